@@ -1,0 +1,53 @@
+// What a client sends: a disparity map and a colour image of the same size, as raw pixels in
+// memory (core views, not copied until Send) or as encoded image files, plus the frame's
+// metadata. OpenCV users: see opencv.h for cv::Mat adapters.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <variant>
+
+#include "cloudcast/core/image.h"
+
+namespace cloudcast::client {
+
+// An image file in memory (PNG, JPEG, TIFF, ...), decoded by the server with OpenCV. Disparity
+// must stay lossless (PNG 8/16-bit, TIFF); JPEG suits colour on a thin uplink. The bytes are
+// viewed, not owned: keep them alive until Send / Process returns.
+struct EncodedImage {
+  std::string_view bytes;
+};
+
+// Colour pixels in OpenCV's four-channel order (B, G, R, A), e.g. a CV_8UC4 Mat. The protocol has
+// no BGRA encoding, so Send drops the alpha while it copies the rows into the request (sent as
+// BGR8, a quarter fewer bytes than RGBA, and alpha is ignored by the server anyway).
+struct BgraView {
+  const void* data = nullptr;
+  std::size_t size_bytes = 0;  // how much memory `data` points to
+  std::uint32_t width = 0;
+  std::uint32_t height = 0;
+  std::size_t stride_bytes = 0;  // distance between row starts, >= width x 4
+};
+
+using DisparityInput = std::variant<DisparityView, EncodedImage>;
+using ColorInput = std::variant<ColorView, BgraView, EncodedImage>;
+
+// A frame's metadata, echoed by the server in its reply.
+struct FrameMeta {
+  // The client's frame counter. Unset: one more than the stream's previous frame (the first
+  // frame of a stream, and every Process call, gets 0).
+  std::optional<std::uint64_t> sequence;
+  // When the images were captured, nanoseconds since the Unix epoch, in this machine's clock.
+  // 0: the moment Send is called (latency then excludes capture and the caller's own work).
+  std::int64_t capture_time_unix_ns = 0;
+  // The camera's coordinate frame, like a ROS frame_id.
+  std::string frame_id;
+};
+
+// Nanoseconds since the Unix epoch, now (std::chrono::system_clock).
+std::int64_t UnixNanosNow();
+
+}  // namespace cloudcast::client

@@ -1,0 +1,42 @@
+// cv::Mat adapters for the client. Kept apart from client.h so that code which sends raw buffers
+// or files never needs OpenCV's headers.
+#pragma once
+
+#include <opencv2/core/mat.hpp>
+#include <string>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "cloudcast/client/client.h"
+#include "cloudcast/client/frame.h"
+
+namespace cloudcast::client {
+
+// Views of a Mat's pixels; nothing is copied (the Mat must outlive the Send / Process that uses
+// the view). Non-continuous Mats (ROIs) are fine: the view carries Mat::step as the row stride.
+//
+// Disparity: one channel, CV_8U, CV_16U or CV_32F. CV_16S (StereoSGBM's output, 16 x disparity,
+// negative where invalid) is refused: convert it, e.g. sgbm.convertTo(d, CV_32F, 1.0 / 16).
+absl::StatusOr<DisparityInput> DisparityFromMat(const cv::Mat& disparity);
+// Colour, 8-bit: CV_8UC3 (BGR, OpenCV's order), CV_8UC4 (BGRA; sent as BGR), CV_8UC1 (grey).
+absl::StatusOr<ColorInput> ColorFromMat(const cv::Mat& colour);
+
+// Stream::Send / Client::Process with Mats: the adapters above, then the call.
+absl::Status SendMats(Stream& stream, const cv::Mat& disparity, const cv::Mat& colour,
+                      const FrameMeta& meta = {});
+absl::StatusOr<Result> ProcessMats(Client& client, const cv::Mat& disparity, const cv::Mat& colour,
+                                   const StreamConfig& config = {}, const FrameMeta& meta = {});
+
+// Encodes a Mat as an image file for EncodedImage, trading client CPU for uplink bytes.
+// `extension` picks the format (".png", ".jpg", ".tiff"); `params` are cv::imwrite flags.
+absl::StatusOr<std::string> EncodeImage(const cv::Mat& image, const std::string& extension,
+                                        const std::vector<int>& params = {});
+// Lossless, for disparity (8/16-bit) or colour. Compression 0..9; 1 is fast and already shrinks
+// typical disparity maps several times.
+absl::StatusOr<std::string> EncodePng(const cv::Mat& image, int compression = 1);
+// Lossy, for colour only (the server refuses nothing, but JPEG corrupts disparities).
+// Quality 0..100.
+absl::StatusOr<std::string> EncodeJpeg(const cv::Mat& colour, int quality = 90);
+
+}  // namespace cloudcast::client

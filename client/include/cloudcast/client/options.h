@@ -1,0 +1,59 @@
+// Options of the cloudcast client library, with their defaults.
+#pragma once
+
+#include <grpcpp/security/credentials.h>
+
+#include <chrono>
+#include <cstddef>
+#include <functional>
+#include <memory>
+
+namespace cloudcast::client {
+
+struct Result;
+
+// How a Client reaches the server. One Client (one gRPC channel) serves any number of calls and
+// streams at once.
+struct ClientOptions {
+  // How long Connect waits for the channel to become ready. Zero: do not wait; Connect always
+  // succeeds and an unreachable server shows up as UNAVAILABLE on the first call.
+  std::chrono::milliseconds connect_timeout{5000};
+
+  // Deadline of each unary call (GetInfo, Process). Zero: none. Streams never have one: they
+  // live as long as the robot drives.
+  std::chrono::milliseconds call_timeout{10000};
+
+  // false (gRPC's default): calls fail at once with UNAVAILABLE while the server is unreachable.
+  // true: calls wait for the connection until their deadline (call_timeout for unary calls,
+  // connect_timeout for OpenStream), which suits a robot that may start before its server. An
+  // open stream never waits: a lost connection ends it, and the robot opens a new one.
+  bool wait_for_ready = false;
+
+  // Largest message the channel sends and receives. A frame is about width x height x 7 bytes
+  // raw (F32 disparity + BGR colour: 16 MiB at 1920x1080 ... 112 MiB at the server's 2^24-pixel
+  // limit), and an unfiltered Draco cloud can be several MiB, both far over gRPC's 4 MiB default.
+  // The server applies its own limit (GetInfo().limits().max_message_bytes).
+  std::size_t max_message_bytes = std::size_t{256} << 20;
+
+  // Upper bound of gRPC's reconnect backoff. gRPC's own default (120 s) leaves a robot blind for
+  // minutes after a Wi-Fi drop; a few seconds keeps reconnecting cheap and prompt.
+  std::chrono::milliseconds max_reconnect_backoff{5000};
+
+  // Channel credentials. nullptr: plaintext (grpc::InsecureChannelCredentials()).
+  std::shared_ptr<grpc::ChannelCredentials> credentials;
+
+  // false: Results carry the reply (Draco bytes, counts, times) but no decoded cloud, e.g. for a
+  // load tester measuring the server rather than the Draco decoder.
+  bool decode_clouds = true;
+};
+
+// How one Stream delivers its replies.
+struct StreamOptions {
+  // Empty (the default): the caller reads replies with Stream::Read. Otherwise the stream starts
+  // a receiver thread that calls this once per reply, in order, and Stream::Read must not be
+  // used. It runs on that thread, so a slow callback delays the next reply, never a Send. It
+  // must not destroy or Finish its own Stream (Finish joins that thread).
+  std::function<void(Result&&)> on_result;
+};
+
+}  // namespace cloudcast::client

@@ -1,0 +1,44 @@
+// The one camera model of cloudcast: a rectified stereo pair seen through its left camera.
+//
+//   denominator d' = d * disparity_scale + disparity_offset     (d: the raw disparity value)
+//   z = fx * baseline / d'
+//   x = (u - cx) * z / fx          (u: column, computed as ((u - cx) * z) * (1 / fx) in float)
+//   y = (v - cy) * z / fy          (v: row)
+//
+// A pixel is invalid (NaN point) when d is one of `invalid_disparities`, is not finite, or d' <= 0.
+// All arithmetic is in float, in the order PCL's OrganizedConversion uses, so the PCL-compatible
+// preset reproduces PCL bit for bit.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "absl/status/status.h"
+
+namespace cloudcast {
+
+struct CameraModel {
+  double fx = 615.0;  // focal length in pixels, horizontal
+  double fy = 615.0;  // focal length in pixels, vertical
+  double cx = 320.0;  // principal point, pixels
+  double cy = 240.0;
+  double baseline = 1.0;          // z unit: z = fx * baseline / d'. 1 reproduces PCL (z = f / d)
+  double disparity_scale = 1.0;   // e.g. 1/16 for 16-bit fixed point disparities
+  double disparity_offset = 0.0;  // added after scaling
+  // Raw disparity values that mean "no measurement". PCL treats 0 and 0x7FF (2047) as invalid.
+  std::vector<double> invalid_disparities = {0.0, 2047.0};
+
+  // PCL's `OrganizedConversion<PointXYZRGBA>::convert`: fy = fx = focal, baseline 1, principal
+  // point at (width/2, height/2) in integer division, 0 and 0x7FF invalid.
+  static CameraModel PclCompatible(std::uint32_t width, std::uint32_t height,
+                                   double focal = 615.0);
+
+  // Finite positive focal lengths and baseline, finite principal point, finite non-zero scale,
+  // finite offset, finite invalid values (at most 16 of them).
+  absl::Status Validate() const;
+
+  std::string ToString() const;
+};
+
+}  // namespace cloudcast

@@ -1,0 +1,63 @@
+// Non-owning views of the two input images of a frame: a disparity map and a colour image.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <string_view>
+
+#include "absl/status/status.h"
+#include "cloudcast/core/limits.h"
+
+namespace cloudcast {
+
+enum class DisparityEncoding : std::uint8_t {
+  kU8,   // 8-bit unsigned, one value per pixel
+  kU16,  // 16-bit unsigned (host order), e.g. 1/16 fixed point from stereo matchers
+  kF32,  // 32-bit float
+};
+
+enum class ColorEncoding : std::uint8_t {
+  kBGR8,   // OpenCV's default order
+  kRGB8,
+  kRGBA8,  // alpha is ignored, as PCL ignores it
+  kMono8,  // grey: r = g = b
+};
+
+std::size_t BytesPerPixel(DisparityEncoding e);
+std::size_t BytesPerPixel(ColorEncoding e);
+std::string_view Name(DisparityEncoding e);
+std::string_view Name(ColorEncoding e);
+// Parses the names above ("u8", "u16", "f32"; "bgr8", "rgb8", "rgba8", "mono8").
+bool ParseDisparityEncoding(std::string_view name, DisparityEncoding* out);
+bool ParseColorEncoding(std::string_view name, ColorEncoding* out);
+
+// A view of pixel rows in memory. `stride_bytes` is the distance between row starts; `size_bytes`
+// is how much memory `data` points to, so a view can be checked before it is read.
+template <typename Encoding>
+struct ImageView {
+  const void* data = nullptr;
+  std::size_t size_bytes = 0;
+  std::uint32_t width = 0;
+  std::uint32_t height = 0;
+  std::size_t stride_bytes = 0;
+  Encoding encoding{};
+
+  const std::uint8_t* row(std::uint32_t v) const {
+    return static_cast<const std::uint8_t*>(data) + v * stride_bytes;
+  }
+};
+using DisparityView = ImageView<DisparityEncoding>;
+using ColorView = ImageView<ColorEncoding>;
+
+// Checks one view: non-null data, non-zero size within `limits`, stride >= width * bytes per
+// pixel, stride a multiple of the sample size, and the buffer large enough for every row.
+// Errors name the field, prefixed with `field` (e.g. "disparity.stride_bytes").
+absl::Status ValidateView(const DisparityView& view, const Limits& limits,
+                          std::string_view field = "disparity");
+absl::Status ValidateView(const ColorView& view, const Limits& limits,
+                          std::string_view field = "colour");
+// Checks both views and that their sizes agree.
+absl::Status ValidateFrame(const DisparityView& disparity, const ColorView& colour,
+                           const Limits& limits);
+
+}  // namespace cloudcast

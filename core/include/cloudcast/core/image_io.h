@@ -1,0 +1,51 @@
+// Loading a frame's images from files and from encoded bytes (PNG, JPEG, TIFF) with OpenCV.
+// Kept apart from the pipeline so the hot path never sees OpenCV.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "cloudcast/core/image.h"
+
+namespace cloudcast {
+
+// An image that owns its pixels, tightly packed rows.
+template <typename Encoding>
+struct OwnedImage {
+  std::vector<std::uint8_t> pixels;
+  std::uint32_t width = 0;
+  std::uint32_t height = 0;
+  Encoding encoding{};
+
+  ImageView<Encoding> view() const {
+    ImageView<Encoding> v;
+    v.data = pixels.data();
+    v.size_bytes = pixels.size();
+    v.width = width;
+    v.height = height;
+    v.stride_bytes = static_cast<std::size_t>(width) * BytesPerPixel(encoding);
+    v.encoding = encoding;
+    return v;
+  }
+};
+using OwnedDisparity = OwnedImage<DisparityEncoding>;
+using OwnedColor = OwnedImage<ColorEncoding>;
+
+// A disparity map from a file: 8-bit -> kU8, 16-bit unsigned -> kU16, 32-bit float (TIFF, PFM)
+// -> kF32, values unchanged. Multi-channel files and other sample types are rejected (a disparity
+// map has one channel).
+//
+// Errors name the file (or "disparity bytes") and the reason: NotFound for a missing file,
+// InvalidArgument for undecodable data, wrong channels or sample type, or a size over Limits{}.
+absl::StatusOr<OwnedDisparity> LoadDisparity(const std::string& path);
+absl::StatusOr<OwnedDisparity> DecodeDisparity(std::string_view bytes);
+// A colour image as BGR8, or mono8 when the file is grey. Alpha is dropped, not composited (New
+// Tsukuba's colour PNGs are RGBA with alpha down to 0); 16-bit samples become v / 257, rounded.
+// Errors as for LoadDisparity.
+absl::StatusOr<OwnedColor> LoadColor(const std::string& path);
+absl::StatusOr<OwnedColor> DecodeColor(std::string_view bytes);
+
+}  // namespace cloudcast

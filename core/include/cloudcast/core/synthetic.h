@@ -1,0 +1,63 @@
+// A synthetic stereo scene with exactly known geometry: textured planes, boxes and spheres,
+// seen by a camera that moves with the frame index. It renders exact disparity and colour at any
+// resolution, is the default input on a fresh machine, and lets tests check converted points
+// against the true surfaces.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "cloudcast/core/camera.h"
+#include "cloudcast/core/image.h"
+
+namespace cloudcast {
+
+struct SyntheticOptions {
+  std::uint32_t width = 640;
+  std::uint32_t height = 480;
+  std::uint64_t frame = 0;  // the camera pose follows the frame index
+  // kF32: exact disparities. kU16: fixed point with scale 1/16 (as stereo matchers output).
+  // kU8: rounded to whole pixels, 0 (invalid) where the disparity exceeds 255.
+  DisparityEncoding disparity_encoding = DisparityEncoding::kF32;
+};
+
+// One rendered frame. It owns its pixels; the views point into them.
+struct SyntheticFrame {
+  // PCL-compatible preset with the focal scaled to the width (615 at 640 px): fx = fy =
+  // 615 * width / 640, principal point (width/2, height/2), baseline 1, and for kU16 a
+  // disparity scale of 1/16. Depths are in the same units as the paper's passthrough (3..12).
+  CameraModel camera;
+  std::vector<std::uint8_t> disparity;  // rows, tightly packed, in the requested encoding
+  std::vector<std::uint8_t> colour;     // BGR8 rows, tightly packed
+  std::uint32_t width = 0;
+  std::uint32_t height = 0;
+  DisparityEncoding disparity_encoding = DisparityEncoding::kF32;
+
+  DisparityView disparity_view() const;
+  ColorView colour_view() const;
+};
+
+class SyntheticScene {
+ public:
+  // The default scene: a floor, a back wall beyond the paper's depth range, boxes and spheres.
+  static SyntheticScene Default();
+
+  // Errors: zero or over-limit sizes.
+  absl::StatusOr<SyntheticFrame> Render(const SyntheticOptions& options) const;
+
+  // Distance from `p`, given in the camera frame of frame `frame` (x right, y down, z forward),
+  // to the nearest surface of the scene. Points converted from an exact render lie on surfaces.
+  double DistanceToSurface(std::uint64_t frame, double x, double y, double z) const;
+
+ private:
+  struct Shape;
+  std::vector<Shape> shapes_;
+  SyntheticScene();
+ public:
+  ~SyntheticScene();
+  SyntheticScene(const SyntheticScene&);
+  SyntheticScene& operator=(const SyntheticScene&);
+};
+
+}  // namespace cloudcast

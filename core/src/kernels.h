@@ -1,0 +1,205 @@
+// Internal building blocks shared by the stand-alone stages and the fused pipeline: the depth
+// arithmetic (in PCL's float order), colour packing, and the voxel accumulator.
+#pragma once
+
+#if !defined(__SSE2__)
+#error "cloudcast's kernels use SSE2, which every x86-64 CPU has"
+#endif
+#include <emmintrin.h>
+
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <limits>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "cloudcast/core/camera.h"
+#include "cloudcast/core/filters.h"
+#include "cloudcast/core/image.h"
+#include "cloudcast/core/point.h"
+
+namespace cloudcast::internal {
+
+inline bool IsFinite(float v) {
+  std::uint32_t bits;
+  std::memcpy(&bits, &v, sizeof bits);
+  return (bits & 0x7F800000u) != 0x7F800000u;
+}
+inline bool IsFinite(const Point& p) { return IsFinite(p.x) && IsFinite(p.y) && IsFinite(p.z); }
+
+inline Point NanPoint() {
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  return Point{nan, nan, nan, 0u};  // PCL sets rgb = 0.0f on bad points
+}
+
+// The camera model reduced to the float constants the per-pixel arithmetic uses, computed the way
+// PCL computes its own (fl_const = 1.0f / focal), so that results match bit for bit.
+struct DepthConstants {
+  float fxb = 0;     // fx * baseline: the numerator of z
+  float scale = 1;   // disparity scale
+  float offset = 0;  // disparity offset
+  float inv_fx = 0;  // 1.0f / fx
+  float inv_fy = 0;  // 1.0f / fy
+  float cx = 0;
+  float cy = 0;
+  float invalid[16] = {};
+  int invalid_count = 0;
+
+  explicit DepthConstants(const CameraModel& camera);
+
+  // z for a raw disparity value, or false if the pixel has no valid depth.
+  bool Depth(float raw, float* z) const {
+    if (!IsFinite(raw)) return false;
+    for (int i = 0; i < invalid_count; ++i) {
+      if (raw == invalid[i]) return false;
+    }
+    const float denominator = raw * scale + offset;
+    if (!(denominator > 0.0f)) return false;
+    const float depth = fxb / denominator;
+    if (!IsFinite(depth)) return false;
+    *z = depth;
+    return true;
+  }
+  // x = ((u - cx) * z) * (1 / fx): PCL's order of operations.
+  float X(std::uint32_t u, float z) const { return ((static_cast<float>(u) - cx) * z) * inv_fx; }
+  float Y(std::uint32_t v, float z) const { return ((static_cast<float>(v) - cy) * z) * inv_fy; }
+
+  bool SameAs(const DepthConstants& o) const;
+};
+
+// z per raw value of an 8- or 16-bit disparity: a table look-up replaces a division per pixel.
+// `valid[d]` is 0 for invalid values; z is NaN there.
+struct DepthTable {
+  std::vector<float> z;
+  std::vector<std::uint8_t> valid;
+  DepthConstants constants{CameraModel{}};
+  int bits = 0;
+
+  // Rebuilds only when the camera or the sample width changed.
+  void Prepare(const DepthConstants& c, int sample_bits);
+};
+
+template <typename Sample>
+inline Sample LoadSample(const std::uint8_t* row, std::uint32_t u) {
+  Sample s;
+  std::memcpy(&s, row + static_cast<std::size_t>(u) * sizeof(Sample), sizeof s);
+  return s;
+}
+
+template <ColorEncoding C>
+inline std::uint32_t PackPixel(const std::uint8_t* row, std::uint32_t u) {
+  if constexpr (C == ColorEncoding::kBGR8) {
+    const std::uint8_t* p = row + 3 * static_cast<std::size_t>(u);
+    return PackRgba(p[2], p[1], p[0]);
+  } else if constexpr (C == ColorEncoding::kRGB8) {
+    const std::uint8_t* p = row + 3 * static_cast<std::size_t>(u);
+    return PackRgba(p[0], p[1], p[2]);
+  } else if constexpr (C == ColorEncoding::kRGBA8) {
+    const std::uint8_t* p = row + 4 * static_cast<std::size_t>(u);
+    return PackRgba(p[0], p[1], p[2]);
+  } else {
+    const std::uint8_t g = row[u];
+    return PackRgba(g, g, g);
+  }
+}
+
+// Calls f.template operator()<Sample, C>() with the types of a frame's encodings.
+template <typename F>
+decltype(auto) DispatchEncodings(DisparityEncoding d, ColorEncoding c, F&& f) {
+  auto with_colour = [&](auto sample_tag) -> decltype(auto) {
+    using S = decltype(sample_tag);
+    switch (c) {
+      case ColorEncoding::kBGR8: return f.template operator()<S, ColorEncoding::kBGR8>();
+      case ColorEncoding::kRGB8: return f.template operator()<S, ColorEncoding::kRGB8>();
+      case ColorEncoding::kRGBA8: return f.template operator()<S, ColorEncoding::kRGBA8>();
+      case ColorEncoding::kMono8: break;
+    }
+    return f.template operator()<S, ColorEncoding::kMono8>();
+  };
+  switch (d) {
+    case DisparityEncoding::kU8: return with_colour(std::uint8_t{});
+    case DisparityEncoding::kU16: return with_colour(std::uint16_t{});
+    case DisparityEncoding::kF32: break;
+  }
+  return with_colour(float{});
+}
+
+// True when p passes the passthrough (non-finite points never pass).
+inline bool Passes(const Point& p, const PassThroughParams& params) {
+  if (!IsFinite(p)) return false;
+  if (!params.enabled) return true;
+  const float v = params.axis == Axis::kX ? p.x : params.axis == Axis::kY ? p.y : p.z;
+  const bool inside = v >= params.min && v <= params.max;
+  return inside != params.negative;
+}
+
+// The bounding box of a set of finite points, kept in SSE registers (lane 3 unused).
+struct Bounds {
+  __m128 lo = _mm_set1_ps(std::numeric_limits<float>::max());
+  __m128 hi = _mm_set1_ps(-std::numeric_limits<float>::max());
+  void Add(__m128 p) {
+    lo = _mm_min_ps(lo, p);
+    hi = _mm_max_ps(hi, p);
+  }
+  bool empty() const { return _mm_movemask_ps(_mm_cmpgt_ps(lo, hi)) & 7; }
+};
+
+// The voxel grid engine. Voxel i along x holds the points with floor(x * (1/leaf_x)) == i,
+// computed in float as PCL does. Knowing the cloud's bounding box first, it numbers voxels
+// relative to the box's corner, so a key needs only as many bits as the extent: 32 bits for
+// ordinary frames, 64 for huge extents or fine leaves (where PCL's 32-bit indices give up).
+//
+// Points are summed into a hash table (open addressing) without data-dependent branches: every
+// point reads its slot once, and "voxel seen before" versus "new voxel" is a select, not a jump.
+// With 3 points per voxel on a typical frame, a branch there would mispredict for a third of the
+// points. Scratch memory is reused from cloud to cloud. Not thread-safe.
+class VoxelAccumulator {
+ public:
+  // Downsamples points[0, n) into `out` (appended, first-seen order). Non-finite points are
+  // skipped. `bounds`, if given, must contain every point, and all points must be finite.
+  absl::Status Run(const Point* points, std::size_t n, const VoxelGridParams& params,
+                   PointVector* out, const Bounds* bounds = nullptr);
+
+ private:
+  struct Voxel {
+    // Sums in double: exact for float inputs, so the centroid does not depend on the order of
+    // the points (PCL's float sums do, slightly). 48 bytes; the key lives in the table only.
+    __m128d sum_xy;
+    __m128d sum_z_n;  // lane 0: z, lane 1: the point count
+    // 32-bit colour sums (b, g, r, a) are exact: a voxel holds at most Limits::max_pixels (2^24)
+    // points of at most 255.
+    __m128i sum_bgra;
+  };
+  template <typename KeyPolicy>
+  void Accumulate(const Point* points, std::size_t n, const KeyPolicy& keys);
+  template <typename KeyPolicy>
+  void AccumulateFiniteNarrow(const Point* points, std::size_t n, const KeyPolicy& keys);
+  // The hot state, copied into locals while points are added: through members every store to
+  // the table (uint64_t) could alias them, and the compiler would reload them for every point.
+  struct Cursor {
+    std::uint64_t* table;
+    Voxel* voxels;
+    std::uint64_t mask;
+    int shift;
+    std::size_t count;
+    std::size_t grow_at;  // count at which the table is more than half full
+  };
+  Cursor MakeCursor();
+  void Grow(Cursor* cursor);
+  template <bool kWide>
+  static void AddPoint(Cursor& c, std::uint64_t key, __m128 xyz, __m128i bgra32);
+  void Emit(std::uint32_t min_points, PointVector* out) const;
+  void ResizeTable(std::size_t slots);
+
+  std::vector<Voxel, DefaultInitAllocator<Voxel>> voxels_;
+  std::size_t voxel_count_ = 0;
+  // Slot: (key << 32 | voxel + 1) for 32-bit keys; for 64-bit keys two words. 0: empty.
+  std::vector<std::uint64_t> table_;
+  std::uint64_t mask_ = 0;
+  int shift_ = 64;
+  bool wide_ = false;  // 64-bit keys: table_ holds (key, voxel + 1) pairs
+  std::size_t last_voxels_ = 0;
+};
+
+}  // namespace cloudcast::internal

@@ -1,0 +1,339 @@
+#include "cloudcast/core/pipeline.h"
+
+#include <limits>
+#include <type_traits>
+#include <utility>
+
+#include "absl/strings/str_cat.h"
+#include "kernels.h"
+
+namespace cloudcast {
+
+absl::Status PipelineOptions::Validate() const {
+  if (auto s = camera.Validate(); !s.ok()) return s;
+  if (auto s = passthrough.Validate(); !s.ok()) return s;
+  return voxel.Validate();
+}
+
+namespace {
+
+using internal::DepthConstants;
+using internal::DepthTable;
+using internal::VoxelAccumulator;
+
+// Where the points that pass go: a buffer sized for the worst case (left uninitialised), with
+// their bounding box when the voxel grid needs it. A point arrives as (x, y, z, 0) plus colour.
+template <bool kTrackBounds>
+struct PointSink {
+  Point* out;
+  std::size_t count = 0;
+  internal::Bounds bounds;
+  void Add(__m128 xyz, std::uint32_t rgba) {
+    Point& p = out[count++];
+    _mm_storeu_ps(&p.x, xyz);
+    p.rgba = rgba;
+    if constexpr (kTrackBounds) bounds.Add(xyz);
+  }
+};
+
+// (x, y, z) of pixel (u, v) as PCL computes it: x = ((u - cx) * z) * (1 / fx), same for y, and
+// z * 1 * 1 == z exactly.
+inline __m128 PixelPoint(const DepthConstants& c, std::uint32_t u, float yc, float z) {
+  const __m128 a = _mm_setr_ps(static_cast<float>(u) - c.cx, yc, z, 0.0f);
+  return _mm_mul_ps(_mm_mul_ps(a, _mm_setr_ps(z, z, 1.0f, 0.0f)),
+                    _mm_setr_ps(c.inv_fx, c.inv_fy, 1.0f, 0.0f));
+}
+// x and y finite (z is known to be).
+inline bool XyFinite(__m128 p) {
+  const float big = std::numeric_limits<float>::max();
+  const __m128 ok = _mm_and_ps(_mm_cmple_ps(_mm_set1_ps(-big), p), _mm_cmple_ps(p, _mm_set1_ps(big)));
+  return (_mm_movemask_ps(ok) & 3) == 3;
+}
+
+struct Tally {
+  std::uint64_t valid = 0;
+  std::uint64_t passed = 0;
+};
+
+// Flags per raw disparity value for the table-driven kernel.
+constexpr std::uint8_t kValid = 1;
+constexpr std::uint8_t kPasses = 2;
+
+// What a scan can learn from the flag table of 8/16-bit disparities, to test 16 bytes of pixels
+// at a time: every value that passes lies in [pass_lo, pass_hi], and the valid values are
+// [valid_lo, valid_hi] minus a few holes (typically the invalid values 0 and 2047).
+struct ScanPlan {
+  bool simd = false;  // the valid set has that shape (else: count validity per pixel)
+  std::uint32_t pass_lo = 1, pass_hi = 0;  // empty when lo > hi
+  std::uint32_t valid_lo = 1, valid_hi = 0;
+  std::uint32_t holes[4] = {0, 0, 0, 0};
+  int hole_count = 0;
+
+  static ScanPlan From(const std::uint8_t* flags, std::size_t n) {
+    ScanPlan plan;
+    std::int64_t plo = -1, phi = -1, vlo = -1, vhi = -1;
+    for (std::size_t d = 0; d < n; ++d) {
+      if (flags[d] & kPasses) {
+        if (plo < 0) plo = static_cast<std::int64_t>(d);
+        phi = static_cast<std::int64_t>(d);
+      }
+      if (flags[d] & kValid) {
+        if (vlo < 0) vlo = static_cast<std::int64_t>(d);
+        vhi = static_cast<std::int64_t>(d);
+      }
+    }
+    if (plo >= 0) plan.pass_lo = static_cast<std::uint32_t>(plo), plan.pass_hi = static_cast<std::uint32_t>(phi);
+    if (vlo >= 0) plan.valid_lo = static_cast<std::uint32_t>(vlo), plan.valid_hi = static_cast<std::uint32_t>(vhi);
+    plan.simd = true;
+    for (std::int64_t d = vlo; vlo >= 0 && d <= vhi; ++d) {
+      if (flags[d] & kValid) continue;
+      if (plan.hole_count == 4) {
+        plan.simd = false;
+        break;
+      }
+      plan.holes[plan.hole_count++] = static_cast<std::uint32_t>(d);
+    }
+    return plan;
+  }
+};
+
+// Lanes of `d` within [lo, hi] (unsigned), as all-ones lanes.
+template <typename Sample>
+inline __m128i InRange(__m128i d, std::uint32_t lo, std::uint32_t hi) {
+  if constexpr (sizeof(Sample) == 1) {
+    const __m128i span = _mm_set1_epi8(static_cast<char>(hi - lo));
+    const __m128i x = _mm_sub_epi8(d, _mm_set1_epi8(static_cast<char>(lo)));
+    return _mm_cmpeq_epi8(_mm_max_epu8(x, span), span);
+  } else {
+    // No unsigned 16-bit compare in SSE2: flip the sign bit and compare signed.
+    const __m128i flip = _mm_set1_epi16(static_cast<short>(0x8000));
+    const __m128i x = _mm_xor_si128(_mm_sub_epi16(d, _mm_set1_epi16(static_cast<short>(lo))), flip);
+    const __m128i span = _mm_set1_epi16(static_cast<short>((hi - lo) ^ 0x8000));
+    return _mm_xor_si128(_mm_cmpgt_epi16(x, span), _mm_set1_epi32(-1));
+  }
+}
+template <typename Sample>
+inline __m128i Equal(__m128i d, std::uint32_t value) {
+  if constexpr (sizeof(Sample) == 1) {
+    return _mm_cmpeq_epi8(d, _mm_set1_epi8(static_cast<char>(value)));
+  } else {
+    return _mm_cmpeq_epi16(d, _mm_set1_epi16(static_cast<short>(value)));
+  }
+}
+
+// 8/16-bit disparities with the passthrough on z (or off): z, validity and the passthrough
+// decision all depend on the raw value only, so they come from tables. Sixteen bytes of pixels
+// are tested at once against the range of passing values, and valid pixels are counted with the
+// same registers; only blocks holding a passing pixel are looked at one pixel at a time.
+template <typename Sample, ColorEncoding C, typename Sink>
+void RunTableKernel(const DepthConstants& c, const float* zt, const std::uint8_t* flags,
+                    const ScanPlan& plan, const DisparityView& disparity, const ColorView& colour,
+                    Sink* sink, Tally* tally) {
+  const std::uint32_t w = disparity.width;
+  const std::uint32_t h = disparity.height;
+  constexpr std::uint32_t kLanes = 16 / sizeof(Sample);
+  std::uint64_t valid = 0, passed = 0;
+  // Valid-pixel counts as sums of 0xFF bytes (psadbw), divided out at the end.
+  __m128i in_valid_range = _mm_setzero_si128(), in_holes = _mm_setzero_si128();
+  const __m128i zero = _mm_setzero_si128();
+  const bool any_pass = plan.pass_lo <= plan.pass_hi;
+  const bool any_valid = plan.valid_lo <= plan.valid_hi;
+  auto pixel = [&](std::uint32_t u, const std::uint8_t* crow, float yc, Sample d) {
+    const __m128 p = PixelPoint(c, u, yc, zt[d]);
+    if (!XyFinite(p)) {
+      --valid;  // z finite but x or y overflowed: not a finite point
+      return;
+    }
+    ++passed;
+    sink->Add(p, internal::PackPixel<C>(crow, u));
+  };
+  for (std::uint32_t v = 0; v < h; ++v) {
+    const std::uint8_t* drow = disparity.row(v);
+    const std::uint8_t* crow = colour.row(v);
+    const float yc = static_cast<float>(v) - c.cy;
+    std::uint32_t u = 0;
+    if (plan.simd) {
+      for (; u + kLanes <= w; u += kLanes) {
+        const __m128i d = _mm_loadu_si128(reinterpret_cast<const __m128i*>(drow + u * sizeof(Sample)));
+        if (any_valid) {
+          in_valid_range = _mm_add_epi64(
+              in_valid_range, _mm_sad_epu8(InRange<Sample>(d, plan.valid_lo, plan.valid_hi), zero));
+          for (int k = 0; k < plan.hole_count; ++k) {
+            in_holes = _mm_add_epi64(in_holes, _mm_sad_epu8(Equal<Sample>(d, plan.holes[k]), zero));
+          }
+        }
+        if (!any_pass) continue;
+        unsigned mask = static_cast<unsigned>(
+            _mm_movemask_epi8(InRange<Sample>(d, plan.pass_lo, plan.pass_hi)));
+        while (mask != 0) {
+          const std::uint32_t j = static_cast<std::uint32_t>(__builtin_ctz(mask)) / sizeof(Sample);
+          mask &= ~((sizeof(Sample) == 1 ? 1u : 3u) << (j * sizeof(Sample)));
+          const Sample s = internal::LoadSample<Sample>(drow, u + j);
+          if (flags[s] & kPasses) pixel(u + j, crow, yc, s);
+        }
+      }
+    }
+    for (; u < w; ++u) {
+      const Sample d = internal::LoadSample<Sample>(drow, u);
+      const std::uint8_t f = flags[d];
+      valid += f & kValid;
+      if (f & kPasses) pixel(u, crow, yc, d);
+    }
+  }
+  alignas(16) std::uint64_t sums[2], holes[2];
+  _mm_store_si128(reinterpret_cast<__m128i*>(sums), in_valid_range);
+  _mm_store_si128(reinterpret_cast<__m128i*>(holes), in_holes);
+  valid += (sums[0] + sums[1] - holes[0] - holes[1]) / (255 * sizeof(Sample));
+  tally->valid = valid;
+  tally->passed = passed;
+}
+
+// Any disparity encoding and any passthrough axis: each pixel becomes a point, then is tested.
+template <typename Sample, ColorEncoding C, typename Sink>
+void RunGenericKernel(const DepthConstants& c, const DepthTable* table,
+                      const PassThroughParams& passthrough, const DisparityView& disparity,
+                      const ColorView& colour, Sink* sink, Tally* tally) {
+  const std::uint32_t w = disparity.width;
+  const std::uint32_t h = disparity.height;
+  std::uint64_t valid = 0, passed = 0;
+  for (std::uint32_t v = 0; v < h; ++v) {
+    const std::uint8_t* drow = disparity.row(v);
+    const std::uint8_t* crow = colour.row(v);
+    for (std::uint32_t u = 0; u < w; ++u) {
+      const Sample d = internal::LoadSample<Sample>(drow, u);
+      float z;
+      if constexpr (std::is_same_v<Sample, float>) {
+        if (!c.Depth(d, &z)) continue;
+      } else {
+        if (!table->valid[d]) continue;
+        z = table->z[d];
+      }
+      const std::uint32_t rgba = internal::PackPixel<C>(crow, u);
+      const Point p{c.X(u, z), c.Y(v, z), z, rgba};
+      if (!internal::IsFinite(p.x) || !internal::IsFinite(p.y)) continue;
+      ++valid;
+      if (!internal::Passes(p, passthrough)) continue;
+      ++passed;
+      sink->Add(_mm_setr_ps(p.x, p.y, p.z, 0.0f), rgba);
+    }
+  }
+  tally->valid = valid;
+  tally->passed = passed;
+}
+
+}  // namespace
+
+struct Pipeline::Impl {
+  VoxelAccumulator accumulator;
+  DepthTable table;
+  // Passthrough flags per raw value, valid for `flags_table_bits` / the passthrough below.
+  std::vector<std::uint8_t> flags;
+  int flags_bits = -1;
+  DepthConstants flags_constants{CameraModel{}};
+  PassThroughParams flags_passthrough;
+  // The points that pass, before the voxel grid.
+  PointVector passed;
+
+  ScanPlan plan;
+
+  const std::uint8_t* PassFlags(const DepthConstants& c, const PassThroughParams& pt, int bits) {
+    if (flags_bits == bits && flags_constants.SameAs(c) && flags_passthrough.enabled == pt.enabled &&
+        flags_passthrough.axis == pt.axis && flags_passthrough.min == pt.min &&
+        flags_passthrough.max == pt.max && flags_passthrough.negative == pt.negative) {
+      return flags.data();
+    }
+    const std::size_t n = std::size_t{1} << bits;
+    flags.assign(n, 0);
+    for (std::size_t d = 0; d < n; ++d) {
+      if (!table.valid[d]) continue;
+      const float z = table.z[d];
+      const bool inside = z >= pt.min && z <= pt.max;
+      flags[d] = kValid | ((!pt.enabled || inside != pt.negative) ? kPasses : 0);
+    }
+    flags_bits = bits;
+    flags_constants = c;
+    flags_passthrough = pt;
+    plan = ScanPlan::From(flags.data(), n);
+    return flags.data();
+  }
+
+  template <typename Sink>
+  struct Kernel {
+    Impl* impl;
+    const DepthConstants& c;
+    const PassThroughParams& passthrough;
+    const DisparityView& disparity;
+    const ColorView& colour;
+    Sink* sink;
+    Tally* tally;
+
+    template <typename Sample, ColorEncoding C>
+    void operator()() const {
+      if constexpr (std::is_same_v<Sample, float>) {
+        RunGenericKernel<Sample, C>(c, nullptr, passthrough, disparity, colour, sink, tally);
+      } else {
+        constexpr int kBits = 8 * sizeof(Sample);
+        impl->table.Prepare(c, kBits);
+        if (!passthrough.enabled || passthrough.axis == Axis::kZ) {
+          const std::uint8_t* flags = impl->PassFlags(c, passthrough, kBits);
+          RunTableKernel<Sample, C>(c, impl->table.z.data(), flags, impl->plan, disparity,
+                                    colour, sink, tally);
+        } else {
+          RunGenericKernel<Sample, C>(c, &impl->table, passthrough, disparity, colour, sink,
+                                      tally);
+        }
+      }
+    }
+  };
+};
+
+Pipeline::Pipeline() : impl_(std::make_unique<Impl>()) {}
+Pipeline::~Pipeline() = default;
+Pipeline::Pipeline(Pipeline&&) noexcept = default;
+Pipeline& Pipeline::operator=(Pipeline&&) noexcept = default;
+
+absl::Status Pipeline::Run(const PipelineOptions& options, const DisparityView& disparity,
+                           const ColorView& colour, PointCloud* out, StageCounts* counts) {
+  if (out == nullptr) return absl::InvalidArgumentError("output cloud is null");
+  out->points.clear();
+  out->width = 0;
+  out->height = 1;
+  if (auto s = options.Validate(); !s.ok()) return s;
+  if (auto s = ValidateFrame(disparity, colour, options.limits); !s.ok()) return s;
+
+  const DepthConstants c(options.camera);
+  Tally tally;
+  const std::size_t pixels = std::size_t{disparity.width} * disparity.height;
+  if (options.voxel.enabled) {
+    if (impl_->passed.size() < pixels) impl_->passed.resize(pixels);
+    PointSink<true> sink{impl_->passed.data(), 0, {}};
+    internal::DispatchEncodings(disparity.encoding, colour.encoding,
+                                Impl::Kernel<PointSink<true>>{impl_.get(), c, options.passthrough,
+                                                              disparity, colour, &sink, &tally});
+    if (auto s = impl_->accumulator.Run(impl_->passed.data(), sink.count, options.voxel,
+                                        &out->points, &sink.bounds);
+        !s.ok()) {
+      out->points.clear();
+      out->width = 0;
+      return s;
+    }
+  } else {
+    out->points.resize(pixels);
+    PointSink<false> sink{out->points.data(), 0, {}};
+    internal::DispatchEncodings(disparity.encoding, colour.encoding,
+                                Impl::Kernel<PointSink<false>>{impl_.get(), c, options.passthrough,
+                                                               disparity, colour, &sink, &tally});
+    out->points.resize(sink.count);
+  }
+  out->width = static_cast<std::uint32_t>(out->points.size());
+  out->height = 1;
+  if (counts != nullptr) {
+    counts->pixels = std::uint64_t{disparity.width} * disparity.height;
+    counts->valid_points = tally.valid;
+    counts->after_passthrough = tally.passed;
+    counts->after_voxel = out->points.size();
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace cloudcast

@@ -1,0 +1,375 @@
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+#include "absl/strings/str_cat.h"
+#include "cloudcast/core/filters.h"
+#include "kernels.h"
+
+namespace cloudcast {
+namespace internal {
+
+namespace {
+
+constexpr std::uint64_t kHashMultiplier = 0x9E3779B97F4A7C15ull;
+constexpr std::size_t kMinSlots = 1024;
+
+// Voxel indices from four-float SSE points: floor(v * inv) per lane, as int32 (the caller has
+// checked that the bounding box keeps them in range), made relative to the box's corner and
+// packed into one key.
+struct SimdKeys {
+  __m128 inv;      // (1/leaf_x, 1/leaf_y, 1/leaf_z, 0)
+  __m128i corner;  // the indices of the box's low corner
+  int shift_y, shift_z;
+
+  std::uint64_t operator()(__m128 v) const {
+    const __m128 t = _mm_mul_ps(v, inv);  // lane 3: colour bits * 0, cleared by the caller
+    const __m128i i = _mm_cvttps_epi32(t);  // truncates toward zero ...
+    // ... and subtracting 1 where truncation rounded up makes it floor.
+    const __m128i floor = _mm_add_epi32(i, _mm_castps_si128(_mm_cmplt_ps(t, _mm_cvtepi32_ps(i))));
+    const __m128i rel = _mm_sub_epi32(floor, corner);  // < 2^32 apart: exact as unsigned
+    const auto rx = static_cast<std::uint32_t>(_mm_cvtsi128_si32(rel));
+    const auto ry = static_cast<std::uint32_t>(_mm_cvtsi128_si32(_mm_shuffle_epi32(rel, 1)));
+    const auto rz = static_cast<std::uint32_t>(_mm_cvtsi128_si32(_mm_shuffle_epi32(rel, 2)));
+    return std::uint64_t{rx} | (std::uint64_t{ry} << shift_y) | (std::uint64_t{rz} << shift_z);
+  }
+};
+
+// The same for indices beyond int32 (fine leaves far from the origin), in scalar int64.
+struct WideKeys {
+  float inv[3];
+  std::int64_t corner[3];
+  int shift_y, shift_z;
+
+  std::uint64_t operator()(__m128 v) const {
+    alignas(16) float p[4];
+    _mm_store_ps(p, v);
+    std::uint64_t r[3];
+    for (int a = 0; a < 3; ++a) {
+      const double t = std::floor(static_cast<double>(p[a] * inv[a]));  // float product, as PCL
+      r[a] = static_cast<std::uint64_t>(static_cast<std::int64_t>(t) - corner[a]);
+    }
+    return r[0] | (r[1] << shift_y) | (r[2] << shift_z);
+  }
+};
+
+int BitWidth(std::uint64_t v) {
+  int bits = 0;
+  while (bits < 64 && (v >> bits) != 0) ++bits;
+  return bits;
+}
+
+inline bool Finite(__m128 v) {
+  const float big = std::numeric_limits<float>::max();
+  const __m128 ok =
+      _mm_and_ps(_mm_cmple_ps(_mm_set1_ps(-big), v), _mm_cmple_ps(v, _mm_set1_ps(big)));
+  return (_mm_movemask_ps(ok) & 7) == 7;
+}
+
+}  // namespace
+
+void VoxelAccumulator::ResizeTable(std::size_t slots) {
+  // Rehash from the old table's own (key, voxel) entries.
+  std::vector<std::uint64_t> old;
+  old.swap(table_);
+  const bool had_entries = voxel_count_ > 0;
+  table_.assign(wide_ ? 2 * slots : slots, 0);
+  mask_ = slots - 1;
+  shift_ = 64 - BitWidth(slots - 1);
+  if (!had_entries) return;
+  auto insert = [&](std::uint64_t key, std::uint64_t voxel_plus_1) {
+    std::uint64_t h = (key * kHashMultiplier) >> shift_;
+    if (wide_) {
+      while (table_[2 * h + 1] != 0) h = (h + 1) & mask_;
+      table_[2 * h] = key;
+      table_[2 * h + 1] = voxel_plus_1;
+    } else {
+      while (table_[h] != 0) h = (h + 1) & mask_;
+      table_[h] = (key << 32) | voxel_plus_1;
+    }
+  };
+  if (wide_) {
+    for (std::size_t i = 0; i + 1 < old.size(); i += 2) {
+      if (old[i + 1] != 0) insert(old[i], old[i + 1]);
+    }
+  } else {
+    for (std::uint64_t e : old) {
+      if ((e & 0xFFFFFFFFu) != 0) insert(e >> 32, e & 0xFFFFFFFFu);
+    }
+  }
+}
+
+VoxelAccumulator::Cursor VoxelAccumulator::MakeCursor() {
+  return Cursor{table_.data(), voxels_.data(), mask_, shift_, voxel_count_, (mask_ + 1) / 2};
+}
+
+void VoxelAccumulator::Grow(Cursor* cursor) {
+  voxel_count_ = cursor->count;
+  ResizeTable(2 * (mask_ + 1));
+  *cursor = MakeCursor();
+}
+
+// Colour bytes (b, g, r, a) of one point as four 32-bit lanes.
+inline __m128i WidenColour(std::uint32_t rgba) {
+  const __m128i zero = _mm_setzero_si128();
+  const __m128i bytes = _mm_cvtsi32_si128(static_cast<int>(rgba));
+  return _mm_unpacklo_epi16(_mm_unpacklo_epi8(bytes, zero), zero);
+}
+
+template <bool kWide>
+inline void VoxelAccumulator::AddPoint(Cursor& c, std::uint64_t key, __m128 v, __m128i bgra32) {
+  std::uint64_t h = (key * kHashMultiplier) >> c.shift;
+  std::uint64_t found;  // voxel + 1, or 0 for an empty slot
+  bool match;
+  for (;;) {  // almost always one round: the table is at most half full
+    if constexpr (kWide) {
+      found = c.table[2 * h + 1];
+      match = found != 0 && c.table[2 * h] == key;
+    } else {
+      const std::uint64_t e = c.table[h];
+      found = e & 0xFFFFFFFFu;
+      match = found != 0 && (e >> 32) == key;
+    }
+    if (match || found == 0) break;
+    h = (h + 1) & c.mask;
+  }
+  // Seen before: its voxel. New: the next free one, whose old contents the masks below zero.
+  const std::size_t index = match ? found - 1 : c.count;
+  c.count += match ? 0 : 1;
+  if constexpr (kWide) {
+    c.table[2 * h] = key;
+    c.table[2 * h + 1] = index + 1;
+  } else {
+    c.table[h] = (key << 32) | (index + 1);
+  }
+  Voxel& voxel = c.voxels[index];
+  const __m128i keep = _mm_set1_epi64x(-static_cast<std::int64_t>(match));
+  const __m128d keep_d = _mm_castsi128_pd(keep);
+  voxel.sum_xy = _mm_add_pd(_mm_and_pd(voxel.sum_xy, keep_d), _mm_cvtps_pd(v));
+  // (z, 1): the count rides along with z.
+  const __m128 z1 = _mm_unpacklo_ps(_mm_movehl_ps(v, v), _mm_set1_ps(1.0f));
+  voxel.sum_z_n = _mm_add_pd(_mm_and_pd(voxel.sum_z_n, keep_d), _mm_cvtps_pd(z1));
+  voxel.sum_bgra = _mm_add_epi32(_mm_and_si128(voxel.sum_bgra, keep), bgra32);
+}
+
+template <typename KeyPolicy>
+void VoxelAccumulator::Accumulate(const Point* points, std::size_t n, const KeyPolicy& keys) {
+  const __m128 xyz_mask = _mm_castsi128_ps(_mm_setr_epi32(-1, -1, -1, 0));
+  Cursor c = MakeCursor();
+  for (std::size_t i = 0; i < n; ++i) {
+    const __m128 v = _mm_and_ps(_mm_loadu_ps(&points[i].x), xyz_mask);
+    if (!Finite(v)) continue;
+    if (wide_) {
+      AddPoint<true>(c, keys(v), v, WidenColour(points[i].rgba));
+    } else {
+      AddPoint<false>(c, keys(v), v, WidenColour(points[i].rgba));
+    }
+    if (c.count >= c.grow_at) Grow(&c);
+  }
+  voxel_count_ = c.count;
+}
+
+// The common case, finite points and 32-bit keys: four points at a time, transposed so that the
+// voxel keys and colours of all four come out of a few SSE instructions.
+template <typename KeyPolicy>
+void VoxelAccumulator::AccumulateFiniteNarrow(const Point* points, std::size_t n,
+                                              const KeyPolicy& keys) {
+  const __m128 inv_x = _mm_set1_ps(_mm_cvtss_f32(keys.inv));
+  const __m128 inv_y = _mm_set1_ps(_mm_cvtss_f32(_mm_shuffle_ps(keys.inv, keys.inv, 0x55)));
+  const __m128 inv_z = _mm_set1_ps(_mm_cvtss_f32(_mm_shuffle_ps(keys.inv, keys.inv, 0xAA)));
+  const __m128i corner_x = _mm_shuffle_epi32(keys.corner, 0x00);
+  const __m128i corner_y = _mm_shuffle_epi32(keys.corner, 0x55);
+  const __m128i corner_z = _mm_shuffle_epi32(keys.corner, 0xAA);
+  const __m128i shift_y = _mm_cvtsi32_si128(keys.shift_y);
+  const __m128i shift_z = _mm_cvtsi32_si128(keys.shift_z);
+  auto relative = [](__m128 coord, __m128 inv, __m128i corner) {
+    const __m128 t = _mm_mul_ps(coord, inv);
+    const __m128i i = _mm_cvttps_epi32(t);  // truncation, minus 1 where it rounded up: floor
+    return _mm_sub_epi32(_mm_add_epi32(i, _mm_castps_si128(_mm_cmplt_ps(t, _mm_cvtepi32_ps(i)))),
+                         corner);
+  };
+  const __m128 xyz_mask = _mm_castsi128_ps(_mm_setr_epi32(-1, -1, -1, 0));
+  const __m128i zero = _mm_setzero_si128();
+  Cursor c = MakeCursor();
+  std::size_t i = 0;
+  for (; i + 4 <= n; i += 4) {
+    const __m128 p0 = _mm_loadu_ps(&points[i].x), p1 = _mm_loadu_ps(&points[i + 1].x);
+    const __m128 p2 = _mm_loadu_ps(&points[i + 2].x), p3 = _mm_loadu_ps(&points[i + 3].x);
+    // Transpose to the x, y, z and colour of the four points.
+    const __m128 t0 = _mm_unpacklo_ps(p0, p1), t1 = _mm_unpacklo_ps(p2, p3);
+    const __m128 t2 = _mm_unpackhi_ps(p0, p1), t3 = _mm_unpackhi_ps(p2, p3);
+    const __m128 x = _mm_movelh_ps(t0, t1), y = _mm_movehl_ps(t1, t0);
+    const __m128 z = _mm_movelh_ps(t2, t3);
+    const __m128i colour = _mm_castps_si128(_mm_movehl_ps(t3, t2));
+    alignas(16) std::uint32_t key[4];
+    _mm_store_si128(reinterpret_cast<__m128i*>(key),
+                    _mm_or_si128(relative(x, inv_x, corner_x),
+                                 _mm_or_si128(_mm_sll_epi32(relative(y, inv_y, corner_y), shift_y),
+                                              _mm_sll_epi32(relative(z, inv_z, corner_z), shift_z))));
+    const __m128i c16lo = _mm_unpacklo_epi8(colour, zero), c16hi = _mm_unpackhi_epi8(colour, zero);
+    AddPoint<false>(c, key[0], _mm_and_ps(p0, xyz_mask), _mm_unpacklo_epi16(c16lo, zero));
+    AddPoint<false>(c, key[1], _mm_and_ps(p1, xyz_mask), _mm_unpackhi_epi16(c16lo, zero));
+    AddPoint<false>(c, key[2], _mm_and_ps(p2, xyz_mask), _mm_unpacklo_epi16(c16hi, zero));
+    AddPoint<false>(c, key[3], _mm_and_ps(p3, xyz_mask), _mm_unpackhi_epi16(c16hi, zero));
+    // Checked every four points: the table has room for four more beyond half full.
+    if (c.count >= c.grow_at) Grow(&c);
+  }
+  voxel_count_ = c.count;
+  Accumulate(points + i, n - i, keys);
+}
+
+void VoxelAccumulator::Emit(std::uint32_t min_points, PointVector* out) const {
+  const std::size_t first = out->size();
+  out->resize(first + voxel_count_);  // not initialised (PointVector)
+  Point* o = out->data() + first;
+  // One division per voxel: integer divisions of the colour sums would cost more than the rest
+  // of the voxel together. floor(sum / n) == floor(sum * (1/n) * (1 + 2^-40)): the nudge lifts
+  // results that should be whole numbers over their rounding, and is far smaller than the gap
+  // (>= 1/n >= 2^-24) between a fraction and the next integer.
+  constexpr double kNudge = 1.0 + 1.0 / (1ull << 40);
+  for (std::size_t i = 0; i < voxel_count_; ++i) {
+    const Voxel& v = voxels_[i];
+    const double n = _mm_cvtsd_f64(_mm_unpackhi_pd(v.sum_z_n, v.sum_z_n));
+    if (n < min_points) continue;
+    const __m128d inv = _mm_set1_pd(1.0 / n);
+    const __m128d xy = _mm_mul_pd(v.sum_xy, inv);
+    const __m128d zn = _mm_mul_pd(v.sum_z_n, inv);
+    Point& p = *o++;
+    _mm_storel_pi(reinterpret_cast<__m64*>(&p.x), _mm_cvtpd_ps(xy));
+    p.z = static_cast<float>(_mm_cvtsd_f64(zn));
+    std::uint32_t channel[4];
+    if (n < (1 << 23)) {  // sums < 2^31: exact as signed 32-bit
+      const __m128d scale = _mm_set1_pd((1.0 / n) * kNudge);
+      const __m128i lo = _mm_cvttpd_epi32(_mm_mul_pd(_mm_cvtepi32_pd(v.sum_bgra), scale));
+      const __m128i hi = _mm_cvttpd_epi32(
+          _mm_mul_pd(_mm_cvtepi32_pd(_mm_unpackhi_epi64(v.sum_bgra, v.sum_bgra)), scale));
+      alignas(16) std::uint32_t q[8];
+      _mm_store_si128(reinterpret_cast<__m128i*>(q), lo);
+      _mm_store_si128(reinterpret_cast<__m128i*>(q + 4), hi);
+      channel[0] = q[0], channel[1] = q[1], channel[2] = q[4], channel[3] = q[5];
+    } else {
+      alignas(16) std::uint32_t sums[4];
+      _mm_store_si128(reinterpret_cast<__m128i*>(sums), v.sum_bgra);
+      const auto count = static_cast<std::uint32_t>(n);
+      for (int c = 0; c < 4; ++c) channel[c] = sums[c] / count;
+    }
+    // PCL: the centroid of the points, and the truncated mean of each colour channel.
+    p.rgba = PackRgba(static_cast<std::uint8_t>(channel[2]), static_cast<std::uint8_t>(channel[1]),
+                      static_cast<std::uint8_t>(channel[0]), static_cast<std::uint8_t>(channel[3]));
+  }
+  out->resize(static_cast<std::size_t>(o - out->data()));
+}
+
+absl::Status VoxelAccumulator::Run(const Point* points, std::size_t n,
+                                   const VoxelGridParams& params, PointVector* out,
+                                   const Bounds* known_bounds) {
+  Bounds bounds;
+  bool all_finite = true;
+  if (known_bounds != nullptr) {
+    bounds = *known_bounds;
+  } else {
+    const __m128 xyz_mask = _mm_castsi128_ps(_mm_setr_epi32(-1, -1, -1, 0));
+    for (std::size_t i = 0; i < n; ++i) {
+      const __m128 v = _mm_and_ps(_mm_loadu_ps(&points[i].x), xyz_mask);
+      if (Finite(v)) {
+        bounds.Add(v);
+      } else {
+        all_finite = false;
+      }
+    }
+  }
+  voxel_count_ = 0;
+  if (n == 0 || bounds.empty()) return absl::OkStatus();
+
+  const float inv[3] = {1.0f / params.leaf_x, 1.0f / params.leaf_y, 1.0f / params.leaf_z};
+  alignas(16) float lo[4], hi[4];
+  _mm_store_ps(lo, bounds.lo);
+  _mm_store_ps(hi, bounds.hi);
+  // Float products and floor are monotonic, so the box's corners bound every point's index.
+  std::int64_t corner[3];
+  int bits[3];
+  bool int32_indices = true;
+  for (int a = 0; a < 3; ++a) {
+    const double tlo = std::floor(static_cast<double>(lo[a] * inv[a]));
+    const double thi = std::floor(static_cast<double>(hi[a] * inv[a]));
+    if (!(std::fabs(tlo) < 4e18) || !(std::fabs(thi) < 4e18)) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "voxel grid: the cloud reaches ", std::fabs(tlo) > std::fabs(thi) ? lo[a] : hi[a],
+          " on axis ", std::string(Name(static_cast<Axis>(a))),
+          ", more than 2^62 leaves from the origin; use a larger voxel.leaf"));
+    }
+    corner[a] = static_cast<std::int64_t>(tlo);
+    bits[a] = BitWidth(static_cast<std::uint64_t>(static_cast<std::int64_t>(thi) - corner[a]));
+    int32_indices &= std::fabs(tlo) < 2e9 && std::fabs(thi) < 2e9;
+  }
+  const int total_bits = bits[0] + bits[1] + bits[2];
+  if (total_bits > 64) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "voxel grid: the cloud spans 2^", bits[0], " x 2^", bits[1], " x 2^", bits[2],
+        " voxels, more than 64-bit keys hold; use a larger voxel.leaf"));
+  }
+  wide_ = total_bits > 32 || !int32_indices;
+
+  // Every finite point may be a voxel of its own: room for all, left uninitialised.
+  if (voxels_.size() < n) voxels_.resize(n);
+  std::size_t slots = kMinSlots;
+  const std::size_t expected = std::min(n, std::max<std::size_t>(last_voxels_, 256));
+  while (slots < 2 * expected) slots *= 2;
+  ResizeTable(slots);
+
+  if (int32_indices) {
+    SimdKeys keys{_mm_setr_ps(inv[0], inv[1], inv[2], 0.0f),
+                  _mm_setr_epi32(static_cast<int>(corner[0]), static_cast<int>(corner[1]),
+                                 static_cast<int>(corner[2]), 0),
+                  bits[0], bits[0] + bits[1]};
+    if (all_finite && !wide_) {
+      AccumulateFiniteNarrow(points, n, keys);
+    } else {
+      Accumulate(points, n, keys);
+    }
+  } else {
+    WideKeys keys{{inv[0], inv[1], inv[2]},
+                  {corner[0], corner[1], corner[2]},
+                  bits[0],
+                  bits[0] + bits[1]};
+    Accumulate(points, n, keys);
+  }
+  last_voxels_ = voxel_count_;
+  Emit(params.min_points_per_voxel, out);
+  return absl::OkStatus();
+}
+
+}  // namespace internal
+
+struct VoxelGrid::Impl {
+  internal::VoxelAccumulator accumulator;
+};
+
+VoxelGrid::VoxelGrid() : impl_(std::make_unique<Impl>()) {}
+VoxelGrid::~VoxelGrid() = default;
+VoxelGrid::VoxelGrid(VoxelGrid&&) noexcept = default;
+VoxelGrid& VoxelGrid::operator=(VoxelGrid&&) noexcept = default;
+
+absl::Status VoxelGrid::Filter(const PointCloud& in, const VoxelGridParams& params,
+                               PointCloud* out) {
+  if (out == nullptr) return absl::InvalidArgumentError("output cloud is null");
+  if (out == &in) return absl::InvalidArgumentError("voxel grid output must not alias its input");
+  if (auto s = params.Validate(); !s.ok()) return s;
+  if (!params.enabled) {
+    return absl::InvalidArgumentError("voxel grid is disabled (voxel.enabled = false)");
+  }
+  const Limits limits;
+  if (in.size() > limits.max_pixels) {
+    return absl::InvalidArgumentError(absl::StrCat("voxel grid input has ", in.size(),
+                                                   " points; the limit is ", limits.max_pixels));
+  }
+  out->points.clear();
+  const absl::Status status =
+      impl_->accumulator.Run(in.points.data(), in.points.size(), params, &out->points);
+  if (!status.ok()) out->points.clear();
+  out->width = static_cast<std::uint32_t>(out->points.size());
+  out->height = 1;
+  return status;
+}
+
+}  // namespace cloudcast

@@ -1,0 +1,68 @@
+// The server's Prometheus metrics. Counters and histograms are updated on the hot path with a
+// handful of atomic adds (histograms take a short lock), never with a look-up by name.
+#pragma once
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "prometheus/collectable.h"
+#include "prometheus/counter.h"
+#include "prometheus/family.h"
+#include "prometheus/gauge.h"
+#include "prometheus/histogram.h"
+#include "prometheus/registry.h"
+
+namespace cloudcast::server {
+
+class Metrics {
+ public:
+  Metrics();
+  Metrics(const Metrics&) = delete;
+  Metrics& operator=(const Metrics&) = delete;
+
+  // What an exporter serves: the registry and the process CPU collector.
+  std::vector<std::shared_ptr<prometheus::Collectable>> collectables() const {
+    return {registry_, process_cpu_};
+  }
+  // Everything in Prometheus' text format, as /metrics serves it.
+  std::string Serialize() const;
+
+  // The errors counter for one status code (labelled with its name, e.g. INVALID_ARGUMENT).
+  prometheus::Counter& FrameErrors(absl::StatusCode code);
+
+ private:
+  std::shared_ptr<prometheus::Registry> registry_;
+  std::shared_ptr<prometheus::Collectable> process_cpu_;
+  prometheus::Family<prometheus::Counter>& frame_errors_family_;
+
+ public:
+  prometheus::Counter& frames_processed;  // clouds sent (Stream and Process)
+  prometheus::Counter& frames_dropped;    // replaced while waiting (DELIVERY_LATEST)
+  prometheus::Counter& bytes_received;    // serialized request size of frames and configs
+  prometheus::Counter& bytes_sent;        // serialized reply size
+  prometheus::Gauge& active_streams;
+  prometheus::Counter& streams_accepted;
+  prometheus::Counter& streams_rejected_limit;     // over --max-streams
+  prometheus::Counter& streams_rejected_shutdown;  // arrived while shutting down
+  prometheus::Counter& streams_idle_timeout;
+
+ private:
+  prometheus::Family<prometheus::Histogram>& stage_family_;
+
+ public:
+  // Per-stage latency, seconds.
+  prometheus::Histogram& decode_seconds;    // PNG / JPEG decoding (frames that had any)
+  prometheus::Histogram& pipeline_seconds;  // conversion + passthrough + voxel grid
+  prometheus::Histogram& encode_seconds;    // Draco
+  prometheus::Histogram& queue_seconds;     // received -> a worker starts on it
+  prometheus::Histogram& total_seconds;     // received -> reply handed to gRPC
+  // CPU time of the worker thread inside the core pipeline and Draco, and in the whole frame
+  // task (decode, checks, reply). Against the process' CPU time these give the share spent
+  // outside the core (transport, protobuf, scheduling).
+  prometheus::Counter& core_cpu_seconds;
+  prometheus::Counter& worker_cpu_seconds;
+};
+
+}  // namespace cloudcast::server

@@ -1,0 +1,1323 @@
+// End-to-end tests of cloudcast-process: the real binary, run through the shell on synthetic
+// frames, on image files of every depth written here, and on a New Tsukuba frame. Its files are
+// read back by PCL, Open3D and the draco_decoder tool and compared with an in-process run of the
+// pipeline and with stock PCL's chain. Also: image_io (OpenCV) and cloud_io (PCD/PLY/DRC) on
+// their own, including files other tools wrote.
+#include <gtest/gtest.h>
+#include <open3d/geometry/PointCloud.h>
+#include <open3d/io/PointCloudIO.h>
+#include <pcl/io/pcd_io.h>
+#include <pcl/io/ply_io.h>
+#include <pcl/point_cloud.h>
+#include <pcl/point_types.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <random>
+#include <sstream>
+#include <string>
+#include <tuple>
+#include <unordered_map>
+#include <vector>
+
+#include "cloudcast/core/camera.h"
+#include "cloudcast/core/cloud_io.h"
+#include "cloudcast/core/draco_codec.h"
+#include "cloudcast/core/filters.h"
+#include "cloudcast/core/image_io.h"
+#include "cloudcast/core/pipeline.h"
+#include "cloudcast/core/point.h"
+#include "cloudcast/core/synthetic.h"
+#include "pcl_reference.h"
+#include "test_support.h"
+
+namespace cloudcast {
+namespace {
+
+namespace fs = std::filesystem;
+using Json = nlohmann::json;
+
+// ---------------------------------------------------------------------------------------------
+// Running the binary.
+
+std::string Binary() { return std::string(CLOUDCAST_BIN_DIR) + "/cloudcast-process"; }
+
+std::string ShellQuote(const std::string& s) {
+  std::string out = "'";
+  for (char c : s) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return out + "'";
+}
+
+std::string ReadText(const std::string& path) {
+  std::ifstream file(path, std::ios::binary);
+  std::stringstream ss;
+  ss << file.rdbuf();
+  return ss.str();
+}
+
+struct RunResult {
+  bool exited = false;  // false: killed by a signal (a crash)
+  int code = -1;
+  std::string out, err;
+
+  // 128 + signal: the shell reports a crashed child this way.
+  bool crashed() const { return !exited || code >= 128; }
+};
+
+std::ostream& operator<<(std::ostream& os, const RunResult& r) {
+  return os << "exit " << r.code << "\n--- stdout:\n" << r.out << "--- stderr:\n" << r.err;
+}
+
+class CliTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    ASSERT_TRUE(fs::exists(Binary())) << Binary() << " is missing: build cloudcast-process";
+    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+    std::string name = std::string(info->test_suite_name()) + "_" + info->name();
+    std::replace(name.begin(), name.end(), '/', '_');
+    dir_ = fs::path(::testing::TempDir()) /
+           ("cloudcast_cli_" + name + "_" + std::to_string(::getpid()));
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override {
+    std::error_code ec;
+    fs::remove_all(dir_, ec);
+  }
+
+  std::string Path(const std::string& name) const { return (dir_ / name).string(); }
+
+  RunResult Run(const std::vector<std::string>& args) const {
+    const std::string out = Path("stdout.txt"), err = Path("stderr.txt");
+    std::string command = ShellQuote(Binary());
+    for (const std::string& a : args) command += " " + ShellQuote(a);
+    command += " <" + ShellQuote("/dev/null") + " >" + ShellQuote(out) + " 2>" + ShellQuote(err);
+    const int status = std::system(command.c_str());
+    RunResult r;
+    if (status != -1 && WIFEXITED(status)) {
+      r.exited = true;
+      r.code = WEXITSTATUS(status);
+    }
+    r.out = ReadText(out);
+    r.err = ReadText(err);
+    return r;
+  }
+
+  // Runs and expects success; returns the parsed --json report.
+  Json RunOk(std::vector<std::string> args, RunResult* result = nullptr) const {
+    const std::string json = Path("report.json");
+    args.push_back("--json");
+    args.push_back(json);
+    const RunResult r = Run(args);
+    if (result != nullptr) *result = r;
+    EXPECT_TRUE(r.exited && r.code == 0) << r;
+    if (!fs::exists(json)) {
+      ADD_FAILURE() << "no JSON report written\n" << r;
+      return Json::object();
+    }
+    return Json::parse(ReadText(json), nullptr, /*allow_exceptions=*/false);
+  }
+
+  fs::path dir_;
+};
+
+Json Stage(const Json& report, const std::string& name) {
+  if (report.contains("stages")) {
+    for (const Json& s : report["stages"]) {
+      if (s.value("name", "") == name) return s;
+    }
+  }
+  ADD_FAILURE() << "stage '" << name << "' missing from " << report.dump(2);
+  return Json::object();
+}
+
+std::uint64_t StagePoints(const Json& report, const std::string& name) {
+  return Stage(report, name).value("points", std::uint64_t{0});
+}
+
+// ---------------------------------------------------------------------------------------------
+// Clouds.
+
+bool Finite(const Point& p) {
+  return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z);
+}
+
+std::uint32_t Bits(float f) {
+  std::uint32_t b;
+  std::memcpy(&b, &f, 4);
+  return b;
+}
+
+// Points sorted by their bits, optionally with alpha forced to 255 (for formats without alpha).
+std::vector<Point> Canonical(const PointCloud& cloud, bool keep_alpha = true) {
+  std::vector<Point> v(cloud.points.begin(), cloud.points.end());
+  for (Point& p : v) {
+    if (!keep_alpha) p.rgba |= 0xFF000000u;
+  }
+  std::sort(v.begin(), v.end(), [](const Point& a, const Point& b) {
+    return std::make_tuple(Bits(a.x), Bits(a.y), Bits(a.z), a.rgba) <
+           std::make_tuple(Bits(b.x), Bits(b.y), Bits(b.z), b.rgba);
+  });
+  return v;
+}
+
+// The same points (bit for bit) and colours, in any order.
+::testing::AssertionResult SamePoints(const PointCloud& expected, const PointCloud& actual,
+                                      bool compare_alpha = true) {
+  const auto a = Canonical(expected, compare_alpha), b = Canonical(actual, compare_alpha);
+  if (a.size() != b.size()) {
+    return ::testing::AssertionFailure() << "expected " << a.size() << " points, got " << b.size();
+  }
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    if (Bits(a[i].x) != Bits(b[i].x) || Bits(a[i].y) != Bits(b[i].y) ||
+        Bits(a[i].z) != Bits(b[i].z) || a[i].rgba != b[i].rgba) {
+      return ::testing::AssertionFailure()
+             << "sorted point " << i << ": expected (" << a[i].x << ", " << a[i].y << ", " << a[i].z
+             << ", " << std::hex << a[i].rgba << std::dec << ") got (" << b[i].x << ", " << b[i].y
+             << ", " << b[i].z << ", " << std::hex << b[i].rgba << ")";
+    }
+  }
+  return ::testing::AssertionSuccess();
+}
+
+// Every decoded point has its own expected point with the same RGB within `tol` per coordinate
+// (Draco quantizes positions and does not keep the order).
+::testing::AssertionResult SameWithin(const PointCloud& expected, const PointCloud& decoded,
+                                      double tol) {
+  if (expected.size() != decoded.size()) {
+    return ::testing::AssertionFailure()
+           << "expected " << expected.size() << " points, decoded " << decoded.size();
+  }
+  const double cell = std::max(2 * tol, 1e-6);
+  auto key = [cell](double x, double y, double z) {
+    auto c = [cell](double v) { return static_cast<std::int64_t>(std::floor(v / cell)); };
+    return std::make_tuple(c(x), c(y), c(z));
+  };
+  struct Hash {
+    std::size_t operator()(const std::tuple<std::int64_t, std::int64_t, std::int64_t>& t) const {
+      return std::hash<std::int64_t>()(std::get<0>(t) * 73856093 ^ std::get<1>(t) * 19349663 ^
+                                       std::get<2>(t) * 83492791);
+    }
+  };
+  std::unordered_map<std::tuple<std::int64_t, std::int64_t, std::int64_t>, std::vector<std::size_t>,
+                     Hash>
+      grid;
+  for (std::size_t i = 0; i < expected.size(); ++i) {
+    const Point& p = expected.points[i];
+    grid[key(p.x, p.y, p.z)].push_back(i);
+  }
+  std::vector<bool> used(expected.size(), false);
+  for (std::size_t d = 0; d < decoded.size(); ++d) {
+    const Point& q = decoded.points[d];
+    const auto [kx, ky, kz] = key(q.x, q.y, q.z);
+    bool found = false;
+    for (int dx = -1; dx <= 1 && !found; ++dx) {
+      for (int dy = -1; dy <= 1 && !found; ++dy) {
+        for (int dz = -1; dz <= 1 && !found; ++dz) {
+          auto it = grid.find({kx + dx, ky + dy, kz + dz});
+          if (it == grid.end()) continue;
+          for (std::size_t i : it->second) {
+            const Point& p = expected.points[i];
+            if (used[i] || (p.rgba & 0xFFFFFF) != (q.rgba & 0xFFFFFF)) continue;
+            if (std::fabs(double(p.x) - q.x) <= tol && std::fabs(double(p.y) - q.y) <= tol &&
+                std::fabs(double(p.z) - q.z) <= tol) {
+              used[i] = found = true;
+              break;
+            }
+          }
+        }
+      }
+    }
+    if (!found) {
+      return ::testing::AssertionFailure()
+             << "decoded point " << d << " (" << q.x << ", " << q.y << ", " << q.z << ", "
+             << std::hex << q.rgba << std::dec << ") has no expected point of its colour within "
+             << tol;
+    }
+  }
+  return ::testing::AssertionSuccess();
+}
+
+PointCloud FromPclCloud(const pcl::PointCloud<pcl::PointXYZRGB>& in) {
+  PointCloud out;
+  for (const auto& q : in) out.points.push_back(Point{q.x, q.y, q.z, q.rgba});
+  out.width = in.width;
+  out.height = in.height;
+  return out;
+}
+
+PointCloud FromOpen3d(const open3d::geometry::PointCloud& in) {
+  PointCloud out;
+  for (std::size_t i = 0; i < in.points_.size(); ++i) {
+    const auto& p = in.points_[i];
+    std::uint32_t rgba = PackRgba(255, 255, 255);
+    if (in.HasColors()) {
+      const auto& c = in.colors_[i];
+      auto byte = [](double v) { return static_cast<std::uint8_t>(std::lround(v * 255.0)); };
+      rgba = PackRgba(byte(c(0)), byte(c(1)), byte(c(2)));
+    }
+    out.points.push_back(
+        Point{static_cast<float>(p(0)), static_cast<float>(p(1)), static_cast<float>(p(2)), rgba});
+  }
+  out.width = static_cast<std::uint32_t>(out.size());
+  out.height = 1;
+  return out;
+}
+
+// What the CLI must produce for a synthetic frame: the fused pipeline run here with `options`
+// (camera taken from the render unless `camera` is given).
+PointCloud RunPipeline(const DisparityView& disparity, const ColorView& colour,
+                       const PipelineOptions& options, StageCounts* counts = nullptr) {
+  Pipeline pipeline;
+  PointCloud out;
+  const absl::Status s = pipeline.Run(options, disparity, colour, &out, counts);
+  EXPECT_TRUE(s.ok()) << s;
+  return out;
+}
+
+SyntheticFrame Render(std::uint32_t w, std::uint32_t h, std::uint64_t frame = 0,
+                      DisparityEncoding encoding = DisparityEncoding::kF32) {
+  SyntheticOptions o;
+  o.width = w;
+  o.height = h;
+  o.frame = frame;
+  o.disparity_encoding = encoding;
+  auto rendered = SyntheticScene::Default().Render(o);
+  EXPECT_TRUE(rendered.ok()) << rendered.status();
+  return rendered.ok() ? *std::move(rendered) : SyntheticFrame{};
+}
+
+PointCloud ExpectedSynthetic(std::uint32_t w, std::uint32_t h, std::uint64_t frame = 0,
+                             PipelineOptions options = {}, StageCounts* counts = nullptr) {
+  const SyntheticFrame f = Render(w, h, frame);
+  options.camera = f.camera;
+  return RunPipeline(f.disparity_view(), f.colour_view(), options, counts);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Image files written by hand (PNG with stored deflate blocks, TIFF, PNM, PFM), so the tests need
+// no image library of their own and control every byte the decoder sees.
+
+void WriteFile(const std::string& path, const std::string& bytes) {
+  std::ofstream file(path, std::ios::binary);
+  file.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+  ASSERT_TRUE(file.good()) << path;
+}
+
+void PutBe32(std::string* s, std::uint32_t v) {
+  for (int shift = 24; shift >= 0; shift -= 8) s->push_back(static_cast<char>(v >> shift));
+}
+void PutLe(std::string* s, std::uint32_t v, int bytes) {
+  for (int i = 0; i < bytes; ++i) s->push_back(static_cast<char>(v >> (8 * i)));
+}
+
+std::uint32_t Crc32(const std::string& bytes) {
+  std::uint32_t crc = 0xFFFFFFFFu;
+  for (unsigned char c : bytes) {
+    crc ^= c;
+    for (int k = 0; k < 8; ++k) crc = (crc >> 1) ^ (0xEDB88320u & (0u - (crc & 1u)));
+  }
+  return crc ^ 0xFFFFFFFFu;
+}
+
+// A PNG of `rows` (already in PNG sample order, 16-bit samples big-endian).
+// colour_type: 0 grey, 2 RGB, 4 grey + alpha, 6 RGBA.
+std::string Png(std::uint32_t w, std::uint32_t h, int bit_depth, int colour_type,
+                const std::string& rows) {
+  const std::size_t row_bytes = rows.size() / h;
+  std::string raw;
+  for (std::uint32_t v = 0; v < h; ++v) raw += '\0' + rows.substr(v * row_bytes, row_bytes);
+  std::string zlib = "\x78\x01";
+  for (std::size_t at = 0; at < raw.size() || at == 0; at += 65535) {
+    const std::size_t n = std::min<std::size_t>(65535, raw.size() - at);
+    zlib.push_back(at + n >= raw.size() ? 1 : 0);
+    PutLe(&zlib, static_cast<std::uint32_t>(n), 2);
+    PutLe(&zlib, static_cast<std::uint32_t>(~n & 0xFFFF), 2);
+    zlib += raw.substr(at, n);
+  }
+  std::uint32_t a = 1, b = 0;
+  for (unsigned char c : raw) {
+    a = (a + c) % 65521;
+    b = (b + a) % 65521;
+  }
+  PutBe32(&zlib, (b << 16) | a);
+  auto chunk = [](const std::string& type, const std::string& data) {
+    std::string c;
+    PutBe32(&c, static_cast<std::uint32_t>(data.size()));
+    c += type + data;
+    PutBe32(&c, Crc32(type + data));
+    return c;
+  };
+  std::string ihdr;
+  PutBe32(&ihdr, w);
+  PutBe32(&ihdr, h);
+  ihdr += {static_cast<char>(bit_depth), static_cast<char>(colour_type), 0, 0, 0};
+  return std::string("\x89PNG\r\n\x1a\n", 8) + chunk("IHDR", ihdr) + chunk("IDAT", zlib) +
+         chunk("IEND", "");
+}
+
+std::string Bytes(const std::vector<std::uint8_t>& v) { return std::string(v.begin(), v.end()); }
+std::string Be16(const std::vector<std::uint16_t>& v) {
+  std::string s;
+  for (std::uint16_t x : v) s += {static_cast<char>(x >> 8), static_cast<char>(x & 0xFF)};
+  return s;
+}
+
+// BGR8 rows -> RGBA PNG rows with the given alpha pattern (as New Tsukuba's colour PNGs).
+std::string RgbaRowsFromBgr(const std::vector<std::uint8_t>& bgr) {
+  std::string s;
+  for (std::size_t i = 0; i + 2 < bgr.size(); i += 3) {
+    const std::uint8_t alpha = static_cast<std::uint8_t>((i / 3) % 3 == 0 ? 0 : 136 + i % 120);
+    s += {static_cast<char>(bgr[i + 2]), static_cast<char>(bgr[i + 1]), static_cast<char>(bgr[i]),
+          static_cast<char>(alpha)};
+  }
+  return s;
+}
+
+// Baseline little-endian TIFF, one strip, uncompressed, one 32-bit float sample per pixel.
+std::string FloatTiff(std::uint32_t w, std::uint32_t h, const std::vector<float>& v) {
+  const std::uint32_t data_bytes = static_cast<std::uint32_t>(v.size() * 4);
+  std::string s("II*\0", 4);
+  PutLe(&s, 8 + data_bytes, 4);  // the IFD follows the pixels
+  s.append(reinterpret_cast<const char*>(v.data()), data_bytes);
+  const std::vector<std::tuple<int, int, std::uint32_t>> entries = {
+      {256, 4, w}, {257, 4, h}, {258, 3, 32}, {259, 3, 1},          {262, 3, 1},
+      {273, 4, 8}, {277, 3, 1}, {278, 4, h},  {279, 4, data_bytes}, {339, 3, 3}};
+  PutLe(&s, static_cast<std::uint32_t>(entries.size()), 2);
+  for (const auto& [tag, type, value] : entries) {
+    PutLe(&s, tag, 2);
+    PutLe(&s, type, 2);
+    PutLe(&s, 1, 4);
+    PutLe(&s, value, 4);  // SHORT values sit in the low bytes (little-endian)
+  }
+  PutLe(&s, 0, 4);
+  return s;
+}
+
+std::string PnmHeader(const char* magic, std::uint32_t w, std::uint32_t h, int maxval) {
+  return std::string(magic) + "\n" + std::to_string(w) + " " + std::to_string(h) + "\n" +
+         std::to_string(maxval) + "\n";
+}
+
+// PFM: grey float, little-endian (negative scale), rows stored bottom to top.
+std::string Pfm(std::uint32_t w, std::uint32_t h, const std::vector<float>& v) {
+  std::string s = "Pf\n" + std::to_string(w) + " " + std::to_string(h) + "\n-1.0\n";
+  for (std::uint32_t r = h; r-- > 0;) {
+    s.append(reinterpret_cast<const char*>(v.data() + std::size_t{r} * w), w * sizeof(float));
+  }
+  return s;
+}
+
+template <typename T>
+std::vector<T> Samples(const std::vector<std::uint8_t>& bytes) {
+  std::vector<T> v(bytes.size() / sizeof(T));
+  std::memcpy(v.data(), bytes.data(), v.size() * sizeof(T));
+  return v;
+}
+
+// ---------------------------------------------------------------------------------------------
+// --help
+
+TEST_F(CliTest, HelpExplainsEveryFlagAndItsDefault) {
+  const RunResult r = Run({"--help"});
+  ASSERT_TRUE(r.exited && r.code == 0) << r;
+  for (const char* flag : {"--colour",
+                           "--disparity",
+                           "--synthetic",
+                           "--frame",
+                           "--focal",
+                           "--fy",
+                           "--cx",
+                           "--cy",
+                           "--baseline",
+                           "--disparity-scale",
+                           "--disparity-offset",
+                           "--axis",
+                           "--min",
+                           "--max",
+                           "--negative",
+                           "--no-passthrough",
+                           "--leaf",
+                           "--min-points-per-voxel",
+                           "--draco-bits",
+                           "--draco-speed",
+                           "--out",
+                           "--json",
+                           "--repeat",
+                           "--quiet"}) {
+    EXPECT_NE(r.out.find(std::string(flag) + " "), std::string::npos) << flag << "\n" << r.out;
+  }
+  // Defaults as CLI11 prints them (NAME TYPE=default), and the computed ones in words.
+  for (const char* shown :
+       {"--focal FLOAT=615", "--baseline FLOAT=1", "--disparity-scale FLOAT=1",
+        "--disparity-offset FLOAT=0", "=z", "--min FLOAT=3", "--max FLOAT=12", "--leaf FLOAT=0.03",
+        "--min-points-per-voxel UINT=0", "[1 - 30]=11", "[0 - 10]=10", "[default: --focal]",
+        "[default: width/2", "[default: height/2", "0 switches it off", "640x480", "Example",
+        ".pcd, .ply or .drc", "Exit status"}) {
+    EXPECT_NE(r.out.find(shown), std::string::npos) << "'" << shown << "' missing\n" << r.out;
+  }
+  const DracoOptions draco;
+  EXPECT_EQ(draco.position_bits, 11) << "DracoOptions' defaults moved: update this test";
+  EXPECT_EQ(draco.encode_speed, 10) << "DracoOptions' defaults moved: update this test";
+  std::istringstream lines(r.out);
+  for (std::string line; std::getline(lines, line);) {
+    EXPECT_LE(line.size(), 100u) << "help line over 100 columns: " << line;
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Synthetic input
+
+TEST_F(CliTest, NoInputFlagsRenderTheSyntheticScene) {
+  RunResult r;
+  const Json report = RunOk({}, &r);
+  EXPECT_EQ(report["input"]["kind"], "synthetic");
+  EXPECT_EQ(report["input"]["width"], 640);
+  EXPECT_EQ(report["input"]["height"], 480);
+  EXPECT_NE(r.err.find("--synthetic 640x480"), std::string::npos) << "it must say so\n" << r;
+  EXPECT_NE(r.out.find("input:  synthetic scene 640x480"), std::string::npos) << r;
+  EXPECT_NE(r.out.find("camera: fx=615"), std::string::npos) << r;
+  for (const char* label :
+       {"load", "convert", "passthrough", "voxel grid", "fused chain", "draco encode"}) {
+    EXPECT_NE(r.out.find(label), std::string::npos) << label << "\n" << r;
+  }
+  StageCounts counts;
+  const PointCloud expected = ExpectedSynthetic(640, 480, 0, {}, &counts);
+  EXPECT_EQ(StagePoints(report, "fused_chain"), expected.size());
+  EXPECT_EQ(Stage(report, "convert")["valid_points"], counts.valid_points);
+}
+
+TEST_F(CliTest, JsonReportsEveryStage) {
+  const Json report = RunOk({"--synthetic", "320x240", "--frame", "5", "--out", Path("c.drc")});
+  ASSERT_TRUE(report.contains("stages")) << report.dump(2);
+  std::vector<std::string> names;
+  for (const Json& s : report["stages"]) {
+    names.push_back(s["name"]);
+    EXPECT_TRUE(s["points"].is_number_unsigned()) << s;
+    EXPECT_TRUE(s["ms"].is_number() && s["ms"].get<double>() >= 0) << s;
+  }
+  EXPECT_EQ(names, (std::vector<std::string>{"load", "convert", "passthrough", "voxel_grid",
+                                             "fused_chain", "draco_encode", "write"}));
+  StageCounts counts;
+  const PointCloud expected = ExpectedSynthetic(320, 240, 5, {}, &counts);
+  EXPECT_EQ(StagePoints(report, "load"), 320u * 240u);
+  EXPECT_EQ(StagePoints(report, "convert"), 320u * 240u);
+  EXPECT_EQ(Stage(report, "convert")["valid_points"], counts.valid_points);
+  EXPECT_EQ(StagePoints(report, "passthrough"), counts.after_passthrough);
+  EXPECT_EQ(StagePoints(report, "voxel_grid"), counts.after_voxel);
+  EXPECT_EQ(StagePoints(report, "fused_chain"), expected.size());
+  EXPECT_EQ(StagePoints(report, "draco_encode"), expected.size());
+  EXPECT_LT(StagePoints(report, "voxel_grid"), StagePoints(report, "passthrough"));
+  EXPECT_LT(StagePoints(report, "passthrough"), counts.valid_points);
+  EXPECT_EQ(report["fused_matches_stages"], true);
+  EXPECT_EQ(report["input"]["frame"], 5);
+  EXPECT_EQ(report["camera"]["fx"], 307.5);  // the scene's camera: 615 * 320 / 640
+  EXPECT_EQ(report["camera"]["cx"], 160.0);
+  EXPECT_EQ(report["passthrough"]["axis"], "z");
+  EXPECT_FLOAT_EQ(report["voxel_grid"]["leaf"].get<float>(), 0.03f);
+  // The .drc written is the encode that was measured.
+  ASSERT_TRUE(report["draco_bytes"].is_number_unsigned());
+  EXPECT_GT(report["draco_bytes"].get<std::uint64_t>(), 0u);
+  EXPECT_EQ(report["draco_bytes"].get<std::uint64_t>(), fs::file_size(Path("c.drc")));
+  EXPECT_EQ(report["output"]["bytes"].get<std::uint64_t>(), fs::file_size(Path("c.drc")));
+}
+
+TEST_F(CliTest, PcdHoldsTheFusedCloudForPclAndOpen3d) {
+  const std::string out = Path("cloud.pcd");
+  const Json report = RunOk({"--synthetic", "320x240", "--frame", "3", "--out", out});
+  const PointCloud expected = ExpectedSynthetic(320, 240, 3);
+  ASSERT_GT(expected.size(), 1000u);
+  EXPECT_EQ(StagePoints(report, "voxel_grid"), expected.size());
+
+  // The header other tools rely on.
+  const std::string text = ReadText(out);
+  EXPECT_NE(text.find("FIELDS x y z rgb\n"), std::string::npos) << text.substr(0, 300);
+  EXPECT_NE(text.find("DATA binary\n"), std::string::npos);
+
+  pcl::PointCloud<pcl::PointXYZRGB> pcl_cloud;
+  ASSERT_EQ(pcl::io::loadPCDFile(out, pcl_cloud), 0);
+  EXPECT_EQ(pcl_cloud.size(), StagePoints(report, "voxel_grid"));
+  EXPECT_TRUE(SamePoints(expected, FromPclCloud(pcl_cloud)));
+
+  open3d::geometry::PointCloud o3d;
+  ASSERT_TRUE(open3d::io::ReadPointCloud(out, o3d));
+  ASSERT_TRUE(o3d.HasColors());
+  EXPECT_TRUE(SamePoints(expected, FromOpen3d(o3d), /*compare_alpha=*/false));
+
+  PointCloud ours;
+  ASSERT_TRUE(LoadCloud(out, &ours).ok());
+  EXPECT_TRUE(SamePoints(expected, ours));
+}
+
+TEST_F(CliTest, PlyHoldsTheFusedCloudForPclAndOpen3d) {
+  const std::string out = Path("cloud.ply");
+  const Json report = RunOk({"--synthetic", "320x240", "--frame", "3", "--out", out});
+  const PointCloud expected = ExpectedSynthetic(320, 240, 3);
+  EXPECT_EQ(StagePoints(report, "voxel_grid"), expected.size());
+
+  const std::string text = ReadText(out);
+  const std::string header = text.substr(0, text.find("end_header"));
+  EXPECT_NE(header.find("format binary_little_endian 1.0"), std::string::npos) << header;
+  EXPECT_NE(header.find("element vertex " + std::to_string(expected.size())), std::string::npos)
+      << header;
+  EXPECT_NE(header.find("property uchar red\nproperty uchar green\nproperty uchar blue"),
+            std::string::npos)
+      << header;
+  EXPECT_EQ(header.find("element camera"), std::string::npos) << header;
+
+  pcl::PointCloud<pcl::PointXYZRGB> pcl_cloud;
+  ASSERT_EQ(pcl::io::loadPLYFile(out, pcl_cloud), 0);
+  EXPECT_TRUE(SamePoints(expected, FromPclCloud(pcl_cloud), /*compare_alpha=*/false));
+
+  open3d::geometry::PointCloud o3d;
+  ASSERT_TRUE(open3d::io::ReadPointCloud(out, o3d));
+  EXPECT_TRUE(SamePoints(expected, FromOpen3d(o3d), /*compare_alpha=*/false));
+
+  PointCloud ours;
+  ASSERT_TRUE(LoadCloud(out, &ours).ok());
+  EXPECT_TRUE(SamePoints(expected, ours, /*compare_alpha=*/false));
+}
+
+TEST_F(CliTest, DrcDecodesToTheFusedCloud) {
+  const std::string out = Path("cloud.drc");
+  const Json report = RunOk({"--synthetic", "320x240", "--frame", "3", "--out", out});
+  const PointCloud expected = ExpectedSynthetic(320, 240, 3);
+  const Json encode = Stage(report, "draco_encode");
+  const double bound = encode.value("position_error_bound", 1.0);
+  EXPECT_GT(bound, 0.0);
+  EXPECT_LE(bound, 0.03 / 4 + 1e-6) << "max_position_error must be leaf / 4";
+  const double tol = bound * (1 + 1e-5) + 1e-6;
+
+  PointCloud ours;
+  ASSERT_TRUE(LoadCloud(out, &ours).ok());
+  EXPECT_EQ(ours.size(), StagePoints(report, "voxel_grid"));
+  EXPECT_TRUE(SameWithin(expected, ours, tol));
+
+  // The stock tool, when installed, reads the same file.
+  if (std::system("command -v draco_decoder >/dev/null 2>&1") != 0) {
+    GTEST_SKIP() << "draco_decoder not installed (Debian package 'draco'); skipped that part";
+  }
+  const std::string ply = Path("decoded.ply");
+  const std::string command = "draco_decoder -i " + ShellQuote(out) + " -o " + ShellQuote(ply) +
+                              " >" + ShellQuote(Path("draco.log")) + " 2>&1";
+  ASSERT_EQ(std::system(command.c_str()), 0) << ReadText(Path("draco.log"));
+  PointCloud decoded;
+  ASSERT_TRUE(LoadCloud(ply, &decoded).ok());
+  EXPECT_TRUE(SameWithin(expected, decoded, tol));
+}
+
+TEST_F(CliTest, RepeatReportsMediansAndQuietPrintsNothing) {
+  RunResult r;
+  const Json report =
+      RunOk({"--synthetic", "160x120", "--repeat", "3", "--quiet", "--out", Path("q.pcd")}, &r);
+  EXPECT_EQ(report["repeat"], 3);
+  EXPECT_TRUE(r.out.empty()) << r;
+  EXPECT_TRUE(r.err.empty()) << r;
+  EXPECT_TRUE(fs::exists(Path("q.pcd")));
+
+  const RunResult loud = Run({"--synthetic", "160x120", "--repeat", "3"});
+  ASSERT_EQ(loud.code, 0) << loud;
+  EXPECT_NE(loud.out.find("median of 3 runs"), std::string::npos) << loud;
+}
+
+TEST_F(CliTest, StageFlagsReachThePipeline) {
+  PipelineOptions options;
+  options.passthrough.axis = Axis::kY;
+  options.passthrough.min = -0.5f;
+  options.passthrough.max = 1.5f;
+  options.passthrough.negative = true;
+  options.voxel.SetLeaf(0.05f);
+  options.voxel.min_points_per_voxel = 3;
+  const PointCloud expected = ExpectedSynthetic(320, 240, 2, options);
+  const Json report = RunOk({"--synthetic", "320x240", "--frame", "2", "--axis", "y", "--min",
+                             "-0.5", "--max", "1.5", "--negative", "--leaf", "0.05",
+                             "--min-points-per-voxel", "3", "--out", Path("s.pcd")});
+  PointCloud ours;
+  ASSERT_TRUE(LoadCloud(Path("s.pcd"), &ours).ok());
+  EXPECT_TRUE(SamePoints(expected, ours));
+  EXPECT_EQ(report["passthrough"]["negative"], true);
+  EXPECT_EQ(report["fused_matches_stages"], true);
+
+  // The passthrough and its negative split the valid points between them.
+  const Json positive = RunOk(
+      {"--synthetic", "320x240", "--frame", "2", "--axis", "y", "--min", "-0.5", "--max", "1.5"});
+  EXPECT_EQ(StagePoints(positive, "passthrough") + StagePoints(report, "passthrough"),
+            Stage(report, "convert")["valid_points"].get<std::uint64_t>());
+}
+
+TEST_F(CliTest, StagesSwitchOff) {
+  const Json report = RunOk({"--synthetic", "160x120", "--no-passthrough", "--leaf", "0", "--min",
+                             "9", "--max", "1"});  // limits unused when off
+  const std::uint64_t valid = Stage(report, "convert")["valid_points"];
+  EXPECT_EQ(StagePoints(report, "passthrough"), valid);
+  EXPECT_EQ(StagePoints(report, "voxel_grid"), valid);
+  EXPECT_EQ(StagePoints(report, "fused_chain"), valid);
+  EXPECT_EQ(report["voxel_grid"]["enabled"], false);
+  EXPECT_EQ(report["passthrough"]["enabled"], false);
+  EXPECT_EQ(report["draco"]["max_position_error"], 0.0);
+}
+
+TEST_F(CliTest, EmptyResultIsWrittenInEveryFormat) {
+  for (const char* name : {"none.pcd", "none.ply", "none.drc"}) {
+    SCOPED_TRACE(name);
+    const Json report =
+        RunOk({"--synthetic", "160x120", "--min", "500", "--max", "600", "--out", Path(name)});
+    EXPECT_EQ(StagePoints(report, "passthrough"), 0u);
+    EXPECT_EQ(StagePoints(report, "fused_chain"), 0u);
+    PointCloud back;
+    back.points.resize(2);
+    const absl::Status s = LoadCloud(Path(name), &back);
+    ASSERT_TRUE(s.ok()) << s;
+    EXPECT_TRUE(back.empty());
+  }
+  // PCL and Open3D refuse to read files without points ("No points to read", "number of
+  // vertex <= 0"); only LoadCloud is checked here.
+}
+
+TEST_F(CliTest, CameraFlagsReachTheCamera) {
+  const Json report = RunOk({"--synthetic",
+                             "320x240",
+                             "--focal",
+                             "400",
+                             "--fy",
+                             "380",
+                             "--cx",
+                             "150.5",
+                             "--cy",
+                             "100",
+                             "--baseline",
+                             "0.5",
+                             "--disparity-scale",
+                             "2",
+                             "--disparity-offset",
+                             "0.25",
+                             "--min",
+                             "0",
+                             "--max",
+                             "100",
+                             "--out",
+                             Path("cam.pcd")});
+  const Json& camera = report["camera"];
+  EXPECT_EQ(camera["fx"], 400.0);
+  EXPECT_EQ(camera["fy"], 380.0);
+  EXPECT_EQ(camera["cx"], 150.5);
+  EXPECT_EQ(camera["cy"], 100.0);
+  EXPECT_EQ(camera["baseline"], 0.5);
+  EXPECT_EQ(camera["disparity_scale"], 2.0);
+  EXPECT_EQ(camera["disparity_offset"], 0.25);
+
+  const SyntheticFrame f = Render(320, 240);
+  PipelineOptions options;
+  options.camera = f.camera;
+  options.camera.fx = 400;
+  options.camera.fy = 380;
+  options.camera.cx = 150.5;
+  options.camera.cy = 100;
+  options.camera.baseline = 0.5;
+  options.camera.disparity_scale = 2;
+  options.camera.disparity_offset = 0.25;
+  options.passthrough.min = 0;
+  options.passthrough.max = 100;
+  const PointCloud expected = RunPipeline(f.disparity_view(), f.colour_view(), options);
+  PointCloud ours;
+  ASSERT_TRUE(LoadCloud(Path("cam.pcd"), &ours).ok());
+  EXPECT_GT(ours.size(), 100u);
+  EXPECT_TRUE(SamePoints(expected, ours));
+
+  // --focal alone sets fy too.
+  const Json focal_only = RunOk({"--synthetic", "320x240", "--focal", "500"});
+  EXPECT_EQ(focal_only["camera"]["fy"], 500.0);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Image files: 8-bit, 16-bit (with --disparity-scale) and float disparity give the same cloud,
+// and it is the cloud stock PCL makes from the 8-bit frame.
+
+TEST_F(CliTest, EveryDisparityDepthGivesTheSameCloudAsStockPcl) {
+  const SyntheticFrame f = Render(640, 480, 4, DisparityEncoding::kU8);
+  const std::uint32_t w = f.width, h = f.height;
+  const std::vector<std::uint8_t> d8 = f.disparity;
+  std::vector<std::uint16_t> d16;
+  std::vector<float> d32;
+  for (std::uint8_t d : d8) {
+    d16.push_back(static_cast<std::uint16_t>(d * 16));
+    d32.push_back(static_cast<float>(d));
+  }
+  WriteFile(Path("d8.png"), Png(w, h, 8, 0, Bytes(d8)));
+  WriteFile(Path("d16.png"), Png(w, h, 16, 0, Be16(d16)));
+  WriteFile(Path("d32.tif"), FloatTiff(w, h, d32));
+  // RGBA with alpha down to 0, as New Tsukuba's colour PNGs: alpha must not touch the colour.
+  WriteFile(Path("colour.png"), Png(w, h, 8, 6, RgbaRowsFromBgr(f.colour)));
+
+  const std::vector<std::string> common = {"--colour", Path("colour.png"), "--focal", "615"};
+  auto run = [&](const std::string& disparity, const std::string& out,
+                 std::vector<std::string> extra) {
+    std::vector<std::string> args = common;
+    args.insert(args.end(), {"--disparity", Path(disparity), "--out", Path(out)});
+    args.insert(args.end(), extra.begin(), extra.end());
+    const Json report = RunOk(args);
+    PointCloud cloud;
+    const absl::Status s = LoadCloud(Path(out), &cloud);
+    EXPECT_TRUE(s.ok()) << s;
+    return std::make_pair(report, cloud);
+  };
+  const auto [r8, c8] = run("d8.png", "c8.pcd", {});
+  const auto [r16, c16] = run("d16.png", "c16.pcd", {"--disparity-scale", "0.0625"});
+  const auto [r32, c32] = run("d32.tif", "c32.pcd", {});
+  EXPECT_EQ(r8["input"]["disparity_encoding"], "u8");
+  EXPECT_EQ(r16["input"]["disparity_encoding"], "u16");
+  EXPECT_EQ(r32["input"]["disparity_encoding"], "f32");
+  EXPECT_EQ(r8["input"]["colour_encoding"], "bgr8");
+  ASSERT_GT(c8.size(), 1000u);
+  EXPECT_TRUE(SamePoints(c8, c16));
+  EXPECT_TRUE(SamePoints(c8, c32));
+
+  // Stock PCL 1.13 on the same 8-bit frame: OrganizedConversion, PassThrough, VoxelGrid.
+  reference::PclFrame pf = reference::MakePclFrame(f.disparity_view(), f.colour_view());
+  auto organized = std::make_shared<reference::PclCloud>();
+  reference::PclConvert(pf, 615.0f, 0.0f, 1.0f, *organized);
+  auto passed = std::make_shared<reference::PclCloud>();
+  reference::PclPassThrough(organized, PassThroughParams{}, *passed);
+  reference::PclCloud voxels;
+  reference::PclVoxelGrid(passed, VoxelGridParams{}, voxels);
+  EXPECT_EQ(StagePoints(r8, "passthrough"), passed->size());
+  EXPECT_TRUE(testing::CloudsMatch(reference::FromPcl(voxels), c8));
+}
+
+// ---------------------------------------------------------------------------------------------
+// A real New Tsukuba frame, the paper's parameters: the counts stock PCL gives (PLATFORM.md).
+
+TEST_F(CliTest, TsukubaFrameMatchesStockPcl) {
+  CLOUDCAST_REQUIRE_TSUKUBA();
+  const std::string colour = testing::TsukubaColourPath("00001");
+  const std::string disparity = testing::TsukubaDisparityPath("00001");
+  const std::string out = Path("tsukuba.pcd");
+  RunResult r;
+  const Json report = RunOk({"--colour", colour, "--disparity", disparity, "--focal", "615",
+                             "--min", "3", "--max", "12", "--leaf", "0.03", "--out", out},
+                            &r);
+  EXPECT_EQ(report["input"]["kind"], "files");
+  EXPECT_EQ(report["input"]["disparity_encoding"], "u8");
+  EXPECT_EQ(report["input"]["colour_encoding"], "bgr8");  // RGBA PNG, alpha dropped
+  EXPECT_EQ(report["camera"]["cx"], 320.0);
+  EXPECT_EQ(report["camera"]["cy"], 240.0);
+  EXPECT_EQ(StagePoints(report, "load"), 307200u);
+  EXPECT_EQ(StagePoints(report, "convert"), 307200u);
+  EXPECT_EQ(Stage(report, "convert")["valid_points"], 307200u);
+  EXPECT_EQ(StagePoints(report, "passthrough"), 52300u);
+  EXPECT_EQ(StagePoints(report, "voxel_grid"), 16186u);
+  EXPECT_EQ(StagePoints(report, "fused_chain"), 16186u);
+  EXPECT_NE(r.out.find("tsukuba_disparity_L_00001.png (640x480 u8)"), std::string::npos) << r;
+
+  // Stock PCL's chain on the same images, compared point by point with the file.
+  auto d = LoadDisparity(disparity);
+  auto c = LoadColor(colour);
+  ASSERT_TRUE(d.ok() && c.ok());
+  reference::PclFrame pf = reference::MakePclFrame(d->view(), c->view());
+  auto organized = std::make_shared<reference::PclCloud>();
+  reference::PclConvert(pf, 615.0f, 0.0f, 1.0f, *organized);
+  auto passed = std::make_shared<reference::PclCloud>();
+  reference::PclPassThrough(organized, PassThroughParams{}, *passed);
+  reference::PclCloud voxels;
+  reference::PclVoxelGrid(passed, VoxelGridParams{}, voxels);
+  ASSERT_EQ(voxels.size(), 16186u);
+
+  pcl::PointCloud<pcl::PointXYZRGB> pcl_cloud;
+  ASSERT_EQ(pcl::io::loadPCDFile(out, pcl_cloud), 0);
+  EXPECT_TRUE(testing::CloudsMatch(reference::FromPcl(voxels), FromPclCloud(pcl_cloud)));
+  open3d::geometry::PointCloud o3d;
+  ASSERT_TRUE(open3d::io::ReadPointCloud(out, o3d));
+  EXPECT_TRUE(testing::CloudsMatch(reference::FromPcl(voxels), FromOpen3d(o3d)));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Bad input: a clear message naming the problem, exit 2 for usage and 1 for processing errors,
+// never a crash, and no output file.
+
+struct BadCase {
+  std::string name;
+  std::vector<std::string> args;  // "@" prefixes a file in the test folder
+  int code;
+  std::vector<std::string> mentions;
+};
+
+void PrintTo(const BadCase& c, std::ostream* os) { *os << c.name; }
+
+class BadInputTest : public CliTest, public ::testing::WithParamInterface<BadCase> {};
+
+TEST_P(BadInputTest, FailsCleanly) {
+  // Fixtures: a good frame, a smaller colour image, an undecodable and an empty file.
+  const SyntheticFrame f = Render(64, 48, 0, DisparityEncoding::kU8);
+  WriteFile(Path("d.png"), Png(f.width, f.height, 8, 0, Bytes(f.disparity)));
+  WriteFile(Path("c.png"), Png(f.width, f.height, 8, 6, RgbaRowsFromBgr(f.colour)));
+  WriteFile(Path("small.png"), Png(32, 48, 8, 2, std::string(std::size_t{32} * 48 * 3, '\x80')));
+  WriteFile(Path("garbage.png"), "this is not a PNG");
+  WriteFile(Path("truncated.png"), Png(f.width, f.height, 8, 0, Bytes(f.disparity)).substr(0, 60));
+  WriteFile(Path("empty.png"), "");
+
+  std::vector<std::string> args;
+  for (const std::string& a : GetParam().args) args.push_back(a[0] == '@' ? Path(a.substr(1)) : a);
+  const bool has_out = std::find(args.begin(), args.end(), "--out") != args.end();
+  if (!has_out) args.insert(args.end(), {"--out", Path("never.pcd")});
+  const RunResult r = Run(args);
+  EXPECT_FALSE(r.crashed()) << r;
+  EXPECT_EQ(r.code, GetParam().code) << r;
+  for (const std::string& m : GetParam().mentions) {
+    const std::string mention = m[0] == '@' ? Path(m.substr(1)) : m;
+    EXPECT_NE(r.err.find(mention), std::string::npos) << "stderr must mention '" << mention << "'\n"
+                                                      << r;
+  }
+  EXPECT_FALSE(fs::exists(Path("never.pcd")));
+}
+
+const std::vector<BadCase>& BadCases() {
+  static const std::vector<BadCase> cases = {
+      {"MissingDisparity",
+       {"--colour", "@c.png", "--disparity", "@nope.png"},
+       1,
+       {"@nope.png", "no such file"}},
+      {"MissingColour",
+       {"--colour", "@nope.png", "--disparity", "@d.png"},
+       1,
+       {"@nope.png", "no such file"}},
+      {"Undecodable",
+       {"--colour", "@c.png", "--disparity", "@garbage.png"},
+       1,
+       {"@garbage.png", "decoded"}},
+      {"Truncated", {"--colour", "@c.png", "--disparity", "@truncated.png"}, 1, {"@truncated.png"}},
+      {"EmptyFile", {"--colour", "@empty.png", "--disparity", "@d.png"}, 1, {"@empty.png"}},
+      {"ColourAsDisparity",
+       {"--colour", "@c.png", "--disparity", "@c.png"},
+       1,
+       {"disparity file", "4 channels"}},
+      {"FolderAsColour", {"--colour", "@", "--disparity", "@d.png"}, 1, {"directory"}},
+      {"MismatchedSizes",
+       {"--colour", "@small.png", "--disparity", "@d.png"},
+       1,
+       {"32x48", "64x48", "must match"}},
+      {"ColourWithoutDisparity", {"--colour", "@c.png"}, 2, {"--disparity"}},
+      {"DisparityWithoutColour", {"--disparity", "@d.png"}, 2, {"--colour"}},
+      {"FilesAndSynthetic",
+       {"--colour", "@c.png", "--disparity", "@d.png", "--synthetic", "8x8"},
+       2,
+       {"--synthetic"}},
+      {"FrameWithFiles",
+       {"--colour", "@c.png", "--disparity", "@d.png", "--frame", "2"},
+       2,
+       {"--frame"}},
+      {"NegativeLeaf", {"--synthetic", "64x48", "--leaf", "-0.1"}, 2, {"--leaf", ">= 0"}},
+      {"NanLeaf", {"--synthetic", "64x48", "--leaf", "nan"}, 2, {"--leaf"}},
+      {"LeafTooFine", {"--synthetic", "64x48", "--leaf", "1e-7"}, 1, {"voxel", "leaf"}},
+      {"UnknownExtension",
+       {"--synthetic", "64x48", "--out", "@cloud.xyz"},
+       2,
+       {"--out", "'.xyz'", ".pcd, .ply, .drc"}},
+      {"NoExtension", {"--synthetic", "64x48", "--out", "@cloud"}, 2, {"--out", "extension"}},
+      {"MissingOutFolder",
+       {"--synthetic", "64x48", "--out", "@no/such/dir/cloud.pcd"},
+       1,
+       {"@no/such/dir", "does not exist"}},
+      {"MissingJsonFolder",
+       {"--synthetic", "64x48", "--json", "@no/such/dir/r.json"},
+       1,
+       {"--json", "@no/such/dir", "does not exist"}},
+      {"FocalZero", {"--synthetic", "64x48", "--focal", "0"}, 2, {"--focal", "> 0"}},
+      {"FocalNan", {"--synthetic", "64x48", "--focal", "nan"}, 2, {"--focal", "nan"}},
+      {"FocalInf", {"--synthetic", "64x48", "--focal", "inf"}, 2, {"--focal"}},
+      {"FocalText", {"--synthetic", "64x48", "--focal", "wide"}, 2, {"--focal"}},
+      {"FocalZeroForFiles",
+       {"--colour", "@c.png", "--disparity", "@d.png", "--focal", "0"},
+       2,
+       {"--focal"}},
+      {"NegativeFy", {"--synthetic", "64x48", "--fy", "-1"}, 2, {"--fy"}},
+      {"NanCx", {"--synthetic", "64x48", "--cx", "nan"}, 2, {"--cx"}},
+      {"ZeroBaseline", {"--synthetic", "64x48", "--baseline", "0"}, 2, {"--baseline"}},
+      {"ZeroScale", {"--synthetic", "64x48", "--disparity-scale", "0"}, 2, {"--disparity-scale"}},
+      {"InfOffset",
+       {"--synthetic", "64x48", "--disparity-offset", "inf"},
+       2,
+       {"--disparity-offset"}},
+      {"SyntheticZero", {"--synthetic", "0x48"}, 2, {"--synthetic"}},
+      {"SyntheticText", {"--synthetic", "big"}, 2, {"--synthetic", "WIDTHxHEIGHT"}},
+      {"SyntheticHuge", {"--synthetic", "100000x100000"}, 2, {"--synthetic", "limits"}},
+      {"MinAboveMax", {"--synthetic", "64x48", "--min", "5", "--max", "3"}, 2, {"--min", "--max"}},
+      {"NanMin", {"--synthetic", "64x48", "--min", "nan"}, 2, {"--min"}},
+      {"BadAxis", {"--synthetic", "64x48", "--axis", "w"}, 2, {"--axis"}},
+      {"RepeatZero", {"--synthetic", "64x48", "--repeat", "0"}, 2, {"--repeat"}},
+      {"NegativeMinPoints",
+       {"--synthetic", "64x48", "--min-points-per-voxel", "-1"},
+       2,
+       {"--min-points-per-voxel"}},
+      {"DracoBits", {"--synthetic", "64x48", "--draco-bits", "31"}, 2, {"--draco-bits"}},
+      {"DracoSpeed", {"--synthetic", "64x48", "--draco-speed", "11"}, 2, {"--draco-speed"}},
+      {"UnknownFlag", {"--synthetic", "64x48", "--voxel", "3"}, 2, {"--voxel"}},
+      {"StrayArgument", {"frame.png"}, 2, {"frame.png"}},
+  };
+  return cases;
+}
+
+INSTANTIATE_TEST_SUITE_P(Cases, BadInputTest, ::testing::ValuesIn(BadCases()),
+                         [](const ::testing::TestParamInfo<BadCase>& info) {
+                           return info.param.name;
+                         });
+
+// ---------------------------------------------------------------------------------------------
+// image_io on its own.
+
+class ImageIoTest : public CliTest {};
+
+TEST_F(ImageIoTest, DisparityKeepsDepthAndValues) {
+  WriteFile(Path("d8.png"), Png(3, 2, 8, 0, Bytes({0, 1, 2, 100, 254, 255})));
+  WriteFile(Path("d16.png"), Png(3, 2, 16, 0, Be16({0, 1, 256, 2047, 40000, 65535})));
+  WriteFile(Path("d32.tif"), FloatTiff(3, 2, {0.0f, 0.5f, 1.25f, 100.0f, -3.0f, 1e6f}));
+  WriteFile(Path("d32.pfm"), Pfm(3, 2, {0.0f, 0.5f, 1.25f, 100.0f, -3.0f, 1e6f}));
+  WriteFile(Path("d16.pgm"), PnmHeader("P5", 3, 2, 65535) + Be16({0, 1, 256, 2047, 40000, 65535}));
+
+  auto d8 = LoadDisparity(Path("d8.png"));
+  ASSERT_TRUE(d8.ok()) << d8.status();
+  EXPECT_EQ(d8->encoding, DisparityEncoding::kU8);
+  EXPECT_EQ(d8->width, 3u);
+  EXPECT_EQ(d8->height, 2u);
+  EXPECT_EQ(d8->pixels, (std::vector<std::uint8_t>{0, 1, 2, 100, 254, 255}));
+
+  for (const char* name : {"d16.png", "d16.pgm"}) {
+    SCOPED_TRACE(name);
+    auto d16 = LoadDisparity(Path(name));
+    ASSERT_TRUE(d16.ok()) << d16.status();
+    EXPECT_EQ(d16->encoding, DisparityEncoding::kU16);
+    EXPECT_EQ(Samples<std::uint16_t>(d16->pixels),
+              (std::vector<std::uint16_t>{0, 1, 256, 2047, 40000, 65535}));
+  }
+  for (const char* name : {"d32.tif", "d32.pfm"}) {
+    SCOPED_TRACE(name);
+    auto d32 = LoadDisparity(Path(name));
+    ASSERT_TRUE(d32.ok()) << d32.status();
+    EXPECT_EQ(d32->encoding, DisparityEncoding::kF32);
+    EXPECT_EQ(Samples<float>(d32->pixels),
+              (std::vector<float>{0.0f, 0.5f, 1.25f, 100.0f, -3.0f, 1e6f}));
+    EXPECT_TRUE(ValidateView(d32->view(), Limits{}).ok());
+  }
+
+  // From bytes, as the server receives them.
+  auto d16 = LoadDisparity(Path("d16.png"));
+  ASSERT_TRUE(d16.ok()) << d16.status();
+  auto decoded = DecodeDisparity(ReadText(Path("d16.png")));
+  ASSERT_TRUE(decoded.ok()) << decoded.status();
+  EXPECT_EQ(decoded->pixels, d16->pixels);
+}
+
+TEST_F(ImageIoTest, ColourDropsAlphaAndNarrows16Bit) {
+  // RGBA with alpha 0, 136 and 255: the colour stays, alpha goes (New Tsukuba's PNGs are RGBA).
+  WriteFile(Path("rgba.png"),
+            Png(3, 1, 8, 6, Bytes({10, 20, 30, 0, 40, 50, 60, 136, 70, 80, 90, 255})));
+  auto rgba = LoadColor(Path("rgba.png"));
+  ASSERT_TRUE(rgba.ok()) << rgba.status();
+  EXPECT_EQ(rgba->encoding, ColorEncoding::kBGR8);
+  EXPECT_EQ(rgba->pixels, (std::vector<std::uint8_t>{30, 20, 10, 60, 50, 40, 90, 80, 70}));
+
+  WriteFile(Path("c16.png"), Png(2, 1, 16, 2, Be16({0, 257, 65535, 128, 32896, 1000})));
+  auto c16 = LoadColor(Path("c16.png"));
+  ASSERT_TRUE(c16.ok()) << c16.status();
+  EXPECT_EQ(c16->encoding, ColorEncoding::kBGR8);
+  // v / 257 rounded, in BGR order.
+  EXPECT_EQ(c16->pixels, (std::vector<std::uint8_t>{255, 1, 0, 4, 128, 0}));
+
+  WriteFile(Path("grey.png"), Png(2, 1, 8, 0, Bytes({7, 200})));
+  WriteFile(Path("grey.pgm"), PnmHeader("P5", 2, 1, 255) + Bytes({7, 200}));
+  for (const char* name : {"grey.png", "grey.pgm"}) {
+    SCOPED_TRACE(name);
+    auto grey = LoadColor(Path(name));
+    ASSERT_TRUE(grey.ok()) << grey.status();
+    EXPECT_EQ(grey->encoding, ColorEncoding::kMono8);
+    EXPECT_EQ(grey->pixels, (std::vector<std::uint8_t>{7, 200}));
+  }
+  // OpenCV expands grey + alpha PNGs to BGRA; the grey survives as equal channels.
+  WriteFile(Path("grey_alpha.png"), Png(2, 1, 8, 4, Bytes({7, 0, 200, 255})));
+  auto grey_alpha = LoadColor(Path("grey_alpha.png"));
+  ASSERT_TRUE(grey_alpha.ok()) << grey_alpha.status();
+  EXPECT_EQ(grey_alpha->pixels, (std::vector<std::uint8_t>{7, 7, 7, 200, 200, 200}));
+
+  auto decoded = DecodeColor(ReadText(Path("rgba.png")));
+  ASSERT_TRUE(decoded.ok()) << decoded.status();
+  EXPECT_EQ(decoded->pixels, rgba->pixels);
+}
+
+TEST_F(ImageIoTest, TsukubaColourIsRgbaAndLoadsAsBgr) {
+  CLOUDCAST_REQUIRE_TSUKUBA();
+  // Frame 00600 has alpha down to 0; its colour must survive.
+  auto c = LoadColor(testing::TsukubaColourPath("00600"));
+  ASSERT_TRUE(c.ok()) << c.status();
+  EXPECT_EQ(c->encoding, ColorEncoding::kBGR8);
+  EXPECT_EQ(c->width, 640u);
+  EXPECT_EQ(c->height, 480u);
+  auto d = LoadDisparity(testing::TsukubaDisparityPath("00600"));
+  ASSERT_TRUE(d.ok()) << d.status();
+  EXPECT_EQ(d->encoding, DisparityEncoding::kU8);
+  EXPECT_EQ(std::count(d->pixels.begin(), d->pixels.end(), 0), 447);  // README: 447 zeros
+}
+
+TEST_F(ImageIoTest, ErrorsNameTheFileAndTheReason) {
+  WriteFile(Path("c.png"), Png(2, 2, 8, 2, std::string(12, '\x09')));
+  WriteFile(Path("bad.png"), Png(2, 2, 8, 2, std::string(12, '\x09')).substr(0, 40));
+  WriteFile(Path("float.tif"), FloatTiff(1, 1, {1.0f}));
+
+  auto missing = LoadDisparity(Path("missing.png"));
+  EXPECT_EQ(missing.status().code(), absl::StatusCode::kNotFound);
+  EXPECT_NE(missing.status().message().find(Path("missing.png")), std::string::npos);
+
+  auto colour_as_disparity = LoadDisparity(Path("c.png"));
+  EXPECT_EQ(colour_as_disparity.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(colour_as_disparity.status().message().find("3 channels"), std::string::npos)
+      << colour_as_disparity.status();
+
+  auto float_colour = LoadColor(Path("float.tif"));
+  EXPECT_EQ(float_colour.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(float_colour.status().message().find("32-bit float"), std::string::npos)
+      << float_colour.status();
+
+  auto bad = LoadColor(Path("bad.png"));
+  EXPECT_EQ(bad.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(bad.status().message().find(Path("bad.png")), std::string::npos) << bad.status();
+
+  EXPECT_FALSE(DecodeColor("").ok());
+  EXPECT_FALSE(DecodeDisparity("not an image").ok());
+  EXPECT_NE(DecodeDisparity("not an image").status().message().find("disparity bytes"),
+            std::string::npos);
+}
+
+// ---------------------------------------------------------------------------------------------
+// cloud_io on its own: SaveCloud -> LoadCloud for each format, and files other tools wrote.
+
+PointCloud OrganizedCloudWithHoles() {
+  PointCloud c;
+  c.width = 4;
+  c.height = 3;
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  for (std::uint32_t v = 0; v < c.height; ++v) {
+    for (std::uint32_t u = 0; u < c.width; ++u) {
+      const bool hole = (u + v) % 5 == 0;
+      const auto fu = static_cast<float>(u), fv = static_cast<float>(v);
+      c.points.push_back(hole ? Point{nan, nan, nan, 0}
+                              : Point{0.1f * fu - 0.15f, 0.2f * fv + 0.01f, 3.0f + 0.37f * fu * fv,
+                                      PackRgba(static_cast<std::uint8_t>(20 * u),
+                                               static_cast<std::uint8_t>(250 - 30 * v),
+                                               static_cast<std::uint8_t>(u * v),
+                                               static_cast<std::uint8_t>(200 + u))});
+    }
+  }
+  return c;
+}
+
+PointCloud FiniteOnly(const PointCloud& in) {
+  PointCloud out;
+  for (const Point& p : in.points) {
+    if (Finite(p)) out.points.push_back(p);
+  }
+  out.width = static_cast<std::uint32_t>(out.size());
+  out.height = 1;
+  return out;
+}
+
+class CloudIoTest : public CliTest {};
+
+TEST_F(CloudIoTest, PcdKeepsOrganizedShapeNanPointsAndAlpha) {
+  const PointCloud cloud = OrganizedCloudWithHoles();
+  ASSERT_TRUE(SaveCloud(Path("o.pcd"), cloud).ok());
+  PointCloud back;
+  ASSERT_TRUE(LoadCloud(Path("o.pcd"), &back).ok());
+  EXPECT_EQ(back.width, 4u);
+  EXPECT_EQ(back.height, 3u);
+  EXPECT_TRUE(testing::CloudsIdentical(cloud, back));
+
+  pcl::PointCloud<pcl::PointXYZRGB> pcl_cloud;
+  ASSERT_EQ(pcl::io::loadPCDFile(Path("o.pcd"), pcl_cloud), 0);
+  EXPECT_EQ(pcl_cloud.width, 4u);
+  EXPECT_EQ(pcl_cloud.height, 3u);
+  EXPECT_FALSE(pcl_cloud.is_dense);
+
+  // Unorganized: the finite points, in order.
+  const PointCloud flat = FiniteOnly(cloud);
+  ASSERT_TRUE(SaveCloud(Path("flat.PCD"), flat).ok());  // extensions are case-insensitive
+  ASSERT_TRUE(LoadCloud(Path("flat.PCD"), &back).ok());
+  EXPECT_EQ(back.height, 1u);
+  EXPECT_TRUE(testing::CloudsIdentical(flat, back));
+}
+
+TEST_F(CloudIoTest, PlyKeepsFinitePointsInOrder) {
+  const PointCloud cloud = OrganizedCloudWithHoles();
+  ASSERT_TRUE(SaveCloud(Path("o.ply"), cloud).ok());
+  PointCloud back;
+  ASSERT_TRUE(LoadCloud(Path("o.ply"), &back).ok());
+  PointCloud expected = FiniteOnly(cloud);
+  for (Point& p : expected.points) p.rgba |= 0xFF000000u;  // PLY carries no alpha
+  EXPECT_EQ(back.height, 1u);
+  EXPECT_TRUE(testing::CloudsIdentical(expected, back));
+}
+
+TEST_F(CloudIoTest, DrcKeepsFinitePointsWithinTheErrorBound) {
+  const PointCloud cloud = OrganizedCloudWithHoles();
+  DracoOptions options;
+  options.max_position_error = 0.001f;
+  ASSERT_TRUE(SaveCloud(Path("o.drc"), cloud, options).ok());
+  PointCloud back;
+  ASSERT_TRUE(LoadCloud(Path("o.drc"), &back).ok());
+  EXPECT_EQ(back.height, 1u);
+  EXPECT_TRUE(SameWithin(FiniteOnly(cloud), back, 0.001 + 1e-6));
+  for (const Point& p : back.points) EXPECT_EQ(AlphaOf(p.rgba), 255);
+}
+
+TEST_F(CloudIoTest, EmptyCloudsRoundTrip) {
+  for (const char* name : {"e.pcd", "e.ply", "e.drc"}) {
+    SCOPED_TRACE(name);
+    const absl::Status saved = SaveCloud(Path(name), PointCloud{});
+    ASSERT_TRUE(saved.ok()) << saved;
+    PointCloud back;
+    back.points.resize(3);
+    const absl::Status loaded = LoadCloud(Path(name), &back);
+    ASSERT_TRUE(loaded.ok()) << loaded;
+    EXPECT_TRUE(back.empty());
+  }
+}
+
+TEST_F(CloudIoTest, ReadsFilesOtherToolsWrote) {
+  // PCL, positions only: white points.
+  pcl::PointCloud<pcl::PointXYZ> xyz;
+  xyz.push_back(pcl::PointXYZ(1, 2, 3));
+  xyz.push_back(pcl::PointXYZ(-1, 0.5f, 7));
+  ASSERT_EQ(pcl::io::savePCDFileASCII(Path("xyz.pcd"), xyz), 0);
+  PointCloud back;
+  ASSERT_TRUE(LoadCloud(Path("xyz.pcd"), &back).ok());
+  ASSERT_EQ(back.size(), 2u);
+  EXPECT_EQ(back.points[1].z, 7.0f);
+  EXPECT_EQ(back.points[0].rgba, PackRgba(255, 255, 255));
+
+  // Open3D (PLY with double coordinates; PCD), with colours.
+  open3d::geometry::PointCloud o3d;
+  o3d.points_ = {{1.5, -2.25, 3.0}, {0.125, 4.0, 9.5}};
+  o3d.colors_ = {{1.0, 0.0, 0.5}, {0.2, 0.4, 0.6}};
+  const PointCloud expected = {{Point{1.5f, -2.25f, 3.0f, PackRgba(255, 0, 128)},
+                                Point{0.125f, 4.0f, 9.5f, PackRgba(51, 102, 153)}},
+                               2,
+                               1};
+  for (const char* name : {"o3d.ply", "o3d.pcd"}) {
+    SCOPED_TRACE(name);
+    ASSERT_TRUE(open3d::io::WritePointCloud(Path(name), o3d));
+    const absl::Status s = LoadCloud(Path(name), &back);
+    ASSERT_TRUE(s.ok()) << s;
+    EXPECT_TRUE(SamePoints(expected, back, /*compare_alpha=*/false));
+  }
+
+  // A hand-written ASCII PLY as CloudCompare and MeshLab write them.
+  WriteFile(Path("ascii.ply"),
+            "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\n"
+            "property float z\nproperty uchar red\nproperty uchar green\nproperty uchar blue\n"
+            "end_header\n1 2 3 255 0 0\n4 5 6 0 0 255\n");
+  ASSERT_TRUE(LoadCloud(Path("ascii.ply"), &back).ok());
+  ASSERT_EQ(back.size(), 2u);
+  EXPECT_EQ(back.points[0].rgba, PackRgba(255, 0, 0));
+  EXPECT_EQ(back.points[1].rgba, PackRgba(0, 0, 255));
+  EXPECT_EQ(back.points[1].y, 5.0f);
+}
+
+// Truncated and corrupted files of every kind give an error or a cloud, never a crash (PCL's
+// readers alone crash on some of these, see cloud_io.cc).
+TEST_F(CloudIoTest, DamagedFilesNeverCrash) {
+  const PointCloud cloud = OrganizedCloudWithHoles();
+  pcl::PointCloud<pcl::PointXYZRGB> pcl_cloud;
+  for (const Point& p : cloud.points) {
+    pcl::PointXYZRGB q;
+    q.x = p.x;
+    q.y = p.y;
+    q.z = p.z;
+    q.rgba = p.rgba;
+    pcl_cloud.push_back(q);
+  }
+  ASSERT_TRUE(SaveCloud(Path("good.pcd"), cloud).ok());
+  ASSERT_TRUE(SaveCloud(Path("good.ply"), cloud).ok());
+  ASSERT_TRUE(SaveCloud(Path("good.drc"), cloud).ok());
+  ASSERT_EQ(pcl::io::savePCDFileASCII(Path("ascii.pcd"), pcl_cloud), 0);
+  ASSERT_EQ(pcl::io::savePCDFileBinaryCompressed(Path("compressed.pcd"), pcl_cloud), 0);
+  ASSERT_EQ(pcl::io::savePLYFileASCII(Path("ascii.ply"), pcl_cloud), 0);
+
+  std::mt19937 rng(7);
+  int loaded = 0, refused = 0;
+  for (const char* name :
+       {"good.pcd", "good.ply", "good.drc", "ascii.pcd", "compressed.pcd", "ascii.ply"}) {
+    const std::string bytes = ReadText(Path(name));
+    const std::string ext = fs::path(name).extension().string();
+    std::vector<std::string> variants;
+    for (std::size_t n = 0; n < bytes.size(); n += 1 + n / 8) {
+      variants.push_back(bytes.substr(0, n));
+    }
+    for (int i = 0; i < 60; ++i) {
+      std::string damaged = bytes;
+      const int flips = 1 + static_cast<int>(rng() % 4);
+      for (int k = 0; k < flips; ++k) {
+        damaged[rng() % damaged.size()] = static_cast<char>(rng());
+      }
+      variants.push_back(damaged);
+    }
+    for (std::size_t i = 0; i < variants.size(); ++i) {
+      const std::string path = Path("damaged" + ext);
+      WriteFile(path, variants[i]);
+      PointCloud back;
+      const absl::Status s = LoadCloud(path, &back);  // a crash ends the test binary
+      if (!s.ok()) {
+        ++refused;
+        continue;
+      }
+      ++loaded;
+      if (!back.organized()) {
+        for (const Point& p : back.points) ASSERT_TRUE(Finite(p)) << name << " variant " << i;
+      } else {
+        ASSERT_EQ(std::uint64_t{back.width} * back.height, back.size()) << name << " " << i;
+      }
+    }
+  }
+  EXPECT_GT(refused, 0);
+  EXPECT_GT(loaded, 0);
+}
+
+TEST_F(CloudIoTest, ErrorsNameTheFileAndTheReason) {
+  PointCloud cloud = FiniteOnly(OrganizedCloudWithHoles());
+  PointCloud back;
+
+  const absl::Status unknown = SaveCloud(Path("c.xyz"), cloud);
+  EXPECT_EQ(unknown.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(unknown.message().find(".pcd, .ply, .drc"), std::string::npos) << unknown;
+  EXPECT_FALSE(LoadCloud(Path("c.xyz"), &back).ok());
+
+  const absl::Status no_folder = SaveCloud(Path("none/c.pcd"), cloud);
+  EXPECT_FALSE(no_folder.ok());
+  EXPECT_NE(no_folder.message().find(Path("none")), std::string::npos) << no_folder;
+
+  const absl::Status missing = LoadCloud(Path("missing.ply"), &back);
+  EXPECT_EQ(missing.code(), absl::StatusCode::kNotFound);
+  EXPECT_NE(missing.message().find(Path("missing.ply")), std::string::npos) << missing;
+
+  for (const char* name : {"junk.pcd", "junk.ply", "junk.drc"}) {
+    WriteFile(Path(name), "definitely not a point cloud\n");
+    const absl::Status s = LoadCloud(Path(name), &back);
+    EXPECT_FALSE(s.ok()) << name;
+    EXPECT_NE(s.message().find(Path(name)), std::string::npos) << s;
+  }
+
+  PointCloud bad_shape = OrganizedCloudWithHoles();
+  bad_shape.points.pop_back();
+  const absl::Status shape = SaveCloud(Path("shape.pcd"), bad_shape);
+  EXPECT_FALSE(shape.ok());
+  EXPECT_NE(shape.message().find("4x3"), std::string::npos) << shape;
+}
+
+}  // namespace
+}  // namespace cloudcast

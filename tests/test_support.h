@@ -1,0 +1,246 @@
+// Shared test helpers: where the New Tsukuba data is, random frames, a brute-force voxel grid
+// and cloud matching with the tolerances the equivalence tests use.
+#pragma once
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdint>
+#include <cstdlib>
+#include <filesystem>
+#include <map>
+#include <random>
+#include <string>
+#include <tuple>
+#include <unordered_map>
+#include <vector>
+
+#include "cloudcast/core/filters.h"
+#include "cloudcast/core/image.h"
+#include "cloudcast/core/point.h"
+
+namespace cloudcast::testing {
+
+// $CLOUDCAST_DATA, else the build's default (../shared/data/new_tsukuba next to the checkout).
+inline std::string TsukubaDir() {
+  if (const char* env = std::getenv("CLOUDCAST_DATA"); env != nullptr && *env != '\0') return env;
+  return CLOUDCAST_DEFAULT_DATA_DIR;
+}
+inline const std::vector<std::string>& TsukubaFrameIds() {
+  static const std::vector<std::string> ids = {"00001", "00200", "00400", "00600", "00800",
+                                               "01000", "01200", "01400", "01600", "01800"};
+  return ids;
+}
+inline std::string TsukubaDisparityPath(const std::string& id) {
+  return TsukubaDir() + "/groundtruth/disparity_maps/left/tsukuba_disparity_L_" + id + ".png";
+}
+inline std::string TsukubaColourPath(const std::string& id) {
+  return TsukubaDir() + "/illumination/daylight/left/tsukuba_daylight_L_" + id + ".png";
+}
+inline bool HaveTsukuba() {
+  return std::filesystem::exists(TsukubaDisparityPath("00001")) &&
+         std::filesystem::exists(TsukubaColourPath("00001"));
+}
+#define CLOUDCAST_REQUIRE_TSUKUBA()                                                         \
+  do {                                                                                      \
+    if (!::cloudcast::testing::HaveTsukuba()) {                                             \
+      GTEST_SKIP() << "New Tsukuba data not found at " << ::cloudcast::testing::TsukubaDir() \
+                   << " (set CLOUDCAST_DATA to the folder holding groundtruth/ and "        \
+                      "illumination/); this test needs the real frames";                    \
+    }                                                                                       \
+  } while (0)
+
+// A frame that owns its bytes, with views over them. Rows may be padded (stride > row bytes).
+struct TestFrame {
+  std::vector<std::uint8_t> disparity_bytes, colour_bytes;
+  DisparityView disparity;
+  ColorView colour;
+};
+
+inline TestFrame MakeFrame(std::uint32_t w, std::uint32_t h, DisparityEncoding de,
+                           ColorEncoding ce, std::size_t row_padding = 0) {
+  TestFrame f;
+  const std::size_t dstride = w * BytesPerPixel(de) + row_padding * BytesPerPixel(de);
+  const std::size_t cstride = w * BytesPerPixel(ce) + row_padding;
+  f.disparity_bytes.assign(dstride * h, 0);
+  f.colour_bytes.assign(cstride * h, 0);
+  f.disparity = DisparityView{f.disparity_bytes.data(), f.disparity_bytes.size(), w, h, dstride, de};
+  f.colour = ColorView{f.colour_bytes.data(), f.colour_bytes.size(), w, h, cstride, ce};
+  return f;
+}
+
+template <typename T>
+inline void SetSample(TestFrame& f, std::uint32_t u, std::uint32_t v, T value) {
+  std::memcpy(f.disparity_bytes.data() + v * f.disparity.stride_bytes + u * sizeof(T), &value,
+              sizeof(T));
+}
+
+// Random frame: a smooth tilted surface (so voxels hold many points) with random holes (zeros),
+// random spikes and random colours. `raw_max` bounds the raw disparity value.
+inline TestFrame RandomFrame(std::mt19937& rng, std::uint32_t w, std::uint32_t h,
+                             DisparityEncoding de, ColorEncoding ce, double raw_min,
+                             double raw_max, double hole_rate = 0.05) {
+  TestFrame f = MakeFrame(w, h, de, ce, /*row_padding=*/rng() % 3);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  const double a = unit(rng), b = unit(rng);
+  for (std::uint32_t v = 0; v < h; ++v) {
+    for (std::uint32_t u = 0; u < w; ++u) {
+      double t = raw_min + (raw_max - raw_min) *
+                               (0.5 * (a * u / w + b * v / h) + 0.25 * unit(rng) * unit(rng));
+      if (unit(rng) < 0.02) t = raw_min + (raw_max - raw_min) * unit(rng);  // spikes
+      if (unit(rng) < hole_rate) t = 0;
+      switch (de) {
+        case DisparityEncoding::kU8:
+          SetSample<std::uint8_t>(f, u, v, static_cast<std::uint8_t>(std::lround(t)));
+          break;
+        case DisparityEncoding::kU16:
+          SetSample<std::uint16_t>(f, u, v, static_cast<std::uint16_t>(std::lround(t)));
+          break;
+        case DisparityEncoding::kF32:
+          SetSample<float>(f, u, v, static_cast<float>(t));
+          break;
+      }
+    }
+  }
+  for (std::size_t i = 0; i < f.colour_bytes.size(); ++i) {
+    f.colour_bytes[i] = static_cast<std::uint8_t>(rng());
+  }
+  return f;
+}
+
+// Voxel grid by the definition: std::map of float-computed floor(v * (1/leaf)) indices, double
+// sums. Independent of the hashing and key packing under test.
+inline PointCloud BruteForceVoxelGrid(const PointCloud& in, const VoxelGridParams& p) {
+  struct Sum {
+    double x = 0, y = 0, z = 0;
+    std::uint64_t n = 0, r = 0, g = 0, b = 0, a = 0;
+  };
+  const float inv[3] = {1.0f / p.leaf_x, 1.0f / p.leaf_y, 1.0f / p.leaf_z};
+  std::map<std::tuple<std::int64_t, std::int64_t, std::int64_t>, Sum> voxels;
+  for (const Point& q : in.points) {
+    if (!std::isfinite(q.x) || !std::isfinite(q.y) || !std::isfinite(q.z)) continue;
+    auto idx = [&](float v, float i) {
+      return static_cast<std::int64_t>(std::floor(static_cast<double>(v * i)));
+    };
+    Sum& s = voxels[{idx(q.x, inv[0]), idx(q.y, inv[1]), idx(q.z, inv[2])}];
+    s.x += q.x;
+    s.y += q.y;
+    s.z += q.z;
+    ++s.n;
+    s.r += RedOf(q.rgba);
+    s.g += GreenOf(q.rgba);
+    s.b += BlueOf(q.rgba);
+    s.a += AlphaOf(q.rgba);
+  }
+  PointCloud out;
+  for (const auto& [key, s] : voxels) {
+    if (s.n < p.min_points_per_voxel) continue;
+    const double n = static_cast<double>(s.n);
+    out.points.push_back(Point{static_cast<float>(s.x / n), static_cast<float>(s.y / n),
+                               static_cast<float>(s.z / n),
+                               PackRgba(s.r / s.n, s.g / s.n, s.b / s.n, s.a / s.n)});
+  }
+  out.width = static_cast<std::uint32_t>(out.size());
+  out.height = 1;
+  return out;
+}
+
+// The equivalence criterion: the same number of points, and every reference point has its own
+// one of ours within 1e-5 of its norm (relative), with colour channels within 1.
+inline ::testing::AssertionResult CloudsMatch(const PointCloud& reference, const PointCloud& ours,
+                                              double rel_tol = 1e-5, int colour_tol = 1) {
+  if (reference.size() != ours.size()) {
+    return ::testing::AssertionFailure()
+           << "point counts differ: reference " << reference.size() << ", ours " << ours.size();
+  }
+  // Bucket ours on a coarse grid; search the reference point's cell and its neighbours.
+  double extent = 1e-9;
+  for (const Point& p : ours.points) {
+    extent = std::max({extent, std::fabs(double(p.x)), std::fabs(double(p.y)),
+                       std::fabs(double(p.z))});
+  }
+  const double cell = std::max(extent / 4096.0, 1e-6);
+  auto key_of = [&](double x, double y, double z) {
+    auto c = [&](double v) { return static_cast<std::int64_t>(std::floor(v / cell)); };
+    return std::make_tuple(c(x), c(y), c(z));
+  };
+  struct TupleHash {
+    std::size_t operator()(const std::tuple<std::int64_t, std::int64_t, std::int64_t>& t) const {
+      return std::hash<std::int64_t>()(std::get<0>(t) * 73856093 ^ std::get<1>(t) * 19349663 ^
+                                       std::get<2>(t) * 83492791);
+    }
+  };
+  std::unordered_map<std::tuple<std::int64_t, std::int64_t, std::int64_t>, std::vector<std::size_t>,
+                     TupleHash>
+      grid;
+  for (std::size_t i = 0; i < ours.size(); ++i) {
+    const Point& p = ours.points[i];
+    grid[key_of(p.x, p.y, p.z)].push_back(i);
+  }
+  std::vector<bool> used(ours.size(), false);
+  for (std::size_t r = 0; r < reference.size(); ++r) {
+    const Point& p = reference.points[r];
+    const double norm = std::sqrt(double(p.x) * p.x + double(p.y) * p.y + double(p.z) * p.z);
+    const double tol = rel_tol * std::max(norm, 1e-12);
+    const auto [cx, cy, cz] = key_of(p.x, p.y, p.z);
+    std::size_t best = SIZE_MAX;
+    double best_d = 1e300;
+    for (int dx = -1; dx <= 1; ++dx)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dz = -1; dz <= 1; ++dz) {
+          auto it = grid.find({cx + dx, cy + dy, cz + dz});
+          if (it == grid.end()) continue;
+          for (std::size_t i : it->second) {
+            if (used[i]) continue;
+            const Point& q = ours.points[i];
+            const double d = std::sqrt((double(p.x) - q.x) * (double(p.x) - q.x) +
+                                       (double(p.y) - q.y) * (double(p.y) - q.y) +
+                                       (double(p.z) - q.z) * (double(p.z) - q.z));
+            if (d < best_d) {
+              best_d = d;
+              best = i;
+            }
+          }
+        }
+    if (best == SIZE_MAX || best_d > tol) {
+      return ::testing::AssertionFailure()
+             << "reference point " << r << " (" << p.x << ", " << p.y << ", " << p.z
+             << ") has no match within " << tol << " (nearest unused at " << best_d << ")";
+    }
+    const Point& q = ours.points[best];
+    auto channel_diff = [](std::uint8_t a, std::uint8_t b) { return std::abs(int(a) - int(b)); };
+    if (channel_diff(RedOf(p.rgba), RedOf(q.rgba)) > colour_tol ||
+        channel_diff(GreenOf(p.rgba), GreenOf(q.rgba)) > colour_tol ||
+        channel_diff(BlueOf(p.rgba), BlueOf(q.rgba)) > colour_tol) {
+      return ::testing::AssertionFailure()
+             << "reference point " << r << " colour " << std::hex << p.rgba << " vs ours "
+             << q.rgba;
+    }
+    used[best] = true;
+  }
+  return ::testing::AssertionSuccess();
+}
+
+// Bit-for-bit equality of two clouds' points in order (NaN equals NaN). Width and height are not
+// compared: PCL's OrganizedConversion push_back()s its points, which leaves it w*h x 1.
+inline ::testing::AssertionResult CloudsIdentical(const PointCloud& a, const PointCloud& b) {
+  if (a.size() != b.size()) {
+    return ::testing::AssertionFailure() << "shapes differ: " << a.width << "x" << a.height << " ("
+                                         << a.size() << ") vs " << b.width << "x" << b.height
+                                         << " (" << b.size() << ")";
+  }
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    const Point& p = a.points[i];
+    const Point& q = b.points[i];
+    auto same = [](float x, float y) { return (std::isnan(x) && std::isnan(y)) || x == y; };
+    if (!same(p.x, q.x) || !same(p.y, q.y) || !same(p.z, q.z) || p.rgba != q.rgba) {
+      return ::testing::AssertionFailure()
+             << "point " << i << " differs: (" << p.x << ", " << p.y << ", " << p.z << ", "
+             << std::hex << p.rgba << std::dec << ") vs (" << q.x << ", " << q.y << ", " << q.z
+             << ", " << std::hex << q.rgba << ")";
+    }
+  }
+  return ::testing::AssertionSuccess();
+}
+
+}  // namespace cloudcast::testing
