@@ -27,8 +27,7 @@ ServerFlags::ServerFlags(CLI::App& app)
   ServerOptions& o = options_;
   app.add_option("--listen", o.listen, "gRPC address, host:port; port 0 picks a free one")
       ->group("Service");
-  app.add_option("--threads", o.threads,
-                 "Worker threads that process frames; 0 = one per core")
+  app.add_option("--threads", o.threads, "Worker threads that process frames; 0 = one per core")
       ->check(CLI::Range(0, 1024))
       ->group("Service");
   app.add_option("--metrics-listen", o.metrics_listen,

@@ -2,9 +2,8 @@
 // --help, plus --config for a TOML or INI file holding the same flags.
 #pragma once
 
-#include <string>
-
 #include <CLI/CLI.hpp>
+#include <string>
 
 #include "absl/status/statusor.h"
 #include "options.h"

@@ -1,12 +1,15 @@
 #include "frame_input.h"
 
 #include <algorithm>
+#include <cctype>
 #include <string>
 
 #include "absl/strings/str_cat.h"
 
 namespace cloudcast::server {
 namespace {
+
+constexpr char kSupportedImageFormats[] = "png, jpeg, tiff, pnm, pfm";
 
 std::uint32_t BigEndian32(const unsigned char* p) {
   return (std::uint32_t{p[0]} << 24) | (std::uint32_t{p[1]} << 16) | (std::uint32_t{p[2]} << 8) |
@@ -25,29 +28,45 @@ absl::Status CheckSizeLimits(const std::string& field, std::uint32_t w, std::uin
   }
   const std::uint64_t pixels = std::uint64_t{w} * h;
   if (pixels > limits.max_pixels) {
-    return absl::ResourceExhaustedError(
-        absl::StrCat(field, " is ", w, "x", h, " = ", pixels, " pixels; the limit is ",
-                     limits.max_pixels, " pixels (width x height)"));
+    return absl::ResourceExhaustedError(absl::StrCat(field, " is ", w, "x", h, " = ", pixels,
+                                                     " pixels; the limit is ", limits.max_pixels,
+                                                     " pixels (width x height)"));
   }
   return absl::OkStatus();
 }
 
 bool ToCore(v1::DisparityEncoding e, DisparityEncoding* out) {
   switch (e) {
-    case v1::DISPARITY_U8: *out = DisparityEncoding::kU8; return true;
-    case v1::DISPARITY_U16: *out = DisparityEncoding::kU16; return true;
-    case v1::DISPARITY_F32: *out = DisparityEncoding::kF32; return true;
-    default: return false;
+    case v1::DISPARITY_U8:
+      *out = DisparityEncoding::kU8;
+      return true;
+    case v1::DISPARITY_U16:
+      *out = DisparityEncoding::kU16;
+      return true;
+    case v1::DISPARITY_F32:
+      *out = DisparityEncoding::kF32;
+      return true;
+    default:
+      return false;
   }
 }
 
 bool ToCore(v1::ColorEncoding e, ColorEncoding* out) {
   switch (e) {
-    case v1::COLOR_BGR8: *out = ColorEncoding::kBGR8; return true;
-    case v1::COLOR_RGB8: *out = ColorEncoding::kRGB8; return true;
-    case v1::COLOR_RGBA8: *out = ColorEncoding::kRGBA8; return true;
-    case v1::COLOR_MONO8: *out = ColorEncoding::kMono8; return true;
-    default: return false;
+    case v1::COLOR_BGR8:
+      *out = ColorEncoding::kBGR8;
+      return true;
+    case v1::COLOR_RGB8:
+      *out = ColorEncoding::kRGB8;
+      return true;
+    case v1::COLOR_RGBA8:
+      *out = ColorEncoding::kRGBA8;
+      return true;
+    case v1::COLOR_MONO8:
+      *out = ColorEncoding::kMono8;
+      return true;
+    default:
+      return false;
   }
 }
 
@@ -66,12 +85,12 @@ absl::Status ViewRaw(const Raw& raw, const std::string& field, const std::string
                      const Limits& limits, ImageView<CoreEncoding>* view) {
   CoreEncoding encoding;
   if (!ToCore(raw.encoding(), &encoding)) {
-    return absl::InvalidArgumentError(absl::StrCat(field, ".encoding is ",
-                                                   EncodingName(raw.encoding()),
-                                                   "; it must be one of ", known));
+    return absl::InvalidArgumentError(absl::StrCat(
+        field, ".encoding is ", EncodingName(raw.encoding()), "; it must be one of ", known));
   }
   if (raw.width() == 0 || raw.height() == 0) {
-    return absl::InvalidArgumentError(absl::StrCat(field, ".", raw.width() == 0 ? "width" : "height",
+    return absl::InvalidArgumentError(absl::StrCat(field, ".",
+                                                   raw.width() == 0 ? "width" : "height",
                                                    " is 0; an image has at least 1x1 pixels"));
   }
   if (auto s = CheckSizeLimits(field, raw.width(), raw.height(), limits); !s.ok()) return s;
@@ -102,8 +121,11 @@ absl::Status ViewRaw(const Raw& raw, const std::string& field, const std::string
 // The core names its input "disparity bytes" / "colour bytes"; the client knows the field.
 absl::Status Rename(const absl::Status& s, const std::string& core_name, const std::string& field) {
   std::string message(s.message());
-  if (message.rfind(core_name, 0) == 0) message.replace(0, core_name.size(), field);
-  else message = absl::StrCat(field, ": ", message);
+  if (message.rfind(core_name, 0) == 0) {
+    message.replace(0, core_name.size(), field);
+  } else {
+    message = absl::StrCat(field, ": ", message);
+  }
   return absl::Status(s.code(), message);
 }
 
@@ -115,7 +137,13 @@ absl::Status CheckEncodedSize(std::string_view bytes, const std::string& field,
   }
   std::uint32_t w = 0, h = 0;
   const char* format = nullptr;
-  if (!SniffImageSize(bytes, &w, &h, &format)) return absl::OkStatus();  // the decoder decides
+  if (!SniffImageSize(bytes, &w, &h, &format)) {
+    // A decoder would allocate whatever an unchecked header claims (OpenCV allows 2^30 pixels),
+    // so only formats whose size is known beforehand are decoded.
+    return absl::InvalidArgumentError(
+        absl::StrCat(field, " is not a PNG, JPEG, TIFF, PNM or PFM image (", kSupportedImageFormats,
+                     "), or its header is cut short"));
+  }
   if (w == 0 || h == 0) {
     return absl::InvalidArgumentError(
         absl::StrCat(field, " is a ", format, " of ", w, "x", h, " pixels"));
@@ -153,8 +181,8 @@ bool SniffImageSize(std::string_view bytes, std::uint32_t* width, std::uint32_t*
         continue;
       }
       const std::uint32_t length = BigEndian16(p + i + 2);
-      const bool sof = marker >= 0xC0 && marker <= 0xCF && marker != 0xC4 && marker != 0xC8 &&
-                       marker != 0xCC;
+      const bool sof =
+          marker >= 0xC0 && marker <= 0xCF && marker != 0xC4 && marker != 0xC8 && marker != 0xCC;
       if (sof) {
         if (i + 9 > n) return false;
         *height = BigEndian16(p + i + 5);
@@ -165,6 +193,68 @@ bool SniffImageSize(std::string_view bytes, std::uint32_t* width, std::uint32_t*
       if (length < 2) return false;
       i += 2 + length;
     }
+    return false;
+  }
+  const bool tiff_le = n >= 8 && p[0] == 'I' && p[1] == 'I' && p[2] == 42 && p[3] == 0;
+  const bool tiff_be = n >= 8 && p[0] == 'M' && p[1] == 'M' && p[2] == 0 && p[3] == 42;
+  if (tiff_le || tiff_be) {
+    // The first image file directory: a count, then 12-byte entries (tag, type, count, value);
+    // ImageWidth is tag 256, ImageLength tag 257, each a SHORT (3) or LONG (4).
+    auto u16 = [&](std::size_t i) {
+      return tiff_le ? std::uint32_t{p[i]} | std::uint32_t{p[i + 1]} << 8 : BigEndian16(p + i);
+    };
+    auto u32 = [&](std::size_t i) {
+      return tiff_le ? u16(i) | u16(i + 2) << 16 : BigEndian32(p + i);
+    };
+    const std::size_t ifd = u32(4);
+    if (ifd + 2 > n) return false;
+    const std::size_t entries = u16(ifd);
+    bool have_width = false, have_height = false;
+    for (std::size_t e = 0; e < entries; ++e) {
+      const std::size_t at = ifd + 2 + 12 * e;
+      if (at + 12 > n) return false;
+      const std::uint32_t tag = u16(at);
+      const std::uint32_t type = u16(at + 2);
+      if (tag != 256 && tag != 257) continue;
+      if (type != 3 && type != 4) return false;
+      const std::uint32_t value = type == 3 ? u16(at + 8) : u32(at + 8);
+      if (tag == 256) {
+        *width = value;
+        have_width = true;
+      } else {
+        *height = value;
+        have_height = true;
+      }
+    }
+    if (!have_width || !have_height) return false;
+    *format = "TIFF";
+    return true;
+  }
+  if (n >= 3 && p[0] == 'P' && ((p[1] >= '1' && p[1] <= '6') || p[1] == 'f' || p[1] == 'F')) {
+    // Netpbm and PFM: the magic, then width and height in ASCII, with # comments in between.
+    std::size_t i = 2;
+    auto number = [&](std::uint32_t* out) {
+      for (;;) {
+        while (i < n && std::isspace(p[i])) ++i;
+        if (i < n && p[i] == '#') {
+          while (i < n && p[i] != '\n') ++i;
+          continue;
+        }
+        break;
+      }
+      if (i >= n || !std::isdigit(p[i])) return false;
+      std::uint64_t v = 0;
+      while (i < n && std::isdigit(p[i])) {
+        v = v * 10 + (p[i++] - '0');
+        if (v > 0xFFFFFFFFu) return false;
+      }
+      *out = static_cast<std::uint32_t>(v);
+      return true;
+    };
+    if (!std::isspace(p[2]) && p[2] != '#') return false;
+    if (!number(width) || !number(height)) return false;
+    *format = p[1] == 'f' || p[1] == 'F' ? "PFM" : "PNM";
+    return true;
   }
   return false;
 }
@@ -201,8 +291,9 @@ absl::Status PrepareFrameImages(const v1::Frame& frame, const Limits& limits,
   }
   switch (frame.colour().data_case()) {
     case v1::ColorImage::kRaw:
-      if (auto s = ViewRaw(frame.colour().raw(), "frame.colour.raw",
-                           "COLOR_BGR8, COLOR_RGB8, COLOR_RGBA8, COLOR_MONO8", limits, &out->colour);
+      if (auto s =
+              ViewRaw(frame.colour().raw(), "frame.colour.raw",
+                      "COLOR_BGR8, COLOR_RGB8, COLOR_RGBA8, COLOR_MONO8", limits, &out->colour);
           !s.ok()) {
         return s;
       }

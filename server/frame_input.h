@@ -27,7 +27,8 @@ struct DecodeScratch {
 
 // Fills `out` from `frame`. Raw images are viewed in place, without a copy: the views point into
 // `frame`'s bytes, which must outlive them. Encoded images are decoded into `scratch` (their size
-// is read from the PNG / JPEG header and checked before anything is decoded).
+// is read from the file's header and checked before anything is decoded; formats whose header
+// SniffImageSize cannot read are refused).
 //
 // Errors name the field by its proto path under "frame." and the limit it broke:
 // RESOURCE_EXHAUSTED for an image over `limits`, INVALID_ARGUMENT for anything malformed
@@ -36,8 +37,10 @@ struct DecodeScratch {
 absl::Status PrepareFrameImages(const v1::Frame& frame, const Limits& limits,
                                 DecodeScratch* scratch, FrameImages* out);
 
-// Width and height from a PNG or JPEG header, without decoding. False when `bytes` is neither, or
-// its header is cut short. `format` gets "PNG" or "JPEG".
+// Width and height from a PNG, JPEG, TIFF (first image), PNM (P1..P6) or PFM header, without
+// decoding. False for any other format, or a header cut short. `format` gets "PNG", "JPEG",
+// "TIFF", "PNM" or "PFM". Encoded images are only decoded when this knows their size: a decoder
+// allocates whatever a header claims.
 bool SniffImageSize(std::string_view bytes, std::uint32_t* width, std::uint32_t* height,
                     const char** format);
 

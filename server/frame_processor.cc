@@ -43,7 +43,8 @@ absl::Status FrameProcessor::Process(const v1::Frame& frame, const StreamSetting
   costs->decoded = images.decoded;
   costs->decode_seconds = images.decoded ? Seconds(t1 - t0) : 0.0;
 
-  const PipelineOptions options = settings.ForFrame(images.disparity.width, images.disparity.height);
+  const PipelineOptions options =
+      settings.ForFrame(images.disparity.width, images.disparity.height);
   StageCounts counts;
   const double cpu0 = ThreadCpuSeconds();
   absl::Status status = pipeline_.Run(options, images.disparity, images.colour, &cloud_, &counts);

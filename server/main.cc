@@ -5,15 +5,14 @@
 // at once. Signals are taken by sigwait on a thread, never handled inside a signal handler.
 #include <pthread.h>
 #include <signal.h>
+#include <spdlog/spdlog.h>
 #include <string.h>
 
+#include <CLI/CLI.hpp>
 #include <cstdlib>
 #include <iostream>
 #include <string>
 #include <thread>
-
-#include <CLI/CLI.hpp>
-#include <spdlog/spdlog.h>
 
 #include "cli.h"
 #include "server.h"

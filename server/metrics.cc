@@ -73,12 +73,11 @@ Metrics::Metrics()
                          .Help("Stream calls open now")
                          .Register(*registry_)
                          .Add({})),
-      streams_accepted(NewCounter(*registry_, "cloudcast_streams_accepted_total",
-                                  "Stream calls accepted")),
+      streams_accepted(
+          NewCounter(*registry_, "cloudcast_streams_accepted_total", "Stream calls accepted")),
       streams_rejected_limit(NewCounter(*registry_, "cloudcast_streams_rejected_limit_total",
                                         "Stream calls refused: --max-streams reached")),
-      streams_rejected_shutdown(NewCounter(*registry_,
-                                           "cloudcast_streams_rejected_shutdown_total",
+      streams_rejected_shutdown(NewCounter(*registry_, "cloudcast_streams_rejected_shutdown_total",
                                            "Stream calls refused: shutting down")),
       streams_idle_timeout(NewCounter(*registry_, "cloudcast_streams_idle_timeout_total",
                                       "Stream calls ended by the idle timeout")),
@@ -98,8 +97,7 @@ Metrics::Metrics()
                                   "encoding")),
       worker_cpu_seconds(NewCounter(*registry_, "cloudcast_worker_cpu_seconds_total",
                                     "Worker thread CPU time per frame task, all of it (decode, "
-                                    "checks, pipeline, Draco, reply)")) {
-}
+                                    "checks, pipeline, Draco, reply)")) {}
 
 prometheus::Counter& Metrics::FrameErrors(absl::StatusCode code) {
   // Family::Add returns the existing counter for known labels; errors are rare enough for its

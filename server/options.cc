@@ -30,8 +30,8 @@ absl::Status CheckFinite(const std::string& field, double v) {
 absl::Status CheckLeaf(const std::string& field, float v) {
   // The voxel grid multiplies by 1 / leaf in float, so that must be finite too.
   if (!std::isfinite(v) || !(v > 0.0f) || !std::isfinite(1.0f / v)) {
-    return Invalid(absl::StrCat(field, " must be finite and > 0 (with 1/leaf a finite float), got ",
-                                v));
+    return Invalid(
+        absl::StrCat(field, " must be finite and > 0 (with 1/leaf a finite float), got ", v));
   }
   return absl::OkStatus();
 }
@@ -103,20 +103,29 @@ absl::Status ResolvePassThrough(const v1::PassThroughConfig& c, const std::strin
   PassThroughParams& pt = s->passthrough;
   if (c.has_enabled()) pt.enabled = c.enabled();
   switch (c.axis()) {
-    case v1::AXIS_UNSPECIFIED: break;
-    case v1::AXIS_X: pt.axis = Axis::kX; break;
-    case v1::AXIS_Y: pt.axis = Axis::kY; break;
-    case v1::AXIS_Z: pt.axis = Axis::kZ; break;
+    case v1::AXIS_UNSPECIFIED:
+      break;
+    case v1::AXIS_X:
+      pt.axis = Axis::kX;
+      break;
+    case v1::AXIS_Y:
+      pt.axis = Axis::kY;
+      break;
+    case v1::AXIS_Z:
+      pt.axis = Axis::kZ;
+      break;
     default:
       return Invalid(absl::StrCat(p, ".axis is ", static_cast<int>(c.axis()),
                                   ", not one of AXIS_X, AXIS_Y, AXIS_Z"));
   }
   if (c.has_min()) {
-    if (!std::isfinite(c.min())) return Invalid(absl::StrCat(p, ".min must be finite, got ", c.min()));
+    if (!std::isfinite(c.min()))
+      return Invalid(absl::StrCat(p, ".min must be finite, got ", c.min()));
     pt.min = c.min();
   }
   if (c.has_max()) {
-    if (!std::isfinite(c.max())) return Invalid(absl::StrCat(p, ".max must be finite, got ", c.max()));
+    if (!std::isfinite(c.max()))
+      return Invalid(absl::StrCat(p, ".max must be finite, got ", c.max()));
     pt.max = c.max();
   }
   if (pt.min > pt.max) {
@@ -156,8 +165,10 @@ absl::Status ResolveVoxelGrid(const v1::VoxelGridConfig& c, const std::string& p
   }
   if (v.enabled && !(v.leaf_x > 0.0f && v.leaf_y > 0.0f && v.leaf_z > 0.0f)) {
     // Only possible when the server runs with --leaf 0 and the client sets only `enabled`.
-    return Invalid(absl::StrCat(p, ".enabled is true but the server has no default leaf (--leaf 0); "
-                                   "set ", p, ".leaf"));
+    return Invalid(absl::StrCat(p,
+                                ".enabled is true but the server has no default leaf (--leaf 0); "
+                                "set ",
+                                p, ".leaf"));
   }
   return absl::OkStatus();
 }
@@ -197,9 +208,7 @@ absl::Status ResolveDraco(const v1::DracoConfig& c, const std::string& p, Stream
 
 }  // namespace
 
-const char* Name(Delivery delivery) {
-  return delivery == Delivery::kAll ? "all" : "latest";
-}
+const char* Name(Delivery delivery) { return delivery == Delivery::kAll ? "all" : "latest"; }
 
 bool ParseDelivery(const std::string& name, Delivery* out) {
   if (name == "latest") {
@@ -232,13 +241,12 @@ absl::Status ServerOptions::Validate() const {
   if (max_streams == 0) return Invalid("--max-streams must be at least 1");
   if (idle_timeout.count() <= 0) return Invalid("--idle-timeout must be positive");
   if (max_queued_frames == 0 || max_queued_frames > 1024) {
-    return Invalid(absl::StrCat("--max-queued-frames is ", max_queued_frames,
-                                "; it must be in [1, 1024]"));
+    return Invalid(
+        absl::StrCat("--max-queued-frames is ", max_queued_frames, "; it must be in [1, 1024]"));
   }
   if (shutdown_grace.count() < 0) return Invalid("--shutdown-grace must not be negative");
   if (auto s = CheckPositive("--focal", defaults.focal); !s.ok()) return s;
-  if (!std::isfinite(defaults.min) || !std::isfinite(defaults.max) ||
-      defaults.min > defaults.max) {
+  if (!std::isfinite(defaults.min) || !std::isfinite(defaults.max) || defaults.min > defaults.max) {
     return Invalid(absl::StrCat("--min (", defaults.min, ") and --max (", defaults.max,
                                 ") must be finite with min <= max"));
   }
@@ -258,8 +266,9 @@ int ServerOptions::ResolvedThreads() const {
 PipelineOptions StreamSettings::ForFrame(std::uint32_t width, std::uint32_t height) const {
   PipelineOptions o;
   o.camera = camera;
-  if (!has_cx) o.camera.cx = static_cast<double>(width / 2);
-  if (!has_cy) o.camera.cy = static_cast<double>(height / 2);
+  // Integer division on purpose: PCL puts the centre at static_cast<int>(width / 2).
+  if (!has_cx) o.camera.cx = static_cast<double>(width / 2);   // NOLINT(bugprone-integer-division)
+  if (!has_cy) o.camera.cy = static_cast<double>(height / 2);  // NOLINT(bugprone-integer-division)
   o.passthrough = passthrough;
   o.voxel = voxel;
   o.limits = limits;
@@ -300,9 +309,14 @@ absl::StatusOr<StreamSettings> ResolveStreamConfig(const v1::StreamConfig& confi
   // After the voxel grid: the default position error follows the leaf.
   if (auto st = ResolveDraco(config.draco(), prefix + ".draco", &s); !st.ok()) return st;
   switch (config.delivery()) {
-    case v1::DELIVERY_UNSPECIFIED: break;
-    case v1::DELIVERY_LATEST: s.delivery = Delivery::kLatest; break;
-    case v1::DELIVERY_ALL: s.delivery = Delivery::kAll; break;
+    case v1::DELIVERY_UNSPECIFIED:
+      break;
+    case v1::DELIVERY_LATEST:
+      s.delivery = Delivery::kLatest;
+      break;
+    case v1::DELIVERY_ALL:
+      s.delivery = Delivery::kAll;
+      break;
     default:
       return Invalid(absl::StrCat(prefix, ".delivery is ", static_cast<int>(config.delivery()),
                                   ", not one of DELIVERY_LATEST, DELIVERY_ALL"));

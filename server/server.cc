@@ -1,7 +1,11 @@
 #include "server.h"
 
 #include <arpa/inet.h>
+#include <grpcpp/ext/proto_server_reflection_plugin.h>
+#include <grpcpp/health_check_service_interface.h>
 #include <netinet/in.h>
+#include <prometheus/exposer.h>
+#include <spdlog/spdlog.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
@@ -9,11 +13,6 @@
 #include <exception>
 #include <thread>
 #include <utility>
-
-#include <grpcpp/ext/proto_server_reflection_plugin.h>
-#include <grpcpp/health_check_service_interface.h>
-#include <prometheus/exposer.h>
-#include <spdlog/spdlog.h>
 
 #include "absl/strings/str_cat.h"
 
@@ -93,16 +92,17 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& optio
   server->server_ = builder.BuildAndStart();
   if (server->server_ == nullptr || server->port_ == 0) {
     server->Abandon();
-    return absl::UnavailableError(
-        absl::StrCat("cannot serve gRPC on ", options.listen, " (--listen): address in use, or "
-                     "not an address of this machine"));
+    return absl::UnavailableError(absl::StrCat("cannot serve gRPC on ", options.listen,
+                                               " (--listen): address in use, or "
+                                               "not an address of this machine"));
   }
   server->address_ = WithPort(options.listen, server->port_);
 
   if (!options.metrics_listen.empty()) {
     try {
       server->exposer_ = std::make_unique<prometheus::Exposer>(options.metrics_listen);
-      for (const auto& c : server->metrics_->collectables()) server->exposer_->RegisterCollectable(c);
+      for (const auto& c : server->metrics_->collectables())
+        server->exposer_->RegisterCollectable(c);
       const std::vector<int> ports = server->exposer_->GetListeningPorts();
       server->metrics_port_ = ports.empty() ? 0 : ports.front();
     } catch (const std::exception& e) {
@@ -155,10 +155,9 @@ void Server::Shutdown(std::chrono::milliseconds grace) {
   service_->StopWorkers();
   StopExposer(std::move(exposer_), options_.metrics_listen, metrics_port_);
   shut_down_ = true;
-  spdlog::info("shut down in {} ms",
-               std::chrono::duration_cast<std::chrono::milliseconds>(
-                   std::chrono::steady_clock::now() - start)
-                   .count());
+  spdlog::info("shut down in {} ms", std::chrono::duration_cast<std::chrono::milliseconds>(
+                                         std::chrono::steady_clock::now() - start)
+                                         .count());
   shutdown_cv_.notify_all();
 }
 

@@ -5,11 +5,10 @@
 #include <string>
 #include <utility>
 
-#include <draco/core/draco_version.h>
-#include <spdlog/spdlog.h>
-
 #include "absl/strings/str_cat.h"
 #include "cloudcast/core/limits.h"
+#include "draco/core/draco_version.h"
+#include "spdlog/spdlog.h"
 
 #ifndef CLOUDCAST_VERSION
 #define CLOUDCAST_VERSION "unknown"
@@ -34,9 +33,8 @@ grpc::Status ToGrpc(const absl::Status& s) {
 }
 
 std::uint32_t Micros(Clock::duration d) {
-  return static_cast<std::uint32_t>(
-      std::clamp<std::int64_t>(std::chrono::duration_cast<std::chrono::microseconds>(d).count(),
-                               0, 4'000'000'000));
+  return static_cast<std::uint32_t>(std::clamp<std::int64_t>(
+      std::chrono::duration_cast<std::chrono::microseconds>(d).count(), 0, 4'000'000'000));
 }
 
 // Frame errors are the client's, not the server's: logged at debug level only, so that a
@@ -88,7 +86,8 @@ class CloudCastService::StreamReactor final
     } else if (finish_sent_ || cancelled_ || draining_) {
       Release(job);  // read after draining began: not answered
     } else {
-      service_->metrics_->bytes_received.Increment(static_cast<double>(job->request.ByteSizeLong()));
+      service_->metrics_->bytes_received.Increment(
+          static_cast<double>(job->request.ByteSizeLong()));
       Accept(job);
     }
     Actions actions;
@@ -136,7 +135,7 @@ class CloudCastService::StreamReactor final
   // Ends the stream if nothing moved on it for the idle timeout.
   void CheckIdle(Clock::time_point now) {
     std::unique_lock<std::mutex> lock(mu_);
-    if (finish_sent_ || end_requested_ || cancelled_ || in_work_ > 0) return;
+    if (finish_sent_ || end_requested_ || cancel_requested_ || cancelled_ || in_work_ > 0) return;
     if (now - last_activity_ < service_->options_.idle_timeout) return;
     const double seconds = Seconds(service_->options_.idle_timeout);
     spdlog::info("stream from {} idle for {} s: ending it", peer_, seconds);
@@ -149,10 +148,9 @@ class CloudCastService::StreamReactor final
       actions.cancel = true;
     } else {
       end_requested_ = true;
-      end_status_ = grpc::Status(
-          grpc::StatusCode::DEADLINE_EXCEEDED,
-          absl::StrCat("stream idle: nothing received or sent for ", seconds,
-                       " s (the server's idle timeout, --idle-timeout)"));
+      end_status_ = grpc::Status(grpc::StatusCode::DEADLINE_EXCEEDED,
+                                 absl::StrCat("stream idle: nothing received or sent for ", seconds,
+                                              " s (the server's idle timeout, --idle-timeout)"));
       PumpLocked(&actions);
     }
     Perform(lock, actions);
@@ -177,8 +175,8 @@ class CloudCastService::StreamReactor final
     // draco buffer keeps its capacity (a oneof member is freed when the oneof is cleared).
     std::unique_ptr<v1::CloudReply> spare_cloud;
     std::shared_ptr<const StreamSettings> settings;
-    std::uint64_t order = 0;  // position among this stream's replies
-    Clock::time_point received;        // for the queue and total latencies
+    std::uint64_t order = 0;            // position among this stream's replies
+    Clock::time_point received;         // for the queue and total latencies
     std::int64_t received_unix_ns = 0;  // echoed as receive_time_unix_ns
   };
 
@@ -560,10 +558,10 @@ grpc::ServerBidiReactor<v1::StreamRequest, v1::StreamReply>* CloudCastService::S
     metrics_->streams_rejected_limit.Increment();
     spdlog::warn("stream from {} refused: {} streams open, the limit", context->peer(),
                  options_.max_streams);
-    return new RejectedStream(grpc::Status(
-        grpc::StatusCode::RESOURCE_EXHAUSTED,
-        absl::StrCat("too many concurrent streams: the server's limit is ", options_.max_streams,
-                     " (max_streams, --max-streams)")));
+    return new RejectedStream(
+        grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED,
+                     absl::StrCat("too many concurrent streams: the server's limit is ",
+                                  options_.max_streams, " (max_streams, --max-streams)")));
   }
   metrics_->streams_accepted.Increment();
   metrics_->active_streams.Increment();
@@ -590,41 +588,41 @@ grpc::ServerUnaryReactor* CloudCastService::Process(grpc::CallbackServerContext*
   // Each call holds its frame until a worker is done with it; bound them like streams.
   if (active_process_calls_.fetch_add(1) >= static_cast<int>(options_.max_streams)) {
     active_process_calls_.fetch_sub(1);
-    reactor->Finish(grpc::Status(
-        grpc::StatusCode::RESOURCE_EXHAUSTED,
-        absl::StrCat("too many Process calls in flight: the server's limit is ",
-                     options_.max_streams, " (max_streams, --max-streams)")));
+    reactor->Finish(
+        grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED,
+                     absl::StrCat("too many Process calls in flight: the server's limit is ",
+                                  options_.max_streams, " (max_streams, --max-streams)")));
     return reactor;
   }
   auto shared_settings = std::make_shared<const StreamSettings>(*std::move(settings));
-  const bool submitted = pool_.Submit([this, reactor, request, reply, received, received_ns,
-                                       shared_settings](std::size_t worker) {
-    const Clock::time_point start = Clock::now();
-    metrics_->queue_seconds.Observe(Seconds(start - received));
-    const double cpu0 = ThreadCpuSeconds();
-    FrameCosts costs;
-    const absl::Status status =
-        processors_[worker]->Process(request->frame(), *shared_settings, reply, &costs);
-    metrics_->core_cpu_seconds.Increment(costs.core_cpu_seconds);
-    grpc::Status result;
-    if (status.ok()) {
-      reply->mutable_times()->set_queue_us(Micros(start - received));
-      reply->set_receive_time_unix_ns(received_ns);
-      reply->set_send_time_unix_ns(UnixNanos());
-      metrics_->frames_processed.Increment();
-      metrics_->pipeline_seconds.Observe(costs.pipeline_seconds);
-      metrics_->encode_seconds.Observe(costs.encode_seconds);
-      if (costs.decoded) metrics_->decode_seconds.Observe(costs.decode_seconds);
-      metrics_->total_seconds.Observe(Seconds(Clock::now() - received));
-      metrics_->bytes_sent.Increment(static_cast<double>(reply->ByteSizeLong()));
-    } else {
-      metrics_->FrameErrors(status.code()).Increment();
-      result = ToGrpc(status);
-    }
-    metrics_->worker_cpu_seconds.Increment(ThreadCpuSeconds() - cpu0);
-    active_process_calls_.fetch_sub(1);
-    reactor->Finish(std::move(result));
-  });
+  const bool submitted = pool_.Submit(
+      [this, reactor, request, reply, received, received_ns, shared_settings](std::size_t worker) {
+        const Clock::time_point start = Clock::now();
+        metrics_->queue_seconds.Observe(Seconds(start - received));
+        const double cpu0 = ThreadCpuSeconds();
+        FrameCosts costs;
+        const absl::Status status =
+            processors_[worker]->Process(request->frame(), *shared_settings, reply, &costs);
+        metrics_->core_cpu_seconds.Increment(costs.core_cpu_seconds);
+        grpc::Status result;
+        if (status.ok()) {
+          reply->mutable_times()->set_queue_us(Micros(start - received));
+          reply->set_receive_time_unix_ns(received_ns);
+          reply->set_send_time_unix_ns(UnixNanos());
+          metrics_->frames_processed.Increment();
+          metrics_->pipeline_seconds.Observe(costs.pipeline_seconds);
+          metrics_->encode_seconds.Observe(costs.encode_seconds);
+          if (costs.decoded) metrics_->decode_seconds.Observe(costs.decode_seconds);
+          metrics_->total_seconds.Observe(Seconds(Clock::now() - received));
+          metrics_->bytes_sent.Increment(static_cast<double>(reply->ByteSizeLong()));
+        } else {
+          metrics_->FrameErrors(status.code()).Increment();
+          result = ToGrpc(status);
+        }
+        metrics_->worker_cpu_seconds.Increment(ThreadCpuSeconds() - cpu0);
+        active_process_calls_.fetch_sub(1);
+        reactor->Finish(std::move(result));
+      });
   if (!submitted) {
     active_process_calls_.fetch_sub(1);
     reactor->Finish(grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
@@ -717,9 +715,8 @@ void CloudCastService::StopWorkers() {
 
 void CloudCastService::Housekeeping() {
   // Checks often enough that a stream ends within about a tenth of the timeout of going idle.
-  const auto tick = std::clamp<std::chrono::milliseconds>(options_.idle_timeout / 10,
-                                                          std::chrono::milliseconds(10),
-                                                          std::chrono::milliseconds(1000));
+  const auto tick = std::clamp<std::chrono::milliseconds>(
+      options_.idle_timeout / 10, std::chrono::milliseconds(10), std::chrono::milliseconds(1000));
   std::unique_lock<std::mutex> lock(streams_mu_);
   while (!stop_housekeeping_) {
     streams_cv_.wait_for(lock, tick, [this] { return stop_housekeeping_; });

@@ -16,6 +16,8 @@
 //                    reorder buffer writes their replies in order.
 #pragma once
 
+#include <grpcpp/grpcpp.h>
+
 #include <atomic>
 #include <chrono>
 #include <condition_variable>
@@ -25,8 +27,6 @@
 #include <set>
 #include <thread>
 #include <vector>
-
-#include <grpcpp/grpcpp.h>
 
 #include "cloudcast/v1/cloudcast.grpc.pb.h"
 #include "frame_processor.h"

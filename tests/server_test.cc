@@ -3,12 +3,17 @@
 //
 // Frames: the New Tsukuba sample when it is there, else frames of the synthetic scene (same size,
 // same camera), so that every test runs on a fresh machine.
+#include "server.h"
+
 #include <arpa/inet.h>
+#include <google/protobuf/descriptor.pb.h>
+#include <google/protobuf/unknown_field_set.h>
+#include <grpcpp/generic/generic_stub.h>
+#include <grpcpp/grpcpp.h>
+#include <gtest/gtest.h>
 #include <netinet/in.h>
 #include <sys/socket.h>
 #include <unistd.h>
-
-#include <gtest/gtest.h>
 
 #include <algorithm>
 #include <atomic>
@@ -21,18 +26,13 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
 #include <sstream>
 #include <string>
 #include <thread>
 #include <tuple>
 #include <vector>
-
-#include <google/protobuf/descriptor.pb.h>
-#include <google/protobuf/unknown_field_set.h>
-#include <grpcpp/generic/generic_stub.h>
-#include <grpcpp/grpcpp.h>
-#include <opencv2/core.hpp>
-#include <opencv2/imgcodecs.hpp>
 
 #include "cli.h"
 #include "cloudcast/core/draco_codec.h"
@@ -42,7 +42,6 @@
 #include "cloudcast/v1/cloudcast.grpc.pb.h"
 #include "frame_input.h"
 #include "options.h"
-#include "server.h"
 #include "test_support.h"
 
 namespace cloudcast::server {
@@ -124,6 +123,17 @@ const std::vector<SourceFrame>& Frames() {
 }
 
 enum class Input { kRaw, kPng, kJpegColour };
+const char* Name(Input input) {
+  switch (input) {
+    case Input::kRaw:
+      return "Raw";
+    case Input::kPng:
+      return "Png";
+    default:
+      return "JpegColour";
+  }
+}
+void PrintTo(Input input, std::ostream* os) { *os << Name(input); }
 
 v1::Frame MakeFrame(const SourceFrame& f, std::uint64_t sequence, Input input = Input::kRaw) {
   v1::Frame frame;
@@ -262,9 +272,9 @@ PointCloud Reference(const SourceFrame& f, const Params& p) {
   for (std::size_t r = 0; r < reference.size(); ++r) {
     if (!augment(r, r)) {
       const Point& p = reference.points[r];
-      return ::testing::AssertionFailure() << "reference point " << r << " (" << p.x << ", "
-                                           << p.y << ", " << p.z
-                                           << ") has no decoded partner left within " << tolerance;
+      return ::testing::AssertionFailure()
+             << "reference point " << r << " (" << p.x << ", " << p.y << ", " << p.z
+             << ") has no decoded partner left within " << tolerance;
     }
   }
   return ::testing::AssertionSuccess();
@@ -367,7 +377,8 @@ StreamResult RunStream(v1::CloudCast::Stub& stub, const std::vector<v1::StreamRe
 }
 
 // Waits for `condition` with a deadline instead of sleeping a fixed time.
-bool Eventually(const std::function<bool()>& condition, milliseconds timeout = milliseconds(10000)) {
+bool Eventually(const std::function<bool()>& condition,
+                milliseconds timeout = milliseconds(10000)) {
   const Clock::time_point deadline = Clock::now() + timeout;
   while (Clock::now() < deadline) {
     if (condition()) return true;
@@ -432,8 +443,8 @@ std::unique_ptr<google::protobuf::UnknownFieldSet> Reflect(
   grpc::CompletionQueue cq;
   grpc::ClientContext ctx;
   SetDeadline(&ctx, seconds(10));
-  auto call = stub.PrepareCall(&ctx, "/grpc.reflection.v1alpha.ServerReflection/ServerReflectionInfo",
-                               &cq);
+  auto call =
+      stub.PrepareCall(&ctx, "/grpc.reflection.v1alpha.ServerReflection/ServerReflectionInfo", &cq);
   void* tag;
   bool ok;
   auto step = [&] {
@@ -561,13 +572,7 @@ TEST_P(StreamInputTest, StreamedSequenceMatchesCorePipeline) {
 
 INSTANTIATE_TEST_SUITE_P(Inputs, StreamInputTest,
                          ::testing::Values(Input::kRaw, Input::kPng, Input::kJpegColour),
-                         [](const auto& info) {
-                           switch (info.param) {
-                             case Input::kRaw: return std::string("Raw");
-                             case Input::kPng: return std::string("Png");
-                             default: return std::string("JpegColour");
-                           }
-                         });
+                         [](const auto& info) { return std::string(Name(info.param)); });
 
 TEST_F(ServerTest, RawRowsWithPaddingAndOtherEncodings) {
   // Padded rows (row_stride > width x bytes) and RGBA colour are viewed in place correctly.
@@ -597,6 +602,43 @@ TEST_F(ServerTest, RawRowsWithPaddingAndOtherEncodings) {
   ASSERT_EQ(result.replies.size(), 1u);
   ASSERT_TRUE(result.replies[0].has_cloud()) << result.replies[0].error().message();
   EXPECT_TRUE(CloudMatches(Reference(f, Params{}), result.replies[0].cloud()));
+}
+
+TEST_F(ServerTest, FloatDisparityAsTiffAndPfm) {
+  // 32-bit float disparities arrive as TIFF or PFM files and keep their values.
+  const SourceFrame& f = Frames().front();
+  const std::uint32_t w = f.disparity.width, h = f.disparity.height;
+  OwnedDisparity f32;
+  f32.width = w;
+  f32.height = h;
+  f32.encoding = DisparityEncoding::kF32;
+  f32.pixels.resize(std::size_t{w} * h * 4);
+  for (std::size_t i = 0; i < std::size_t{w} * h; ++i) {
+    const float d = f.disparity.pixels[i] * 0.5f + 0.25f * (f.disparity.pixels[i] > 0);
+    std::memcpy(&f32.pixels[i * 4], &d, 4);
+  }
+  PipelineOptions o;
+  o.camera = CameraModel::PclCompatible(w, h, 615.0);
+  Pipeline pipeline;
+  PointCloud reference;
+  ASSERT_TRUE(pipeline.Run(o, f32.view(), f.colour.view(), &reference).ok());
+  for (const char* ext : {".tiff", ".pfm"}) {
+    SCOPED_TRACE(ext);
+    std::vector<std::uint8_t> file;
+    ASSERT_TRUE(cv::imencode(ext, cv::Mat(h, w, CV_32FC1, f32.pixels.data()), file));
+    std::uint32_t sw = 0, sh = 0;
+    const char* format = nullptr;
+    ASSERT_TRUE(SniffImageSize(std::string(file.begin(), file.end()), &sw, &sh, &format));
+    EXPECT_EQ(sw, w);
+    EXPECT_EQ(sh, h);
+    v1::Frame frame = MakeFrame(f, 1);
+    frame.mutable_disparity()->set_encoded(file.data(), file.size());
+    const StreamResult result = RunStream(*stub_, {FrameRequest(frame)});
+    ASSERT_TRUE(result.status.ok());
+    ASSERT_EQ(result.replies.size(), 1u);
+    ASSERT_TRUE(result.replies[0].has_cloud()) << result.replies[0].error().message();
+    EXPECT_TRUE(CloudMatches(reference, result.replies[0].cloud()));
+  }
 }
 
 TEST_F(ServerTest, ConcurrentStreamsEachGetTheirOwnConfig) {
@@ -703,8 +745,7 @@ TEST(ServerAllModeTest, SlowReaderGetsEveryFrameInOrderWithBoundedMemory) {
   ASSERT_NE(server, nullptr);
   auto stub = Stub(*server);
   constexpr int kFrames = 24;
-  std::vector<v1::StreamRequest> requests = {
-      ConfigRequest(ConfigFor(Params{}, v1::DELIVERY_ALL))};
+  std::vector<v1::StreamRequest> requests = {ConfigRequest(ConfigFor(Params{}, v1::DELIVERY_ALL))};
   for (int i = 0; i < kFrames; ++i) {
     requests.push_back(FrameRequest(MakeFrame(Frames()[i % Frames().size()], i)));
   }
@@ -716,8 +757,8 @@ TEST(ServerAllModeTest, SlowReaderGetsEveryFrameInOrderWithBoundedMemory) {
     EXPECT_EQ(result.replies[i].cloud().sequence(), static_cast<std::uint64_t>(i));
     EXPECT_EQ(result.replies[i].cloud().frames_dropped(), 0u);
   }
-  EXPECT_TRUE(CloudMatches(Reference(Frames()[5 % Frames().size()], Params{}),
-                           result.replies[5].cloud()));
+  EXPECT_TRUE(
+      CloudMatches(Reference(Frames()[5 % Frames().size()], Params{}), result.replies[5].cloud()));
   // The server held at most max_queued_frames frames of the stream, and did fill its queue.
   const std::uint32_t high_water = server->queued_frames_high_water();
   std::cout << "queued-frame high-water mark: " << high_water << " (limit 3)\n";
@@ -744,6 +785,30 @@ std::string PngWithSize(std::uint32_t w, std::uint32_t h) {
   return png;
 }
 
+// A little-endian TIFF whose first directory claims w x h (and holds nothing else).
+std::string TiffHeader(std::uint32_t w, std::uint32_t h) {
+  std::string t = {'I', 'I', 42, 0, 8, 0, 0, 0, 2, 0};
+  auto entry = [&](std::uint16_t tag, std::uint32_t value) {
+    const std::uint8_t e[12] = {std::uint8_t(tag),
+                                std::uint8_t(tag >> 8),
+                                4,
+                                0,
+                                1,
+                                0,
+                                0,
+                                0,
+                                std::uint8_t(value),
+                                std::uint8_t(value >> 8),
+                                std::uint8_t(value >> 16),
+                                std::uint8_t(value >> 24)};
+    t.append(reinterpret_cast<const char*>(e), 12);
+  };
+  entry(256, w);
+  entry(257, h);
+  t.append(4, '\0');
+  return t;
+}
+
 std::string JpegWithSize(std::uint16_t w, std::uint16_t h) {
   std::string jpeg = Frames().front().colour_jpeg;
   // Walk the marker segments to the start of frame (baseline or progressive) and patch its size.
@@ -768,79 +833,125 @@ std::vector<BadFrameCase> BadFrameCases() {
   const auto kExhausted = grpc::StatusCode::RESOURCE_EXHAUSTED;
   const SourceFrame& f = Frames().front();
   return {
-      {"missing disparity", [](v1::Frame* fr) { fr->clear_disparity(); }, kInvalid,
+      {"missing disparity",
+       [](v1::Frame* fr) { fr->clear_disparity(); },
+       kInvalid,
        {"frame.disparity is missing"}},
-      {"missing colour", [](v1::Frame* fr) { fr->clear_colour(); }, kInvalid,
+      {"missing colour",
+       [](v1::Frame* fr) { fr->clear_colour(); },
+       kInvalid,
        {"frame.colour is missing"}},
       {"unspecified disparity encoding",
        [](v1::Frame* fr) {
          fr->mutable_disparity()->mutable_raw()->set_encoding(v1::DISPARITY_ENCODING_UNSPECIFIED);
        },
-       kInvalid, {"frame.disparity.raw.encoding", "DISPARITY_ENCODING_UNSPECIFIED"}},
+       kInvalid,
+       {"frame.disparity.raw.encoding", "DISPARITY_ENCODING_UNSPECIFIED"}},
       {"unknown colour encoding",
        [](v1::Frame* fr) {
          fr->mutable_colour()->mutable_raw()->set_encoding(static_cast<v1::ColorEncoding>(42));
        },
-       kInvalid, {"frame.colour.raw.encoding is 42"}},
-      {"zero width", [](v1::Frame* fr) { fr->mutable_disparity()->mutable_raw()->set_width(0); },
-       kInvalid, {"frame.disparity.raw.width is 0"}},
-      {"zero height", [](v1::Frame* fr) { fr->mutable_colour()->mutable_raw()->set_height(0); },
-       kInvalid, {"frame.colour.raw.height is 0"}},
+       kInvalid,
+       {"frame.colour.raw.encoding is 42"}},
+      {"zero width",
+       [](v1::Frame* fr) { fr->mutable_disparity()->mutable_raw()->set_width(0); },
+       kInvalid,
+       {"frame.disparity.raw.width is 0"}},
+      {"zero height",
+       [](v1::Frame* fr) { fr->mutable_colour()->mutable_raw()->set_height(0); },
+       kInvalid,
+       {"frame.colour.raw.height is 0"}},
       {"disparity row_stride too small",
        [](v1::Frame* fr) { fr->mutable_disparity()->mutable_raw()->set_row_stride(100); },
-       kInvalid, {"frame.disparity.raw.row_stride is 100, less than width x 1 = 640"}},
+       kInvalid,
+       {"frame.disparity.raw.row_stride is 100, less than width x 1 = 640"}},
       {"colour row_stride too small",
        [](v1::Frame* fr) { fr->mutable_colour()->mutable_raw()->set_row_stride(1000); },
-       kInvalid, {"frame.colour.raw.row_stride is 1000, less than width x 3 = 1920"}},
+       kInvalid,
+       {"frame.colour.raw.row_stride is 1000, less than width x 3 = 1920"}},
       {"disparity pixels too short",
-       [](v1::Frame* fr) { fr->mutable_disparity()->mutable_raw()->mutable_pixels()->resize(1000); },
-       kInvalid, {"frame.disparity.raw.pixels holds 1000 bytes", "needs 307200"}},
+       [](v1::Frame* fr) {
+         fr->mutable_disparity()->mutable_raw()->mutable_pixels()->resize(1000);
+       },
+       kInvalid,
+       {"frame.disparity.raw.pixels holds 1000 bytes", "needs 307200"}},
       {"colour pixels too short for its stride",
        [](v1::Frame* fr) { fr->mutable_colour()->mutable_raw()->set_row_stride(1921); },
-       kInvalid, {"frame.colour.raw.pixels holds 921600 bytes", "row_stride 1921"}},
+       kInvalid,
+       {"frame.colour.raw.pixels holds 921600 bytes", "row_stride 1921"}},
       {"u16 pixels too short",
-       [](v1::Frame* fr) { fr->mutable_disparity()->mutable_raw()->set_encoding(v1::DISPARITY_U16); },
-       kInvalid, {"frame.disparity.raw.pixels holds 307200 bytes", "DISPARITY_U16"}},
+       [](v1::Frame* fr) {
+         fr->mutable_disparity()->mutable_raw()->set_encoding(v1::DISPARITY_U16);
+       },
+       kInvalid,
+       {"frame.disparity.raw.pixels holds 307200 bytes", "DISPARITY_U16"}},
       {"sizes differ",
        [](v1::Frame* fr) {
          v1::RawColor* c = fr->mutable_colour()->mutable_raw();
          c->set_width(320);
          c->set_height(240);
        },
-       kInvalid, {"frame.colour is 320x240 but frame.disparity is 640x480"}},
-      {"undecodable disparity bytes",
-       [](v1::Frame* fr) { fr->mutable_disparity()->set_encoded("this is not a PNG"); }, kInvalid,
-       {"frame.disparity.encoded", "cannot be decoded"}},
+       kInvalid,
+       {"frame.colour is 320x240 but frame.disparity is 640x480"}},
+      {"unknown image format",
+       [](v1::Frame* fr) { fr->mutable_disparity()->set_encoded("this is not a PNG"); },
+       kInvalid,
+       {"frame.disparity.encoded is not a PNG, JPEG, TIFF, PNM or PFM image"}},
+      {"undecodable PNG body",
+       [&f](v1::Frame* fr) {
+         std::string png = f.disparity_png;
+         std::fill(png.begin() + 40, png.end(), 'x');
+         fr->mutable_disparity()->set_encoded(png);
+       },
+       kInvalid,
+       {"frame.disparity.encoded: cannot be decoded"}},
       {"truncated colour PNG",
        [&f](v1::Frame* fr) { fr->mutable_colour()->set_encoded(f.colour_png.substr(0, 200)); },
-       kInvalid, {"frame.colour.encoded"}},
+       kInvalid,
+       {"frame.colour.encoded"}},
       {"empty encoded disparity",
-       [](v1::Frame* fr) { fr->mutable_disparity()->set_encoded(""); }, kInvalid,
+       [](v1::Frame* fr) { fr->mutable_disparity()->set_encoded(""); },
+       kInvalid,
        {"frame.disparity.encoded is empty"}},
       {"multi-channel disparity file",
        [&f](v1::Frame* fr) {
-         fr->mutable_disparity()->set_encoded(Encode(".png", f.colour.width, f.colour.height,
-                                                     CV_8UC3, f.colour.pixels.data()));
+         fr->mutable_disparity()->set_encoded(
+             Encode(".png", f.colour.width, f.colour.height, CV_8UC3, f.colour.pixels.data()));
        },
-       kInvalid, {"frame.disparity.encoded", "3 channels", "one"}},
+       kInvalid,
+       {"frame.disparity.encoded", "3 channels", "one"}},
       {"side over the limit",
        [](v1::Frame* fr) {
          fr->mutable_disparity()->mutable_raw()->set_width(20000);
          fr->mutable_disparity()->mutable_raw()->set_height(1);
        },
-       kExhausted, {"frame.disparity.raw is 20000x1", "the limit is 16384 pixels per side"}},
+       kExhausted,
+       {"frame.disparity.raw is 20000x1", "the limit is 16384 pixels per side"}},
       {"pixels over the limit",
        [](v1::Frame* fr) {
          fr->mutable_colour()->mutable_raw()->set_width(5000);
          fr->mutable_colour()->mutable_raw()->set_height(5000);
        },
-       kExhausted, {"frame.colour.raw is 5000x5000 = 25000000 pixels", "the limit is 16777216"}},
+       kExhausted,
+       {"frame.colour.raw is 5000x5000 = 25000000 pixels", "the limit is 16777216"}},
       {"PNG header over the limit",
        [](v1::Frame* fr) { fr->mutable_disparity()->set_encoded(PngWithSize(16000, 16000)); },
-       kExhausted, {"frame.disparity.encoded (PNG) is 16000x16000", "16777216"}},
+       kExhausted,
+       {"frame.disparity.encoded (PNG) is 16000x16000", "16777216"}},
+      {"TIFF header over the limit",
+       [](v1::Frame* fr) { fr->mutable_disparity()->set_encoded(TiffHeader(30000, 30000)); },
+       kExhausted,
+       {"frame.disparity.encoded (TIFF) is 30000x30000", "16384 pixels per side"}},
+      {"PNM header over the limit",
+       [](v1::Frame* fr) {
+         fr->mutable_colour()->set_encoded("P6\n# a comment\n5000 4000\n255\n");
+       },
+       kExhausted,
+       {"frame.colour.encoded (PNM) is 5000x4000 = 20000000 pixels"}},
       {"JPEG header over the limit",
        [](v1::Frame* fr) { fr->mutable_colour()->set_encoded(JpegWithSize(30000, 2)); },
-       kExhausted, {"frame.colour.encoded (JPEG) is 30000x2", "16384 pixels per side"}},
+       kExhausted,
+       {"frame.colour.encoded (JPEG) is 30000x2", "16384 pixels per side"}},
   };
 }
 
@@ -852,23 +963,29 @@ struct BadConfigCase {
 
 std::vector<BadConfigCase> BadConfigCases() {
   return {
-      {"fx zero", [](v1::StreamConfig* c) { c->mutable_camera()->set_fx(0); },
+      {"fx zero",
+       [](v1::StreamConfig* c) { c->mutable_camera()->set_fx(0); },
        {"config.camera.fx must be finite and in (0, 1e9], got 0"}},
-      {"fx NaN", [](v1::StreamConfig* c) { c->mutable_camera()->set_fx(std::nan("")); },
+      {"fx NaN",
+       [](v1::StreamConfig* c) { c->mutable_camera()->set_fx(std::nan("")); },
        {"config.camera.fx", "nan"}},
-      {"baseline negative", [](v1::StreamConfig* c) { c->mutable_camera()->set_baseline(-1); },
+      {"baseline negative",
+       [](v1::StreamConfig* c) { c->mutable_camera()->set_baseline(-1); },
        {"config.camera.baseline"}},
       {"disparity_scale zero",
        [](v1::StreamConfig* c) { c->mutable_camera()->set_disparity_scale(0); },
        {"config.camera.disparity_scale must not be 0"}},
       {"too many invalid disparities",
        [](v1::StreamConfig* c) {
-         for (int i = 0; i < 17; ++i) c->mutable_camera()->mutable_invalid_disparities()->add_values(i);
+         for (int i = 0; i < 17; ++i)
+           c->mutable_camera()->mutable_invalid_disparities()->add_values(i);
        },
        {"config.camera.invalid_disparities.values holds 17 values; the limit is 16"}},
-      {"leaf zero", [](v1::StreamConfig* c) { c->mutable_voxel_grid()->set_leaf(0); },
+      {"leaf zero",
+       [](v1::StreamConfig* c) { c->mutable_voxel_grid()->set_leaf(0); },
        {"config.voxel_grid.leaf must be finite and > 0", "got 0"}},
-      {"leaf negative", [](v1::StreamConfig* c) { c->mutable_voxel_grid()->set_leaf_y(-0.5f); },
+      {"leaf negative",
+       [](v1::StreamConfig* c) { c->mutable_voxel_grid()->set_leaf_y(-0.5f); },
        {"config.voxel_grid.leaf_y", "got -0.5"}},
       {"min above max",
        [](v1::StreamConfig* c) {
@@ -877,16 +994,20 @@ std::vector<BadConfigCase> BadConfigCases() {
        },
        {"config.passthrough.min (20) must not exceed config.passthrough.max (12, the server "
         "default)"}},
-      {"min NaN", [](v1::StreamConfig* c) { c->mutable_passthrough()->set_min(std::nanf("")); },
+      {"min NaN",
+       [](v1::StreamConfig* c) { c->mutable_passthrough()->set_min(std::nanf("")); },
        {"config.passthrough.min must be finite"}},
       {"unknown axis",
        [](v1::StreamConfig* c) { c->mutable_passthrough()->set_axis(static_cast<v1::Axis>(9)); },
        {"config.passthrough.axis is 9"}},
-      {"draco bits out of range", [](v1::StreamConfig* c) { c->mutable_draco()->set_position_bits(31); },
+      {"draco bits out of range",
+       [](v1::StreamConfig* c) { c->mutable_draco()->set_position_bits(31); },
        {"config.draco.position_bits is 31; it must be in [1, 30]"}},
-      {"draco colour bits zero", [](v1::StreamConfig* c) { c->mutable_draco()->set_color_bits(0); },
+      {"draco colour bits zero",
+       [](v1::StreamConfig* c) { c->mutable_draco()->set_color_bits(0); },
        {"config.draco.color_bits is 0; it must be in [1, 8]"}},
-      {"draco speed out of range", [](v1::StreamConfig* c) { c->mutable_draco()->set_encode_speed(11); },
+      {"draco speed out of range",
+       [](v1::StreamConfig* c) { c->mutable_draco()->set_encode_speed(11); },
        {"config.draco.encode_speed is 11; it must be in [0, 10]"}},
       {"draco negative error",
        [](v1::StreamConfig* c) { c->mutable_draco()->set_max_position_error(-1); },
@@ -902,16 +1023,16 @@ std::vector<BadConfigCase> BadConfigCases() {
   if (!reply.has_error()) return ::testing::AssertionFailure() << "not an error reply";
   const v1::FrameError& e = reply.error();
   if (e.code() != static_cast<int>(code)) {
-    return ::testing::AssertionFailure() << "code " << e.code() << ", want " << code << ": "
-                                         << e.message();
+    return ::testing::AssertionFailure()
+           << "code " << e.code() << ", want " << code << ": " << e.message();
   }
   if (e.sequence() != sequence) {
     return ::testing::AssertionFailure() << "sequence " << e.sequence() << ", want " << sequence;
   }
   for (const std::string& s : has) {
     if (e.message().find(s) == std::string::npos) {
-      return ::testing::AssertionFailure() << "message \"" << e.message() << "\" lacks \"" << s
-                                           << "\"";
+      return ::testing::AssertionFailure()
+             << "message \"" << e.message() << "\" lacks \"" << s << "\"";
     }
   }
   return ::testing::AssertionSuccess() << e.message();
@@ -977,15 +1098,13 @@ TEST_F(ServerTest, BadFramesAndConfigsGetNamedErrorsAndEveryStreamGoesOn) {
   }
   for (const BadConfigCase& c : config_cases) {
     SCOPED_TRACE(c.name);
-    EXPECT_TRUE(IsError(result.replies[r++], grpc::StatusCode::INVALID_ARGUMENT, 0,
-                        c.message_has));
+    EXPECT_TRUE(IsError(result.replies[r++], grpc::StatusCode::INVALID_ARGUMENT, 0, c.message_has));
     // The previous config (leaf 0.1) is still in force.
     ASSERT_TRUE(result.replies[r].has_cloud()) << result.replies[r].error().message();
     EXPECT_EQ(result.replies[r].cloud().sequence(), s++);
     EXPECT_TRUE(CloudMatches(expected, result.replies[r++].cloud()));
   }
-  EXPECT_TRUE(IsError(result.replies[r++], grpc::StatusCode::INVALID_ARGUMENT, 0,
-                      {"neither"}));
+  EXPECT_TRUE(IsError(result.replies[r++], grpc::StatusCode::INVALID_ARGUMENT, 0, {"neither"}));
   EXPECT_TRUE(result.replies[r++].has_cloud());
 
   ASSERT_TRUE(bystander.status.ok()) << bystander.status.error_message();
@@ -1009,8 +1128,7 @@ TEST_F(ServerTest, ProcessRpcReturnsFrameErrorsAsStatus) {
   request.mutable_frame()->mutable_disparity()->mutable_raw()->set_row_stride(100);
   grpc::Status status = process(request);
   EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
-  EXPECT_NE(status.error_message().find("frame.disparity.raw.row_stride is 100"),
-            std::string::npos)
+  EXPECT_NE(status.error_message().find("frame.disparity.raw.row_stride is 100"), std::string::npos)
       << status.error_message();
 
   *request.mutable_frame() = MakeFrame(f, 1);
@@ -1125,6 +1243,28 @@ TEST(ServerLimitsTest, IdleStreamIsEndedWithDeadlineExceeded) {
   EXPECT_GE(elapsed, 0.9);
   EXPECT_LT(elapsed, 10.0);
   EXPECT_TRUE(Eventually([&] { return server->service().active_streams() == 0; }));
+
+  // A lossless stream whose client sends until the server stops reading and never reads a reply
+  // holds its slot only for the timeout: nothing moves, so the server cancels it.
+  grpc::ClientContext stuck_ctx;
+  SetDeadline(&stuck_ctx, seconds(30));
+  auto stuck = stub->Stream(&stuck_ctx);
+  std::atomic<bool> writer_done{false};
+  std::thread writer([&] {
+    stuck->Write(ConfigRequest(ConfigFor(Params{}, v1::DELIVERY_ALL)));
+    for (std::uint64_t i = 0; stuck->Write(FrameRequest(MakeFrame(f, i))); ++i) {
+    }
+    writer_done.store(true);
+  });
+  ASSERT_TRUE(Eventually([&] { return server->service().active_streams() == 1; }));
+  EXPECT_TRUE(
+      Eventually([&] { return server->service().active_streams() == 0; }, milliseconds(15000)));
+  EXPECT_TRUE(Eventually([&] { return writer_done.load(); }));
+  writer.join();
+  while (stuck->Read(&reply)) {
+  }
+  const grpc::Status stuck_status = stuck->Finish();
+  EXPECT_EQ(stuck_status.error_code(), grpc::StatusCode::CANCELLED) << stuck_status.error_message();
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1282,8 +1422,8 @@ TEST(ServerShutdownTest, ShutdownUnderLoadReturnsWithinTheGracePeriod) {
       grpc::ClientContext ctx;
       SetDeadline(&ctx, seconds(60));
       auto stream = stub->Stream(&ctx);
-      stream->Write(ConfigRequest(ConfigFor(
-          Params{}, s % 2 || s == kStuck ? v1::DELIVERY_ALL : v1::DELIVERY_LATEST)));
+      stream->Write(ConfigRequest(
+          ConfigFor(Params{}, s % 2 || s == kStuck ? v1::DELIVERY_ALL : v1::DELIVERY_LATEST)));
       std::thread writer([&] {
         for (std::uint64_t i = 0;; ++i) {
           if (!stream->Write(FrameRequest(MakeFrame(Frames()[i % Frames().size()], i)))) break;
@@ -1299,8 +1439,8 @@ TEST(ServerShutdownTest, ShutdownUnderLoadReturnsWithinTheGracePeriod) {
       statuses[s] = stream->Finish();
     });
   }
-  ASSERT_TRUE(Eventually([&] { return streams_with_replies.load() == kBusy; },
-                         milliseconds(30000)));
+  ASSERT_TRUE(
+      Eventually([&] { return streams_with_replies.load() == kBusy; }, milliseconds(30000)));
   // The stuck stream is stuck once its client cannot write any more: the server stopped reading
   // it (its queue is full) and cannot write to it.
   int last = -1;
@@ -1365,10 +1505,10 @@ TEST(ServerMetricsTest, PrometheusEndpointServesTheCounters) {
   auto stub = Stub(*server);
   v1::Frame bad = MakeFrame(Frames()[0], 2);
   bad.clear_colour();
-  const StreamResult result = RunStream(
-      *stub, {ConfigRequest(ConfigFor(Params{}, v1::DELIVERY_ALL)),
-              FrameRequest(MakeFrame(Frames()[0], 1)), FrameRequest(bad),
-              FrameRequest(MakeFrame(Frames()[1 % Frames().size()], 3, Input::kPng))});
+  const StreamResult result =
+      RunStream(*stub, {ConfigRequest(ConfigFor(Params{}, v1::DELIVERY_ALL)),
+                        FrameRequest(MakeFrame(Frames()[0], 1)), FrameRequest(bad),
+                        FrameRequest(MakeFrame(Frames()[1 % Frames().size()], 3, Input::kPng))});
   ASSERT_TRUE(result.status.ok());
   const std::string text = HttpGet(server->metrics_port(), "/metrics");
   ASSERT_NE(text.find("200 OK"), std::string::npos) << text.substr(0, 200);
@@ -1434,10 +1574,9 @@ TEST(ServerOptionsTest, StreamConfigResolvesFieldByFieldAgainstTheDefaults) {
 }
 
 TEST(ServerOptionsTest, FlagsAndConfigFile) {
-  const std::string path =
-      (std::filesystem::temp_directory_path() / ("cloudcast_server_test_" +
-                                                 std::to_string(getpid()) + ".toml"))
-          .string();
+  const std::string path = (std::filesystem::temp_directory_path() /
+                            ("cloudcast_server_test_" + std::to_string(getpid()) + ".toml"))
+                               .string();
   {
     std::ofstream out(path);
     out << "max-streams = 8\nidle-timeout = 2.5\ndelivery = \"all\"\nleaf = 0.05\n"
@@ -1460,11 +1599,26 @@ TEST(ServerOptionsTest, FlagsAndConfigFile) {
 
   // Every flag shows its default in --help.
   const std::string help = app.help();
-  for (const char* flag :
-       {"--listen", "--threads", "--max-message-bytes", "--max-side", "--max-pixels",
-        "--max-streams", "--idle-timeout", "--max-queued-frames", "--shutdown-grace",
-        "--metrics-listen", "--focal", "--axis", "--min", "--max", "--leaf", "--draco-bits",
-        "--draco-speed", "--delivery", "--log-level", "--config"}) {
+  for (const char* flag : {"--listen",
+                           "--threads",
+                           "--max-message-bytes",
+                           "--max-side",
+                           "--max-pixels",
+                           "--max-streams",
+                           "--idle-timeout",
+                           "--max-queued-frames",
+                           "--shutdown-grace",
+                           "--metrics-listen",
+                           "--focal",
+                           "--axis",
+                           "--min",
+                           "--max",
+                           "--leaf",
+                           "--draco-bits",
+                           "--draco-speed",
+                           "--delivery",
+                           "--log-level",
+                           "--config"}) {
     EXPECT_NE(help.find(flag), std::string::npos) << flag;
   }
   EXPECT_NE(help.find("=0.0.0.0:50051"), std::string::npos) << help;
@@ -1477,7 +1631,7 @@ TEST(ServerOptionsTest, FlagsAndConfigFile) {
   EXPECT_FALSE(bad.Options().ok());
 }
 
-TEST(FrameInputTest, SniffsPngAndJpegSizes) {
+TEST(FrameInputTest, SniffsImageSizesFromHeaders) {
   const SourceFrame& f = Frames().front();
   std::uint32_t w = 0, h = 0;
   const char* format = nullptr;
@@ -1491,6 +1645,22 @@ TEST(FrameInputTest, SniffsPngAndJpegSizes) {
   EXPECT_EQ(h, 480u);
   EXPECT_FALSE(SniffImageSize("not an image", &w, &h, &format));
   EXPECT_FALSE(SniffImageSize(f.colour_jpeg.substr(0, 20), &w, &h, &format));
+  ASSERT_TRUE(SniffImageSize(TiffHeader(7, 9), &w, &h, &format));
+  EXPECT_EQ(std::string(format), "TIFF");
+  EXPECT_EQ(w, 7u);
+  EXPECT_EQ(h, 9u);
+  EXPECT_FALSE(SniffImageSize(TiffHeader(7, 9).substr(0, 20), &w, &h, &format));
+  const std::string pgm =
+      Encode(".pgm", f.disparity.width, f.disparity.height, CV_8UC1, f.disparity.pixels.data());
+  ASSERT_TRUE(SniffImageSize(pgm, &w, &h, &format));
+  EXPECT_EQ(std::string(format), "PNM");
+  EXPECT_EQ(w, 640u);
+  EXPECT_EQ(h, 480u);
+  ASSERT_TRUE(SniffImageSize("P5 #c\n 12\n#d\n34 255\n", &w, &h, &format));
+  EXPECT_EQ(w, 12u);
+  EXPECT_EQ(h, 34u);
+  EXPECT_FALSE(SniffImageSize("P5\n12", &w, &h, &format));
+  EXPECT_FALSE(SniffImageSize("P9\n12 13\n", &w, &h, &format));
 }
 
 }  // namespace

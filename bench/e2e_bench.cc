@@ -1,0 +1,454 @@
+// cloudcast-e2e-bench: the whole service over loopback. It starts `cloudcast-server` as a child
+// process, streams New Tsukuba frames (or synthetic ones) through 1, 2 and 4 concurrent streams,
+// raw and PNG-encoded, and reports frames per second, latency percentiles and the server's CPU
+// per frame, split into the share inside the core pipeline + Draco and the share outside them.
+//
+// Two runs per case:
+//   throughput  every stream sends as fast as the server answers (delivery "all", a window of
+//               frames in flight per stream);
+//   paced       every stream sends at --paced-fps (delivery "latest"), the real-time use.
+// Latency is send to reply on the client's steady clock: transport both ways, queueing, work.
+// The client does not decode the Draco replies here (a robot decodes on its own machine); the
+// client and the server share this machine's cores, so the figures are a lower bound.
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <signal.h>
+#include <sys/socket.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <CLI/CLI.hpp>
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "cloudcast/client/client.h"
+#include "cloudcast/client/config.h"
+#include "cloudcast/core/image_io.h"
+#include "cloudcast/core/synthetic.h"
+
+namespace cloudcast::bench {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+namespace cc = cloudcast::client;
+
+struct Frame {
+  OwnedDisparity disparity;
+  OwnedColor colour;
+  std::string disparity_png, colour_png;
+};
+
+int FreePort() {
+  const int fd = socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  a.sin_port = 0;
+  socklen_t len = sizeof a;
+  if (bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0 ||
+      getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len) != 0) {
+    close(fd);
+    return -1;
+  }
+  const int port = ntohs(a.sin_port);
+  close(fd);
+  return port;
+}
+
+// GET /metrics from the server's Prometheus endpoint (HTTP/1.0, so the body ends at close).
+std::string HttpGet(int port, const std::string& path) {
+  const int fd = socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  a.sin_port = htons(static_cast<std::uint16_t>(port));
+  std::string out;
+  if (connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0) {
+    const std::string req = "GET " + path + " HTTP/1.0\r\nHost: localhost\r\n\r\n";
+    if (write(fd, req.data(), req.size()) == static_cast<ssize_t>(req.size())) {
+      char buf[65536];
+      ssize_t n;
+      while ((n = read(fd, buf, sizeof buf)) > 0) out.append(buf, static_cast<std::size_t>(n));
+    }
+  }
+  close(fd);
+  return out;
+}
+
+// The value of an unlabelled metric line "name value".
+double MetricValue(const std::string& text, const std::string& name) {
+  std::istringstream in(text);
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.rfind(name + " ", 0) == 0) return std::stod(line.substr(name.size() + 1));
+  }
+  return -1;
+}
+
+// utime + stime of a process, seconds.
+double ProcessCpuSeconds(pid_t pid) {
+  std::ifstream in("/proc/" + std::to_string(pid) + "/stat");
+  std::string s((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const auto close_paren = s.rfind(')');
+  if (close_paren == std::string::npos) return -1;
+  std::istringstream fields(s.substr(close_paren + 2));
+  std::string f;
+  double utime = 0, stime = 0;
+  for (int i = 3; i <= 15 && fields >> f; ++i) {
+    if (i == 14) utime = std::stod(f);
+    if (i == 15) stime = std::stod(f);
+  }
+  return (utime + stime) / static_cast<double>(sysconf(_SC_CLK_TCK));
+}
+
+class ServerProcess {
+ public:
+  ServerProcess(const std::string& binary, int threads) {
+    port_ = FreePort();
+    metrics_port_ = FreePort();
+    pid_ = fork();
+    if (pid_ == 0) {
+      const std::string listen = "127.0.0.1:" + std::to_string(port_);
+      const std::string metrics = "127.0.0.1:" + std::to_string(metrics_port_);
+      const std::string t = std::to_string(threads);
+      execl(binary.c_str(), binary.c_str(), "--listen", listen.c_str(), "--metrics-listen",
+            metrics.c_str(), "--threads", t.c_str(), "--log-level", "warn", "--max-streams", "64",
+            static_cast<char*>(nullptr));
+      std::perror("exec cloudcast-server");
+      _exit(127);
+    }
+  }
+  ~ServerProcess() {
+    if (pid_ > 0) {
+      kill(pid_, SIGTERM);
+      int status = 0;
+      waitpid(pid_, &status, 0);
+    }
+  }
+  pid_t pid() const { return pid_; }
+  int port() const { return port_; }
+  int metrics_port() const { return metrics_port_; }
+  double CoreCpuSeconds() const {
+    return MetricValue(HttpGet(metrics_port_, "/metrics"), "cloudcast_core_cpu_seconds_total");
+  }
+
+ private:
+  pid_t pid_ = -1;
+  int port_ = 0, metrics_port_ = 0;
+};
+
+double Percentile(std::vector<double> v, double q) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  return v[static_cast<std::size_t>(q * (v.size() - 1) + 0.5)];
+}
+
+struct CaseResult {
+  std::string encoding, mode;
+  int streams = 0;
+  double seconds = 0, fps = 0, p50 = 0, p90 = 0, p99 = 0;
+  std::uint64_t frames = 0, errors = 0, dropped = 0;
+  double server_cpu_ms_per_frame = 0, core_cpu_ms_per_frame = 0, outside_share = 0;
+
+  nlohmann::json ToJson() const {
+    return {{"encoding", encoding},
+            {"mode", mode},
+            {"streams", streams},
+            {"seconds", seconds},
+            {"fps", fps},
+            {"latency_ms_p50", p50},
+            {"latency_ms_p90", p90},
+            {"latency_ms_p99", p99},
+            {"frames", frames},
+            {"errors", errors},
+            {"dropped", dropped},
+            {"server_cpu_ms_per_frame", server_cpu_ms_per_frame},
+            {"core_cpu_ms_per_frame", core_cpu_ms_per_frame},
+            {"outside_core_share", outside_share}};
+  }
+};
+
+// One case: `streams` streams for `seconds`, either as fast as possible with `window` frames in
+// flight per stream (paced_fps == 0) or at paced_fps each.
+CaseResult RunCase(const ServerProcess& server, const std::vector<Frame>& frames, bool png,
+                   int streams, double seconds, int window, double paced_fps) {
+  CaseResult r;
+  r.encoding = png ? "png" : "raw";
+  r.mode = paced_fps > 0 ? "paced " + std::to_string(static_cast<int>(paced_fps)) + " fps"
+                         : "throughput";
+  r.streams = streams;
+  cc::ClientOptions options;
+  options.decode_clouds = false;
+  auto client = cc::Client::Connect("127.0.0.1:" + std::to_string(server.port()), options);
+  if (!client.ok()) {
+    std::cerr << "connect: " << client.status() << "\n";
+    std::exit(1);
+  }
+  std::mutex mu;
+  std::vector<double> latencies;
+  std::atomic<std::uint64_t> answered{0}, errors{0}, dropped{0};
+  std::atomic<bool> measuring{false}, stop{false};
+
+  struct StreamState {
+    std::unique_ptr<cc::Stream> stream;
+    std::mutex mu;
+    std::condition_variable cv;
+    int in_flight = 0;
+  };
+  std::vector<std::unique_ptr<StreamState>> states;
+  for (int s = 0; s < streams; ++s) {
+    auto state = std::make_unique<StreamState>();
+    StreamState* st = state.get();
+    cc::StreamConfig config;
+    config.set_delivery(paced_fps > 0 ? v1::DELIVERY_LATEST : v1::DELIVERY_ALL);
+    cc::StreamOptions so;
+    so.on_result = [&, st](cc::Result&& res) {
+      {
+        std::lock_guard<std::mutex> lock(st->mu);
+        --st->in_flight;
+      }
+      st->cv.notify_one();
+      if (!measuring.load()) return;
+      ++answered;
+      if (!res.ok()) ++errors;
+      dropped = std::max<std::uint64_t>(dropped.load(), res.frames_dropped);
+      const double ms = std::chrono::duration<double, std::milli>(res.round_trip()).count();
+      std::lock_guard<std::mutex> lock(mu);
+      latencies.push_back(ms);
+    };
+    auto stream = (*client)->OpenStream(config, so);
+    if (!stream.ok()) {
+      std::cerr << "open stream: " << stream.status() << "\n";
+      std::exit(1);
+    }
+    st->stream = *std::move(stream);
+    states.push_back(std::move(state));
+  }
+
+  auto sender = [&](int s) {
+    StreamState& st = *states[s];
+    std::size_t i = static_cast<std::size_t>(s) * 3;  // streams start at different frames
+    auto next_send = Clock::now();
+    const auto period = paced_fps > 0 ? std::chrono::duration_cast<Clock::duration>(
+                                            std::chrono::duration<double>(1.0 / paced_fps))
+                                      : Clock::duration::zero();
+    while (!stop.load()) {
+      if (paced_fps > 0) {
+        std::this_thread::sleep_until(next_send);
+        next_send += period;
+      } else {
+        std::unique_lock<std::mutex> lock(st.mu);
+        st.cv.wait(lock, [&] { return st.in_flight < window || stop.load(); });
+        if (stop.load()) break;
+      }
+      const Frame& f = frames[i++ % frames.size()];
+      {
+        std::lock_guard<std::mutex> lock(st.mu);
+        ++st.in_flight;
+      }
+      absl::Status sent =
+          png ? st.stream->Send(cc::EncodedImage{f.disparity_png}, cc::EncodedImage{f.colour_png})
+              : st.stream->Send(f.disparity.view(), f.colour.view());
+      if (!sent.ok()) {
+        std::cerr << "send: " << sent << "\n";
+        break;
+      }
+    }
+  };
+  std::vector<std::thread> threads;
+  for (int s = 0; s < streams; ++s) threads.emplace_back(sender, s);
+
+  std::this_thread::sleep_for(std::chrono::milliseconds(800));  // warm-up
+  const double cpu0 = ProcessCpuSeconds(server.pid());
+  const double core0 = server.CoreCpuSeconds();
+  measuring = true;
+  const auto t0 = Clock::now();
+  std::this_thread::sleep_for(std::chrono::duration<double>(seconds));
+  measuring = false;
+  const auto t1 = Clock::now();
+  const double cpu1 = ProcessCpuSeconds(server.pid());
+  const double core1 = server.CoreCpuSeconds();
+  stop = true;
+  for (auto& st : states) st->cv.notify_all();
+  for (auto& t : threads) t.join();
+  for (auto& st : states) (void)st->stream->Finish();
+
+  r.seconds = std::chrono::duration<double>(t1 - t0).count();
+  r.frames = answered.load();
+  r.errors = errors.load();
+  r.dropped = dropped.load();
+  r.fps = r.frames / r.seconds;
+  {
+    std::lock_guard<std::mutex> lock(mu);
+    r.p50 = Percentile(latencies, 0.50);
+    r.p90 = Percentile(latencies, 0.90);
+    r.p99 = Percentile(latencies, 0.99);
+  }
+  if (r.frames > 0) {
+    r.server_cpu_ms_per_frame = (cpu1 - cpu0) * 1000.0 / r.frames;
+    r.core_cpu_ms_per_frame = core0 >= 0 ? (core1 - core0) * 1000.0 / r.frames : 0;
+    r.outside_share = r.server_cpu_ms_per_frame > 0
+                          ? 1.0 - r.core_cpu_ms_per_frame / r.server_cpu_ms_per_frame
+                          : 0;
+  }
+  return r;
+}
+
+std::vector<Frame> LoadFrames(const std::string& dir) {
+  static const char* kIds[] = {"00001", "00200", "00400", "00600", "00800",
+                               "01000", "01200", "01400", "01600", "01800"};
+  std::vector<Frame> frames;
+  for (const char* id : kIds) {
+    const std::string d = dir + "/groundtruth/disparity_maps/left/tsukuba_disparity_L_" + id + ".png";
+    const std::string c = dir + "/illumination/daylight/left/tsukuba_daylight_L_" + id + ".png";
+    if (!std::filesystem::exists(d) || !std::filesystem::exists(c)) continue;
+    auto disparity = LoadDisparity(d);
+    auto colour = LoadColor(c);
+    if (!disparity.ok() || !colour.ok()) continue;
+    frames.push_back(Frame{*std::move(disparity), *std::move(colour), {}, {}});
+  }
+  if (frames.empty()) {
+    for (std::uint64_t i = 0; i < 10; ++i) {
+      SyntheticOptions o;
+      o.frame = i * 36;
+      o.disparity_encoding = DisparityEncoding::kU8;
+      auto r = SyntheticScene::Default().Render(o);
+      Frame f;
+      f.disparity = OwnedDisparity{std::move(r->disparity), o.width, o.height,
+                                   DisparityEncoding::kU8};
+      f.colour = OwnedColor{std::move(r->colour), o.width, o.height, ColorEncoding::kBGR8};
+      frames.push_back(std::move(f));
+    }
+  }
+  // The PNG uplink: encoded once, as a camera driver would hand them over.
+  for (Frame& f : frames) {
+    std::vector<std::uint8_t> buf;
+    cv::Mat d(static_cast<int>(f.disparity.height), static_cast<int>(f.disparity.width), CV_8UC1,
+              f.disparity.pixels.data());
+    cv::imencode(".png", d, buf, {cv::IMWRITE_PNG_COMPRESSION, 1});
+    f.disparity_png.assign(buf.begin(), buf.end());
+    cv::Mat c(static_cast<int>(f.colour.height), static_cast<int>(f.colour.width), CV_8UC3,
+              f.colour.pixels.data());
+    cv::imencode(".png", c, buf, {cv::IMWRITE_PNG_COMPRESSION, 1});
+    f.colour_png.assign(buf.begin(), buf.end());
+  }
+  return frames;
+}
+
+int Main(int argc, char** argv) {
+  CLI::App app{
+      "cloudcast-e2e-bench: the gRPC service end to end over loopback. Starts cloudcast-server,\n"
+      "streams frames through 1, 2 and 4 concurrent streams (raw and PNG), and prints frames/s,\n"
+      "latency p50/p90/p99 (send to reply) and the server's CPU per frame, inside the core\n"
+      "pipeline + Draco and outside them."};
+  std::string data_dir = CLOUDCAST_DEFAULT_DATA_DIR;
+  std::string server_bin =
+      (std::filesystem::read_symlink("/proc/self/exe").parent_path() / "cloudcast-server").string();
+  double seconds = 4, paced_fps = 30;
+  int window = 4, threads = 0;
+  std::vector<int> stream_counts = {1, 2, 4};
+  std::vector<std::string> encodings = {"raw", "png"};
+  std::string json_path;
+  app.add_option("--data", data_dir, "New Tsukuba folder; synthetic frames when absent")
+      ->capture_default_str();
+  app.add_option("--server-bin", server_bin, "the cloudcast-server binary")->capture_default_str();
+  app.add_option("--seconds", seconds, "measured seconds per case")
+      ->check(CLI::Range(0.5, 600.0))
+      ->capture_default_str();
+  app.add_option("--streams", stream_counts, "concurrent stream counts")->capture_default_str();
+  app.add_option("--encodings", encodings, "raw and/or png")
+      ->check(CLI::IsMember({"raw", "png"}))
+      ->capture_default_str();
+  app.add_option("--window", window, "frames in flight per stream in the throughput runs")
+      ->check(CLI::Range(1, 64))
+      ->capture_default_str();
+  app.add_option("--paced-fps", paced_fps, "frames/s per stream in the paced runs (0: skip)")
+      ->check(CLI::Range(0.0, 1000.0))
+      ->capture_default_str();
+  app.add_option("--threads", threads, "server worker threads (0: one per core)")
+      ->capture_default_str();
+  app.add_option("--json", json_path, "also write the results as JSON");
+  CLI11_PARSE(app, argc, argv);
+  signal(SIGPIPE, SIG_IGN);
+
+  if (!std::filesystem::exists(server_bin)) {
+    std::cerr << "no cloudcast-server at " << server_bin << " (--server-bin)\n";
+    return 1;
+  }
+  const std::vector<Frame> frames = LoadFrames(data_dir);
+  std::size_t raw_bytes = 0, png_bytes = 0;
+  for (const Frame& f : frames) {
+    raw_bytes += f.disparity.pixels.size() + f.colour.pixels.size();
+    png_bytes += f.disparity_png.size() + f.colour_png.size();
+  }
+  std::cout << frames.size() << " frames of " << frames[0].disparity.width << "x"
+            << frames[0].disparity.height << ": " << raw_bytes / frames.size() / 1024
+            << " KB raw, " << png_bytes / frames.size() / 1024 << " KB as PNG per frame\n";
+  ServerProcess server(server_bin, threads);
+  // Wait for the server to answer.
+  {
+    cc::ClientOptions o;
+    o.connect_timeout = std::chrono::seconds(10);
+    auto c = cc::Client::Connect("127.0.0.1:" + std::to_string(server.port()), o);
+    if (!c.ok()) {
+      std::cerr << "server did not come up: " << c.status() << "\n";
+      return 1;
+    }
+  }
+  std::cout << "server: pid " << server.pid() << ", 127.0.0.1:" << server.port() << ", "
+            << std::thread::hardware_concurrency() << " cores shared with this client\n\n";
+
+  std::vector<CaseResult> results;
+  char line[256];
+  std::snprintf(line, sizeof line, "%-4s %-7s %-14s %8s %7s %7s %7s %8s %11s %10s %8s\n", "enc",
+                "streams", "mode", "frames/s", "p50 ms", "p90 ms", "p99 ms", "dropped",
+                "srv CPU ms", "core+Draco", "outside");
+  std::cout << line;
+  for (const std::string& enc : encodings) {
+    for (int n : stream_counts) {
+      std::vector<CaseResult> cases = {
+          RunCase(server, frames, enc == "png", n, seconds, window, 0)};
+      if (paced_fps > 0) {
+        cases.push_back(RunCase(server, frames, enc == "png", n, seconds, window, paced_fps));
+      }
+      for (const CaseResult& r : cases) {
+        std::snprintf(line, sizeof line,
+                      "%-4s %7d %-14s %8.1f %7.2f %7.2f %7.2f %8lu %11.3f %10.3f %7.0f%%\n",
+                      r.encoding.c_str(), r.streams, r.mode.c_str(), r.fps, r.p50, r.p90, r.p99,
+                      static_cast<unsigned long>(r.dropped), r.server_cpu_ms_per_frame,
+                      r.core_cpu_ms_per_frame, 100 * r.outside_share);
+        std::cout << line << std::flush;
+        if (r.errors > 0) std::cout << "  (" << r.errors << " frame errors)\n";
+        results.push_back(r);
+      }
+    }
+  }
+  std::cout << "\nsrv CPU ms: server process CPU (user + system) per answered frame; core+Draco: "
+               "the part inside Pipeline::Run and EncodeDraco (thread CPU time); outside: the "
+               "rest (gRPC, protobuf, PNG decoding, scheduling).\n";
+  if (!json_path.empty()) {
+    nlohmann::json j = nlohmann::json::array();
+    for (const CaseResult& r : results) j.push_back(r.ToJson());
+    std::ofstream(json_path) << j.dump(2) << "\n";
+    std::cout << "wrote " << json_path << "\n";
+  }
+  return 0;
+}
+
+}  // namespace
+}  // namespace cloudcast::bench
+
+int main(int argc, char** argv) { return cloudcast::bench::Main(argc, argv); }
