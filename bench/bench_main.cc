@@ -18,6 +18,7 @@
 #include "cloudcast/core/image_io.h"
 #include "cloudcast/core/pipeline.h"
 #include "cloudcast/core/synthetic.h"
+#include "cloudcast/core/tsukuba.h"
 #include "draco_table.h"
 #include "open3d_voxel.h"
 #include "pcl_reference.h"
@@ -58,21 +59,11 @@ struct Samples {
 };
 
 std::vector<Frame> LoadTsukuba(const std::string& dir) {
-  static const char* kIds[] = {"00001", "00200", "00400", "00600", "00800",
-                               "01000", "01200", "01400", "01600", "01800"};
   std::vector<Frame> frames;
-  for (const char* id : kIds) {
-    const std::string d = dir + "/groundtruth/disparity_maps/left/tsukuba_disparity_L_" + id + ".png";
-    const std::string c = dir + "/illumination/daylight/left/tsukuba_daylight_L_" + id + ".png";
-    if (!std::filesystem::exists(d) || !std::filesystem::exists(c)) continue;
-    auto disparity = LoadDisparity(d);
-    auto colour = LoadColor(c);
-    if (!disparity.ok() || !colour.ok()) {
-      std::cerr << "skipping frame " << id << ": "
-                << (disparity.ok() ? colour.status() : disparity.status()) << "\n";
-      continue;
-    }
-    Frame f{std::string("tsukuba ") + id, *std::move(disparity), *std::move(colour), {}};
+  auto loaded = tsukuba::LoadAll(dir);
+  if (!loaded.ok()) return frames;
+  for (tsukuba::Frame& t : *loaded) {
+    Frame f{"tsukuba " + t.id, std::move(t.disparity), std::move(t.colour), {}};
     f.camera = CameraModel::PclCompatible(f.disparity.width, f.disparity.height);
     frames.push_back(std::move(f));
   }
@@ -222,7 +213,7 @@ int Main(int argc, char** argv) {
       "stage by stage and for the whole chain, interleaved in one process on the same frames.\n"
       "Paper parameters: PCL conversion with focal 615, passthrough z in [3, 12], leaf 0.03.\n"
       "Times are per frame, single thread; quote medians and ratios (PERFORMANCE.md)."};
-  std::string data_dir = CLOUDCAST_DEFAULT_DATA_DIR;
+  std::string data_dir = tsukuba::DefaultDir();
   int iterations = 21;
   int warmup = 3;
   std::string json_path;

@@ -38,6 +38,7 @@
 #include "cloudcast/client/config.h"
 #include "cloudcast/core/image_io.h"
 #include "cloudcast/core/synthetic.h"
+#include "cloudcast/core/tsukuba.h"
 
 namespace cloudcast::bench {
 namespace {
@@ -308,17 +309,11 @@ CaseResult RunCase(const ServerProcess& server, const std::vector<Frame>& frames
 }
 
 std::vector<Frame> LoadFrames(const std::string& dir) {
-  static const char* kIds[] = {"00001", "00200", "00400", "00600", "00800",
-                               "01000", "01200", "01400", "01600", "01800"};
   std::vector<Frame> frames;
-  for (const char* id : kIds) {
-    const std::string d = dir + "/groundtruth/disparity_maps/left/tsukuba_disparity_L_" + id + ".png";
-    const std::string c = dir + "/illumination/daylight/left/tsukuba_daylight_L_" + id + ".png";
-    if (!std::filesystem::exists(d) || !std::filesystem::exists(c)) continue;
-    auto disparity = LoadDisparity(d);
-    auto colour = LoadColor(c);
-    if (!disparity.ok() || !colour.ok()) continue;
-    frames.push_back(Frame{*std::move(disparity), *std::move(colour), {}, {}});
+  if (auto loaded = tsukuba::LoadAll(dir); loaded.ok()) {
+    for (tsukuba::Frame& t : *loaded) {
+      frames.push_back(Frame{std::move(t.disparity), std::move(t.colour), {}, {}});
+    }
   }
   if (frames.empty()) {
     for (std::uint64_t i = 0; i < 10; ++i) {
@@ -354,7 +349,7 @@ int Main(int argc, char** argv) {
       "streams frames through 1, 2 and 4 concurrent streams (raw and PNG), and prints frames/s,\n"
       "latency p50/p90/p99 (send to reply) and the server's CPU per frame, inside the core\n"
       "pipeline + Draco and outside them."};
-  std::string data_dir = CLOUDCAST_DEFAULT_DATA_DIR;
+  std::string data_dir = tsukuba::DefaultDir();
   std::string server_bin =
       (std::filesystem::read_symlink("/proc/self/exe").parent_path() / "cloudcast-server").string();
   double seconds = 4, paced_fps = 30;

@@ -461,13 +461,13 @@ TEST_F(CliTest, HelpExplainsEveryFlagAndItsDefault) {
   for (const char* shown :
        {"--focal FLOAT=615", "--baseline FLOAT=1", "--disparity-scale FLOAT=1",
         "--disparity-offset FLOAT=0", "=z", "--min FLOAT=3", "--max FLOAT=12", "--leaf FLOAT=0.03",
-        "--min-points-per-voxel UINT=0", "[1 - 30]=11", "[0 - 10]=10", "[default: --focal]",
+        "--min-points-per-voxel UINT=0", "[1 - 30]=10", "[0 - 10]=10", "[default: --focal]",
         "[default: width/2", "[default: height/2", "0 switches it off", "640x480", "Example",
         ".pcd, .ply or .drc", "Exit status"}) {
     EXPECT_NE(r.out.find(shown), std::string::npos) << "'" << shown << "' missing\n" << r.out;
   }
   const DracoOptions draco;
-  EXPECT_EQ(draco.position_bits, 11) << "DracoOptions' defaults moved: update this test";
+  EXPECT_EQ(draco.position_bits, 10) << "DracoOptions' defaults moved: update this test";
   EXPECT_EQ(draco.encode_speed, 10) << "DracoOptions' defaults moved: update this test";
   std::istringstream lines(r.out);
   for (std::string line; std::getline(lines, line);) {

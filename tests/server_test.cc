@@ -1367,7 +1367,7 @@ TEST_F(ServerTest, GetInfoReportsLimitsAndDefaults) {
   EXPECT_EQ(d.passthrough().max(), 12.0f);
   EXPECT_TRUE(d.voxel_grid().enabled());
   EXPECT_FLOAT_EQ(d.voxel_grid().leaf(), 0.03f);
-  EXPECT_EQ(d.draco().position_bits(), 11);
+  EXPECT_EQ(d.draco().position_bits(), DracoOptions{}.position_bits);
   EXPECT_EQ(d.draco().color_bits(), 8);
   EXPECT_EQ(d.draco().encode_speed(), 10);
   EXPECT_FLOAT_EQ(d.draco().max_position_error(), 0.0075f);

@@ -18,29 +18,20 @@
 #include "cloudcast/core/filters.h"
 #include "cloudcast/core/image.h"
 #include "cloudcast/core/point.h"
+#include "cloudcast/core/tsukuba.h"
 
 namespace cloudcast::testing {
 
-// $CLOUDCAST_DATA, else the build's default (../shared/data/new_tsukuba next to the checkout).
-inline std::string TsukubaDir() {
-  if (const char* env = std::getenv("CLOUDCAST_DATA"); env != nullptr && *env != '\0') return env;
-  return CLOUDCAST_DEFAULT_DATA_DIR;
-}
-inline const std::vector<std::string>& TsukubaFrameIds() {
-  static const std::vector<std::string> ids = {"00001", "00200", "00400", "00600", "00800",
-                                               "01000", "01200", "01400", "01600", "01800"};
-  return ids;
-}
+// The New Tsukuba sample: $CLOUDCAST_DATA, else ../shared/data/new_tsukuba (see tsukuba.h).
+inline std::string TsukubaDir() { return tsukuba::DefaultDir(); }
+inline const std::vector<std::string>& TsukubaFrameIds() { return tsukuba::FrameIds(); }
 inline std::string TsukubaDisparityPath(const std::string& id) {
-  return TsukubaDir() + "/groundtruth/disparity_maps/left/tsukuba_disparity_L_" + id + ".png";
+  return tsukuba::DisparityPath(TsukubaDir(), id);
 }
 inline std::string TsukubaColourPath(const std::string& id) {
-  return TsukubaDir() + "/illumination/daylight/left/tsukuba_daylight_L_" + id + ".png";
+  return tsukuba::ColourPath(TsukubaDir(), id);
 }
-inline bool HaveTsukuba() {
-  return std::filesystem::exists(TsukubaDisparityPath("00001")) &&
-         std::filesystem::exists(TsukubaColourPath("00001"));
-}
+inline bool HaveTsukuba() { return tsukuba::Present(TsukubaDir()); }
 #define CLOUDCAST_REQUIRE_TSUKUBA()                                                         \
   do {                                                                                      \
     if (!::cloudcast::testing::HaveTsukuba()) {                                             \

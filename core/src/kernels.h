@@ -199,7 +199,10 @@ class VoxelAccumulator {
   std::uint64_t mask_ = 0;
   int shift_ = 64;
   bool wide_ = false;  // 64-bit keys: table_ holds (key, voxel + 1) pairs
-  std::size_t last_voxels_ = 0;
+  // Voxel counts of the last clouds: the table is sized for the largest, so that a stream whose
+  // frames alternate between small and large ones does not regrow it every frame.
+  std::size_t recent_voxels_[8] = {};
+  std::size_t clouds_ = 0;
 };
 
 }  // namespace cloudcast::internal

@@ -313,7 +313,9 @@ absl::Status VoxelAccumulator::Run(const Point* points, std::size_t n,
   // Every finite point may be a voxel of its own: room for all, left uninitialised.
   if (voxels_.size() < n) voxels_.resize(n);
   std::size_t slots = kMinSlots;
-  const std::size_t expected = std::min(n, std::max<std::size_t>(last_voxels_, 256));
+  std::size_t recent = 256;
+  for (std::size_t v : recent_voxels_) recent = std::max(recent, v);
+  const std::size_t expected = std::min(n, recent);
   while (slots < 2 * expected) slots *= 2;
   ResizeTable(slots);
 
@@ -334,7 +336,7 @@ absl::Status VoxelAccumulator::Run(const Point* points, std::size_t n,
                   bits[0] + bits[1]};
     Accumulate(points, n, keys);
   }
-  last_voxels_ = voxel_count_;
+  recent_voxels_[clouds_++ % 8] = voxel_count_;
   Emit(params.min_points_per_voxel, out);
   return absl::OkStatus();
 }

@@ -1,0 +1,262 @@
+#include "app/session.h"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <utility>
+#include <vector>
+
+#include "absl/strings/str_cat.h"
+#include "cloudcast/client/opencv.h"
+
+namespace cloudcast::client::app {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+// Frame errors are logged individually up to this many, then every 100th, so a misconfigured
+// stream does not flood the terminal.
+constexpr std::uint64_t kErrorsLoggedInFull = 5;
+
+// The encoded files of one frame; they must outlive the Send that views them.
+struct EncodedFrame {
+  std::string disparity, colour;
+};
+
+std::uint64_t RawBytes(const cv::Mat& disparity, const cv::Mat& colour) {
+  // BGRA is sent as BGR; everything else as stored, rows packed.
+  const std::uint64_t colour_bpp = colour.channels() == 4 ? 3 : colour.elemSize();
+  return disparity.total() * disparity.elemSize() + colour.total() * colour_bpp;
+}
+
+}  // namespace
+
+bool ParseImageEncoding(const std::string& name, ImageEncoding* out) {
+  if (name == "raw")
+    *out = ImageEncoding::kRaw;
+  else if (name == "png")
+    *out = ImageEncoding::kPng;
+  else if (name == "jpeg")
+    *out = ImageEncoding::kJpeg;
+  else
+    return false;
+  return true;
+}
+
+const char* Name(ImageEncoding encoding) {
+  switch (encoding) {
+    case ImageEncoding::kRaw:
+      return "raw";
+    case ImageEncoding::kPng:
+      return "png";
+    case ImageEncoding::kJpeg:
+      return "jpeg";
+  }
+  return "?";
+}
+
+absl::StatusOr<std::unique_ptr<Session>> Session::Start(const SessionOptions& options,
+                                                        FrameSource* source, StreamStats* stats,
+                                                        ResultCallback on_result) {
+  std::unique_ptr<Session> s(new Session());
+  s->options_ = options;
+  s->source_ = source;
+  s->stats_ = stats;
+  s->on_result_ = std::move(on_result);
+
+  ClientOptions client_options;
+  client_options.connect_timeout = options.connect_timeout;
+  client_options.decode_clouds = options.decode_clouds;
+  auto client = Client::Connect(options.server, client_options);
+  if (!client.ok()) {
+    return absl::Status(client.status().code(),
+                        absl::StrCat("--server ", options.server, ": ", client.status().message()));
+  }
+  s->client_ = *std::move(client);
+  auto info = s->client_->GetInfo();
+  if (!info.ok()) {
+    return absl::Status(info.status().code(),
+                        absl::StrCat("--server ", options.server, ": ", info.status().message()));
+  }
+  s->server_info_ = *std::move(info);
+  spdlog::info("server {}: cloudcast {}, {} workers, Draco {}", options.server,
+               s->server_info_.version(), s->server_info_.worker_threads(),
+               s->server_info_.draco_version());
+
+  auto stream = s->client_->OpenStream(options.config);
+  if (!stream.ok()) {
+    return absl::Status(stream.status().code(),
+                        absl::StrCat("--server ", options.server, ": ", stream.status().message()));
+  }
+  s->stream_ = *std::move(stream);
+  s->receiver_ = std::thread([p = s.get()] { p->ReceiveLoop(); });
+  s->sender_ = std::thread([p = s.get()] { p->SendLoop(); });
+  return s;
+}
+
+Session::~Session() {
+  Stop();
+  Wait().IgnoreError();
+}
+
+void Session::Stop() {
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (stop_ || done_) return;
+    stop_ = true;
+  }
+  cv_.notify_all();
+  // Unblocks a Send held by flow control and the receiver's Read.
+  if (stream_ != nullptr) stream_->Cancel();
+}
+
+absl::Status Session::Wait() {
+  if (sender_.joinable()) sender_.join();
+  std::lock_guard<std::mutex> lock(mu_);
+  return error_;
+}
+
+bool Session::WaitFor(std::chrono::milliseconds timeout) {
+  std::unique_lock<std::mutex> lock(mu_);
+  return cv_.wait_for(lock, timeout, [this] { return done_.load(); });
+}
+
+void Session::SetError(const absl::Status& status) {
+  std::lock_guard<std::mutex> lock(mu_);
+  if (error_.ok() && !stop_) error_ = status;
+}
+
+void Session::ReceiveLoop() {
+  Result result;
+  std::uint64_t errors = 0;
+  while (stream_->Read(&result)) {
+    if (result.config_rejected) {
+      SetError(absl::InvalidArgumentError(
+          absl::StrCat("the server rejected the stream settings: ", result.status.message())));
+      Stop();
+      continue;
+    }
+    if (!result.ok()) {
+      ++errors;
+      if (errors <= kErrorsLoggedInFull || errors % 100 == 0) {
+        spdlog::warn(
+            "frame {} ({}): {}{}", result.sequence, result.frame_id,
+            std::string(result.status.message()),
+            errors == kErrorsLoggedInFull ? " (further errors: every 100th is shown)" : "");
+      }
+    }
+    stats_->RecordResult(result);
+    if (on_result_) on_result_(result);
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      ++answered_;
+      dropped_ = std::max<std::uint64_t>(dropped_, result.frames_dropped);
+    }
+    cv_.notify_all();
+  }
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    receiver_done_ = true;
+  }
+  cv_.notify_all();
+}
+
+void Session::SendLoop() {
+  const bool paced = options_.fps > 0;
+  const auto period = paced ? std::chrono::duration_cast<Clock::duration>(
+                                  std::chrono::duration<double>(1.0 / options_.fps))
+                            : Clock::duration::zero();
+  const std::uint64_t window = static_cast<std::uint64_t>(std::max(1, options_.max_in_flight));
+  Clock::time_point due = Clock::now();
+  SourceFrame frame;
+  EncodedFrame encoded;
+  bool png_float_noted = false;
+
+  for (;;) {
+    // The next frame is read (decoded) before waiting, so its decoding overlaps the wait.
+    absl::StatusOr<bool> got = source_->Next(&frame);
+    if (!got.ok()) {
+      SetError(got.status());
+      break;
+    }
+    if (!*got) break;
+
+    {
+      std::unique_lock<std::mutex> lock(mu_);
+      if (paced) {
+        // A camera does not catch up on frames it missed: when far behind, restart the clock.
+        const Clock::time_point now = Clock::now();
+        if (now > due + period) due = now;
+        cv_.wait_until(lock, due, [this] { return stop_ || receiver_done_; });
+        due += period;
+      } else {
+        cv_.wait(lock, [&] {
+          return stop_ || receiver_done_ || sent_ - std::min(sent_, answered_ + dropped_) < window;
+        });
+      }
+      if (stop_ || receiver_done_) break;
+    }
+
+    FrameMeta meta;
+    meta.capture_time_unix_ns = UnixNanosNow();  // encoding below counts as latency
+    meta.frame_id = frame.name;
+    absl::Status status;
+    std::uint64_t bytes = 0;
+    if (options_.encoding == ImageEncoding::kRaw) {
+      bytes = RawBytes(frame.disparity, frame.colour);
+      status = SendMats(*stream_, frame.disparity, frame.colour, meta);
+    } else {
+      // PNG has no float samples; TIFF keeps them exactly.
+      absl::StatusOr<std::string> d = frame.disparity.depth() == CV_32F
+                                          ? EncodeImage(frame.disparity, ".tiff")
+                                          : EncodePng(frame.disparity, options_.png_compression);
+      if (frame.disparity.depth() == CV_32F && !png_float_noted) {
+        png_float_noted = true;
+        spdlog::info("float disparities are sent as TIFF (PNG has no float samples)");
+      }
+      absl::StatusOr<std::string> c = options_.encoding == ImageEncoding::kJpeg
+                                          ? EncodeJpeg(frame.colour, options_.jpeg_quality)
+                                          : EncodePng(frame.colour, options_.png_compression);
+      if (!d.ok() || !c.ok()) {
+        SetError(!d.ok() ? d.status() : c.status());
+        break;
+      }
+      encoded.disparity = *std::move(d);
+      encoded.colour = *std::move(c);
+      bytes = encoded.disparity.size() + encoded.colour.size();
+      status = stream_->Send(EncodedImage{encoded.disparity}, EncodedImage{encoded.colour}, meta);
+    }
+    if (!status.ok()) {
+      // A failed write means the call ended; Finish below says why. Bad inputs are ours.
+      if (status.code() != absl::StatusCode::kUnavailable) {
+        SetError(absl::Status(status.code(),
+                              absl::StrCat("frame ", frame.name, ": ", status.message())));
+      }
+      break;
+    }
+    stats_->RecordSent(bytes);
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      ++sent_;
+    }
+  }
+
+  stream_->CloseSend().IgnoreError();
+  if (receiver_.joinable()) receiver_.join();
+  absl::Status final_status = stream_->Finish();
+  bool stopped = false;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    stopped = stop_;
+  }
+  if (!final_status.ok() && !(stopped && final_status.code() == absl::StatusCode::kCancelled)) {
+    SetError(final_status);
+  }
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    done_ = true;
+  }
+  cv_.notify_all();
+}
+
+}  // namespace cloudcast::client::app

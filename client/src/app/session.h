@@ -1,0 +1,103 @@
+// One streaming run of cloudcast-client: frames from a FrameSource go to the server over one
+// Stream, paced (a fixed rate, or as fast as the server answers with a bounded number of frames in
+// flight); replies go to a callback on the receiving thread. No GL here: the viewer, the recorder
+// and the statistics all hang off the callback.
+#pragma once
+
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "app/frame_source.h"
+#include "app/stats.h"
+#include "cloudcast/client/client.h"
+
+namespace cloudcast::client::app {
+
+// How frames travel to the server.
+enum class ImageEncoding {
+  kRaw,   // pixels as they are (the fastest on loopback and fast links)
+  kPng,   // both images as PNG (lossless; float disparities go as TIFF)
+  kJpeg,  // colour as JPEG, disparity lossless as with kPng: the thinnest uplink
+};
+bool ParseImageEncoding(const std::string& name, ImageEncoding* out);
+const char* Name(ImageEncoding encoding);
+
+struct SessionOptions {
+  std::string server = "localhost:50051";
+  std::chrono::milliseconds connect_timeout{5000};
+  // Sent as the stream's first message.
+  StreamConfig config;
+  // Frames per second; 0: send whenever fewer than max_in_flight frames await their reply.
+  double fps = 0;
+  int max_in_flight = 2;
+  ImageEncoding encoding = ImageEncoding::kRaw;
+  int jpeg_quality = 90;
+  int png_compression = 1;
+  // Decode the Draco replies (off for pure load measurements).
+  bool decode_clouds = true;
+};
+
+class Session {
+ public:
+  // Called on the receiving thread for every reply, in order. It may take (swap out) the
+  // result's cloud and bytes; the Result is reused afterwards.
+  using ResultCallback = std::function<void(Result&)>;
+
+  // Connects (UNAVAILABLE naming --server when it cannot), asks the server for its info, opens
+  // the stream and starts sending. `source` and `stats` must outlive the session.
+  static absl::StatusOr<std::unique_ptr<Session>> Start(const SessionOptions& options,
+                                                        FrameSource* source, StreamStats* stats,
+                                                        ResultCallback on_result);
+  ~Session();  // Stop() and Wait()
+
+  // Asks the session to end early (any thread): no more frames are sent and the call is
+  // cancelled. Wait() then returns OK.
+  void Stop();
+  // True once every frame was sent and answered (or the stream failed, or Stop ran).
+  bool done() const { return done_.load(); }
+  // Blocks until done; returns why the session ended: OK (source exhausted and every reply in,
+  // or Stop), or the error (stream failure, unreadable frame, rejected config).
+  absl::Status Wait();
+  // Waits up to `timeout` for done.
+  bool WaitFor(std::chrono::milliseconds timeout);
+
+  const v1::ServerInfo& server_info() const { return server_info_; }
+
+ private:
+  Session() = default;
+  void SendLoop();
+  void ReceiveLoop();
+  // Stores the first error only; later ones are consequences.
+  void SetError(const absl::Status& status);
+
+  SessionOptions options_;
+  FrameSource* source_ = nullptr;
+  StreamStats* stats_ = nullptr;
+  ResultCallback on_result_;
+  std::unique_ptr<Client> client_;
+  std::unique_ptr<Stream> stream_;
+  v1::ServerInfo server_info_;
+
+  std::mutex mu_;
+  std::condition_variable cv_;  // in-flight count changed, stop, receiver ended, done
+  std::uint64_t sent_ = 0;
+  std::uint64_t answered_ = 0;  // replies to frames (clouds and frame errors)
+  std::uint64_t dropped_ = 0;   // the server's running count
+  bool receiver_done_ = false;
+  bool stop_ = false;
+  absl::Status error_;
+  std::atomic<bool> done_{false};
+
+  std::thread sender_, receiver_;
+};
+
+}  // namespace cloudcast::client::app

@@ -1,0 +1,1056 @@
+// Tests of cloudcast-client: its frame sources in-process (New Tsukuba folder, image globs,
+// lossless videos written here, the synthetic scene, the looped pair, --loop and --frames), its
+// statistics, and the real binary against an in-process server on a loopback port: the live
+// viewer's snapshot under Xvfb (visible and hidden window), --record in every format checked
+// against the server's own replies, --no-window statistics and JSON, --open of cloudcast-process
+// output, and the errors of bad flags and files.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/videoio.hpp>
+#include <random>
+#include <set>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "app/frame_source.h"
+#include "app/session.h"
+#include "app/stats.h"
+#include "app/viewer.h"
+#include "cloudcast/client/client.h"
+#include "cloudcast/client/opencv.h"
+#include "cloudcast/core/cloud_io.h"
+#include "cloudcast/core/synthetic.h"
+#include "server.h"  // cloudcast_server_lib
+#include "test_support.h"
+#include "xvfb_support.h"
+
+namespace cloudcast::client::app {
+namespace {
+
+namespace fs = std::filesystem;
+using Json = nlohmann::json;
+
+// ---------------------------------------------------------------------------------------------
+// Helpers
+
+// A fresh folder per test, removed afterwards.
+class TempDirTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+    std::string name = std::string(info->test_suite_name()) + "_" + info->name();
+    std::replace(name.begin(), name.end(), '/', '_');
+    dir_ = fs::path(::testing::TempDir()) /
+           ("cloudcast_app_" + name + "_" + std::to_string(::getpid()));
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override {
+    std::error_code ec;
+    fs::remove_all(dir_, ec);
+  }
+  std::string Path(const std::string& name) const { return (dir_ / name).string(); }
+
+  fs::path dir_;
+};
+
+// Equal type, size and every value.
+::testing::AssertionResult SameMat(const cv::Mat& a, const cv::Mat& b) {
+  if (a.type() != b.type() || a.size() != b.size()) {
+    return ::testing::AssertionFailure()
+           << "type/size differ: " << cv::typeToString(a.type()) << " " << a.cols << "x" << a.rows
+           << " vs " << cv::typeToString(b.type()) << " " << b.cols << "x" << b.rows;
+  }
+  if (a.empty()) return ::testing::AssertionSuccess();
+  cv::Mat diff;
+  cv::absdiff(a.reshape(1), b.reshape(1), diff);
+  double max = 0;
+  cv::minMaxLoc(diff, nullptr, &max);
+  if (max != 0) return ::testing::AssertionFailure() << "values differ by up to " << max;
+  return ::testing::AssertionSuccess();
+}
+
+// A disparity with every 8-bit value, zeros included, and a structured colour image.
+cv::Mat TestDisparity8(int w, int h, int seed) {
+  cv::Mat d(h, w, CV_8UC1);
+  cv::RNG rng(seed);
+  rng.fill(d, cv::RNG::UNIFORM, 0, 256);
+  return d;
+}
+cv::Mat TestColour(int w, int h, int seed) {
+  cv::Mat c(h, w, CV_8UC3);
+  cv::RNG rng(seed + 1000);
+  rng.fill(c, cv::RNG::UNIFORM, 0, 256);
+  return c;
+}
+
+std::vector<SourceFrame> Drain(FrameSource& source, std::size_t max = 1000) {
+  std::vector<SourceFrame> frames;
+  for (std::size_t i = 0; i < max; ++i) {
+    SourceFrame f;
+    absl::StatusOr<bool> got = source.Next(&f);
+    EXPECT_TRUE(got.ok()) << got.status();
+    if (!got.ok() || !*got) break;
+    // Deep copies: a source may reuse its Mats for the next frame.
+    f.disparity = f.disparity.clone();
+    f.colour = f.colour.clone();
+    frames.push_back(f);
+  }
+  return frames;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Helpers
+
+TEST(NaturalSortTest, NumbersCompareByValue) {
+  std::vector<std::string> names = {"f10.png", "f2.png", "f1.png", "f002.png",
+                                    "g1.png",  "f9.png", "f.png",  "f01.png"};
+  NaturalSort(&names);
+  EXPECT_EQ(names, (std::vector<std::string>{"f.png", "f01.png", "f1.png", "f002.png", "f2.png",
+                                             "f9.png", "f10.png", "g1.png"}));
+}
+
+TEST(ClientStatsTest, PercentilesAndCounts) {
+  std::vector<double> v;
+  for (int i = 1; i <= 100; ++i) v.push_back(101 - i);
+  EXPECT_EQ(Percentile(v, 50), 50);
+  EXPECT_EQ(Percentile(v, 90), 90);
+  EXPECT_EQ(Percentile(v, 99), 99);
+  EXPECT_EQ(Percentile(v, 100), 100);
+  EXPECT_EQ(Percentile({}, 50), 0);
+
+  StreamStats stats;
+  for (int i = 0; i < 4; ++i) stats.RecordSent(1000);
+  Result ok;
+  ok.capture_time_unix_ns = 1'000'000'000;
+  ok.times.receive_unix_ns = 1'000'000'000 + 5'000'000;  // 5 ms
+  ok.times.receive = std::chrono::steady_clock::now();
+  ok.reply.set_point_count(100);
+  ok.reply.set_draco(std::string(50, 'x'));
+  ok.frames_dropped = 1;
+  stats.RecordResult(ok);
+  Result error;
+  error.status = absl::InvalidArgumentError("frame.disparity: bad");
+  error.frames_dropped = 2;
+  stats.RecordResult(error);
+  Result config;
+  config.status = absl::InvalidArgumentError("config.voxel_grid.leaf: bad");
+  config.config_rejected = true;
+  stats.RecordResult(config);
+
+  const StatsSnapshot s = stats.Snapshot();
+  EXPECT_EQ(s.sent, 4u);
+  EXPECT_EQ(s.received, 1u);
+  EXPECT_EQ(s.errors, 1u);  // the config error is not a frame
+  EXPECT_EQ(s.dropped, 2u);
+  EXPECT_EQ(s.points, 100u);
+  EXPECT_EQ(s.draco_bytes, 50u);
+  EXPECT_NEAR(s.latency_p50_ms, 5.0, 1e-9);
+  const Json j = Json::parse(StreamStats::ToJson(s, false).dump());
+  EXPECT_EQ(j["frames"]["sent"], 4);
+  EXPECT_EQ(j["frames"]["errors"], 1);
+  EXPECT_DOUBLE_EQ(j["latency_ms"]["p99"].get<double>(), 5.0);
+  EXPECT_DOUBLE_EQ(j["mean_points_per_frame"].get<double>(), 100.0);
+}
+
+Result CloudResult(std::uint64_t sequence, std::size_t points) {
+  Result r;
+  r.sequence = sequence;
+  r.cloud.ResizeUnorganized(points);
+  return r;
+}
+
+TEST(CloudMailboxTest, ReplacePolicyKeepsTheNewestAndCountsTheRest) {
+  CloudMailbox mailbox(/*wait_for_viewer=*/false);
+  for (std::uint64_t i = 0; i < 3; ++i) {
+    Result r = CloudResult(i, 10 + i);
+    mailbox.Put(r);
+  }
+  PointCloud cloud;
+  CloudMeta meta;
+  ASSERT_TRUE(mailbox.Take(&cloud, &meta, std::chrono::milliseconds(0)));
+  EXPECT_EQ(meta.sequence, 2u);
+  EXPECT_EQ(cloud.size(), 12u);
+  EXPECT_EQ(mailbox.skipped(), 2u);
+  EXPECT_FALSE(mailbox.Take(&cloud, &meta, std::chrono::milliseconds(1)));
+  Result error;
+  error.status = absl::InvalidArgumentError("bad frame");
+  mailbox.Put(error);  // errors carry no cloud
+  EXPECT_FALSE(mailbox.has_new());
+}
+
+TEST(CloudMailboxTest, WaitPolicyHoldsTheReceiverUntilTheViewerTakes) {
+  CloudMailbox mailbox(/*wait_for_viewer=*/true);
+  std::atomic<int> put{0};
+  std::thread receiver([&] {
+    for (std::uint64_t i = 0; i < 3; ++i) {
+      Result r = CloudResult(i, 5);
+      mailbox.Put(r);
+      ++put;
+    }
+  });
+  std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  EXPECT_EQ(put.load(), 1);  // the second Put waits for the first cloud to be taken
+  PointCloud cloud;
+  CloudMeta meta;
+  ASSERT_TRUE(mailbox.Take(&cloud, &meta, std::chrono::milliseconds(1000)));
+  EXPECT_EQ(meta.sequence, 0u);
+  ASSERT_TRUE(mailbox.Take(&cloud, &meta, std::chrono::milliseconds(1000)));
+  EXPECT_EQ(meta.sequence, 1u);
+  mailbox.Close();  // the viewer is gone: the last Put must not hang
+  receiver.join();
+  EXPECT_EQ(put.load(), 3);
+  EXPECT_EQ(mailbox.skipped(), 0u);
+}
+
+TEST(VideoCodecTest, LosslessCodecsAreKnown) {
+  EXPECT_EQ(FourccToString(cv::VideoWriter::fourcc('F', 'F', 'V', '1')), "FFV1");
+  EXPECT_TRUE(IsLosslessCodec("FFV1"));
+  EXPECT_TRUE(IsLosslessCodec("png "));
+  EXPECT_FALSE(IsLosslessCodec("MJPG"));
+  EXPECT_FALSE(IsLosslessCodec("H264"));
+  EXPECT_FALSE(IsLosslessCodec("IYUV"));  // 4:2:0: grey survives, colour does not
+}
+
+// ---------------------------------------------------------------------------------------------
+// Sources
+
+class ClientSourceTest : public TempDirTest {};
+
+TEST_F(ClientSourceTest, TsukubaFolderYieldsTheTenFramesInOrder) {
+  CLOUDCAST_REQUIRE_TSUKUBA();
+  auto source = OpenTsukuba(cloudcast::testing::TsukubaDir(), "daylight", SourceOptions{});
+  ASSERT_TRUE(source.ok()) << source.status();
+  EXPECT_EQ((*source)->info().kind, "tsukuba");
+  EXPECT_EQ((*source)->info().width, 640u);
+  EXPECT_EQ((*source)->info().height, 480u);
+  ASSERT_TRUE((*source)->info().frames_per_pass.has_value());
+  EXPECT_EQ(*(*source)->info().frames_per_pass, 10u);
+  EXPECT_EQ((*source)->info().camera.fx, 615.0);
+  EXPECT_EQ((*source)->info().camera.cx, 320.0);
+
+  const std::vector<SourceFrame> frames = Drain(**source);
+  const auto& ids = cloudcast::testing::TsukubaFrameIds();
+  ASSERT_EQ(frames.size(), ids.size());
+  for (std::size_t i = 0; i < ids.size(); ++i) {
+    SCOPED_TRACE(ids[i]);
+    EXPECT_EQ(frames[i].name, "tsukuba_" + ids[i]);
+    EXPECT_EQ(frames[i].index, i);
+    EXPECT_TRUE(SameMat(
+        frames[i].disparity,
+        cv::imread(cloudcast::testing::TsukubaDisparityPath(ids[i]), cv::IMREAD_UNCHANGED)));
+    EXPECT_TRUE(SameMat(frames[i].colour, cv::imread(cloudcast::testing::TsukubaColourPath(ids[i]),
+                                                     cv::IMREAD_COLOR)));
+  }
+}
+
+TEST_F(ClientSourceTest, TsukubaLoopServesLaterPassesFromMemory) {
+  CLOUDCAST_REQUIRE_TSUKUBA();
+  SourceOptions options;
+  options.loop = true;
+  auto source =
+      LimitFrames(*OpenTsukuba(cloudcast::testing::TsukubaDir(), "daylight", options), 25);
+  const std::vector<SourceFrame> frames = Drain(*source);
+  ASSERT_EQ(frames.size(), 25u);
+  for (std::size_t i = 10; i < 25; ++i) {
+    EXPECT_EQ(frames[i].name, frames[i - 10].name);
+    EXPECT_EQ(frames[i].index, i);
+    EXPECT_TRUE(SameMat(frames[i].disparity, frames[i - 10].disparity));
+    EXPECT_TRUE(SameMat(frames[i].colour, frames[i - 10].colour));
+  }
+}
+
+TEST_F(ClientSourceTest, TsukubaLayoutErrorsNameTheFolder) {
+  auto missing = OpenTsukuba(Path("nowhere"), "daylight", SourceOptions{});
+  ASSERT_FALSE(missing.ok());
+  EXPECT_NE(missing.status().message().find("--tsukuba"), std::string::npos);
+  EXPECT_NE(missing.status().message().find("nowhere"), std::string::npos);
+
+  // A folder of the right shape with one unpaired frame.
+  fs::create_directories(dir_ / "groundtruth/disparity_maps/left");
+  fs::create_directories(dir_ / "illumination/daylight/left");
+  auto not_layout = OpenTsukuba(dir_.string(), "lamps", SourceOptions{});
+  ASSERT_FALSE(not_layout.ok());
+  EXPECT_NE(not_layout.status().message().find("illumination/lamps/left"), std::string::npos)
+      << not_layout.status();
+  cv::imwrite(Path("groundtruth/disparity_maps/left/tsukuba_disparity_L_00001.png"),
+              TestDisparity8(8, 6, 1));
+  auto unpaired = OpenTsukuba(dir_.string(), "daylight", SourceOptions{});
+  ASSERT_FALSE(unpaired.ok());
+  EXPECT_NE(unpaired.status().message().find("no partner"), std::string::npos) << unpaired.status();
+}
+
+TEST_F(ClientSourceTest, GlobsPairSortedFilesExactly) {
+  fs::create_directories(dir_ / "d");
+  fs::create_directories(dir_ / "c");
+  // 16-bit disparities named so that byte order and natural order differ (f2 < f10).
+  std::map<int, cv::Mat> disparities, colours;
+  for (int i : {1, 2, 3, 10, 11, 12}) {
+    cv::Mat d(30, 40, CV_16UC1);
+    cv::RNG(i).fill(d, cv::RNG::UNIFORM, 0, 65536);
+    disparities[i] = d;
+    colours[i] = TestColour(40, 30, i);
+    ASSERT_TRUE(cv::imwrite(Path("d/f" + std::to_string(i) + ".png"), d));
+    ASSERT_TRUE(cv::imwrite(Path("c/img_" + std::to_string(i) + ".png"), colours[i]));
+  }
+  auto source = OpenGlobs(Path("d/*.png"), Path("c/*.png"), SourceOptions{});
+  ASSERT_TRUE(source.ok()) << source.status();
+  EXPECT_EQ((*source)->info().kind, "glob");
+  EXPECT_EQ((*source)->info().width, 40u);
+  EXPECT_EQ(*(*source)->info().frames_per_pass, 6u);
+  const std::vector<SourceFrame> frames = Drain(**source);
+  ASSERT_EQ(frames.size(), 6u);
+  std::size_t k = 0;
+  for (const auto& [i, d] : disparities) {
+    SCOPED_TRACE(i);
+    EXPECT_EQ(frames[k].name, "f" + std::to_string(i));
+    EXPECT_TRUE(SameMat(frames[k].disparity, d));
+    EXPECT_TRUE(SameMat(frames[k].colour, colours[i]));
+    ++k;
+  }
+
+  // --loop and --frames together: 6 files, 14 frames, wrapping twice.
+  SourceOptions loop;
+  loop.loop = true;
+  auto looped = LimitFrames(*OpenGlobs(Path("d/*.png"), Path("c/*.png"), loop), 14);
+  const std::vector<SourceFrame> again = Drain(*looped);
+  ASSERT_EQ(again.size(), 14u);
+  for (std::size_t i = 0; i < again.size(); ++i) {
+    EXPECT_EQ(again[i].name, frames[i % 6].name);
+    EXPECT_TRUE(SameMat(again[i].disparity, frames[i % 6].disparity));
+  }
+}
+
+TEST_F(ClientSourceTest, GlobErrorsNameTheFlags) {
+  fs::create_directories(dir_ / "d");
+  fs::create_directories(dir_ / "c");
+  for (int i = 0; i < 3; ++i) {
+    cv::imwrite(Path("d/" + std::to_string(i) + ".png"), TestDisparity8(8, 6, i));
+    if (i < 2) cv::imwrite(Path("c/" + std::to_string(i) + ".png"), TestColour(8, 6, i));
+  }
+  auto mismatch = OpenGlobs(Path("d/*.png"), Path("c/*.png"), SourceOptions{});
+  ASSERT_FALSE(mismatch.ok());
+  const std::string m(mismatch.status().message());
+  EXPECT_NE(m.find("--disparity-glob"), std::string::npos) << m;
+  EXPECT_NE(m.find("matches 3"), std::string::npos) << m;
+  EXPECT_NE(m.find("matches 2"), std::string::npos) << m;
+
+  auto none = OpenGlobs(Path("d/*.tif"), Path("c/*.png"), SourceOptions{});
+  ASSERT_FALSE(none.ok());
+  EXPECT_NE(none.status().message().find("matches no file"), std::string::npos);
+
+  // Sizes that differ are caught on the first frame, naming both files.
+  cv::imwrite(Path("c/2.png"), TestColour(9, 6, 2));
+  cv::imwrite(Path("c/0.png"), TestColour(9, 6, 0));
+  auto sizes = OpenGlobs(Path("d/*.png"), Path("c/*.png"), SourceOptions{});
+  ASSERT_FALSE(sizes.ok());
+  EXPECT_NE(sizes.status().message().find("0.png"), std::string::npos) << sizes.status();
+  EXPECT_NE(sizes.status().message().find("must match"), std::string::npos) << sizes.status();
+}
+
+// Writes `frames` to `path` with `fourcc`; false when this OpenCV build cannot.
+bool WriteVideo(const std::string& path, const char* fourcc, const std::vector<cv::Mat>& frames) {
+  const bool colour = frames.front().channels() == 3;
+  cv::VideoWriter writer(path, cv::CAP_FFMPEG,
+                         cv::VideoWriter::fourcc(fourcc[0], fourcc[1], fourcc[2], fourcc[3]), 30,
+                         frames.front().size(), colour);
+  if (!writer.isOpened()) return false;
+  for (const cv::Mat& f : frames) writer.write(f);
+  writer.release();
+  return true;
+}
+
+struct VideoCase {
+  const char* container;
+  const char* fourcc;
+};
+
+// Readable test names in ctest, instead of the parameter's bytes.
+void PrintTo(const VideoCase& c, std::ostream* os) { *os << c.fourcc << " in ." << c.container; }
+
+class ClientVideoSourceTest : public TempDirTest,
+                              public ::testing::WithParamInterface<VideoCase> {};
+
+TEST_P(ClientVideoSourceTest, LosslessVideosKeepEveryDisparityValue) {
+  const VideoCase c = GetParam();
+  std::vector<cv::Mat> disparities, colours;
+  for (int i = 0; i < 7; ++i) {
+    disparities.push_back(TestDisparity8(64, 48, i));
+    colours.push_back(TestColour(64, 48, i));
+  }
+  const std::string d = Path(std::string("d.") + c.container);
+  const std::string col = Path(std::string("c.") + c.container);
+  if (!WriteVideo(d, c.fourcc, disparities) || !WriteVideo(col, c.fourcc, colours)) {
+    GTEST_SKIP() << "this OpenCV build cannot write " << c.fourcc << " in ." << c.container;
+  }
+  SourceOptions options;
+  options.loop = true;
+  auto source = OpenVideos(d, col, options);
+  ASSERT_TRUE(source.ok()) << source.status();
+  EXPECT_EQ((*source)->info().kind, "video");
+  EXPECT_TRUE((*source)->info().warnings.empty()) << (*source)->info().warnings.front();
+  EXPECT_EQ((*source)->info().width, 64u);
+  ASSERT_TRUE((*source)->info().frames_per_pass.has_value());
+  EXPECT_EQ(*(*source)->info().frames_per_pass, 7u);
+
+  // Two passes and a bit: the loop reopens the files.
+  auto limited = LimitFrames(*std::move(source), 16);
+  const std::vector<SourceFrame> frames = Drain(*limited);
+  ASSERT_EQ(frames.size(), 16u);
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    SCOPED_TRACE(i);
+    EXPECT_EQ(frames[i].disparity.type(), CV_8UC1);  // back to one channel
+    EXPECT_TRUE(SameMat(frames[i].disparity, disparities[i % 7]));
+    EXPECT_TRUE(SameMat(frames[i].colour, colours[i % 7]));
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(Codecs, ClientVideoSourceTest,
+                         ::testing::Values(VideoCase{"mkv", "FFV1"}, VideoCase{"avi", "png "},
+                                           VideoCase{"avi", "FFV1"}),
+                         [](const ::testing::TestParamInfo<VideoCase>& info) {
+                           std::string name =
+                               std::string(info.param.container) + "_" + info.param.fourcc;
+                           name.erase(std::remove(name.begin(), name.end(), ' '), name.end());
+                           return name;
+                         });
+
+TEST_F(ClientSourceTest, LossyDisparityVideoIsWarnedAbout) {
+  std::vector<cv::Mat> disparities, colours;
+  for (int i = 0; i < 3; ++i) {
+    disparities.push_back(TestDisparity8(64, 48, i));
+    colours.push_back(TestColour(64, 48, i));
+  }
+  if (!WriteVideo(Path("d.avi"), "MJPG", disparities) ||
+      !WriteVideo(Path("c.avi"), "MJPG", colours)) {
+    GTEST_SKIP() << "this OpenCV build cannot write MJPG";
+  }
+  auto source = OpenVideos(Path("d.avi"), Path("c.avi"), SourceOptions{});
+  ASSERT_TRUE(source.ok()) << source.status();
+  ASSERT_FALSE((*source)->info().warnings.empty());
+  EXPECT_NE((*source)->info().warnings.front().find("MJPG"), std::string::npos);
+  EXPECT_NE((*source)->info().warnings.front().find("lossless"), std::string::npos);
+  EXPECT_EQ(Drain(**source).size(), 3u);
+
+  auto missing = OpenVideos(Path("none.mkv"), Path("c.avi"), SourceOptions{});
+  ASSERT_FALSE(missing.ok());
+  EXPECT_NE(missing.status().message().find("--disparity-video"), std::string::npos);
+  EXPECT_NE(missing.status().message().find("none.mkv"), std::string::npos);
+}
+
+// The paper's section A: frames from a video decode faster than the same frames as stills. Here
+// that depends on the codec: FFV1 decodes slower than PNG, while PNG-in-AVI disparity with
+// HuffYUV colour (both exact) decodes faster. Times are printed, not asserted (tests never
+// assert on time); the values must survive exactly.
+TEST_F(ClientSourceTest, TsukubaAsLosslessVideosIsExactAndPrintsDecodeTimes) {
+  CLOUDCAST_REQUIRE_TSUKUBA();
+  std::vector<cv::Mat> disparities, colours;
+  for (const std::string& id : cloudcast::testing::TsukubaFrameIds()) {
+    disparities.push_back(
+        cv::imread(cloudcast::testing::TsukubaDisparityPath(id), cv::IMREAD_UNCHANGED));
+    colours.push_back(cv::imread(cloudcast::testing::TsukubaColourPath(id), cv::IMREAD_COLOR));
+  }
+  // Decodes every frame of `source` twice over (the first pass warms caches), ms per frame.
+  auto time_pass = [](auto open, std::vector<SourceFrame>* out) {
+    double ms = 0;
+    for (int pass = 0; pass < 2; ++pass) {
+      auto source = open();
+      if (!source.ok()) {
+        ADD_FAILURE() << source.status();
+        return 0.0;
+      }
+      const auto start = std::chrono::steady_clock::now();
+      *out = Drain(**source);
+      ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+               .count() /
+           std::max<std::size_t>(1, out->size());
+    }
+    return ms;
+  };
+  std::vector<SourceFrame> frames;
+  const double stills_ms = time_pass(
+      [] { return OpenTsukuba(cloudcast::testing::TsukubaDir(), "daylight", SourceOptions{}); },
+      &frames);
+  std::printf("[ info     ] per frame, decode + clone: PNG stills %.2f ms", stills_ms);
+  struct Combo {
+    const char* disparity_file;
+    const char* disparity_fourcc;
+    const char* colour_file;
+    const char* colour_fourcc;
+  };
+  for (const Combo& c :
+       {Combo{"d.mkv", "FFV1", "c.mkv", "FFV1"}, Combo{"d.avi", "png ", "c.avi", "HFYU"}}) {
+    SCOPED_TRACE(c.colour_fourcc);
+    if (!WriteVideo(Path(c.disparity_file), c.disparity_fourcc, disparities) ||
+        !WriteVideo(Path(c.colour_file), c.colour_fourcc, colours)) {
+      std::printf(", %s + %s: cannot write", c.disparity_fourcc, c.colour_fourcc);
+      continue;
+    }
+    const std::string d = Path(c.disparity_file), col = Path(c.colour_file);
+    const double ms = time_pass([&] { return OpenVideos(d, col, SourceOptions{}); }, &frames);
+    ASSERT_EQ(frames.size(), 10u);
+    for (std::size_t i = 0; i < 10; ++i) {
+      EXPECT_TRUE(SameMat(frames[i].disparity, disparities[i])) << i;
+      EXPECT_TRUE(SameMat(frames[i].colour, colours[i])) << i;
+    }
+    std::printf(", %s + %s video %.2f ms", c.disparity_fourcc, c.colour_fourcc, ms);
+  }
+  std::printf("\n");
+}
+
+TEST_F(ClientSourceTest, SyntheticFramesAdvanceAndMatchTheScene) {
+  auto source = OpenSynthetic(160, 120);
+  ASSERT_TRUE(source.ok()) << source.status();
+  EXPECT_EQ((*source)->info().kind, "synthetic");
+  EXPECT_FALSE((*source)->info().frames_per_pass.has_value());
+  auto limited = LimitFrames(*std::move(source), 4);
+  const std::vector<SourceFrame> frames = Drain(*limited);
+  ASSERT_EQ(frames.size(), 4u);
+  const SyntheticScene scene = SyntheticScene::Default();
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    SyntheticOptions o;
+    o.width = 160;
+    o.height = 120;
+    o.frame = i;
+    auto expected = scene.Render(o);
+    ASSERT_TRUE(expected.ok());
+    EXPECT_EQ(frames[i].name, "synthetic_" + std::to_string(i));
+    EXPECT_TRUE(
+        SameMat(frames[i].disparity, cv::Mat(120, 160, CV_32FC1, expected->disparity.data())));
+    EXPECT_TRUE(SameMat(frames[i].colour, cv::Mat(120, 160, CV_8UC3, expected->colour.data())));
+    EXPECT_EQ(limited->info().camera.fx, expected->camera.fx);
+  }
+  EXPECT_FALSE(SameMat(frames[0].disparity, frames[1].disparity)) << "the camera must move";
+
+  auto bad = OpenSynthetic(0, 10);
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.status().message().find("--synthetic"), std::string::npos);
+}
+
+TEST_F(ClientSourceTest, PairRepeatsUntilTheLimit) {
+  const cv::Mat d = TestDisparity8(32, 24, 5), c = TestColour(32, 24, 5);
+  ASSERT_TRUE(cv::imwrite(Path("disp.png"), d));
+  ASSERT_TRUE(cv::imwrite(Path("col.png"), c));
+  auto source = OpenPair(Path("disp.png"), Path("col.png"), SourceOptions{});
+  ASSERT_TRUE(source.ok()) << source.status();
+  EXPECT_FALSE((*source)->info().frames_per_pass.has_value());  // endless
+  EXPECT_EQ((*source)->info().camera.cx, 16.0);
+  auto limited = LimitFrames(*std::move(source), 5);
+  const std::vector<SourceFrame> frames = Drain(*limited);
+  ASSERT_EQ(frames.size(), 5u);
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    EXPECT_EQ(frames[i].index, i);
+    EXPECT_EQ(frames[i].name, "disp");
+    EXPECT_TRUE(SameMat(frames[i].disparity, d));
+    EXPECT_TRUE(SameMat(frames[i].colour, c));
+  }
+}
+
+TEST_F(ClientSourceTest, PairErrorsNameFlagAndFile) {
+  ASSERT_TRUE(cv::imwrite(Path("rgb.png"), TestColour(8, 6, 1)));
+  ASSERT_TRUE(cv::imwrite(Path("d.png"), TestDisparity8(8, 6, 1)));
+  ASSERT_TRUE(cv::imwrite(Path("big.png"), TestColour(9, 6, 1)));
+  std::ofstream(Path("junk.png")) << "not an image";
+
+  auto three_channels = OpenPair(Path("rgb.png"), Path("rgb.png"), SourceOptions{});
+  ASSERT_FALSE(three_channels.ok());
+  EXPECT_NE(three_channels.status().message().find("3 channels"), std::string::npos);
+  EXPECT_NE(three_channels.status().message().find("--disparity"), std::string::npos);
+
+  auto missing = OpenPair(Path("d.png"), Path("nope.png"), SourceOptions{});
+  ASSERT_FALSE(missing.ok());
+  EXPECT_EQ(missing.status().code(), absl::StatusCode::kNotFound);
+  EXPECT_NE(missing.status().message().find("--colour"), std::string::npos);
+  EXPECT_NE(missing.status().message().find("nope.png"), std::string::npos);
+
+  auto junk = OpenPair(Path("junk.png"), Path("rgb.png"), SourceOptions{});
+  ASSERT_FALSE(junk.ok());
+  EXPECT_NE(junk.status().message().find("cannot decode"), std::string::npos);
+
+  auto sizes = OpenPair(Path("d.png"), Path("big.png"), SourceOptions{});
+  ASSERT_FALSE(sizes.ok());
+  EXPECT_NE(sizes.status().message().find("9x6"), std::string::npos) << sizes.status();
+}
+
+// ---------------------------------------------------------------------------------------------
+// The session in-process, against a loopback server.
+
+class ClientSessionTest : public TempDirTest {
+ protected:
+  static void SetUpTestSuite() {
+    server::ServerOptions options;
+    options.listen = "127.0.0.1:0";
+    options.metrics_listen = "";
+    auto s = server::Server::Start(options);
+    ASSERT_TRUE(s.ok()) << s.status();
+    server_ = s->release();
+    target_ = "127.0.0.1:" + std::to_string(server_->port());
+  }
+  static void TearDownTestSuite() {
+    if (server_ != nullptr) server_->Shutdown(std::chrono::milliseconds(2000));
+    delete server_;
+    server_ = nullptr;
+  }
+
+  static server::Server* server_;
+  static std::string target_;
+};
+server::Server* ClientSessionTest::server_ = nullptr;
+std::string ClientSessionTest::target_;
+
+TEST_F(ClientSessionTest, SessionPacesFramesAndAnswersEveryOneLosslessly) {
+  auto source = LimitFrames(*OpenSynthetic(160, 120), 8);
+  SessionOptions options;
+  options.server = target_;
+  options.fps = 20;
+  options.config.set_delivery(v1::DELIVERY_ALL);
+  StreamStats stats;
+  std::vector<std::uint64_t> sequences;
+  std::vector<std::size_t> points;
+  const auto start = std::chrono::steady_clock::now();
+  auto session = Session::Start(options, source.get(), &stats, [&](Result& r) {
+    EXPECT_TRUE(r.ok()) << r.status;
+    sequences.push_back(r.sequence);
+    points.push_back(r.cloud.size());
+  });
+  ASSERT_TRUE(session.ok()) << session.status();
+  EXPECT_TRUE((*session)->Wait().ok());
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  // 8 frames at 20/s: 7 periods between the first and the last send.
+  EXPECT_GE(seconds, 7 * 0.05 * 0.95);
+  EXPECT_EQ(sequences, (std::vector<std::uint64_t>{0, 1, 2, 3, 4, 5, 6, 7}));
+  for (std::size_t n : points) EXPECT_GT(n, 0u);
+  const StatsSnapshot s = stats.Snapshot();
+  EXPECT_EQ(s.sent, 8u);
+  EXPECT_EQ(s.received, 8u);
+  EXPECT_EQ(s.errors, 0u);
+  EXPECT_GT(s.latency_p50_ms, 0);
+}
+
+TEST_F(ClientSessionTest, SessionSendsEncodedImages) {
+  for (ImageEncoding encoding : {ImageEncoding::kPng, ImageEncoding::kJpeg}) {
+    SCOPED_TRACE(Name(encoding));
+    auto source = LimitFrames(*OpenSynthetic(160, 120), 3);
+    SessionOptions options;
+    options.server = target_;
+    options.encoding = encoding;
+    options.config.set_delivery(v1::DELIVERY_ALL);
+    StreamStats stats;
+    auto session = Session::Start(options, source.get(), &stats, nullptr);
+    ASSERT_TRUE(session.ok()) << session.status();
+    EXPECT_TRUE((*session)->Wait().ok());
+    const StatsSnapshot s = stats.Snapshot();
+    EXPECT_EQ(s.received, 3u);
+    EXPECT_EQ(s.errors, 0u);
+    EXPECT_GT(s.points, 0u);
+    // Encoded frames are smaller than raw ones (float disparity + BGR: 7 bytes per pixel).
+    EXPECT_LT(s.uplink_bytes / 3, 160u * 120u * 7u);
+  }
+}
+
+TEST_F(ClientSessionTest, SessionReportsAnUnreachableServer) {
+  auto source = OpenSynthetic(16, 16);
+  SessionOptions options;
+  options.server = "127.0.0.1:1";
+  options.connect_timeout = std::chrono::milliseconds(300);
+  StreamStats stats;
+  auto session = Session::Start(options, source->get(), &stats, nullptr);
+  ASSERT_FALSE(session.ok());
+  EXPECT_EQ(session.status().code(), absl::StatusCode::kUnavailable);
+  EXPECT_NE(session.status().message().find("--server 127.0.0.1:1"), std::string::npos);
+}
+
+// ---------------------------------------------------------------------------------------------
+// The cloudcast-client binary.
+
+std::string BinDir() { return CLOUDCAST_BIN_DIR; }
+
+std::string ShellQuote(const std::string& s) {
+  std::string out = "'";
+  for (char c : s) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return out + "'";
+}
+
+std::string ReadText(const std::string& path) {
+  std::ifstream file(path, std::ios::binary);
+  std::stringstream ss;
+  ss << file.rdbuf();
+  return ss.str();
+}
+
+struct RunResult {
+  bool exited = false;
+  int code = -1;
+  std::string out, err;
+};
+
+std::ostream& operator<<(std::ostream& os, const RunResult& r) {
+  return os << "exit " << r.code << "\n--- stdout:\n" << r.out << "--- stderr:\n" << r.err;
+}
+
+// Counts what a snapshot shows: pixels that differ from the background (the corner pixel below
+// the overlay) and distinct colours among them.
+struct PictureStats {
+  int foreground = 0;
+  std::size_t colours = 0;
+};
+PictureStats Analyse(const std::string& png) {
+  PictureStats s;
+  const cv::Mat image = cv::imread(png, cv::IMREAD_COLOR);
+  if (image.empty()) return s;
+  const cv::Vec3b background = image.at<cv::Vec3b>(image.rows - 1, image.cols - 1);
+  std::set<std::uint32_t> colours;
+  // The overlay's rows (top 40 pixels) are left out: text alone must not pass.
+  for (int y = 40; y < image.rows; ++y) {
+    for (int x = 0; x < image.cols; ++x) {
+      const cv::Vec3b p = image.at<cv::Vec3b>(y, x);
+      if (p == background) continue;
+      ++s.foreground;
+      colours.insert((p[0] >> 3) << 10 | (p[1] >> 3) << 5 | (p[2] >> 3));
+    }
+  }
+  s.colours = colours.size();
+  return s;
+}
+
+class ClientProgramTest : public ClientSessionTest {
+ protected:
+  void SetUp() override {
+    ClientSessionTest::SetUp();
+    ASSERT_TRUE(fs::exists(Binary())) << Binary() << " is missing: build cloudcast-client";
+  }
+  static std::string Binary() { return BinDir() + "/cloudcast-client"; }
+
+  // Runs the client; `env` prefixes the command (e.g. "env -u DISPLAY").
+  RunResult Run(const std::vector<std::string>& args, const std::string& env = "") const {
+    return RunProgram(Binary(), args, env);
+  }
+  RunResult RunProgram(const std::string& binary, const std::vector<std::string>& args,
+                       const std::string& env = "") const {
+    const std::string out = Path("stdout.txt"), err = Path("stderr.txt");
+    std::string command = env.empty() ? "" : env + " ";
+    command += ShellQuote(binary);
+    for (const std::string& a : args) command += " " + ShellQuote(a);
+    command += " </dev/null >" + ShellQuote(out) + " 2>" + ShellQuote(err);
+    const int status = std::system(command.c_str());
+    RunResult r;
+    if (status != -1 && WIFEXITED(status)) {
+      r.exited = true;
+      r.code = WEXITSTATUS(status);
+    }
+    r.out = ReadText(out);
+    r.err = ReadText(err);
+    return r;
+  }
+
+  // The default input of the tests: the New Tsukuba folder when present, else the synthetic
+  // scene (10 frames either way).
+  static std::vector<std::string> SourceArgs() {
+    if (cloudcast::testing::HaveTsukuba()) return {"--tsukuba", cloudcast::testing::TsukubaDir()};
+    return {"--synthetic", "640x480", "--frames", "10"};
+  }
+  static std::vector<std::string> Join(std::vector<std::string> a,
+                                       const std::vector<std::string>& b) {
+    a.insert(a.end(), b.begin(), b.end());
+    return a;
+  }
+};
+
+TEST_F(ClientProgramTest, StreamsAndWritesANonTrivialSnapshot) {
+  CLOUDCAST_REQUIRE_DISPLAY();
+  if (!cloudcast::testing::HaveTsukuba()) {
+    std::printf("[ info     ] New Tsukuba data not found: streaming the synthetic scene\n");
+  }
+  for (const bool hidden : {false, true}) {
+    SCOPED_TRACE(hidden ? "hidden window" : "visible window");
+    const std::string png = Path(hidden ? "hidden.png" : "visible.png");
+    const std::string json = Path("view.json");
+    // --lossless with --fps 0: no frame is dropped by the server, and the display paces the
+    // stream (no cloud is replaced before it is drawn), so the 3rd cloud shown is the 3rd frame
+    // whatever the machine's load. (Some New Tsukuba frames lie wholly outside the paper's
+    // passthrough, z = 615 / d in [3, 12]: 00800 and 01800 give empty clouds, 00200 and 00600 a
+    // few thousand points; 00400, the 3rd, gives 27,557.)
+    std::vector<std::string> args =
+        Join(SourceArgs(), {"--server", target_, "--lossless", "--snapshot", png,
+                            "--snapshot-after", "3", "--json", json, "--window", "640x480"});
+    if (hidden) args.push_back("--hidden");
+    const RunResult r = Run(args);
+    ASSERT_TRUE(r.exited && r.code == 0) << r;
+    ASSERT_TRUE(fs::exists(png)) << r;
+    const PictureStats p = Analyse(png);
+    EXPECT_GT(p.foreground, 640 * 440 / 20) << "too few points drawn in " << png;
+    EXPECT_GT(p.colours, 20u) << "the points should carry the frame's colours";
+    EXPECT_NE(r.err.find("snapshot written to"), std::string::npos) << r;
+    const Json j = Json::parse(ReadText(json));
+    EXPECT_EQ(j["frames"]["displayed"].get<int>(), 3);
+    EXPECT_EQ(j["viewer_skipped"].get<int>(), 0);
+    EXPECT_GT(j["displayed_fps"].get<double>(), 0);
+  }
+}
+
+TEST_F(ClientProgramTest, RecordedFilesHoldTheRepliesPointCounts) {
+  // The reference: the same frames through the server one by one, with the same settings.
+  auto reference_source =
+      LimitFrames(cloudcast::testing::HaveTsukuba()
+                      ? *OpenTsukuba(cloudcast::testing::TsukubaDir(), "daylight", SourceOptions{})
+                      : *OpenSynthetic(640, 480),
+                  10);
+  ClientOptions client_options;
+  auto client = Client::Connect(target_, client_options);
+  ASSERT_TRUE(client.ok()) << client.status();
+  StreamConfig config;
+  SetCamera(reference_source->info().camera, &config);
+  config.mutable_camera()->clear_cx();
+  config.mutable_camera()->clear_cy();
+  std::vector<std::uint32_t> expected;
+  SourceFrame f;
+  while (*reference_source->Next(&f)) {
+    auto r = ProcessMats(**client, f.disparity, f.colour, config);
+    ASSERT_TRUE(r.ok()) << r.status();
+    expected.push_back(r->reply.point_count());
+  }
+  ASSERT_EQ(expected.size(), 10u);
+
+  for (const std::string format : {"pcd", "ply", "drc"}) {
+    SCOPED_TRACE(format);
+    const std::string dir = Path("rec_" + format);
+    const RunResult r =
+        Run(Join(SourceArgs(), {"--server", target_, "--no-window", "--lossless", "--record", dir,
+                                "--record-format", format, "--json", Path("rec.json")}),
+            "env -u DISPLAY");
+    ASSERT_TRUE(r.exited && r.code == 0) << r;
+    EXPECT_NE(r.out.find("recorded: 10 " + format + " files"), std::string::npos) << r;
+    double total = 0;
+    for (std::size_t i = 0; i < expected.size(); ++i) {
+      char name[32];
+      std::snprintf(name, sizeof(name), "cloud_%06zu.%s", i, format.c_str());
+      PointCloud cloud;
+      const absl::Status s = LoadCloud((fs::path(dir) / name).string(), &cloud);
+      ASSERT_TRUE(s.ok()) << s;
+      EXPECT_EQ(cloud.size(), expected[i]) << name;
+      total += cloud.size();
+    }
+    const Json j = Json::parse(ReadText(Path("rec.json")));
+    EXPECT_EQ(j["record"]["files"], 10);
+    EXPECT_NEAR(j["mean_points_per_frame"].get<double>(), total / 10, 1e-9);
+  }
+}
+
+TEST_F(ClientProgramTest, NoWindowPrintsStatisticsAndJson) {
+  const std::string json = Path("stats.json");
+  // No display at all: --no-window must not touch GL.
+  const RunResult r = Run(Join(SourceArgs(), {"--server", target_, "--no-window", "--lossless",
+                                              "--json", json, "--progress", "0.05"}),
+                          "env -u DISPLAY");
+  ASSERT_TRUE(r.exited && r.code == 0) << r;
+  EXPECT_NE(r.out.find("frames: sent 10, received 10, dropped 0, errors 0"), std::string::npos)
+      << r;
+  EXPECT_NE(r.out.find("latency (capture to reply, ms): p50"), std::string::npos) << r;
+  EXPECT_NE(r.out.find("per cloud:"), std::string::npos) << r;
+  const Json j = Json::parse(ReadText(json));
+  EXPECT_EQ(j["status"], "ok");
+  EXPECT_EQ(j["frames"]["sent"], 10);
+  EXPECT_EQ(j["frames"]["received"], 10);
+  EXPECT_EQ(j["frames"]["dropped"], 0);
+  EXPECT_EQ(j["frames"]["errors"], 0);
+  EXPECT_FALSE(j.contains("displayed_fps"));
+  EXPECT_GT(j["fps"].get<double>(), 0);
+  const double p50 = j["latency_ms"]["p50"], p90 = j["latency_ms"]["p90"],
+               p99 = j["latency_ms"]["p99"];
+  EXPECT_GT(p50, 0);
+  EXPECT_LE(p50, p90);
+  EXPECT_LE(p90, p99);
+  EXPECT_GT(j["mean_points_per_frame"].get<double>(), 0);
+  EXPECT_GT(j["mean_draco_bytes_per_frame"].get<double>(), 0);
+  EXPECT_EQ(j["source"]["width"], 640);
+}
+
+TEST_F(ClientProgramTest, DefaultSourceIsTsukubaWhenPresentElseSynthetic) {
+  const RunResult r = Run({"--server", target_, "--no-window", "--frames", "3", "--lossless",
+                           "--json", Path("default.json")},
+                          "env -u DISPLAY");
+  ASSERT_TRUE(r.exited && r.code == 0) << r;
+  const Json j = Json::parse(ReadText(Path("default.json")));
+  EXPECT_EQ(j["source"]["kind"], cloudcast::testing::HaveTsukuba() ? "tsukuba" : "synthetic");
+  EXPECT_EQ(j["source"]["width"], 640);
+  EXPECT_EQ(j["source"]["height"], 480);
+  EXPECT_EQ(j["frames"]["received"], 3);
+}
+
+TEST_F(ClientProgramTest, OpensTheFilesCloudcastProcessWrites) {
+  CLOUDCAST_REQUIRE_DISPLAY();
+  const std::string process = BinDir() + "/cloudcast-process";
+  ASSERT_TRUE(fs::exists(process)) << process << " is missing: build cloudcast-process";
+  std::vector<std::string> input = {"--synthetic", "640x480"};
+  if (cloudcast::testing::HaveTsukuba()) {
+    input = {"--disparity", cloudcast::testing::TsukubaDisparityPath("00001"), "--colour",
+             cloudcast::testing::TsukubaColourPath("00001")};
+  }
+  for (const std::string ext : {"pcd", "ply", "drc"}) {
+    SCOPED_TRACE(ext);
+    const std::string cloud = Path("frame." + ext);
+    const RunResult made = RunProgram(process, Join(input, {"--out", cloud, "--quiet"}));
+    ASSERT_TRUE(made.exited && made.code == 0) << made;
+    const std::string png = Path("open_" + ext + ".png");
+    const RunResult r =
+        Run({"--open", cloud, "--snapshot", png, "--snapshot-after", "2", "--window", "640x480"});
+    ASSERT_TRUE(r.exited && r.code == 0) << r;
+    const PictureStats p = Analyse(png);
+    EXPECT_GT(p.foreground, 640 * 440 / 20) << png;
+    EXPECT_GT(p.colours, 20u) << png;
+  }
+}
+
+TEST_F(ClientProgramTest, HelpDocumentsEveryFlagWithDefaults) {
+  const RunResult r = Run({"--help"}, "env -u DISPLAY");
+  ASSERT_TRUE(r.exited && r.code == 0) << r;
+  for (const char* flag : {"--tsukuba",
+                           "--illumination",
+                           "--disparity-glob",
+                           "--colour-glob",
+                           "--disparity-video",
+                           "--colour-video",
+                           "--synthetic",
+                           "--disparity",
+                           "--colour",
+                           "--open",
+                           "--loop",
+                           "--frames",
+                           "--server",
+                           "--connect-timeout",
+                           "--fps",
+                           "--in-flight",
+                           "--lossless",
+                           "--encoding",
+                           "--jpeg-quality",
+                           "--focal",
+                           "--baseline",
+                           "--disparity-scale",
+                           "--axis",
+                           "--min",
+                           "--max",
+                           "--negative",
+                           "--no-passthrough",
+                           "--leaf",
+                           "--draco-bits",
+                           "--draco-speed",
+                           "--no-window",
+                           "--window",
+                           "--hidden",
+                           "--point-size",
+                           "--snapshot",
+                           "--snapshot-after",
+                           "--exit-at-end",
+                           "--record",
+                           "--record-format",
+                           "--json",
+                           "--progress",
+                           "--quiet",
+                           "Examples:"}) {
+    EXPECT_NE(r.out.find(flag), std::string::npos) << flag;
+  }
+  for (const char* default_shown :
+       {"--server HOST:PORT=localhost:50051", "--fps FLOAT=0", "--in-flight INT:INT in [1 - 64]=2",
+        "--leaf FLOAT=0.03", "--snapshot-after N=10", "--record-format TEXT:{pcd,ply,drc}=pcd"}) {
+    EXPECT_NE(r.out.find(default_shown), std::string::npos) << default_shown;
+  }
+}
+
+TEST_F(ClientProgramTest, BadFlagsAndFilesGiveClearErrors) {
+  fs::create_directories(dir_ / "d");
+  fs::create_directories(dir_ / "c");
+  cv::imwrite(Path("d/1.png"), TestDisparity8(8, 6, 1));
+  cv::imwrite(Path("d/2.png"), TestDisparity8(8, 6, 2));
+  cv::imwrite(Path("c/1.png"), TestColour(8, 6, 1));
+  struct Case {
+    std::vector<std::string> args;
+    int code;
+    std::string message;  // in stderr
+  };
+  const std::vector<Case> cases = {
+      {{"--frobnicate"}, 2, "--frobnicate"},
+      {{"--fps", "fast"}, 2, "--fps"},
+      {{"--fps", "nan"}, 2, "--fps"},
+      {{"--synthetic", "0x5"}, 2, "--synthetic"},
+      {{"--encoding", "webp"}, 2, "--encoding"},
+      {{"--record-format", "xyz"}, 2, "--record-format"},
+      {{"--min", "5", "--max", "1"}, 2, "--min (5) must not be greater than --max (1)"},
+      {{"--synthetic", "64x48", "--tsukuba", "x"}, 2, "choose one source"},
+      {{"--disparity-glob", "d/*.png"}, 2, "needs --colour-glob"},
+      {{"--no-window", "--snapshot", Path("a.png")}, 2, "--snapshot needs a window"},
+      {{"--snapshot", Path("a.jpg")}, 2, "must end in .png"},
+      {{"--json", Path("no/such/dir/x.json"), "--no-window"}, 2, "does not exist"},
+      {{"--open", Path("x.pcd"), "--fps", "3"}, 2, "--fps does not apply to --open"},
+      {{"--tsukuba", Path("missing"), "--no-window"}, 1, "--tsukuba: no folder"},
+      {{"--disparity-glob", Path("d/*.png"), "--colour-glob", Path("c/*.png"), "--no-window"},
+       1,
+       "matches 2 files but --colour-glob"},
+      {{"--disparity", Path("d/1.png"), "--colour", Path("c/none.png"), "--no-window"},
+       1,
+       "c/none.png"},
+      {{"--synthetic", "64x48", "--no-window", "--server", "127.0.0.1:1", "--connect-timeout",
+        "0.3"},
+       1,
+       "--server 127.0.0.1:1"},
+      {{"--open", Path("none.pcd")}, 1, "none.pcd"},
+      {{"--open", Path("d/1.png")}, 1, ".pcd, .ply, .drc"},
+  };
+  for (const Case& c : cases) {
+    std::string line;
+    for (const std::string& a : c.args) line += a + " ";
+    SCOPED_TRACE(line);
+    const RunResult r = Run(c.args, "env -u DISPLAY");
+    ASSERT_TRUE(r.exited) << r;
+    EXPECT_EQ(r.code, c.code) << r;
+    EXPECT_NE(r.err.find(c.message), std::string::npos) << r;
+  }
+}
+
+TEST_F(ClientProgramTest, StreamsLosslessVideos) {
+  std::vector<cv::Mat> disparities, colours;
+  for (int i = 0; i < 6; ++i) {
+    cv::Mat d(120, 160, CV_8UC1);
+    // A tilted plane at disparities 60..90: z = 615 / d lies inside the default passthrough.
+    for (int y = 0; y < d.rows; ++y) {
+      for (int x = 0; x < d.cols; ++x) d.at<std::uint8_t>(y, x) = 60 + (x + y + i) % 31;
+    }
+    disparities.push_back(d);
+    colours.push_back(TestColour(160, 120, i));
+  }
+  if (!WriteVideo(Path("d.mkv"), "FFV1", disparities) ||
+      !WriteVideo(Path("c.mkv"), "FFV1", colours)) {
+    GTEST_SKIP() << "this OpenCV build cannot write FFV1";
+  }
+  const RunResult r =
+      Run({"--disparity-video", Path("d.mkv"), "--colour-video", Path("c.mkv"), "--server", target_,
+           "--no-window", "--lossless", "--loop", "--frames", "15", "--json", Path("v.json")},
+          "env -u DISPLAY");
+  ASSERT_TRUE(r.exited && r.code == 0) << r;
+  EXPECT_EQ(r.err.find("not known to be lossless"), std::string::npos) << r;
+  const Json j = Json::parse(ReadText(Path("v.json")));
+  EXPECT_EQ(j["source"]["kind"], "video");
+  EXPECT_EQ(j["frames"]["received"], 15);
+  EXPECT_EQ(j["frames"]["errors"], 0);
+  EXPECT_GT(j["mean_points_per_frame"].get<double>(), 100);
+}
+
+}  // namespace
+}  // namespace cloudcast::client::app
