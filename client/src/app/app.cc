@@ -104,6 +104,7 @@ struct Flags {
   std::string record_format = "pcd";
   std::string json;
   double progress_s = 2;
+  bool print_frames = false;
   bool quiet = false;
 };
 
@@ -395,6 +396,10 @@ void AddFlags(CLI::App& app, Flags& f) {
       ->check(NumberCheck("a number of seconds >= 0", [](double v) { return v >= 0; }))
       ->capture_default_str()
       ->group(output);
+  app.add_flag("--print-frames", f.print_frames,
+               "Print one line per reply: sequence, points after each stage, Draco bytes, server "
+               "stage times and end-to-end latency")
+      ->group(output);
   app.add_flag("--quiet,-q", f.quiet, "Log only warnings and errors (the summary still prints)")
       ->group(output);
 
@@ -479,6 +484,27 @@ absl::StatusOr<std::unique_ptr<FrameSource>> OpenSource(const Flags& f) {
   }
   if (!source.ok()) return source.status();
   return LimitFrames(*std::move(source), f.frames);
+}
+
+// One line per reply, for --print-frames (the demo's per-frame latency).
+void PrintFrameLine(const Result& r) {
+  const double latency_ms = std::chrono::duration<double, std::milli>(r.latency()).count();
+  if (!r.ok()) {
+    std::printf("frame %6llu  error: %s\n", static_cast<unsigned long long>(r.sequence),
+                r.status.ToString().c_str());
+  } else {
+    const auto& c = r.reply.counts();
+    const auto& t = r.reply.times();
+    std::printf(
+        "frame %6llu  %7llu valid  %7llu passthrough  %6llu voxels  %6.1f KB  server "
+        "decode %5.2f  pipeline %5.2f  draco %5.2f ms  latency %6.2f ms\n",
+        static_cast<unsigned long long>(r.sequence),
+        static_cast<unsigned long long>(c.valid_points()),
+        static_cast<unsigned long long>(c.after_passthrough()),
+        static_cast<unsigned long long>(c.after_voxel_grid()), r.draco_bytes() / 1024.0,
+        t.decode_us() / 1000.0, t.pipeline_us() / 1000.0, t.encode_us() / 1000.0, latency_ms);
+  }
+  std::fflush(stdout);
 }
 
 int Fail(const absl::Status& status) {
@@ -601,6 +627,7 @@ int Run(const Flags& f, const CLI::App& app) {
   std::mutex record_mu;
   absl::Status record_status;
   auto on_result = [&](Result& result) {
+    if (f.print_frames) PrintFrameLine(result);
     if (recorder) {
       absl::Status s = recorder->Save(result);
       if (!s.ok()) {
