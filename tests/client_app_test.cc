@@ -38,6 +38,7 @@
 #include "cloudcast/core/cloud_io.h"
 #include "cloudcast/core/synthetic.h"
 #include "server.h"  // cloudcast_server_lib
+#include "program_support.h"
 #include "test_support.h"
 #include "xvfb_support.h"
 
@@ -681,30 +682,10 @@ TEST_F(ClientSessionTest, SessionReportsAnUnreachableServer) {
 // ---------------------------------------------------------------------------------------------
 // The cloudcast-client binary.
 
-std::string BinDir() { return CLOUDCAST_BIN_DIR; }
-
-std::string ShellQuote(const std::string& s) {
-  std::string out = "'";
-  for (char c : s) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
-  return out + "'";
-}
-
-std::string ReadText(const std::string& path) {
-  std::ifstream file(path, std::ios::binary);
-  std::stringstream ss;
-  ss << file.rdbuf();
-  return ss.str();
-}
-
-struct RunResult {
-  bool exited = false;
-  int code = -1;
-  std::string out, err;
-};
-
-std::ostream& operator<<(std::ostream& os, const RunResult& r) {
-  return os << "exit " << r.code << "\n--- stdout:\n" << r.out << "--- stderr:\n" << r.err;
-}
+using cloudcast::testing::BinDir;
+using cloudcast::testing::ReadText;
+using cloudcast::testing::RunResult;
+using cloudcast::testing::ShellQuote;
 
 // Counts what a snapshot shows: pixels that differ from the background (the corner pixel below
 // the overlay) and distinct colours among them.
@@ -745,20 +726,7 @@ class ClientProgramTest : public ClientSessionTest {
   }
   RunResult RunProgram(const std::string& binary, const std::vector<std::string>& args,
                        const std::string& env = "") const {
-    const std::string out = Path("stdout.txt"), err = Path("stderr.txt");
-    std::string command = env.empty() ? "" : env + " ";
-    command += ShellQuote(binary);
-    for (const std::string& a : args) command += " " + ShellQuote(a);
-    command += " </dev/null >" + ShellQuote(out) + " 2>" + ShellQuote(err);
-    const int status = std::system(command.c_str());
-    RunResult r;
-    if (status != -1 && WIFEXITED(status)) {
-      r.exited = true;
-      r.code = WEXITSTATUS(status);
-    }
-    r.out = ReadText(out);
-    r.err = ReadText(err);
-    return r;
+    return cloudcast::testing::RunProgram(binary, args, dir_.string(), env);
   }
 
   // The default input of the tests: the New Tsukuba folder when present, else the synthetic

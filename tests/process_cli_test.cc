@@ -39,6 +39,7 @@
 #include "cloudcast/core/point.h"
 #include "cloudcast/core/synthetic.h"
 #include "pcl_reference.h"
+#include "program_support.h"
 #include "test_support.h"
 
 namespace cloudcast {
@@ -52,31 +53,9 @@ using Json = nlohmann::json;
 
 std::string Binary() { return std::string(CLOUDCAST_BIN_DIR) + "/cloudcast-process"; }
 
-std::string ShellQuote(const std::string& s) {
-  std::string out = "'";
-  for (char c : s) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
-  return out + "'";
-}
-
-std::string ReadText(const std::string& path) {
-  std::ifstream file(path, std::ios::binary);
-  std::stringstream ss;
-  ss << file.rdbuf();
-  return ss.str();
-}
-
-struct RunResult {
-  bool exited = false;  // false: killed by a signal (a crash)
-  int code = -1;
-  std::string out, err;
-
-  // 128 + signal: the shell reports a crashed child this way.
-  bool crashed() const { return !exited || code >= 128; }
-};
-
-std::ostream& operator<<(std::ostream& os, const RunResult& r) {
-  return os << "exit " << r.code << "\n--- stdout:\n" << r.out << "--- stderr:\n" << r.err;
-}
+using testing::ReadText;
+using testing::RunResult;
+using testing::ShellQuote;
 
 class CliTest : public ::testing::Test {
  protected:
@@ -98,19 +77,7 @@ class CliTest : public ::testing::Test {
   std::string Path(const std::string& name) const { return (dir_ / name).string(); }
 
   RunResult Run(const std::vector<std::string>& args) const {
-    const std::string out = Path("stdout.txt"), err = Path("stderr.txt");
-    std::string command = ShellQuote(Binary());
-    for (const std::string& a : args) command += " " + ShellQuote(a);
-    command += " <" + ShellQuote("/dev/null") + " >" + ShellQuote(out) + " 2>" + ShellQuote(err);
-    const int status = std::system(command.c_str());
-    RunResult r;
-    if (status != -1 && WIFEXITED(status)) {
-      r.exited = true;
-      r.code = WEXITSTATUS(status);
-    }
-    r.out = ReadText(out);
-    r.err = ReadText(err);
-    return r;
+    return testing::RunProgram(Binary(), args, dir_.string());
   }
 
   // Runs and expects success; returns the parsed --json report.

@@ -35,6 +35,7 @@
 #include "cloudcast/core/draco_codec.h"
 #include "cloudcast/core/filters.h"
 #include "cloudcast/core/tsukuba.h"
+#include "cli_checks.h"
 #include "cloudcast/core/cloud_io.h"
 #include "cloudcast/core/filters.h"
 #include "cloudcast/core/limits.h"
@@ -112,73 +113,11 @@ struct Flags {
 // Validators: they see the raw string, so they reject "nan" and "inf", which CLI11's own number
 // conversion accepts.
 
-bool ParseDouble(const std::string& s, double* v) {
-  if (s.empty()) return false;
-  char* end = nullptr;
-  *v = std::strtod(s.c_str(), &end);
-  return end == s.c_str() + s.size();
-}
+using cli::NumberCheck;
+using cli::ParseSize;
+using cli::SizeCheck;
+using cli::Wrap;
 
-CLI::Validator NumberCheck(const std::string& what, std::function<bool(double)> ok) {
-  return CLI::Validator(
-      [what, ok = std::move(ok)](std::string& s) -> std::string {
-        double v = 0;
-        if (!ParseDouble(s, &v) || !std::isfinite(v) || !ok(v)) {
-          return "must be " + what + ", got '" + s + "'";
-        }
-        return std::string();
-      },
-      "", "");
-}
-
-bool ParseSize(const std::string& s, std::uint32_t* w, std::uint32_t* h) {
-  const auto x = s.find_first_of("xX");
-  if (x == std::string::npos || x == 0 || x + 1 == s.size()) return false;
-  const std::string ws = s.substr(0, x), hs = s.substr(x + 1);
-  auto digits = [](const std::string& t) {
-    return t.size() <= 9 &&
-           std::all_of(t.begin(), t.end(), [](char c) { return c >= '0' && c <= '9'; });
-  };
-  if (!digits(ws) || !digits(hs)) return false;
-  *w = static_cast<std::uint32_t>(std::stoul(ws));
-  *h = static_cast<std::uint32_t>(std::stoul(hs));
-  return true;
-}
-
-CLI::Validator SizeCheck(std::uint32_t max_side, std::uint64_t max_pixels) {
-  return CLI::Validator(
-      [=](std::string& s) -> std::string {
-        std::uint32_t w = 0, h = 0;
-        if (!ParseSize(s, &w, &h)) return "must be WIDTHxHEIGHT, e.g. 640x480, got '" + s + "'";
-        if (w == 0 || h == 0 || w > max_side || h > max_side || std::uint64_t{w} * h > max_pixels) {
-          return fmt::format(
-              "'{}' is outside the limits: 1..{} pixels per side, at most {} "
-              "pixels",
-              s, max_side, max_pixels);
-        }
-        return std::string();
-      },
-      "", "");
-}
-
-// CLI11 2.1 does not wrap descriptions but indents the lines after a '\n', so wrapping at 64
-// columns keeps --help within 100.
-std::string Wrap(const std::string& text, std::size_t width = 64) {
-  std::string out, line;
-  std::size_t start = 0;
-  while (start <= text.size()) {
-    std::size_t end = text.find(' ', start);
-    if (end == std::string::npos) end = text.size();
-    const std::string word = text.substr(start, end - start);
-    if (!line.empty() && line.size() + 1 + word.size() > width) {
-      out += line + "\n";
-      line.clear();
-    }
-    line += (line.empty() ? "" : " ") + word;
-    start = end + 1;
-  }
-  return out + line;
-}
 
 // Output folders are checked before any work, so a typo costs nothing.
 std::string MissingFolder(const std::string& flag, const std::string& path) {
