@@ -39,6 +39,7 @@
 #include "cloudcast/core/image_io.h"
 #include "cloudcast/core/synthetic.h"
 #include "cloudcast/core/tsukuba.h"
+#include "metrics_scrape.h"
 
 namespace cloudcast::bench {
 namespace {
@@ -67,36 +68,6 @@ int FreePort() {
   const int port = ntohs(a.sin_port);
   close(fd);
   return port;
-}
-
-// GET /metrics from the server's Prometheus endpoint (HTTP/1.0, so the body ends at close).
-std::string HttpGet(int port, const std::string& path) {
-  const int fd = socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  a.sin_port = htons(static_cast<std::uint16_t>(port));
-  std::string out;
-  if (connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0) {
-    const std::string req = "GET " + path + " HTTP/1.0\r\nHost: localhost\r\n\r\n";
-    if (write(fd, req.data(), req.size()) == static_cast<ssize_t>(req.size())) {
-      char buf[65536];
-      ssize_t n;
-      while ((n = read(fd, buf, sizeof buf)) > 0) out.append(buf, static_cast<std::size_t>(n));
-    }
-  }
-  close(fd);
-  return out;
-}
-
-// The value of an unlabelled metric line "name value".
-double MetricValue(const std::string& text, const std::string& name) {
-  std::istringstream in(text);
-  std::string line;
-  while (std::getline(in, line)) {
-    if (line.rfind(name + " ", 0) == 0) return std::stod(line.substr(name.size() + 1));
-  }
-  return -1;
 }
 
 // utime + stime of a process, seconds.
@@ -143,7 +114,8 @@ class ServerProcess {
   int port() const { return port_; }
   int metrics_port() const { return metrics_port_; }
   double CoreCpuSeconds() const {
-    return MetricValue(HttpGet(metrics_port_, "/metrics"), "cloudcast_core_cpu_seconds_total");
+    return server::MetricValue(server::ScrapeMetrics(metrics_port_),
+                              "cloudcast_core_cpu_seconds_total");
   }
 
  private:

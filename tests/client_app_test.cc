@@ -52,25 +52,7 @@ using Json = nlohmann::json;
 // Helpers
 
 // A fresh folder per test, removed afterwards.
-class TempDirTest : public ::testing::Test {
- protected:
-  void SetUp() override {
-    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    std::string name = std::string(info->test_suite_name()) + "_" + info->name();
-    std::replace(name.begin(), name.end(), '/', '_');
-    dir_ = fs::path(::testing::TempDir()) /
-           ("cloudcast_app_" + name + "_" + std::to_string(::getpid()));
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override {
-    std::error_code ec;
-    fs::remove_all(dir_, ec);
-  }
-  std::string Path(const std::string& name) const { return (dir_ / name).string(); }
-
-  fs::path dir_;
-};
+using TempDirTest = cloudcast::testing::ScratchDirTest;
 
 // Equal type, size and every value.
 ::testing::AssertionResult SameMat(const cv::Mat& a, const cv::Mat& b) {

@@ -57,24 +57,12 @@ using testing::ReadText;
 using testing::RunResult;
 using testing::ShellQuote;
 
-class CliTest : public ::testing::Test {
+class CliTest : public testing::ScratchDirTest {
  protected:
   void SetUp() override {
     ASSERT_TRUE(fs::exists(Binary())) << Binary() << " is missing: build cloudcast-process";
-    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    std::string name = std::string(info->test_suite_name()) + "_" + info->name();
-    std::replace(name.begin(), name.end(), '/', '_');
-    dir_ = fs::path(::testing::TempDir()) /
-           ("cloudcast_cli_" + name + "_" + std::to_string(::getpid()));
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
+    testing::ScratchDirTest::SetUp();
   }
-  void TearDown() override {
-    std::error_code ec;
-    fs::remove_all(dir_, ec);
-  }
-
-  std::string Path(const std::string& name) const { return (dir_ / name).string(); }
 
   RunResult Run(const std::vector<std::string>& args) const {
     return testing::RunProgram(Binary(), args, dir_.string());
@@ -94,8 +82,6 @@ class CliTest : public ::testing::Test {
     }
     return Json::parse(ReadText(json), nullptr, /*allow_exceptions=*/false);
   }
-
-  fs::path dir_;
 };
 
 Json Stage(const Json& report, const std::string& name) {

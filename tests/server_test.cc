@@ -41,6 +41,7 @@
 #include "cloudcast/core/synthetic.h"
 #include "cloudcast/v1/cloudcast.grpc.pb.h"
 #include "frame_input.h"
+#include "metrics_scrape.h"
 #include "options.h"
 #include "test_support.h"
 
@@ -482,37 +483,7 @@ const google::protobuf::UnknownField* FieldOf(const google::protobuf::UnknownFie
   return nullptr;
 }
 
-// GET /metrics over a plain socket.
-std::string HttpGet(int port, const std::string& path) {
-  const int fd = socket(AF_INET, SOCK_STREAM, 0);
-  sockaddr_in addr{};
-  addr.sin_family = AF_INET;
-  addr.sin_port = htons(static_cast<std::uint16_t>(port));
-  inet_pton(AF_INET, "127.0.0.1", &addr.sin_addr);
-  if (connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr) != 0) {
-    close(fd);
-    return "";
-  }
-  const std::string request =
-      "GET " + path + " HTTP/1.0\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n";
-  EXPECT_EQ(write(fd, request.data(), request.size()), static_cast<ssize_t>(request.size()));
-  std::string response;
-  char buffer[65536];
-  ssize_t n;
-  while ((n = read(fd, buffer, sizeof buffer)) > 0) response.append(buffer, n);
-  close(fd);
-  return response;
-}
-
-// The value of an unlabelled sample in Prometheus' text format, or -1.
-double MetricValue(const std::string& text, const std::string& name) {
-  std::istringstream in(text);
-  std::string line;
-  while (std::getline(in, line)) {
-    if (line.rfind(name + " ", 0) == 0) return std::stod(line.substr(name.size() + 1));
-  }
-  return -1;
-}
+using cloudcast::server::MetricValue;
 
 // ---------------------------------------------------------------------------------------------
 // The shared server for the tests that need nothing special.
@@ -1510,7 +1481,7 @@ TEST(ServerMetricsTest, PrometheusEndpointServesTheCounters) {
                         FrameRequest(MakeFrame(Frames()[0], 1)), FrameRequest(bad),
                         FrameRequest(MakeFrame(Frames()[1 % Frames().size()], 3, Input::kPng))});
   ASSERT_TRUE(result.status.ok());
-  const std::string text = HttpGet(server->metrics_port(), "/metrics");
+  const std::string text = cloudcast::server::ScrapeMetrics(server->metrics_port());
   ASSERT_NE(text.find("200 OK"), std::string::npos) << text.substr(0, 200);
   EXPECT_EQ(MetricValue(text, "cloudcast_frames_processed_total"), 2.0);
   EXPECT_EQ(MetricValue(text, "cloudcast_streams_accepted_total"), 1.0);
