@@ -33,6 +33,9 @@ ServerFlags::ServerFlags(CLI::App& app)
   app.add_option("--metrics-listen", o.metrics_listen,
                  "Prometheus /metrics address, host:port; empty switches it off")
       ->group("Service");
+  app.add_option("--instance", o.instance,
+                 "This replica's name, sent in every reply and in GetInfo; default: the host name")
+      ->group("Service");
   app.add_option("--log-level", log_level_, "trace, debug, info, warn, error, critical or off")
       ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error", "critical", "off"}))
       ->group("Service");

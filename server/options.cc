@@ -4,6 +4,8 @@
 #include <cmath>
 #include <thread>
 
+#include <unistd.h>
+
 #include "absl/strings/str_cat.h"
 
 namespace cloudcast::server {
@@ -366,6 +368,13 @@ v1::StreamConfig DefaultStreamConfig(const ServerOptions& options) {
   dc->set_max_position_error(s.draco.max_position_error);
   c.set_delivery(s.delivery == Delivery::kAll ? v1::DELIVERY_ALL : v1::DELIVERY_LATEST);
   return c;
+}
+
+std::string ServerOptions::ResolvedInstance() const {
+  if (!instance.empty()) return instance;
+  char host[256] = {};
+  if (gethostname(host, sizeof host - 1) != 0 || host[0] == '\0') return "cloudcast";
+  return host;
 }
 
 }  // namespace cloudcast::server

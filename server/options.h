@@ -59,6 +59,8 @@ struct ServerOptions {
   std::chrono::milliseconds shutdown_grace{5'000};
   // host:port for Prometheus' /metrics; empty switches the HTTP exporter off.
   std::string metrics_listen = "0.0.0.0:9464";
+  // This replica's name, sent in every reply and in GetInfo. Empty: the host name.
+  std::string instance;
   StageDefaults defaults;
 
   // Everything in range: threads >= 0, positive limits, max_queued_frames >= 1, sane defaults.
@@ -66,6 +68,8 @@ struct ServerOptions {
   absl::Status Validate() const;
   // `threads`, or the number of cores when it is 0 (at least 1).
   int ResolvedThreads() const;
+  // `instance`, or the host name when it is empty.
+  std::string ResolvedInstance() const;
 };
 
 // A StreamConfig resolved against the server defaults and validated: everything a frame needs.

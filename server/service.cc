@@ -237,7 +237,7 @@ class CloudCastService::StreamReactor final
           return;
         }
         // The previous config stays; the client hears why in order with its frames.
-        QueueError(job, 0, "", settings.status());
+        QueueError(job, 0, "", v1::ERROR_KIND_CONFIG, settings.status());
         return;
       }
       case v1::StreamRequest::kFrame: {
@@ -252,7 +252,7 @@ class CloudCastService::StreamReactor final
         return;
       }
       default:
-        QueueError(job, 0, "",
+        QueueError(job, 0, "", v1::ERROR_KIND_REQUEST,
                    absl::InvalidArgumentError(
                        "request: a StreamRequest must hold a config or a frame; it held neither"));
         return;
@@ -260,7 +260,7 @@ class CloudCastService::StreamReactor final
   }
 
   void QueueError(Job* job, std::uint64_t sequence, const std::string& frame_id,
-                  const absl::Status& status) {
+                  v1::ErrorKind kind, const absl::Status& status) {
     LogFrameError(peer_, status);
     service_->metrics_->FrameErrors(status.code()).Increment();
     job->request.Clear();
@@ -270,6 +270,8 @@ class CloudCastService::StreamReactor final
     error->set_frame_id(frame_id);
     error->set_code(static_cast<int>(status.code()));
     error->set_message(std::string(status.message()));
+    error->set_kind(kind);
+    error->set_server_instance(service_->instance_);
     pending_.push_back(job);
     ++held_;
     service_->NoteQueued(held_);
@@ -433,6 +435,7 @@ class CloudCastService::StreamReactor final
       if (status.ok()) {
         cloud->mutable_times()->set_queue_us(Micros(start - job->received));
         cloud->set_receive_time_unix_ns(job->received_unix_ns);
+        cloud->set_server_instance(service_->instance_);
         metrics.frames_processed.Increment();
         metrics.pipeline_seconds.Observe(costs.pipeline_seconds);
         metrics.encode_seconds.Observe(costs.encode_seconds);
@@ -448,6 +451,8 @@ class CloudCastService::StreamReactor final
         error->set_frame_id(frame_id);
         error->set_code(static_cast<int>(status.code()));
         error->set_message(std::string(status.message()));
+        error->set_kind(v1::ERROR_KIND_FRAME);
+        error->set_server_instance(service_->instance_);
       }
       metrics.core_cpu_seconds.Increment(costs.core_cpu_seconds);
       // The pixels are no longer needed; free them before the reply waits for the writer.
@@ -531,6 +536,7 @@ class RejectedStream final : public grpc::ServerBidiReactor<v1::StreamRequest, v
 
 CloudCastService::CloudCastService(const ServerOptions& options, Metrics* metrics)
     : options_(options),
+      instance_(options.ResolvedInstance()),
       default_settings_(std::make_shared<const StreamSettings>(DefaultSettings(options))),
       metrics_(metrics),
       processors_([&] {
@@ -609,6 +615,7 @@ grpc::ServerUnaryReactor* CloudCastService::Process(grpc::CallbackServerContext*
           reply->mutable_times()->set_queue_us(Micros(start - received));
           reply->set_receive_time_unix_ns(received_ns);
           reply->set_send_time_unix_ns(UnixNanos());
+          reply->set_server_instance(instance_);
           metrics_->frames_processed.Increment();
           metrics_->pipeline_seconds.Observe(costs.pipeline_seconds);
           metrics_->encode_seconds.Observe(costs.encode_seconds);
@@ -653,6 +660,7 @@ grpc::ServerUnaryReactor* CloudCastService::GetInfo(grpc::CallbackServerContext*
   for (const char* f : {"png", "jpeg", "tiff", "pnm", "pfm"}) info->add_image_formats(f);
   info->set_worker_threads(static_cast<std::uint32_t>(pool_.size()));
   info->set_draco_version(draco::kDracoVersion);
+  info->set_instance(instance_);
   grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
   reactor->Finish(grpc::Status::OK);
   return reactor;

@@ -79,6 +79,7 @@ class CloudCastService final : public v1::CloudCast::CallbackService {
   void Housekeeping();
 
   const ServerOptions options_;
+  const std::string instance_;  // sent in every reply
   const std::shared_ptr<const StreamSettings> default_settings_;
   Metrics* const metrics_;
   // Before pool_: the workers use them until the pool is stopped.

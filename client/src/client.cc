@@ -65,13 +65,10 @@ void DecodeInto(bool decode, Result* result) {
   result->times.decode_us = MicrosSince(start);
 }
 
-// Whether a stream's FrameError answers a request other than a frame. The protocol gives such
-// errors sequence 0 and an empty frame_id, which a frame may have too; what tells them apart is
-// the field the message names first ("config.voxel_grid.leaf ...", "request: ...").
+// Whether a stream's FrameError answers a request other than a frame (a StreamConfig, or a
+// request with neither a config nor a frame). Servers older than FrameError.kind leave it unset.
 bool AnswersNoFrame(const v1::FrameError& error) {
-  if (error.sequence() != 0 || !error.frame_id().empty()) return false;
-  const std::string& m = error.message();
-  return m.rfind("config.", 0) == 0 || m.rfind("config:", 0) == 0 || m.rfind("request:", 0) == 0;
+  return error.kind() == v1::ERROR_KIND_CONFIG || error.kind() == v1::ERROR_KIND_REQUEST;
 }
 
 // What the reader needs to know about a frame in flight.
@@ -179,7 +176,7 @@ struct Stream::Impl {
         result->frames_dropped = error.frames_dropped();
         if (AnswersNoFrame(error)) {
           answers_frame = false;
-          result->config_rejected = error.message().rfind("config", 0) == 0;
+          result->config_rejected = error.kind() == v1::ERROR_KIND_CONFIG;
         }
         break;
       }
