@@ -15,13 +15,13 @@
 
 #include "cloudcast/core/camera.h"
 #include "cloudcast/core/filters.h"
-#include "cloudcast/core/image_io.h"
 #include "cloudcast/core/pipeline.h"
-#include "cloudcast/core/synthetic.h"
-#include "cloudcast/core/tsukuba.h"
+#include "cloudcast/datasets/synthetic.h"
+#include "cloudcast/datasets/tsukuba.h"
+#include "cloudcast/io/image_io.h"
+#include "cloudcast/reference/pcl_reference.h"
 #include "draco_table.h"
 #include "open3d_voxel.h"
-#include "pcl_reference.h"
 
 namespace cloudcast::bench {
 namespace {
@@ -83,8 +83,8 @@ Frame SyntheticFrameAt(std::uint32_t w, std::uint32_t h, std::uint64_t index,
     std::exit(1);
   }
   Frame f;
-  f.name = "synthetic " + std::to_string(w) + "x" + std::to_string(h) + " #" +
-           std::to_string(index);
+  f.name =
+      "synthetic " + std::to_string(w) + "x" + std::to_string(h) + " #" + std::to_string(index);
   f.camera = r->camera;
   f.disparity.width = f.colour.width = w;
   f.disparity.height = f.colour.height = h;
@@ -168,8 +168,8 @@ struct StageResult {
 void PrintStageTable(const std::vector<StageResult>& stages, std::size_t anchor,
                      const std::string& anchor_name, std::ostream& out) {
   char line[256];
-  std::snprintf(line, sizeof line, "%-12s %9s %9s %9s %9s | %8s %8s %7s | %s\n", "stage",
-                "PCL new", "PCL reuse", "Open3D", "cloudcast", "speedup", "vs reuse", "target",
+  std::snprintf(line, sizeof line, "%-12s %9s %9s %9s %9s | %8s %8s %7s | %s\n", "stage", "PCL new",
+                "PCL reuse", "Open3D", "cloudcast", "speedup", "vs reuse", "target",
                 ("points out, " + anchor_name + " (PCL / ours)").c_str());
   out << line;
   for (const StageResult& s : stages) {
@@ -181,15 +181,14 @@ void PrintStageTable(const std::vector<StageResult>& stages, std::size_t anchor,
       std::snprintf(o3d, sizeof o3d, "%.3f", StageResult::MeanOfMedians(s.open3d));
     }
     std::snprintf(line, sizeof line,
-                  "%-12s %9.3f %9.3f %9s %9.3f | %7.1fx %7.1fx %7s | %zu / %zu\n",
-                  s.name.c_str(), pcl, reused, o3d, ours, pcl / ours, reused / ours,
-                  s.target.c_str(), s.pcl_points[anchor], s.ours_points[anchor]);
+                  "%-12s %9.3f %9.3f %9s %9.3f | %7.1fx %7.1fx %7s | %zu / %zu\n", s.name.c_str(),
+                  pcl, reused, o3d, ours, pcl / ours, reused / ours, s.target.c_str(),
+                  s.pcl_points[anchor], s.ours_points[anchor]);
     out << line;
     if (s.has_open3d()) {
       std::snprintf(line, sizeof line, "%-12s %9s %9s %9s %9s | %7.1fx %8s %7s | %zu (Open3D)\n",
-                    "  vs Open3D", "", "", "", "",
-                    StageResult::MeanOfMedians(s.open3d) / ours, "", ">=15x",
-                    s.open3d_points[anchor]);
+                    "  vs Open3D", "", "", "", "", StageResult::MeanOfMedians(s.open3d) / ours, "",
+                    ">=15x", s.open3d_points[anchor]);
       out << line;
     }
   }
@@ -211,16 +210,16 @@ constexpr double kPlatformOpen3dVoxelMs = 5.20;
 void PrintAnchorTable(const std::vector<StageResult>& stages, std::size_t anchor,
                       bool tsukuba_00001, std::ostream& out) {
   char line[256];
-  std::snprintf(line, sizeof line, "%-12s %9s %9s %9s %9s | %8s %8s %9s %7s\n", "stage",
-                "PCL new", "PCL reuse", "Open3D", "cloudcast", "speedup", "vs reuse",
-                "vs anchor", "target");
+  std::snprintf(line, sizeof line, "%-12s %9s %9s %9s %9s | %8s %8s %9s %7s\n", "stage", "PCL new",
+                "PCL reuse", "Open3D", "cloudcast", "speedup", "vs reuse", "vs anchor", "target");
   out << line;
   for (const StageResult& s : stages) {
     const double pcl = s.pcl[anchor].Median(), ours = s.ours[anchor].Median();
     char o3d[32] = "-";
     if (s.has_open3d()) std::snprintf(o3d, sizeof o3d, "%.3f", s.open3d[anchor].Median());
     char vs_anchor[32] = "-";
-    if (tsukuba_00001) std::snprintf(vs_anchor, sizeof vs_anchor, "%.1fx", PlatformAnchorMs(s.name) / ours);
+    if (tsukuba_00001)
+      std::snprintf(vs_anchor, sizeof vs_anchor, "%.1fx", PlatformAnchorMs(s.name) / ours);
     std::snprintf(line, sizeof line, "%-12s %9.3f %9.3f %9s %9.3f | %7.1fx %7.1fx %9s %7s\n",
                   s.name.c_str(), pcl, s.pcl_reused[anchor].Median(), o3d, ours, pcl / ours,
                   s.pcl_reused[anchor].Median() / ours, vs_anchor, s.target.c_str());
@@ -230,8 +229,8 @@ void PrintAnchorTable(const std::vector<StageResult>& stages, std::size_t anchor
         std::snprintf(vs_anchor, sizeof vs_anchor, "%.1fx", kPlatformOpen3dVoxelMs / ours);
       }
       std::snprintf(line, sizeof line, "%-12s %9s %9s %9s %9s | %7.1fx %8s %9s %7s\n",
-                    "  vs Open3D", "", "", "", "", s.open3d[anchor].Median() / ours, "",
-                    vs_anchor, ">=15x");
+                    "  vs Open3D", "", "", "", "", s.open3d[anchor].Median() / ours, "", vs_anchor,
+                    ">=15x");
       out << line;
     }
   }
@@ -466,8 +465,8 @@ int Main(int argc, char** argv) {
       const double pixels = double(w) * h;
       const double ns = s.Median() * 1e6 / pixels;
       if (base_ns == 0) base_ns = ns;
-      std::snprintf(line, sizeof line, "%4ux%-5u %10.0f %10zu %10.3f %12.3f %9.2fx\n", w, h,
-                    pixels, out.size(), s.Median(), ns, ns / base_ns);
+      std::snprintf(line, sizeof line, "%4ux%-5u %10.0f %10zu %10.3f %12.3f %9.2fx\n", w, h, pixels,
+                    out.size(), s.Median(), ns, ns / base_ns);
       std::cout << line;
       scaling.push_back({{"width", w},
                          {"height", h},

@@ -36,10 +36,10 @@
 
 #include "cloudcast/client/client.h"
 #include "cloudcast/client/config.h"
-#include "cloudcast/core/image_io.h"
-#include "cloudcast/core/synthetic.h"
-#include "cloudcast/core/tsukuba.h"
-#include "metrics_scrape.h"
+#include "cloudcast/datasets/synthetic.h"
+#include "cloudcast/datasets/tsukuba.h"
+#include "cloudcast/io/image_io.h"
+#include "cloudcast/testing/metrics_scrape.h"
 
 namespace cloudcast::bench {
 namespace {
@@ -115,7 +115,7 @@ class ServerProcess {
   int metrics_port() const { return metrics_port_; }
   double CoreCpuSeconds() const {
     return server::MetricValue(server::ScrapeMetrics(metrics_port_),
-                              "cloudcast_core_cpu_seconds_total");
+                               "cloudcast_core_cpu_seconds_total");
   }
 
  private:
@@ -294,8 +294,8 @@ std::vector<Frame> LoadFrames(const std::string& dir) {
       o.disparity_encoding = DisparityEncoding::kU8;
       auto r = SyntheticScene::Default().Render(o);
       Frame f;
-      f.disparity = OwnedDisparity{std::move(r->disparity), o.width, o.height,
-                                   DisparityEncoding::kU8};
+      f.disparity =
+          OwnedDisparity{std::move(r->disparity), o.width, o.height, DisparityEncoding::kU8};
       f.colour = OwnedColor{std::move(r->colour), o.width, o.height, ColorEncoding::kBGR8};
       frames.push_back(std::move(f));
     }
@@ -362,8 +362,8 @@ int Main(int argc, char** argv) {
     png_bytes += f.disparity_png.size() + f.colour_png.size();
   }
   std::cout << frames.size() << " frames of " << frames[0].disparity.width << "x"
-            << frames[0].disparity.height << ": " << raw_bytes / frames.size() / 1024
-            << " KB raw, " << png_bytes / frames.size() / 1024 << " KB as PNG per frame\n";
+            << frames[0].disparity.height << ": " << raw_bytes / frames.size() / 1024 << " KB raw, "
+            << png_bytes / frames.size() / 1024 << " KB as PNG per frame\n";
   ServerProcess server(server_bin, threads);
   // Wait for the server to answer.
   {

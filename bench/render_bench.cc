@@ -19,10 +19,10 @@
 
 #include "cloudcast/core/camera.h"
 #include "cloudcast/core/filters.h"
-#include "cloudcast/core/image_io.h"
 #include "cloudcast/core/pipeline.h"
-#include "cloudcast/core/synthetic.h"
-#include "cloudcast/core/tsukuba.h"
+#include "cloudcast/datasets/synthetic.h"
+#include "cloudcast/datasets/tsukuba.h"
+#include "cloudcast/io/image_io.h"
 #include "cloudcast/render/renderer.h"
 #include "pclvis_bench.h"
 

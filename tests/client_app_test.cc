@@ -35,9 +35,9 @@
 #include "app/viewer.h"
 #include "cloudcast/client/client.h"
 #include "cloudcast/client/opencv.h"
-#include "cloudcast/core/cloud_io.h"
-#include "cloudcast/core/synthetic.h"
-#include "server.h"  // cloudcast_server_lib
+#include "cloudcast/datasets/synthetic.h"
+#include "cloudcast/io/cloud_io.h"
+#include "cloudcast/server/server.h"  // cloudcast_server_lib
 #include "program_support.h"
 #include "test_support.h"
 #include "xvfb_support.h"
@@ -942,7 +942,7 @@ TEST_F(ClientProgramTest, BadFlagsAndFilesGiveClearErrors) {
       {{"--synthetic", "0x5"}, 2, "--synthetic"},
       {{"--encoding", "webp"}, 2, "--encoding"},
       {{"--record-format", "xyz"}, 2, "--record-format"},
-      {{"--min", "5", "--max", "1"}, 2, "--min (5) must not be greater than --max (1)"},
+      {{"--min", "5", "--max", "1"}, 2, "--min (5) must not exceed --max (1)"},
       {{"--synthetic", "64x48", "--tsukuba", "x"}, 2, "choose one source"},
       {{"--disparity-glob", "d/*.png"}, 2, "needs --colour-glob"},
       {{"--no-window", "--snapshot", Path("a.png")}, 2, "--snapshot needs a window"},

@@ -8,6 +8,13 @@
 // point count, and a one-to-one matching in which every point lies within the reply's
 // position_error_bound per coordinate (Draco's quantization) with the exact colour (8-bit
 // colour is lossless).
+#include "cloudcast/client/client.h"
+
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -16,6 +23,9 @@
 #include <cstring>
 #include <memory>
 #include <mutex>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 #include <string>
 #include <thread>
 #include <tuple>
@@ -23,25 +33,15 @@
 #include <utility>
 #include <vector>
 
-#include <arpa/inet.h>
-#include <netinet/in.h>
-#include <sys/socket.h>
-#include <unistd.h>
-
-#include <opencv2/core.hpp>
-#include <opencv2/imgcodecs.hpp>
-#include <opencv2/imgproc.hpp>
-
-#include "cloudcast/client/client.h"
 #include "cloudcast/client/config.h"
 #include "cloudcast/client/opencv.h"
 #include "cloudcast/core/image.h"
-#include "cloudcast/core/image_io.h"
 #include "cloudcast/core/pipeline.h"
 #include "cloudcast/core/point.h"
-#include "cloudcast/core/synthetic.h"
+#include "cloudcast/datasets/synthetic.h"
+#include "cloudcast/io/image_io.h"
+#include "cloudcast/server/server.h"  // cloudcast_server_lib
 #include "gtest/gtest.h"
-#include "server.h"  // cloudcast_server_lib
 #include "test_support.h"
 
 namespace cloudcast::client {

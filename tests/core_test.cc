@@ -97,7 +97,7 @@ TEST(Validation, BadFramesGetErrorsNamingTheField) {
 
   DisparityView d = f.disparity;
   d.size_bytes -= 1;
-  EXPECT_THAT(run(d, f.colour), StatusMentions("disparity buffer holds 47 bytes"));
+  EXPECT_THAT(run(d, f.colour), StatusMentions("disparity.data holds 47 bytes"));
   d = f.disparity;
   d.stride_bytes = 7;
   EXPECT_THAT(run(d, f.colour), StatusMentions("disparity.stride_bytes"));
@@ -106,10 +106,10 @@ TEST(Validation, BadFramesGetErrorsNamingTheField) {
   EXPECT_THAT(run(d, f.colour), StatusMentions("disparity.data is null"));
   d = f.disparity;
   d.width = 0;
-  EXPECT_THAT(run(d, f.colour), StatusMentions("disparity is empty"));
+  EXPECT_THAT(run(d, f.colour), StatusMentions("disparity.width is 0"));
   d = f.disparity;
   d.height = 0;
-  EXPECT_THAT(run(d, f.colour), StatusMentions("disparity is empty"));
+  EXPECT_THAT(run(d, f.colour), StatusMentions("disparity.height is 0"));
   d = f.disparity;
   d.width = 100000;
   d.height = 100000;
@@ -124,7 +124,7 @@ TEST(Validation, BadFramesGetErrorsNamingTheField) {
 
   ColorView c = f.colour;
   c.size_bytes = 10;
-  EXPECT_THAT(run(f.disparity, c), StatusMentions("colour buffer holds 10 bytes"));
+  EXPECT_THAT(run(f.disparity, c), StatusMentions("colour.data holds 10 bytes"));
   c = f.colour;
   c.width = 7;
   c.stride_bytes = 21;

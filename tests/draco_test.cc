@@ -502,10 +502,10 @@ TEST(DracoOptions, BadValuesNameTheField) {
     void (*set)(DracoOptions*);
   };
   const Case cases[] = {
-      {"draco.position_bits must be in [1, 30], got 0",
+      {"draco.position_bits is 0; it must be in [1, 30]",
        [](DracoOptions* o) { o->position_bits = 0; }},
       {"draco.position_bits", [](DracoOptions* o) { o->position_bits = 31; }},
-      {"draco.color_bits must be in [1, 8], got 9", [](DracoOptions* o) { o->color_bits = 9; }},
+      {"draco.color_bits is 9; it must be in [1, 8]", [](DracoOptions* o) { o->color_bits = 9; }},
       {"draco.color_bits", [](DracoOptions* o) { o->color_bits = 0; }},
       {"draco.encode_speed", [](DracoOptions* o) { o->encode_speed = -1; }},
       {"draco.encode_speed", [](DracoOptions* o) { o->encode_speed = 11; }},

@@ -1,17 +1,16 @@
 // cloudcast against stock PCL 1.13, stage by stage and for the whole chain: on the ten real
 // New Tsukuba frames and on randomised frames (encodings, sizes, leaves, axes, limits).
 #include <gtest/gtest.h>
+#include <pcl/common/common.h>
+#include <pcl/common/point_tests.h>
 
 #include <random>
 
 #include "cloudcast/core/camera.h"
 #include "cloudcast/core/filters.h"
-#include "cloudcast/core/image_io.h"
 #include "cloudcast/core/pipeline.h"
-#include <pcl/common/common.h>
-#include <pcl/common/point_tests.h>
-
-#include "pcl_reference.h"
+#include "cloudcast/io/image_io.h"
+#include "cloudcast/reference/pcl_reference.h"
 #include "test_support.h"
 
 namespace cloudcast {
@@ -54,8 +53,8 @@ bool ExpectSameAsPcl(const DisparityView& disparity, const ColorView& colour,
     // Same layout helper, then depths: z = fx*B / (d*s + o) exactly as ours (see camera.h).
     DisparityView as_u8 = disparity;  // MakePclFrame only needs the colour here
     std::vector<std::uint8_t> zeros(std::size_t{disparity.width} * disparity.height, 0);
-    as_u8 = DisparityView{zeros.data(), zeros.size(), disparity.width, disparity.height,
-                          disparity.width, DisparityEncoding::kU8};
+    as_u8 = DisparityView{zeros.data(),     zeros.size(),    disparity.width,
+                          disparity.height, disparity.width, DisparityEncoding::kU8};
     pf = reference::MakePclFrame(as_u8, colour);
     std::vector<float> depth(zeros.size(), 0.0f);
     const float fxb = static_cast<float>(camera.fx * camera.baseline);
@@ -173,8 +172,7 @@ TEST_P(TsukubaEquivalence, OtherStageSettingsMatchPcl) {
   anisotropic.leaf_x = 0.05f;
   anisotropic.leaf_y = 0.02f;
   anisotropic.leaf_z = 0.08f;
-  ExpectSameAsPcl(t.disparity.view(), t.colour.view(), camera, negative, anisotropic,
-                  "negative z");
+  ExpectSameAsPcl(t.disparity.view(), t.colour.view(), camera, negative, anisotropic, "negative z");
   VoxelGridParams off;
   off.enabled = false;
   ExpectSameAsPcl(t.disparity.view(), t.colour.view(), camera, PassThroughParams{}, off,
@@ -202,12 +200,13 @@ TEST(OverflowCase, Frame01200WithoutPassthrough) {
   EXPECT_EQ(pcl_voxel.size(), organized->size()) << "PCL is expected to give up here";
 
   PointCloud ours_organized, ours_voxel, fused;
-  ASSERT_TRUE(ConvertToOrganized(camera, t.disparity.view(), t.colour.view(), &ours_organized).ok());
+  ASSERT_TRUE(
+      ConvertToOrganized(camera, t.disparity.view(), t.colour.view(), &ours_organized).ok());
   VoxelGrid grid;
   ASSERT_TRUE(grid.Filter(ours_organized, voxel, &ours_voxel).ok());
   const PointCloud brute = testing::BruteForceVoxelGrid(ours_organized, voxel);
   EXPECT_LT(brute.size(), organized->size());  // really downsampled (about 80% remain: far
-                                                // surfaces are sparse at 3 cm)
+                                               // surfaces are sparse at 3 cm)
   EXPECT_TRUE(CloudsMatch(brute, ours_voxel, 1e-5, 0));
   Pipeline pipeline;
   PipelineOptions options;
@@ -270,17 +269,16 @@ TEST_P(RandomEquivalence, MatchesPcl) {
     voxel.leaf_z = (rng() % 2) ? voxel.leaf_x : leaves[rng() % 5] * z_scale;
     voxel.min_points_per_voxel = rng() % 4;
     pcl_gave_up += ExpectSameAsPcl(f.disparity, f.colour, camera, pass, voxel,
-                    "seed " + std::to_string(GetParam()) + " round " + std::to_string(round) +
-                        " " + std::string(Name(de)) + "/" + std::string(Name(ce)) + " " +
-                        std::to_string(w) + "x" + std::to_string(h) + " axis " +
-                        std::string(Name(pass.axis)));
+                                   "seed " + std::to_string(GetParam()) + " round " +
+                                       std::to_string(round) + " " + std::string(Name(de)) + "/" +
+                                       std::string(Name(ce)) + " " + std::to_string(w) + "x" +
+                                       std::to_string(h) + " axis " + std::string(Name(pass.axis)));
   }
   // Most rounds must be compared with PCL itself, not only with the brute-force definition.
   EXPECT_LE(pcl_gave_up, kRounds / 2);
 }
 
 INSTANTIATE_TEST_SUITE_P(Seeds, RandomEquivalence, ::testing::Range(0, 20));
-
 
 }  // namespace
 }  // namespace cloudcast

@@ -31,14 +31,14 @@
 #include <vector>
 
 #include "cloudcast/core/camera.h"
-#include "cloudcast/core/cloud_io.h"
 #include "cloudcast/core/draco_codec.h"
 #include "cloudcast/core/filters.h"
-#include "cloudcast/core/image_io.h"
 #include "cloudcast/core/pipeline.h"
 #include "cloudcast/core/point.h"
-#include "cloudcast/core/synthetic.h"
-#include "pcl_reference.h"
+#include "cloudcast/datasets/synthetic.h"
+#include "cloudcast/io/cloud_io.h"
+#include "cloudcast/io/image_io.h"
+#include "cloudcast/reference/pcl_reference.h"
 #include "program_support.h"
 #include "test_support.h"
 
@@ -857,7 +857,7 @@ const std::vector<BadCase>& BadCases() {
       {"MismatchedSizes",
        {"--colour", "@small.png", "--disparity", "@d.png"},
        1,
-       {"32x48", "64x48", "must match"}},
+       {"32x48", "64x48", "must be the same size"}},
       {"ColourWithoutDisparity", {"--colour", "@c.png"}, 2, {"--disparity"}},
       {"DisparityWithoutColour", {"--disparity", "@d.png"}, 2, {"--colour"}},
       {"FilesAndSynthetic",

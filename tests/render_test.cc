@@ -22,8 +22,8 @@
 #include <string>
 #include <vector>
 
-#include "cloudcast/core/cloud_io.h"
 #include "cloudcast/core/point.h"
+#include "cloudcast/io/cloud_io.h"
 #include "cloudcast/render/renderer.h"
 #include "test_support.h"
 #include "xvfb_support.h"

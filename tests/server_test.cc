@@ -3,7 +3,7 @@
 //
 // Frames: the New Tsukuba sample when it is there, else frames of the synthetic scene (same size,
 // same camera), so that every test runs on a fresh machine.
-#include "server.h"
+#include "cloudcast/server/server.h"
 
 #include <arpa/inet.h>
 #include <google/protobuf/descriptor.pb.h>
@@ -34,15 +34,16 @@
 #include <tuple>
 #include <vector>
 
-#include "cli.h"
 #include "cloudcast/core/draco_codec.h"
-#include "cloudcast/core/image_io.h"
 #include "cloudcast/core/pipeline.h"
-#include "cloudcast/core/synthetic.h"
+#include "cloudcast/datasets/synthetic.h"
+#include "cloudcast/io/image_io.h"
+#include "cloudcast/server/cli.h"
+#include "cloudcast/server/options.h"
+#include "cloudcast/testing/metrics_scrape.h"
 #include "cloudcast/v1/cloudcast.grpc.pb.h"
 #include "frame_input.h"
-#include "metrics_scrape.h"
-#include "options.h"
+#include "service.h"
 #include "test_support.h"
 
 namespace cloudcast::server {
@@ -1505,45 +1506,6 @@ TEST(ServerMetricsTest, PrometheusEndpointServesTheCounters) {
 // ---------------------------------------------------------------------------------------------
 // Pieces of the server library.
 
-TEST(ServerOptionsTest, StreamConfigResolvesFieldByFieldAgainstTheDefaults) {
-  ServerOptions options;
-  options.defaults.leaf = 0.05f;
-  v1::StreamConfig config;
-  config.mutable_camera()->set_fx(700);
-  auto s = ResolveStreamConfig(config, options);
-  ASSERT_TRUE(s.ok()) << s.status();
-  EXPECT_EQ(s->camera.fx, 700);
-  EXPECT_EQ(s->camera.fy, 700);  // follows fx
-  EXPECT_FALSE(s->has_cx);
-  EXPECT_EQ(s->ForFrame(641, 481).camera.cx, 320);  // integer division, as PCL
-  EXPECT_EQ(s->ForFrame(641, 481).camera.cy, 240);
-  EXPECT_FLOAT_EQ(s->voxel.leaf_x, 0.05f);
-  EXPECT_FLOAT_EQ(s->draco.max_position_error, 0.05f / 4);
-  EXPECT_EQ(s->delivery, Delivery::kLatest);
-
-  config.mutable_voxel_grid()->set_leaf(0.2f);
-  config.mutable_voxel_grid()->set_leaf_z(0.08f);
-  config.mutable_camera()->mutable_invalid_disparities();  // set, empty: no invalid values
-  s = ResolveStreamConfig(config, options);
-  ASSERT_TRUE(s.ok());
-  EXPECT_FLOAT_EQ(s->voxel.leaf_y, 0.2f);
-  EXPECT_FLOAT_EQ(s->voxel.leaf_z, 0.08f);
-  EXPECT_FLOAT_EQ(s->draco.max_position_error, 0.02f);  // a quarter of the smallest leaf
-  EXPECT_TRUE(s->camera.invalid_disparities.empty());
-
-  config.mutable_voxel_grid()->set_enabled(false);
-  s = ResolveStreamConfig(config, options);
-  ASSERT_TRUE(s.ok());
-  EXPECT_EQ(s->draco.max_position_error, 0.0f);
-
-  // A server with the grid off by default: a client that names a leaf turns it on.
-  options.defaults.leaf = 0;
-  v1::StreamConfig with_leaf;
-  with_leaf.mutable_voxel_grid()->set_leaf(0.1f);
-  EXPECT_TRUE(ResolveStreamConfig(with_leaf, options)->voxel.enabled);
-  EXPECT_FALSE(ResolveStreamConfig(v1::StreamConfig(), options)->voxel.enabled);
-}
-
 TEST(ServerOptionsTest, FlagsAndConfigFile) {
   const std::string path = (std::filesystem::temp_directory_path() /
                             ("cloudcast_server_test_" + std::to_string(getpid()) + ".toml"))
@@ -1563,7 +1525,7 @@ TEST(ServerOptionsTest, FlagsAndConfigFile) {
   EXPECT_EQ(options->max_streams, 8u);
   EXPECT_EQ(options->idle_timeout, milliseconds(2500));
   EXPECT_EQ(options->defaults.delivery, Delivery::kAll);
-  EXPECT_FLOAT_EQ(options->defaults.leaf, 0.07f);  // the command line wins
+  EXPECT_FLOAT_EQ(options->defaults.frame.pipeline.voxel.leaf_x, 0.07f);  // the command line wins
   EXPECT_EQ(options->listen, "127.0.0.1:6000");
   EXPECT_EQ(options->max_queued_frames, 4u);  // untouched default
   std::filesystem::remove(path);

@@ -1,7 +1,7 @@
 // The synthetic scene is the project's ground truth: these tests check that what it renders is
 // exactly the geometry it claims (points converted from its disparities lie on its surfaces),
 // that every encoding and size renders, and that it exercises the paper's filters meaningfully.
-#include "cloudcast/core/synthetic.h"
+#include "cloudcast/datasets/synthetic.h"
 
 #include <cmath>
 #include <cstdint>

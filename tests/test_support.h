@@ -18,7 +18,7 @@
 #include "cloudcast/core/filters.h"
 #include "cloudcast/core/image.h"
 #include "cloudcast/core/point.h"
-#include "cloudcast/core/tsukuba.h"
+#include "cloudcast/datasets/tsukuba.h"
 
 namespace cloudcast::testing {
 
@@ -32,13 +32,13 @@ inline std::string TsukubaColourPath(const std::string& id) {
   return tsukuba::ColourPath(TsukubaDir(), id);
 }
 inline bool HaveTsukuba() { return tsukuba::Present(TsukubaDir()); }
-#define CLOUDCAST_REQUIRE_TSUKUBA()                                                         \
-  do {                                                                                      \
-    if (!::cloudcast::testing::HaveTsukuba()) {                                             \
+#define CLOUDCAST_REQUIRE_TSUKUBA()                                                          \
+  do {                                                                                       \
+    if (!::cloudcast::testing::HaveTsukuba()) {                                              \
       GTEST_SKIP() << "New Tsukuba data not found at " << ::cloudcast::testing::TsukubaDir() \
-                   << " (set CLOUDCAST_DATA to the folder holding groundtruth/ and "        \
-                      "illumination/); this test needs the real frames";                    \
-    }                                                                                       \
+                   << " (set CLOUDCAST_DATA to the folder holding groundtruth/ and "         \
+                      "illumination/); this test needs the real frames";                     \
+    }                                                                                        \
   } while (0)
 
 // A frame that owns its bytes, with views over them. Rows may be padded (stride > row bytes).
@@ -48,14 +48,15 @@ struct TestFrame {
   ColorView colour;
 };
 
-inline TestFrame MakeFrame(std::uint32_t w, std::uint32_t h, DisparityEncoding de,
-                           ColorEncoding ce, std::size_t row_padding = 0) {
+inline TestFrame MakeFrame(std::uint32_t w, std::uint32_t h, DisparityEncoding de, ColorEncoding ce,
+                           std::size_t row_padding = 0) {
   TestFrame f;
   const std::size_t dstride = w * BytesPerPixel(de) + row_padding * BytesPerPixel(de);
   const std::size_t cstride = w * BytesPerPixel(ce) + row_padding;
   f.disparity_bytes.assign(dstride * h, 0);
   f.colour_bytes.assign(cstride * h, 0);
-  f.disparity = DisparityView{f.disparity_bytes.data(), f.disparity_bytes.size(), w, h, dstride, de};
+  f.disparity =
+      DisparityView{f.disparity_bytes.data(), f.disparity_bytes.size(), w, h, dstride, de};
   f.colour = ColorView{f.colour_bytes.data(), f.colour_bytes.size(), w, h, cstride, ce};
   return f;
 }
@@ -69,8 +70,8 @@ inline void SetSample(TestFrame& f, std::uint32_t u, std::uint32_t v, T value) {
 // Random frame: a smooth tilted surface (so voxels hold many points) with random holes (zeros),
 // random spikes and random colours. `raw_max` bounds the raw disparity value.
 inline TestFrame RandomFrame(std::mt19937& rng, std::uint32_t w, std::uint32_t h,
-                             DisparityEncoding de, ColorEncoding ce, double raw_min,
-                             double raw_max, double hole_rate = 0.05) {
+                             DisparityEncoding de, ColorEncoding ce, double raw_min, double raw_max,
+                             double hole_rate = 0.05) {
   TestFrame f = MakeFrame(w, h, de, ce, /*row_padding=*/rng() % 3);
   std::uniform_real_distribution<double> unit(0.0, 1.0);
   const double a = unit(rng), b = unit(rng);
@@ -147,8 +148,8 @@ inline ::testing::AssertionResult CloudsMatch(const PointCloud& reference, const
   // Bucket ours on a coarse grid; search the reference point's cell and its neighbours.
   double extent = 1e-9;
   for (const Point& p : ours.points) {
-    extent = std::max({extent, std::fabs(double(p.x)), std::fabs(double(p.y)),
-                       std::fabs(double(p.z))});
+    extent =
+        std::max({extent, std::fabs(double(p.x)), std::fabs(double(p.y)), std::fabs(double(p.z))});
   }
   const double cell = std::max(extent / 4096.0, 1e-6);
   auto key_of = [&](double x, double y, double z) {
@@ -203,9 +204,8 @@ inline ::testing::AssertionResult CloudsMatch(const PointCloud& reference, const
     if (channel_diff(RedOf(p.rgba), RedOf(q.rgba)) > colour_tol ||
         channel_diff(GreenOf(p.rgba), GreenOf(q.rgba)) > colour_tol ||
         channel_diff(BlueOf(p.rgba), BlueOf(q.rgba)) > colour_tol) {
-      return ::testing::AssertionFailure()
-             << "reference point " << r << " colour " << std::hex << p.rgba << " vs ours "
-             << q.rgba;
+      return ::testing::AssertionFailure() << "reference point " << r << " colour " << std::hex
+                                           << p.rgba << " vs ours " << q.rgba;
     }
     used[best] = true;
   }
@@ -216,9 +216,9 @@ inline ::testing::AssertionResult CloudsMatch(const PointCloud& reference, const
 // compared: PCL's OrganizedConversion push_back()s its points, which leaves it w*h x 1.
 inline ::testing::AssertionResult CloudsIdentical(const PointCloud& a, const PointCloud& b) {
   if (a.size() != b.size()) {
-    return ::testing::AssertionFailure() << "shapes differ: " << a.width << "x" << a.height << " ("
-                                         << a.size() << ") vs " << b.width << "x" << b.height
-                                         << " (" << b.size() << ")";
+    return ::testing::AssertionFailure()
+           << "shapes differ: " << a.width << "x" << a.height << " (" << a.size() << ") vs "
+           << b.width << "x" << b.height << " (" << b.size() << ")";
   }
   for (std::size_t i = 0; i < a.size(); ++i) {
     const Point& p = a.points[i];

@@ -17,7 +17,7 @@
 
 #include "cloudcast/client/client.h"
 #include "cloudcast/client/opencv.h"
-#include "cloudcast/core/synthetic.h"
+#include "cloudcast/datasets/synthetic.h"
 
 namespace cc = cloudcast::client;
 

@@ -16,6 +16,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "cloudcast/core/draco_codec.h"
+#include "cloudcast/proto/convert.h"
 #include "cloudcast/v1/cloudcast.grpc.pb.h"
 #include "frame_builder.h"
 
@@ -35,11 +36,16 @@ absl::Status FromGrpc(const grpc::Status& status, const std::string& what) {
 
 const char* StateName(grpc_connectivity_state state) {
   switch (state) {
-    case GRPC_CHANNEL_IDLE: return "IDLE";
-    case GRPC_CHANNEL_CONNECTING: return "CONNECTING";
-    case GRPC_CHANNEL_READY: return "READY";
-    case GRPC_CHANNEL_TRANSIENT_FAILURE: return "TRANSIENT_FAILURE";
-    case GRPC_CHANNEL_SHUTDOWN: return "SHUTDOWN";
+    case GRPC_CHANNEL_IDLE:
+      return "IDLE";
+    case GRPC_CHANNEL_CONNECTING:
+      return "CONNECTING";
+    case GRPC_CHANNEL_READY:
+      return "READY";
+    case GRPC_CHANNEL_TRANSIENT_FAILURE:
+      return "TRANSIENT_FAILURE";
+    case GRPC_CHANNEL_SHUTDOWN:
+      return "SHUTDOWN";
   }
   return "UNKNOWN";
 }
@@ -63,12 +69,6 @@ void DecodeInto(bool decode, Result* result) {
                                                       " has an undecodable cloud: ", s.message()));
   }
   result->times.decode_us = MicrosSince(start);
-}
-
-// Whether a stream's FrameError answers a request other than a frame (a StreamConfig, or a
-// request with neither a config nor a frame). Servers older than FrameError.kind leave it unset.
-bool AnswersNoFrame(const v1::FrameError& error) {
-  return error.kind() == v1::ERROR_KIND_CONFIG || error.kind() == v1::ERROR_KIND_REQUEST;
 }
 
 // What the reader needs to know about a frame in flight.
@@ -166,15 +166,13 @@ struct Stream::Impl {
         break;
       case v1::StreamReply::kError: {
         const v1::FrameError& error = reply.error();
-        int code = error.code();
-        if (code <= 0 || code > 16) code = static_cast<int>(absl::StatusCode::kUnknown);
-        result->status = absl::Status(static_cast<absl::StatusCode>(code), error.message());
+        result->status = convert::ToStatus(error);
         result->reply.Clear();
         result->sequence = error.sequence();
         result->frame_id = error.frame_id();
         result->capture_time_unix_ns = 0;
         result->frames_dropped = error.frames_dropped();
-        if (AnswersNoFrame(error)) {
+        if (convert::AnswersNoFrame(error)) {
           answers_frame = false;
           result->config_rejected = error.kind() == v1::ERROR_KIND_CONFIG;
         }

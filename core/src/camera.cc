@@ -1,9 +1,11 @@
 #include "cloudcast/core/camera.h"
 
 #include <cmath>
+#include <string>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
+#include "cloudcast/core/checks.h"
 
 namespace cloudcast {
 
@@ -20,36 +22,21 @@ CameraModel CameraModel::PclCompatible(std::uint32_t width, std::uint32_t height
   return c;
 }
 
-absl::Status CameraModel::Validate() const {
-  auto positive = [](const char* name, double v) -> absl::Status {
-    if (!std::isfinite(v) || v <= 0.0 || v > 1e9) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("camera.", name, " must be finite and in (0, 1e9], got ", v));
-    }
-    return absl::OkStatus();
-  };
-  auto finite = [](const char* name, double v) -> absl::Status {
-    if (!std::isfinite(v) || std::fabs(v) > 1e9) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("camera.", name, " must be finite and within +-1e9, got ", v));
-    }
-    return absl::OkStatus();
-  };
-  for (auto s : {positive("fx", fx), positive("fy", fy), positive("baseline", baseline),
-                 finite("cx", cx), finite("cy", cy), finite("disparity_offset", disparity_offset),
-                 finite("disparity_scale", disparity_scale)}) {
+absl::Status CameraModel::Validate(std::string_view field) const {
+  const std::string f(field);
+  for (absl::Status s : {check::Positive(f + ".fx", fx), check::Positive(f + ".fy", fy),
+                         check::Finite(f + ".cx", cx), check::Finite(f + ".cy", cy),
+                         check::Positive(f + ".baseline", baseline),
+                         check::NonZero(f + ".disparity_scale", disparity_scale),
+                         check::Finite(f + ".disparity_offset", disparity_offset),
+                         check::AtMost(f + ".invalid_disparities", invalid_disparities.size(),
+                                       kMaxInvalidDisparities)}) {
     if (!s.ok()) return s;
   }
-  if (disparity_scale == 0.0) {
-    return absl::InvalidArgumentError("camera.disparity_scale must not be 0");
-  }
-  if (invalid_disparities.size() > 16) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "camera.invalid_disparities holds ", invalid_disparities.size(), " values; at most 16"));
-  }
-  for (double v : invalid_disparities) {
-    if (!std::isfinite(v)) {
-      return absl::InvalidArgumentError("camera.invalid_disparities must be finite");
+  for (std::size_t i = 0; i < invalid_disparities.size(); ++i) {
+    if (!std::isfinite(invalid_disparities[i])) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          f, ".invalid_disparities must be finite; value ", i, " is ", invalid_disparities[i]));
     }
   }
   return absl::OkStatus();
@@ -57,9 +44,8 @@ absl::Status CameraModel::Validate() const {
 
 std::string CameraModel::ToString() const {
   return absl::StrCat("fx=", fx, " fy=", fy, " cx=", cx, " cy=", cy, " baseline=", baseline,
-                      " disparity_scale=", disparity_scale,
-                      " disparity_offset=", disparity_offset, " invalid={",
-                      absl::StrJoin(invalid_disparities, ","), "}");
+                      " disparity_scale=", disparity_scale, " disparity_offset=", disparity_offset,
+                      " invalid={", absl::StrJoin(invalid_disparities, ","), "}");
 }
 
 }  // namespace cloudcast

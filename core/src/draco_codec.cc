@@ -12,6 +12,7 @@
 #include <string_view>
 
 #include "absl/strings/str_cat.h"
+#include "cloudcast/core/checks.h"
 #include "cloudcast/core/limits.h"
 #include "draco/attributes/geometry_attribute.h"
 #include "draco/attributes/point_attribute.h"
@@ -46,14 +47,6 @@ constexpr std::uint64_t kMaxAttributeBytesPerPoint = 64;
 
 constexpr std::uint64_t MaxPointsFor(std::size_t bytes) {
   return std::min(kMaxDecodedPoints, std::max(kPointsFreeOfRatioCheck, kMaxPointsPerByte * bytes));
-}
-
-absl::Status CheckRange(const char* field, int value, int lo, int hi) {
-  if (value < lo || value > hi) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("draco.", field, " must be in [", lo, ", ", hi, "], got ", value));
-  }
-  return absl::OkStatus();
 }
 
 // The largest per-coordinate error of Draco 1.5.5's position quantization on a cloud whose
@@ -313,16 +306,17 @@ absl::Status DecodeCapped(std::string_view bytes, std::unique_ptr<draco::PointCl
 
 }  // namespace
 
-absl::Status DracoOptions::Validate() const {
-  for (absl::Status s :
-       {CheckRange("position_bits", position_bits, 1, kMaxPositionBits),
-        CheckRange("color_bits", color_bits, 1, 8), CheckRange("encode_speed", encode_speed, 0, 10),
-        CheckRange("decode_speed", decode_speed, 0, 10)}) {
+absl::Status DracoOptions::Validate(std::string_view field) const {
+  const std::string f(field);
+  for (absl::Status s : {check::InRange(f + ".position_bits", position_bits, 1, kMaxPositionBits),
+                         check::InRange(f + ".color_bits", color_bits, 1, 8),
+                         check::InRange(f + ".encode_speed", encode_speed, 0, 10),
+                         check::InRange(f + ".decode_speed", decode_speed, 0, 10)}) {
     if (!s.ok()) return s;
   }
   if (!std::isfinite(max_position_error) || max_position_error < 0.0f) {
     return absl::InvalidArgumentError(
-        absl::StrCat("draco.max_position_error must be finite and >= 0, got ", max_position_error));
+        absl::StrCat(f, ".max_position_error must be finite and >= 0, got ", max_position_error));
   }
   return absl::OkStatus();
 }

@@ -12,15 +12,19 @@
 #include <string>
 
 #include "absl/strings/str_cat.h"
+#include "cloudcast/core/checks.h"
 #include "kernels.h"
 
 namespace cloudcast {
 
 std::string_view Name(Axis axis) {
   switch (axis) {
-    case Axis::kX: return "x";
-    case Axis::kY: return "y";
-    case Axis::kZ: return "z";
+    case Axis::kX:
+      return "x";
+    case Axis::kY:
+      return "y";
+    case Axis::kZ:
+      return "z";
   }
   return "?";
 }
@@ -35,34 +39,26 @@ bool ParseAxis(std::string_view name, Axis* out) {
   return false;
 }
 
-absl::Status PassThroughParams::Validate() const {
+absl::Status PassThroughParams::Validate(std::string_view field) const {
   if (!enabled) return absl::OkStatus();
+  const std::string f(field);
   if (axis != Axis::kX && axis != Axis::kY && axis != Axis::kZ) {
     return absl::InvalidArgumentError(
-        absl::StrCat("passthrough.axis must be x, y or z, got ", static_cast<int>(axis)));
+        absl::StrCat(f, ".axis must be x, y or z, got ", static_cast<int>(axis)));
   }
-  if (!std::isfinite(min) || !std::isfinite(max)) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("passthrough.min and passthrough.max must be finite, got [", min, ", ", max,
-                     "]"));
-  }
-  if (min > max) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("passthrough.min (", min, ") must not exceed passthrough.max (", max, ")"));
+  for (absl::Status s : {check::FiniteFloat(f + ".min", min), check::FiniteFloat(f + ".max", max),
+                         check::Ordered(f + ".min", min, f + ".max", max)}) {
+    if (!s.ok()) return s;
   }
   return absl::OkStatus();
 }
 
-absl::Status VoxelGridParams::Validate() const {
+absl::Status VoxelGridParams::Validate(std::string_view field) const {
   if (!enabled) return absl::OkStatus();
-  const float leaves[3] = {leaf_x, leaf_y, leaf_z};
-  const char* names[3] = {"voxel.leaf_x", "voxel.leaf_y", "voxel.leaf_z"};
-  for (int i = 0; i < 3; ++i) {
-    // 1/leaf must be a finite float, as PCL uses it.
-    if (!std::isfinite(leaves[i]) || !(leaves[i] > 0.0f) || !std::isfinite(1.0f / leaves[i])) {
-      return absl::InvalidArgumentError(
-          absl::StrCat(names[i], " must be a finite positive number, got ", leaves[i]));
-    }
+  const std::string f(field);
+  for (absl::Status s : {check::Leaf(f + ".leaf_x", leaf_x), check::Leaf(f + ".leaf_y", leaf_y),
+                         check::Leaf(f + ".leaf_z", leaf_z)}) {
+    if (!s.ok()) return s;
   }
   return absl::OkStatus();
 }
@@ -83,8 +79,7 @@ DepthConstants::DepthConstants(const CameraModel& c)
 }
 
 bool DepthConstants::SameAs(const DepthConstants& o) const {
-  if (fxb != o.fxb || scale != o.scale || offset != o.offset ||
-      invalid_count != o.invalid_count) {
+  if (fxb != o.fxb || scale != o.scale || offset != o.offset || invalid_count != o.invalid_count) {
     return false;
   }
   for (int i = 0; i < invalid_count; ++i) {
@@ -150,8 +145,8 @@ struct OrganizedKernel {
           const float z = zt[d];
           // Invalid pixels compute NaN coordinates from z = NaN; only the colour needs a choice.
           const std::uint32_t rgba = valid[d] ? PackPixel<C>(crow, u) : 0u;
-          o[u] = Point{((static_cast<float>(u) - c.cx) * z) * c.inv_fx, (yc * z) * c.inv_fy, z,
-                       rgba};
+          o[u] =
+              Point{((static_cast<float>(u) - c.cx) * z) * c.inv_fx, (yc * z) * c.inv_fy, z, rgba};
         }
       }
     }
@@ -256,8 +251,8 @@ absl::Status PassThrough(const PointCloud& in, const PassThroughParams& params, 
   if (auto s = params.Validate(); !s.ok()) return s;
   // Sized for the worst case without initialising (PointVector), then cut to what was kept.
   out->points.resize(in.points.size());
-  const std::size_t kept = PassThroughKernel(in.points.data(), in.points.size(), params,
-                                             out->points.data());
+  const std::size_t kept =
+      PassThroughKernel(in.points.data(), in.points.size(), params, out->points.data());
   out->points.resize(kept);
   out->width = static_cast<std::uint32_t>(kept);
   out->height = 1;

@@ -9,10 +9,11 @@
 
 namespace cloudcast {
 
-absl::Status PipelineOptions::Validate() const {
-  if (auto s = camera.Validate(); !s.ok()) return s;
-  if (auto s = passthrough.Validate(); !s.ok()) return s;
-  return voxel.Validate();
+absl::Status PipelineOptions::Validate(std::string_view field) const {
+  const std::string prefix = field.empty() ? "" : std::string(field) + ".";
+  if (auto s = camera.Validate(prefix + "camera"); !s.ok()) return s;
+  if (auto s = passthrough.Validate(prefix + "passthrough"); !s.ok()) return s;
+  return voxel.Validate(prefix + "voxel");
 }
 
 namespace {
@@ -46,7 +47,8 @@ inline __m128 PixelPoint(const DepthConstants& c, std::uint32_t u, float yc, flo
 // x and y finite (z is known to be).
 inline bool XyFinite(__m128 p) {
   const float big = std::numeric_limits<float>::max();
-  const __m128 ok = _mm_and_ps(_mm_cmple_ps(_mm_set1_ps(-big), p), _mm_cmple_ps(p, _mm_set1_ps(big)));
+  const __m128 ok =
+      _mm_and_ps(_mm_cmple_ps(_mm_set1_ps(-big), p), _mm_cmple_ps(p, _mm_set1_ps(big)));
   return (_mm_movemask_ps(ok) & 3) == 3;
 }
 
@@ -82,8 +84,12 @@ struct ScanPlan {
         vhi = static_cast<std::int64_t>(d);
       }
     }
-    if (plo >= 0) plan.pass_lo = static_cast<std::uint32_t>(plo), plan.pass_hi = static_cast<std::uint32_t>(phi);
-    if (vlo >= 0) plan.valid_lo = static_cast<std::uint32_t>(vlo), plan.valid_hi = static_cast<std::uint32_t>(vhi);
+    if (plo >= 0)
+      plan.pass_lo = static_cast<std::uint32_t>(plo),
+      plan.pass_hi = static_cast<std::uint32_t>(phi);
+    if (vlo >= 0)
+      plan.valid_lo = static_cast<std::uint32_t>(vlo),
+      plan.valid_hi = static_cast<std::uint32_t>(vhi);
     plan.simd = true;
     for (std::int64_t d = vlo; vlo >= 0 && d <= vhi; ++d) {
       if (flags[d] & kValid) continue;
@@ -154,7 +160,8 @@ void RunTableKernel(const DepthConstants& c, const float* zt, const std::uint8_t
     std::uint32_t u = 0;
     if (plan.simd) {
       for (; u + kLanes <= w; u += kLanes) {
-        const __m128i d = _mm_loadu_si128(reinterpret_cast<const __m128i*>(drow + u * sizeof(Sample)));
+        const __m128i d =
+            _mm_loadu_si128(reinterpret_cast<const __m128i*>(drow + u * sizeof(Sample)));
         if (any_valid) {
           in_valid_range = _mm_add_epi64(
               in_valid_range, _mm_sad_epu8(InRange<Sample>(d, plan.valid_lo, plan.valid_hi), zero));
@@ -237,9 +244,10 @@ struct Pipeline::Impl {
   ScanPlan plan;
 
   const std::uint8_t* PassFlags(const DepthConstants& c, const PassThroughParams& pt, int bits) {
-    if (flags_bits == bits && flags_constants.SameAs(c) && flags_passthrough.enabled == pt.enabled &&
-        flags_passthrough.axis == pt.axis && flags_passthrough.min == pt.min &&
-        flags_passthrough.max == pt.max && flags_passthrough.negative == pt.negative) {
+    if (flags_bits == bits && flags_constants.SameAs(c) &&
+        flags_passthrough.enabled == pt.enabled && flags_passthrough.axis == pt.axis &&
+        flags_passthrough.min == pt.min && flags_passthrough.max == pt.max &&
+        flags_passthrough.negative == pt.negative) {
       return flags.data();
     }
     const std::size_t n = std::size_t{1} << bits;
@@ -276,11 +284,10 @@ struct Pipeline::Impl {
         impl->table.Prepare(c, kBits);
         if (!passthrough.enabled || passthrough.axis == Axis::kZ) {
           const std::uint8_t* flags = impl->PassFlags(c, passthrough, kBits);
-          RunTableKernel<Sample, C>(c, impl->table.z.data(), flags, impl->plan, disparity,
-                                    colour, sink, tally);
+          RunTableKernel<Sample, C>(c, impl->table.z.data(), flags, impl->plan, disparity, colour,
+                                    sink, tally);
         } else {
-          RunGenericKernel<Sample, C>(c, &impl->table, passthrough, disparity, colour, sink,
-                                      tally);
+          RunGenericKernel<Sample, C>(c, &impl->table, passthrough, disparity, colour, sink, tally);
         }
       }
     }

@@ -1,12 +1,10 @@
 // Stream configuration. The protocol's StreamConfig is used as it is (every field optional: unset
 // fields take the server's defaults, see Client::GetInfo); these helpers fill it from the core
-// structs, so a client can state the exact parameters it would give core::Pipeline.
+// structs, so a client can state the exact parameters it would give core::Pipeline. They are the
+// proto boundary's own (cloudcast/proto/convert.h), named here for the client's users.
 #pragma once
 
-#include "cloudcast/core/camera.h"
-#include "cloudcast/core/draco_codec.h"
-#include "cloudcast/core/filters.h"
-#include "cloudcast/core/pipeline.h"
+#include "cloudcast/proto/convert.h"
 #include "cloudcast/v1/cloudcast.pb.h"
 
 namespace cloudcast::client {
@@ -15,15 +13,14 @@ using StreamConfig = ::cloudcast::v1::StreamConfig;
 
 // Each sets every field of its section (cx and cy included, so the principal point is the
 // struct's, not the image centre), leaving the other sections alone.
-void SetCamera(const CameraModel& camera, StreamConfig* config);
-void SetPassThrough(const PassThroughParams& params, StreamConfig* config);
-void SetVoxelGrid(const VoxelGridParams& params, StreamConfig* config);
+using convert::SetCamera;
+using convert::SetPassThrough;
+using convert::SetVoxelGrid;
 // max_position_error 0 (the DracoOptions default) stays unset: the server then uses a quarter of
 // the voxel leaf, as the core pipeline does.
-void SetDraco(const DracoOptions& options, StreamConfig* config);
-
+using convert::SetDraco;
 // Camera, passthrough and voxel grid of `options` (its limits are the server's business).
 // Draco and delivery stay at the server defaults.
-StreamConfig MakeStreamConfig(const PipelineOptions& options);
+using convert::MakeStreamConfig;
 
 }  // namespace cloudcast::client

@@ -10,13 +10,18 @@
 // preset reproduces PCL bit for bit.
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "absl/status/status.h"
 
 namespace cloudcast {
+
+// Invalid values are tested per pixel, so their number is bounded.
+inline constexpr std::size_t kMaxInvalidDisparities = 16;
 
 struct CameraModel {
   double fx = 615.0;  // focal length in pixels, horizontal
@@ -31,12 +36,12 @@ struct CameraModel {
 
   // PCL's `OrganizedConversion<PointXYZRGBA>::convert`: fy = fx = focal, baseline 1, principal
   // point at (width/2, height/2) in integer division, 0 and 0x7FF invalid.
-  static CameraModel PclCompatible(std::uint32_t width, std::uint32_t height,
-                                   double focal = 615.0);
+  static CameraModel PclCompatible(std::uint32_t width, std::uint32_t height, double focal = 615.0);
 
   // Finite positive focal lengths and baseline, finite principal point, finite non-zero scale,
-  // finite offset, finite invalid values (at most 16 of them).
-  absl::Status Validate() const;
+  // finite offset, finite invalid values (at most kMaxInvalidDisparities of them). Errors name
+  // the member under `field` (e.g. "camera.fx").
+  absl::Status Validate(std::string_view field = "camera") const;
 
   std::string ToString() const;
 };

@@ -30,7 +30,8 @@ struct DracoOptions {
   // position. The pipeline sets it to a quarter of the voxel leaf.
   float max_position_error = 0.0f;
 
-  absl::Status Validate() const;
+  // Errors name the member under `field` (e.g. "draco.position_bits").
+  absl::Status Validate(std::string_view field = "draco") const;
 };
 
 // What an encode produced.

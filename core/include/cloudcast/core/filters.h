@@ -24,11 +24,12 @@ bool ParseAxis(std::string_view name, Axis* out);  // "x", "y" or "z"
 struct PassThroughParams {
   bool enabled = true;  // false: only remove the non-finite points
   Axis axis = Axis::kZ;
-  float min = 3.0f;   // the paper's depth range
+  float min = 3.0f;  // the paper's depth range
   float max = 12.0f;
   bool negative = false;
 
-  absl::Status Validate() const;  // finite limits, min <= max
+  // Finite limits, min <= max; errors name the member under `field`.
+  absl::Status Validate(std::string_view field = "passthrough") const;
 };
 
 // pcl::VoxelGrid with downsample-all-data: one point per occupied voxel at the centroid of its
@@ -45,7 +46,8 @@ struct VoxelGridParams {
   std::uint32_t min_points_per_voxel = 0;
 
   void SetLeaf(float leaf) { leaf_x = leaf_y = leaf_z = leaf; }
-  absl::Status Validate() const;  // finite positive leaves when enabled
+  // Finite positive leaves when enabled; errors name the member under `field`.
+  absl::Status Validate(std::string_view field = "voxel") const;
 };
 
 // Disparity + colour -> organized cloud (width x height points, NaN where invalid), as

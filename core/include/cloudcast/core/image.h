@@ -17,7 +17,7 @@ enum class DisparityEncoding : std::uint8_t {
 };
 
 enum class ColorEncoding : std::uint8_t {
-  kBGR8,   // OpenCV's default order
+  kBGR8,  // OpenCV's default order
   kRGB8,
   kRGBA8,  // alpha is ignored, as PCL ignores it
   kMono8,  // grey: r = g = b
@@ -49,13 +49,24 @@ struct ImageView {
 using DisparityView = ImageView<DisparityEncoding>;
 using ColorView = ImageView<ColorEncoding>;
 
-// Checks one view: non-null data, non-zero size within `limits`, stride >= width * bytes per
-// pixel, stride a multiple of the sample size, and the buffer large enough for every row.
-// Errors name the field, prefixed with `field` (e.g. "disparity.stride_bytes").
+// What the caller calls a view's stride, buffer and encoding in its messages: the core's names by
+// default, the proto's ("row_stride", "pixels", "DISPARITY_U16") at the proto boundary.
+struct ImageFieldNames {
+  std::string_view stride = "stride_bytes";
+  std::string_view buffer = "data";
+  std::string_view encoding;  // empty: the core's Name(encoding)
+};
+
+// Checks one view: a known encoding, a size of at least 1x1 within `limits` (RESOURCE_EXHAUSTED
+// beyond them), non-null data, stride >= width * bytes per pixel, and a buffer large enough for
+// every row. Errors name the field under `field` (e.g. "disparity.stride_bytes").
 absl::Status ValidateView(const DisparityView& view, const Limits& limits,
-                          std::string_view field = "disparity");
+                          std::string_view field = "disparity", const ImageFieldNames& names = {});
 absl::Status ValidateView(const ColorView& view, const Limits& limits,
-                          std::string_view field = "colour");
+                          std::string_view field = "colour", const ImageFieldNames& names = {});
+// The two images of a frame must have the same size.
+absl::Status CheckSameSize(const DisparityView& disparity, std::string_view disparity_field,
+                           const ColorView& colour, std::string_view colour_field);
 // Checks both views and that their sizes agree.
 absl::Status ValidateFrame(const DisparityView& disparity, const ColorView& colour,
                            const Limits& limits);

@@ -5,6 +5,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <string_view>
 
 #include "absl/status/status.h"
 #include "cloudcast/core/camera.h"
@@ -21,7 +22,8 @@ struct PipelineOptions {
   VoxelGridParams voxel;
   Limits limits;
 
-  absl::Status Validate() const;
+  // Errors name the member: "camera.fx", or "<field>.camera.fx" with a non-empty `field`.
+  absl::Status Validate(std::string_view field = "") const;
 };
 
 // Points left after each stage.

@@ -1,0 +1,121 @@
+// The proto boundary: the one place where the contract (cloudcast/v1/cloudcast.proto) meets the
+// engine's types. Server, client library, viewer and load generator all convert through here:
+//   - every enum and config mapping, in both directions;
+//   - building a Frame's raw images from core image views, and core views from a Frame;
+//   - validation of what a client sent, delegating to the core's field checks with the proto
+//     field path, so each message is worded once and names the field the client set;
+//   - FrameError <-> absl::Status, carrying the error's kind.
+// Nothing outside this module rewrites or parses an error message.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <string_view>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "cloudcast/core/filters.h"
+#include "cloudcast/core/image.h"
+#include "cloudcast/core/limits.h"
+#include "cloudcast/core/pipeline.h"
+#include "cloudcast/core/settings.h"
+#include "cloudcast/v1/cloudcast.pb.h"
+
+namespace cloudcast::convert {
+
+// ---------------------------------------------------------------------------------------------
+// Delivery: how a stream treats frames that arrive faster than they are processed.
+
+enum class Delivery : std::uint8_t {
+  kLatest,  // real time: a newer frame replaces an older one still waiting
+  kAll,     // lossless: gRPC flow control slows the client down
+};
+std::string_view Name(Delivery delivery);  // "latest" / "all"
+bool ParseDelivery(std::string_view name, Delivery* out);
+
+// ---------------------------------------------------------------------------------------------
+// Enums. ToProto never fails. FromProto takes the field path for its message: the UNSPECIFIED
+// value leaves *out alone (the caller's default) where the proto gives it that meaning, and is
+// an error for image encodings.
+
+v1::Axis ToProto(Axis axis);
+v1::DisparityEncoding ToProto(DisparityEncoding encoding);
+v1::ColorEncoding ToProto(ColorEncoding encoding);
+v1::DeliveryMode ToProto(Delivery delivery);
+absl::Status FromProto(v1::Axis axis, std::string_view field, Axis* out);
+absl::Status FromProto(v1::DisparityEncoding encoding, std::string_view field,
+                       DisparityEncoding* out);
+absl::Status FromProto(v1::ColorEncoding encoding, std::string_view field, ColorEncoding* out);
+absl::Status FromProto(v1::DeliveryMode mode, std::string_view field, Delivery* out);
+
+// ---------------------------------------------------------------------------------------------
+// Stream configuration.
+
+// A StreamConfig resolved against defaults: everything a frame on that stream needs.
+struct StreamSettings {
+  FrameSettings frame;
+  Delivery delivery = Delivery::kLatest;
+};
+
+// Resolves `config` field by field against `defaults`: a set field wins, an unset one keeps the
+// default (a StreamConfig replaces the previous one whole, so `defaults` are the server's, never
+// an earlier config's). Every value set is checked as it is read; an error is INVALID_ARGUMENT and
+// names the field by its proto path under `field` (e.g. "config.voxel_grid.leaf must be finite
+// and > 0 ..."). `defaults.frame.pipeline.limits` carry over as they are.
+absl::StatusOr<StreamSettings> Resolve(const v1::StreamConfig& config,
+                                       const StreamSettings& defaults,
+                                       std::string_view field = "config");
+
+// Every field of a StreamConfig filled from `settings` (GetInfo's defaults); cx and cy only when
+// they are set, since unset they follow each frame's size. max_position_error is the bound these
+// settings' leaf gives.
+v1::StreamConfig ToProto(const StreamSettings& settings);
+
+// Each fills one section of `config` from a core struct, every field of it set (cx and cy
+// included, so the principal point is the struct's), leaving the other sections alone.
+void SetCamera(const CameraModel& camera, v1::StreamConfig* config);
+void SetPassThrough(const PassThroughParams& params, v1::StreamConfig* config);
+void SetVoxelGrid(const VoxelGridParams& params, v1::StreamConfig* config);
+// max_position_error 0 (the DracoOptions default) stays unset: the server then uses a quarter of
+// the voxel leaf, as the core does.
+void SetDraco(const DracoOptions& options, v1::StreamConfig* config);
+// Camera, passthrough and voxel grid of `options` (its limits are the server's business).
+// Draco and delivery stay at the server defaults.
+v1::StreamConfig MakeStreamConfig(const PipelineOptions& options);
+
+// ---------------------------------------------------------------------------------------------
+// Frames.
+
+// Copies a view's rows into `raw`, packed tightly (row_stride 0) whatever the view's stride. The
+// view is checked for memory safety only (sizes and limits are the server's to judge); errors
+// name it under `field`. `raw`'s pixel buffer keeps its capacity from frame to frame.
+absl::Status ToProto(const DisparityView& view, std::string_view field, v1::RawDisparity* raw);
+absl::Status ToProto(const ColorView& view, std::string_view field, v1::RawColor* raw);
+// Four-channel B, G, R, A rows (an OpenCV CV_8UC4 Mat) sent as BGR8, dropping the alpha while the
+// rows are copied: the protocol has no BGRA encoding, and the server ignores alpha anyway.
+absl::Status BgraToProto(const void* data, std::size_t size_bytes, std::uint32_t width,
+                         std::uint32_t height, std::size_t stride_bytes, std::string_view field,
+                         v1::RawColor* raw);
+
+// Views of a raw image in place (no copy: the view points into `raw`'s bytes), checked against
+// `limits`. Errors name the field under `field` (e.g. "frame.disparity.raw.row_stride is 100,
+// less than width x 1 = 640"): INVALID_ARGUMENT when malformed, RESOURCE_EXHAUSTED over a limit.
+absl::Status ViewRaw(const v1::RawDisparity& raw, std::string_view field, const Limits& limits,
+                     DisparityView* view);
+absl::Status ViewRaw(const v1::RawColor& raw, std::string_view field, const Limits& limits,
+                     ColorView* view);
+
+// ---------------------------------------------------------------------------------------------
+// Errors.
+
+// `error` from a status: its code and message, its kind, and what it answers. frames_dropped and
+// server_instance are left to the caller.
+void FillError(const absl::Status& status, v1::ErrorKind kind, std::uint64_t sequence,
+               const std::string& frame_id, v1::FrameError* error);
+// The status a FrameError carries. An out-of-range code becomes UNKNOWN.
+absl::Status ToStatus(const v1::FrameError& error);
+// Whether a FrameError answers a request other than a frame (a StreamConfig, or a request with
+// neither a config nor a frame). A server older than FrameError.kind leaves it unset: a frame.
+bool AnswersNoFrame(const v1::FrameError& error);
+
+}  // namespace cloudcast::convert

@@ -1,0 +1,525 @@
+#include "cloudcast/proto/convert.h"
+
+#include <cstring>
+#include <limits>
+#include <string>
+
+#include "absl/strings/str_cat.h"
+#include "cloudcast/core/checks.h"
+
+namespace cloudcast::convert {
+namespace {
+
+// The protocol's 16- and 32-bit samples are little endian; raw rows are sent and viewed as they
+// lie in memory, which is only right on a little-endian host.
+static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__,
+              "raw U16/F32 disparities are used as in memory; the protocol wants little endian");
+
+// Only memory safety is checked where a client builds a frame, so that sizes and limits stay the
+// server's one judgement.
+constexpr Limits kNoLimits{std::numeric_limits<std::uint32_t>::max(),
+                           std::numeric_limits<std::uint64_t>::max()};
+
+std::string S(std::string_view v) { return std::string(v); }
+
+// "config.camera" + "fx" -> "config.camera.fx".
+std::string Path(std::string_view parent, std::string_view child) {
+  return absl::StrCat(S(parent), ".", S(child));
+}
+
+// The name of an enum value, or its number when it has none (a client may send any number).
+template <typename Enum>
+std::string EnumName(const std::string& (*name)(Enum), Enum value) {
+  const std::string& n = name(value);
+  return n.empty() ? std::to_string(static_cast<int>(value)) : n;
+}
+
+absl::Status NotOneOf(std::string_view field, int value, std::string_view known) {
+  return absl::InvalidArgumentError(
+      absl::StrCat(S(field), " is ", value, ", not one of ", S(known)));
+}
+
+// ---------------------------------------------------------------------------------------------
+// StreamConfig sections. Each checks a field as it reads it, with the core's check and the proto
+// path, so that the message names what the client set.
+
+absl::Status ResolveCamera(const v1::CameraModel& c, std::string_view p, FrameSettings* s) {
+  CameraModel& cam = s->pipeline.camera;
+  if (c.has_fx()) {
+    if (auto st = check::Positive(Path(p, "fx"), c.fx()); !st.ok()) return st;
+    cam.fx = c.fx();
+    cam.fy = c.fx();  // fy follows fx unless set
+  }
+  if (c.has_fy()) {
+    if (auto st = check::Positive(Path(p, "fy"), c.fy()); !st.ok()) return st;
+    cam.fy = c.fy();
+  }
+  if (c.has_cx()) {
+    if (auto st = check::Finite(Path(p, "cx"), c.cx()); !st.ok()) return st;
+    s->cx = c.cx();
+  }
+  if (c.has_cy()) {
+    if (auto st = check::Finite(Path(p, "cy"), c.cy()); !st.ok()) return st;
+    s->cy = c.cy();
+  }
+  if (c.has_baseline()) {
+    if (auto st = check::Positive(Path(p, "baseline"), c.baseline()); !st.ok()) return st;
+    cam.baseline = c.baseline();
+  }
+  if (c.has_disparity_scale()) {
+    if (auto st = check::NonZero(Path(p, "disparity_scale"), c.disparity_scale()); !st.ok()) {
+      return st;
+    }
+    cam.disparity_scale = c.disparity_scale();
+  }
+  if (c.has_disparity_offset()) {
+    if (auto st = check::Finite(Path(p, "disparity_offset"), c.disparity_offset()); !st.ok()) {
+      return st;
+    }
+    cam.disparity_offset = c.disparity_offset();
+  }
+  if (c.has_invalid_disparities()) {
+    const auto& values = c.invalid_disparities().values();
+    const std::string field = Path(p, "invalid_disparities.values");
+    if (auto st = check::AtMost(field, values.size(), kMaxInvalidDisparities); !st.ok()) {
+      return st;
+    }
+    for (int i = 0; i < values.size(); ++i) {
+      if (!std::isfinite(values[i])) {
+        return absl::InvalidArgumentError(
+            absl::StrCat(field, "[", i, "] must be finite, got ", values[i]));
+      }
+    }
+    cam.invalid_disparities.assign(values.begin(), values.end());
+  }
+  return absl::OkStatus();
+}
+
+absl::Status ResolvePassThrough(const v1::PassThroughConfig& c, std::string_view p,
+                                FrameSettings* s) {
+  PassThroughParams& pt = s->pipeline.passthrough;
+  if (c.has_enabled()) pt.enabled = c.enabled();
+  if (auto st = FromProto(c.axis(), Path(p, "axis"), &pt.axis); !st.ok()) return st;
+  if (c.has_min()) {
+    if (auto st = check::FiniteFloat(Path(p, "min"), c.min()); !st.ok()) return st;
+    pt.min = c.min();
+  }
+  if (c.has_max()) {
+    if (auto st = check::FiniteFloat(Path(p, "max"), c.max()); !st.ok()) return st;
+    pt.max = c.max();
+  }
+  if (auto st = check::Ordered(Path(p, "min"), pt.min, Path(p, "max"), pt.max,
+                               c.has_min() ? "" : "the server default",
+                               c.has_max() ? "" : "the server default");
+      !st.ok()) {
+    return st;
+  }
+  if (c.has_negative()) pt.negative = c.negative();
+  return absl::OkStatus();
+}
+
+absl::Status ResolveVoxelGrid(const v1::VoxelGridConfig& c, std::string_view p, FrameSettings* s) {
+  VoxelGridParams& v = s->pipeline.voxel;
+  if (c.has_enabled()) v.enabled = c.enabled();
+  if (c.has_leaf()) {
+    if (auto st = check::Leaf(Path(p, "leaf"), c.leaf()); !st.ok()) return st;
+    v.SetLeaf(c.leaf());
+  }
+  struct Axis {
+    bool has;
+    float value;
+    const char* name;
+    float* out;
+  };
+  for (const Axis& a : {Axis{c.has_leaf_x(), c.leaf_x(), "leaf_x", &v.leaf_x},
+                        Axis{c.has_leaf_y(), c.leaf_y(), "leaf_y", &v.leaf_y},
+                        Axis{c.has_leaf_z(), c.leaf_z(), "leaf_z", &v.leaf_z}}) {
+    if (!a.has) continue;
+    if (auto st = check::Leaf(Path(p, a.name), a.value); !st.ok()) return st;
+    *a.out = a.value;
+  }
+  if (c.has_min_points_per_voxel()) v.min_points_per_voxel = c.min_points_per_voxel();
+  // A server run with --leaf 0 has the grid off by default; a client that asks for a leaf (and
+  // says nothing of `enabled`) wants it on.
+  if (!c.has_enabled() && (c.has_leaf() || c.has_leaf_x() || c.has_leaf_y() || c.has_leaf_z())) {
+    v.enabled = true;
+  }
+  if (v.enabled && !(v.leaf_x > 0.0f && v.leaf_y > 0.0f && v.leaf_z > 0.0f)) {
+    // Only possible when the server runs with --leaf 0 and the client sets only `enabled`.
+    return absl::InvalidArgumentError(absl::StrCat(
+        Path(p, "enabled"), " is true but the server has no default leaf (--leaf 0); set ",
+        Path(p, "leaf")));
+  }
+  return absl::OkStatus();
+}
+
+absl::Status ResolveDraco(const v1::DracoConfig& c, std::string_view p, FrameSettings* s) {
+  // The proto's Draco fields are named as DracoOptions' members, so the core's own check names
+  // them right under the proto path.
+  DracoOptions& d = s->draco;
+  if (c.has_position_bits()) d.position_bits = c.position_bits();
+  if (c.has_color_bits()) d.color_bits = c.color_bits();
+  if (c.has_encode_speed()) d.encode_speed = c.encode_speed();
+  if (c.has_decode_speed()) d.decode_speed = c.decode_speed();
+  if (c.has_max_position_error()) {
+    d.max_position_error = c.max_position_error();
+    s->max_position_error = c.max_position_error();
+  }
+  return d.Validate(p);
+}
+
+template <typename View, typename Raw, typename Encoding>
+absl::Status ViewAny(const Raw& raw, std::string_view field, const Limits& limits,
+                     Encoding encoding, const std::string& encoding_name, View* view) {
+  const std::uint64_t row_bytes = std::uint64_t{raw.width()} * BytesPerPixel(encoding);
+  view->data = raw.pixels().data();
+  view->size_bytes = raw.pixels().size();
+  view->width = raw.width();
+  view->height = raw.height();
+  view->stride_bytes = raw.row_stride() == 0 ? row_bytes : raw.row_stride();
+  view->encoding = encoding;
+  return ValidateView(*view, limits, field, {"row_stride", "pixels", encoding_name});
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+
+std::string_view Name(Delivery delivery) { return delivery == Delivery::kAll ? "all" : "latest"; }
+
+bool ParseDelivery(std::string_view name, Delivery* out) {
+  for (Delivery d : {Delivery::kLatest, Delivery::kAll}) {
+    if (Name(d) == name) {
+      *out = d;
+      return true;
+    }
+  }
+  return false;
+}
+
+v1::Axis ToProto(Axis axis) {
+  switch (axis) {
+    case Axis::kX:
+      return v1::AXIS_X;
+    case Axis::kY:
+      return v1::AXIS_Y;
+    case Axis::kZ:
+      return v1::AXIS_Z;
+  }
+  return v1::AXIS_UNSPECIFIED;
+}
+
+v1::DisparityEncoding ToProto(DisparityEncoding encoding) {
+  switch (encoding) {
+    case DisparityEncoding::kU8:
+      return v1::DISPARITY_U8;
+    case DisparityEncoding::kU16:
+      return v1::DISPARITY_U16;
+    case DisparityEncoding::kF32:
+      return v1::DISPARITY_F32;
+  }
+  return v1::DISPARITY_ENCODING_UNSPECIFIED;
+}
+
+v1::ColorEncoding ToProto(ColorEncoding encoding) {
+  switch (encoding) {
+    case ColorEncoding::kBGR8:
+      return v1::COLOR_BGR8;
+    case ColorEncoding::kRGB8:
+      return v1::COLOR_RGB8;
+    case ColorEncoding::kRGBA8:
+      return v1::COLOR_RGBA8;
+    case ColorEncoding::kMono8:
+      return v1::COLOR_MONO8;
+  }
+  return v1::COLOR_ENCODING_UNSPECIFIED;
+}
+
+v1::DeliveryMode ToProto(Delivery delivery) {
+  return delivery == Delivery::kAll ? v1::DELIVERY_ALL : v1::DELIVERY_LATEST;
+}
+
+absl::Status FromProto(v1::Axis axis, std::string_view field, Axis* out) {
+  switch (axis) {
+    case v1::AXIS_UNSPECIFIED:
+      return absl::OkStatus();
+    case v1::AXIS_X:
+      *out = Axis::kX;
+      return absl::OkStatus();
+    case v1::AXIS_Y:
+      *out = Axis::kY;
+      return absl::OkStatus();
+    case v1::AXIS_Z:
+      *out = Axis::kZ;
+      return absl::OkStatus();
+    default:
+      return NotOneOf(field, axis, "AXIS_X, AXIS_Y, AXIS_Z");
+  }
+}
+
+absl::Status FromProto(v1::DeliveryMode mode, std::string_view field, Delivery* out) {
+  switch (mode) {
+    case v1::DELIVERY_UNSPECIFIED:
+      return absl::OkStatus();
+    case v1::DELIVERY_LATEST:
+      *out = Delivery::kLatest;
+      return absl::OkStatus();
+    case v1::DELIVERY_ALL:
+      *out = Delivery::kAll;
+      return absl::OkStatus();
+    default:
+      return NotOneOf(field, mode, "DELIVERY_LATEST, DELIVERY_ALL");
+  }
+}
+
+absl::Status FromProto(v1::DisparityEncoding encoding, std::string_view field,
+                       DisparityEncoding* out) {
+  switch (encoding) {
+    case v1::DISPARITY_U8:
+      *out = DisparityEncoding::kU8;
+      return absl::OkStatus();
+    case v1::DISPARITY_U16:
+      *out = DisparityEncoding::kU16;
+      return absl::OkStatus();
+    case v1::DISPARITY_F32:
+      *out = DisparityEncoding::kF32;
+      return absl::OkStatus();
+    default:
+      return absl::InvalidArgumentError(
+          absl::StrCat(S(field), " is ", EnumName(&v1::DisparityEncoding_Name, encoding),
+                       "; it must be one of DISPARITY_U8, DISPARITY_U16, DISPARITY_F32"));
+  }
+}
+
+absl::Status FromProto(v1::ColorEncoding encoding, std::string_view field, ColorEncoding* out) {
+  switch (encoding) {
+    case v1::COLOR_BGR8:
+      *out = ColorEncoding::kBGR8;
+      return absl::OkStatus();
+    case v1::COLOR_RGB8:
+      *out = ColorEncoding::kRGB8;
+      return absl::OkStatus();
+    case v1::COLOR_RGBA8:
+      *out = ColorEncoding::kRGBA8;
+      return absl::OkStatus();
+    case v1::COLOR_MONO8:
+      *out = ColorEncoding::kMono8;
+      return absl::OkStatus();
+    default:
+      return absl::InvalidArgumentError(
+          absl::StrCat(S(field), " is ", EnumName(&v1::ColorEncoding_Name, encoding),
+                       "; it must be one of COLOR_BGR8, COLOR_RGB8, COLOR_RGBA8, COLOR_MONO8"));
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+
+absl::StatusOr<StreamSettings> Resolve(const v1::StreamConfig& config,
+                                       const StreamSettings& defaults, std::string_view field) {
+  StreamSettings s = defaults;
+  if (config.has_camera()) {
+    if (auto st = ResolveCamera(config.camera(), Path(field, "camera"), &s.frame); !st.ok()) {
+      return st;
+    }
+  }
+  if (auto st = ResolvePassThrough(config.passthrough(), Path(field, "passthrough"), &s.frame);
+      !st.ok()) {
+    return st;
+  }
+  if (auto st = ResolveVoxelGrid(config.voxel_grid(), Path(field, "voxel_grid"), &s.frame);
+      !st.ok()) {
+    return st;
+  }
+  if (auto st = ResolveDraco(config.draco(), Path(field, "draco"), &s.frame); !st.ok()) return st;
+  if (auto st = FromProto(config.delivery(), Path(field, "delivery"), &s.delivery); !st.ok()) {
+    return st;
+  }
+  return s;
+}
+
+v1::StreamConfig ToProto(const StreamSettings& settings) {
+  const FrameSettings& f = settings.frame;
+  v1::StreamConfig c;
+  SetCamera(f.pipeline.camera, &c);
+  if (f.cx.has_value()) {
+    c.mutable_camera()->set_cx(*f.cx);
+  } else {
+    c.mutable_camera()->clear_cx();
+  }
+  if (f.cy.has_value()) {
+    c.mutable_camera()->set_cy(*f.cy);
+  } else {
+    c.mutable_camera()->clear_cy();
+  }
+  SetPassThrough(f.pipeline.passthrough, &c);
+  SetVoxelGrid(f.pipeline.voxel, &c);
+  const VoxelGridParams& v = f.pipeline.voxel;
+  if (v.leaf_x == v.leaf_y && v.leaf_y == v.leaf_z) c.mutable_voxel_grid()->set_leaf(v.leaf_x);
+  // The error bound as it applies with these settings' leaf (GetInfo shows what a client gets).
+  SetDraco(f.Draco(), &c);
+  c.mutable_draco()->set_max_position_error(f.Draco().max_position_error);
+  c.set_delivery(ToProto(settings.delivery));
+  return c;
+}
+
+void SetCamera(const CameraModel& camera, v1::StreamConfig* config) {
+  v1::CameraModel* c = config->mutable_camera();
+  c->set_fx(camera.fx);
+  c->set_fy(camera.fy);
+  c->set_cx(camera.cx);
+  c->set_cy(camera.cy);
+  c->set_baseline(camera.baseline);
+  c->set_disparity_scale(camera.disparity_scale);
+  c->set_disparity_offset(camera.disparity_offset);
+  // Set even when empty: an empty list means "no invalid values", unlike an absent one.
+  v1::InvalidDisparities* invalid = c->mutable_invalid_disparities();
+  invalid->clear_values();
+  for (double v : camera.invalid_disparities) invalid->add_values(v);
+}
+
+void SetPassThrough(const PassThroughParams& params, v1::StreamConfig* config) {
+  v1::PassThroughConfig* p = config->mutable_passthrough();
+  p->set_enabled(params.enabled);
+  p->set_axis(ToProto(params.axis));
+  p->set_min(params.min);
+  p->set_max(params.max);
+  p->set_negative(params.negative);
+}
+
+void SetVoxelGrid(const VoxelGridParams& params, v1::StreamConfig* config) {
+  v1::VoxelGridConfig* v = config->mutable_voxel_grid();
+  v->set_enabled(params.enabled);
+  v->clear_leaf();
+  v->set_leaf_x(params.leaf_x);
+  v->set_leaf_y(params.leaf_y);
+  v->set_leaf_z(params.leaf_z);
+  v->set_min_points_per_voxel(params.min_points_per_voxel);
+}
+
+void SetDraco(const DracoOptions& options, v1::StreamConfig* config) {
+  v1::DracoConfig* d = config->mutable_draco();
+  d->set_position_bits(options.position_bits);
+  d->set_color_bits(options.color_bits);
+  d->set_encode_speed(options.encode_speed);
+  d->set_decode_speed(options.decode_speed);
+  if (options.max_position_error > 0) {
+    d->set_max_position_error(options.max_position_error);
+  } else {
+    d->clear_max_position_error();
+  }
+}
+
+v1::StreamConfig MakeStreamConfig(const PipelineOptions& options) {
+  v1::StreamConfig config;
+  SetCamera(options.camera, &config);
+  SetPassThrough(options.passthrough, &config);
+  SetVoxelGrid(options.voxel, &config);
+  return config;
+}
+
+// ---------------------------------------------------------------------------------------------
+
+namespace {
+
+// Copies `height` rows of `row_bytes` from `src` (rows `stride` apart) into `out`, packed.
+void CopyRows(const void* src, std::size_t stride, std::size_t row_bytes, std::uint32_t height,
+              std::string* out) {
+  const std::size_t total = row_bytes * height;
+  // Same-size frames keep the size, so resize() neither allocates nor zero-fills after the first.
+  out->resize(total);
+  char* dst = out->data();
+  const char* s = static_cast<const char*>(src);
+  if (stride == row_bytes) {
+    std::memcpy(dst, s, total);
+    return;
+  }
+  for (std::uint32_t v = 0; v < height; ++v) {
+    std::memcpy(dst + v * row_bytes, s + v * stride, row_bytes);
+  }
+}
+
+template <typename View, typename Raw>
+absl::Status FillRaw(const View& view, std::string_view field, Raw* raw) {
+  if (absl::Status s = ValidateView(view, kNoLimits, field); !s.ok()) return s;
+  raw->set_encoding(ToProto(view.encoding));
+  raw->set_width(view.width);
+  raw->set_height(view.height);
+  raw->set_row_stride(0);
+  CopyRows(view.data, view.stride_bytes, std::size_t{view.width} * BytesPerPixel(view.encoding),
+           view.height, raw->mutable_pixels());
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+absl::Status ToProto(const DisparityView& view, std::string_view field, v1::RawDisparity* raw) {
+  return FillRaw(view, field, raw);
+}
+
+absl::Status ToProto(const ColorView& view, std::string_view field, v1::RawColor* raw) {
+  return FillRaw(view, field, raw);
+}
+
+absl::Status BgraToProto(const void* data, std::size_t size_bytes, std::uint32_t width,
+                         std::uint32_t height, std::size_t stride_bytes, std::string_view field,
+                         v1::RawColor* raw) {
+  // The same memory checks as any four-byte-per-pixel view.
+  ColorView as_rgba{data, size_bytes, width, height, stride_bytes, ColorEncoding::kRGBA8};
+  if (absl::Status s = ValidateView(as_rgba, kNoLimits, field, {"stride_bytes", "data", "bgra8"});
+      !s.ok()) {
+    return s;
+  }
+  raw->set_encoding(v1::COLOR_BGR8);
+  raw->set_width(width);
+  raw->set_height(height);
+  raw->set_row_stride(0);
+  std::string* out = raw->mutable_pixels();
+  out->resize(std::size_t{width} * 3 * height);
+  auto* dst = reinterpret_cast<std::uint8_t*>(out->data());
+  for (std::uint32_t v = 0; v < height; ++v) {
+    const auto* src = static_cast<const std::uint8_t*>(data) + v * stride_bytes;
+    for (std::uint32_t u = 0; u < width; ++u, src += 4, dst += 3) {
+      dst[0] = src[0];
+      dst[1] = src[1];
+      dst[2] = src[2];
+    }
+  }
+  return absl::OkStatus();
+}
+
+absl::Status ViewRaw(const v1::RawDisparity& raw, std::string_view field, const Limits& limits,
+                     DisparityView* view) {
+  DisparityEncoding encoding;
+  if (auto s = FromProto(raw.encoding(), Path(field, "encoding"), &encoding); !s.ok()) return s;
+  return ViewAny(raw, field, limits, encoding, v1::DisparityEncoding_Name(raw.encoding()), view);
+}
+
+absl::Status ViewRaw(const v1::RawColor& raw, std::string_view field, const Limits& limits,
+                     ColorView* view) {
+  ColorEncoding encoding;
+  if (auto s = FromProto(raw.encoding(), Path(field, "encoding"), &encoding); !s.ok()) return s;
+  return ViewAny(raw, field, limits, encoding, v1::ColorEncoding_Name(raw.encoding()), view);
+}
+
+// ---------------------------------------------------------------------------------------------
+
+void FillError(const absl::Status& status, v1::ErrorKind kind, std::uint64_t sequence,
+               const std::string& frame_id, v1::FrameError* error) {
+  error->set_sequence(sequence);
+  error->set_frame_id(frame_id);
+  error->set_code(static_cast<int>(status.code()));  // absl and gRPC share the numbering
+  error->set_message(std::string(status.message()));
+  error->set_kind(kind);
+}
+
+absl::Status ToStatus(const v1::FrameError& error) {
+  int code = error.code();
+  if (code <= 0 || code > 16) code = static_cast<int>(absl::StatusCode::kUnknown);
+  return absl::Status(static_cast<absl::StatusCode>(code), error.message());
+}
+
+bool AnswersNoFrame(const v1::FrameError& error) {
+  return error.kind() == v1::ERROR_KIND_CONFIG || error.kind() == v1::ERROR_KIND_REQUEST;
+}
+
+}  // namespace cloudcast::convert

@@ -1,0 +1,33 @@
+// cloudcast-server's command line: every ServerOptions field as a flag with its default shown in
+// --help, plus --config for a TOML or INI file holding the same flags.
+#pragma once
+
+#include <CLI/CLI.hpp>
+#include <memory>
+#include <string>
+
+#include "absl/status/statusor.h"
+#include "cloudcast/cli/stage_flags.h"
+#include "cloudcast/server/options.h"
+
+namespace cloudcast::server {
+
+class ServerFlags {
+ public:
+  // Registers the flags on `app`, which must outlive this object.
+  explicit ServerFlags(CLI::App& app);
+
+  // The options the parsed flags describe, validated. Call after app.parse().
+  absl::StatusOr<ServerOptions> Options() const;
+  const std::string& log_level() const { return log_level_; }
+
+ private:
+  ServerOptions options_;
+  double idle_timeout_seconds_;
+  double shutdown_grace_seconds_;
+  std::string delivery_;
+  std::unique_ptr<cli::StageFlags> stages_;  // after the service flags in --help
+  std::string log_level_ = "info";
+};
+
+}  // namespace cloudcast::server

@@ -1,0 +1,58 @@
+// The server's options, with their documented defaults. What a stream gets for the StreamConfig
+// fields it leaves unset is `defaults`, whose own defaults are the core structs' (the paper's
+// parameters: PCL's conversion with focal 615, passthrough z in [3, 12], 3 cm voxels, Draco speed
+// 10 at 10 bits).
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <string>
+
+#include "absl/status/status.h"
+#include "cloudcast/core/limits.h"
+#include "cloudcast/proto/convert.h"
+
+namespace cloudcast::server {
+
+using convert::Delivery;
+using convert::StreamSettings;
+
+struct ServerOptions {
+  // host:port to serve gRPC on; port 0 picks a free port (Server::port() reports it).
+  std::string listen = "0.0.0.0:50051";
+  // Worker threads that process frames; 0 means one per core (std::thread::hardware_concurrency).
+  int threads = 0;
+  // Largest request message gRPC accepts. A raw 640x480 frame (8-bit disparity, RGB colour) is
+  // 1.2 MiB; one at the pixel limit (2^24 pixels) is 64 MiB plus a few bytes, so serving frames
+  // that large needs this raised.
+  std::uint64_t max_message_bytes = std::uint64_t{64} << 20;
+  // Largest image side and width x height (the core's limits).
+  Limits limits;
+  // Concurrent Stream calls; the next one gets RESOURCE_EXHAUSTED.
+  std::uint32_t max_streams = 64;
+  // A stream on which nothing moved this long is ended with DEADLINE_EXCEEDED.
+  std::chrono::milliseconds idle_timeout{60'000};
+  // Frames held per stream in DELIVERY_ALL mode (waiting + in work + replies not yet written).
+  std::uint32_t max_queued_frames = 4;
+  // On shutdown, how long frames in flight may take before their calls are cancelled.
+  std::chrono::milliseconds shutdown_grace{5'000};
+  // host:port for Prometheus' /metrics; empty switches the HTTP exporter off.
+  std::string metrics_listen = "0.0.0.0:9464";
+  // This replica's name, sent in every reply and in GetInfo. Empty: the host name.
+  std::string instance;
+  // What a stream gets for every StreamConfig field it leaves unset (GetInfo's `defaults`).
+  // Its pipeline limits are ignored: `limits` above apply.
+  StreamSettings defaults;
+
+  // Everything in range: threads >= 0, positive limits, max_queued_frames >= 1, valid defaults.
+  // Errors name the command-line flag.
+  absl::Status Validate() const;
+  // `threads`, or the number of cores when it is 0 (at least 1).
+  int ResolvedThreads() const;
+  // `instance`, or the host name when it is empty.
+  std::string ResolvedInstance() const;
+  // `defaults` with `limits`: what a stream starts from.
+  StreamSettings StreamDefaults() const;
+};
+
+}  // namespace cloudcast::server

@@ -1,0 +1,94 @@
+#include "cloudcast/server/cli.h"
+
+#include <chrono>
+#include <cmath>
+
+#include "absl/strings/str_cat.h"
+
+namespace cloudcast::server {
+namespace {
+
+std::chrono::milliseconds ToMillis(double seconds) {
+  return std::chrono::milliseconds(static_cast<std::int64_t>(std::llround(seconds * 1000.0)));
+}
+
+}  // namespace
+
+ServerFlags::ServerFlags(CLI::App& app)
+    : idle_timeout_seconds_(std::chrono::duration<double>(options_.idle_timeout).count()),
+      shutdown_grace_seconds_(std::chrono::duration<double>(options_.shutdown_grace).count()),
+      delivery_(convert::Name(options_.defaults.delivery)) {
+  app.option_defaults()->always_capture_default();
+  app.set_config("--config", "",
+                 "Read flags from this TOML or INI file: one `name = value` per flag, the name "
+                 "without its dashes (e.g. max-streams = 8); the command line wins");
+
+  ServerOptions& o = options_;
+  app.add_option("--listen", o.listen, "gRPC address, host:port; port 0 picks a free one")
+      ->group("Service");
+  app.add_option("--threads", o.threads, "Worker threads that process frames; 0 = one per core")
+      ->check(CLI::Range(0, 1024))
+      ->group("Service");
+  app.add_option("--metrics-listen", o.metrics_listen,
+                 "Prometheus /metrics address, host:port; empty switches it off")
+      ->group("Service");
+  app.add_option("--instance", o.instance,
+                 "This replica's name, sent in every reply and in GetInfo; default: the host name")
+      ->group("Service");
+  app.add_option("--log-level", log_level_, "trace, debug, info, warn, error, critical or off")
+      ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error", "critical", "off"}))
+      ->group("Service");
+  app.add_option("--shutdown-grace", shutdown_grace_seconds_,
+                 "Seconds frames in flight get to finish on SIGINT / SIGTERM before their calls "
+                 "are cancelled")
+      ->check(CLI::Range(0.0, 3600.0))
+      ->group("Service");
+
+  app.add_option("--max-message-bytes", o.max_message_bytes,
+                 "Largest request message; a larger one ends its call with RESOURCE_EXHAUSTED")
+      ->group("Limits");
+  app.add_option("--max-side", o.limits.max_side, "Largest image width or height, pixels")
+      ->group("Limits");
+  app.add_option("--max-pixels", o.limits.max_pixels,
+                 "Largest width x height, pixels (at most 2^24)")
+      ->group("Limits");
+  app.add_option("--max-streams", o.max_streams,
+                 "Concurrent Stream calls (and, separately, Process calls in flight); more get "
+                 "RESOURCE_EXHAUSTED")
+      ->group("Limits");
+  app.add_option("--idle-timeout", idle_timeout_seconds_,
+                 "Seconds a stream may sit with nothing moving before it is ended with "
+                 "DEADLINE_EXCEEDED")
+      ->check(CLI::Range(0.001, 86400.0))
+      ->group("Limits");
+  app.add_option("--max-queued-frames", o.max_queued_frames,
+                 "Frames held per stream in delivery 'all' (waiting + in work + replies not yet "
+                 "written); when full the stream is not read")
+      ->group("Limits");
+
+  const std::string defaults = "Stream defaults (a client's StreamConfig overrides them)";
+  stages_ = std::make_unique<cli::StageFlags>(
+      app, cli::StageFlags::Groups{defaults, defaults, defaults}, o.defaults.frame);
+  app.add_option("--delivery", delivery_,
+                 "Default delivery: 'latest' (real time, drops stale frames) or 'all' "
+                 "(lossless, flow-controlled)")
+      ->check(CLI::IsMember({"latest", "all"}))
+      ->group(defaults);
+}
+
+absl::StatusOr<ServerOptions> ServerFlags::Options() const {
+  ServerOptions o = options_;
+  o.idle_timeout = ToMillis(idle_timeout_seconds_);
+  o.shutdown_grace = ToMillis(shutdown_grace_seconds_);
+  auto frame = stages_->Apply(o.defaults.frame);
+  if (!frame.ok()) return frame.status();
+  o.defaults.frame = *std::move(frame);
+  if (!convert::ParseDelivery(delivery_, &o.defaults.delivery)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("--delivery must be latest or all, got ", delivery_));
+  }
+  if (absl::Status s = o.Validate(); !s.ok()) return s;
+  return o;
+}
+
+}  // namespace cloudcast::server

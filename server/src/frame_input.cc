@@ -1,0 +1,72 @@
+#include "frame_input.h"
+
+#include "cloudcast/proto/convert.h"
+
+namespace cloudcast::server {
+namespace {
+
+// Decodes `bytes` into `owned` and views it. Formats the header check cannot size are refused
+// before the decoder runs; the decoded size is checked again (a TIFF may hold several pages).
+template <typename Owned, typename View, typename Decode>
+absl::Status DecodeChecked(std::string_view bytes, const char* field, const Limits& limits,
+                           Decode decode, Owned* owned, View* view) {
+  if (absl::Status s = CheckEncodedImage(bytes, field, limits); !s.ok()) return s;
+  auto decoded = decode(bytes, field);
+  if (!decoded.ok()) return decoded.status();
+  *owned = *std::move(decoded);
+  *view = owned->view();
+  return ValidateView(*view, limits, field);
+}
+
+}  // namespace
+
+absl::Status PrepareFrameImages(const v1::Frame& frame, const Limits& limits,
+                                DecodeScratch* scratch, FrameImages* out) {
+  out->decoded = false;
+  switch (frame.disparity().data_case()) {
+    case v1::DisparityImage::kRaw:
+      if (auto s = convert::ViewRaw(frame.disparity().raw(), "frame.disparity.raw", limits,
+                                    &out->disparity);
+          !s.ok()) {
+        return s;
+      }
+      break;
+    case v1::DisparityImage::kEncoded:
+      if (auto s = DecodeChecked(
+              frame.disparity().encoded(), "frame.disparity.encoded", limits,
+              [](std::string_view b, const char* f) { return DecodeDisparity(b, f); },
+              &scratch->disparity, &out->disparity);
+          !s.ok()) {
+        return s;
+      }
+      out->decoded = true;
+      break;
+    default:
+      return absl::InvalidArgumentError(
+          "frame.disparity is missing: set frame.disparity.raw or frame.disparity.encoded");
+  }
+  switch (frame.colour().data_case()) {
+    case v1::ColorImage::kRaw:
+      if (auto s = convert::ViewRaw(frame.colour().raw(), "frame.colour.raw", limits, &out->colour);
+          !s.ok()) {
+        return s;
+      }
+      break;
+    case v1::ColorImage::kEncoded:
+      if (auto s = DecodeChecked(
+              frame.colour().encoded(), "frame.colour.encoded", limits,
+              [](std::string_view b, const char* f) { return DecodeColor(b, f); }, &scratch->colour,
+              &out->colour);
+          !s.ok()) {
+        return s;
+      }
+      out->decoded = true;
+      break;
+    default:
+      return absl::InvalidArgumentError(
+          "frame.colour is missing: set frame.colour.raw or frame.colour.encoded");
+  }
+  return CheckSameSize(out->disparity, "frame.disparity", out->colour, "frame.colour");
+}
+
+}  // namespace cloudcast::server

@@ -1,0 +1,34 @@
+// A proto Frame as the core's image views: raw images viewed in place, encoded ones decoded.
+#pragma once
+
+#include "absl/status/status.h"
+#include "cloudcast/core/image.h"
+#include "cloudcast/core/limits.h"
+#include "cloudcast/io/image_io.h"
+#include "cloudcast/v1/cloudcast.pb.h"
+
+namespace cloudcast::server {
+
+// The images of one frame as the core reads them.
+struct FrameImages {
+  DisparityView disparity;
+  ColorView colour;
+  bool decoded = false;  // at least one image came encoded (PNG, JPEG, ...) and was decoded
+};
+
+// Decoded pixels, kept by a worker from frame to frame.
+struct DecodeScratch {
+  OwnedDisparity disparity;
+  OwnedColor colour;
+};
+
+// Fills `out` from `frame`. Raw images are viewed in place, without a copy: the views point into
+// `frame`'s bytes, which must outlive them (convert::ViewRaw). Encoded images are decoded into
+// `scratch` once their header's size has been checked (CheckEncodedImage).
+//
+// Errors name the field by its proto path under "frame." and the limit it broke:
+// RESOURCE_EXHAUSTED for an image over `limits`, INVALID_ARGUMENT for anything malformed.
+absl::Status PrepareFrameImages(const v1::Frame& frame, const Limits& limits,
+                                DecodeScratch* scratch, FrameImages* out);
+
+}  // namespace cloudcast::server

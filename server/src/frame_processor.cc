@@ -1,0 +1,113 @@
+#include "frame_processor.h"
+
+#include <time.h>
+
+#include <algorithm>
+#include <chrono>
+#include <string>
+#include <utility>
+
+#include "cloudcast/core/draco_codec.h"
+
+namespace cloudcast::server {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double Seconds(Clock::duration d) { return std::chrono::duration<double>(d).count(); }
+
+std::uint32_t Micros(double seconds) {
+  return static_cast<std::uint32_t>(std::clamp(seconds * 1e6, 0.0, 4.0e9));
+}
+
+}  // namespace
+
+double ThreadCpuSeconds() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return static_cast<double>(ts.tv_sec) + static_cast<double>(ts.tv_nsec) * 1e-9;
+}
+
+absl::Status FrameProcessor::Process(const v1::Frame& frame, const FrameSettings& settings,
+                                     v1::CloudReply* reply, FrameCosts* costs) {
+  *costs = FrameCosts{};
+  reply->set_sequence(frame.sequence());
+  reply->set_frame_id(frame.frame_id());
+  reply->set_capture_time_unix_ns(frame.capture_time_unix_ns());
+
+  const Clock::time_point t0 = Clock::now();
+  FrameImages images;
+  if (absl::Status s = PrepareFrameImages(frame, settings.pipeline.limits, &decode_, &images);
+      !s.ok()) {
+    return s;
+  }
+  const Clock::time_point t1 = Clock::now();
+  costs->decoded = images.decoded;
+  costs->decode_seconds = images.decoded ? Seconds(t1 - t0) : 0.0;
+
+  const PipelineOptions options =
+      settings.PipelineFor(images.disparity.width, images.disparity.height);
+  StageCounts counts;
+  const double cpu0 = ThreadCpuSeconds();
+  absl::Status status = pipeline_.Run(options, images.disparity, images.colour, &cloud_, &counts);
+  const Clock::time_point t2 = Clock::now();
+  DracoEncodeInfo info;
+  if (status.ok()) {
+    // Straight into the reply's own buffer: no copy of the compressed cloud afterwards.
+    status = EncodeDraco(cloud_, settings.Draco(), reply->mutable_draco(), &info);
+  }
+  const double cpu1 = ThreadCpuSeconds();
+  const Clock::time_point t3 = Clock::now();
+  costs->pipeline_seconds = Seconds(t2 - t1);
+  costs->encode_seconds = Seconds(t3 - t2);
+  costs->core_cpu_seconds = cpu1 - cpu0;
+  // The settings were checked when the StreamConfig was resolved, so what fails here is the
+  // frame (e.g. a cloud too wide for 30 position bits under the error bound).
+  if (!status.ok()) return status;
+
+  reply->set_point_count(static_cast<std::uint32_t>(counts.after_voxel));
+  reply->set_position_error_bound(info.position_error_bound);
+  reply->set_position_bits(info.position_bits);
+  v1::StageCounts* c = reply->mutable_counts();
+  c->set_pixels(counts.pixels);
+  c->set_valid_points(counts.valid_points);
+  c->set_after_passthrough(counts.after_passthrough);
+  c->set_after_voxel_grid(counts.after_voxel);
+  v1::StageTimes* t = reply->mutable_times();
+  t->set_decode_us(Micros(costs->decode_seconds));
+  t->set_pipeline_us(Micros(costs->pipeline_seconds));
+  t->set_encode_us(Micros(costs->encode_seconds));
+  return absl::OkStatus();
+}
+
+FrameRunner::FrameRunner(int workers, Metrics* metrics, std::string instance)
+    : metrics_(metrics), instance_(std::move(instance)) {
+  for (int i = 0; i < workers; ++i) processors_.push_back(std::make_unique<FrameProcessor>());
+}
+
+absl::Status FrameRunner::Run(std::size_t worker, const v1::Frame& frame,
+                              const FrameSettings& settings, const Arrival& arrival,
+                              v1::CloudReply* reply) {
+  const Clock::time_point start = Clock::now();
+  Metrics& m = *metrics_;
+  m.queue_seconds.Observe(Seconds(start - arrival.time));
+  const double cpu0 = ThreadCpuSeconds();
+  FrameCosts costs;
+  const absl::Status status = processors_[worker]->Process(frame, settings, reply, &costs);
+  m.core_cpu_seconds.Increment(costs.core_cpu_seconds);
+  if (status.ok()) {
+    reply->mutable_times()->set_queue_us(Micros(Seconds(start - arrival.time)));
+    reply->set_receive_time_unix_ns(arrival.unix_ns);
+    reply->set_server_instance(instance_);
+    m.frames_processed.Increment();
+    m.pipeline_seconds.Observe(costs.pipeline_seconds);
+    m.encode_seconds.Observe(costs.encode_seconds);
+    if (costs.decoded) m.decode_seconds.Observe(costs.decode_seconds);
+  } else {
+    m.FrameErrors(status.code()).Increment();
+  }
+  m.worker_cpu_seconds.Increment(ThreadCpuSeconds() - cpu0);
+  return status;
+}
+
+}  // namespace cloudcast::server

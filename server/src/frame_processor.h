@@ -1,0 +1,74 @@
+// Running one frame on a worker: proto Frame -> images -> fused pipeline -> Draco -> CloudReply,
+// with the metrics. Stream and Process both run their frames through FrameRunner::Run.
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "cloudcast/core/pipeline.h"
+#include "cloudcast/core/point.h"
+#include "cloudcast/proto/convert.h"
+#include "cloudcast/v1/cloudcast.pb.h"
+#include "frame_input.h"
+#include "metrics.h"
+
+namespace cloudcast::server {
+
+// What one frame cost, for the metrics.
+struct FrameCosts {
+  double decode_seconds = 0;    // wall time decoding PNG / JPEG (0 for raw images)
+  double pipeline_seconds = 0;  // wall time in Pipeline::Run
+  double encode_seconds = 0;    // wall time in EncodeDraco
+  double core_cpu_seconds = 0;  // this thread's CPU time in Pipeline::Run + EncodeDraco
+  bool decoded = false;
+};
+
+// Holds the scratch a frame needs (pipeline tables and voxel accumulator, the cloud, decoded
+// images) so that steady-state frames allocate little. Not thread-safe: one per worker thread.
+class FrameProcessor {
+ public:
+  // Fills `reply`'s cloud fields: the echoed sequence / frame_id / capture time, `draco` (written
+  // in place), point_count, position_error_bound, position_bits, counts and the decode, pipeline
+  // and encode times. Errors: see PrepareFrameImages; pipeline and Draco errors keep the core's
+  // code.
+  absl::Status Process(const v1::Frame& frame, const FrameSettings& settings, v1::CloudReply* reply,
+                       FrameCosts* costs);
+
+ private:
+  Pipeline pipeline_;
+  PointCloud cloud_;
+  DecodeScratch decode_;
+};
+
+// When a frame had arrived whole.
+struct Arrival {
+  std::chrono::steady_clock::time_point time;
+  std::int64_t unix_ns = 0;
+};
+
+// One FrameProcessor per worker, and the bookkeeping every frame gets.
+class FrameRunner {
+ public:
+  FrameRunner(int workers, Metrics* metrics, std::string instance);
+
+  // On worker `worker`: processes `frame` into `reply`, which gets everything but its send time
+  // and frames_dropped (the writer's). Counts the frame, its stage times and CPU, or its error.
+  absl::Status Run(std::size_t worker, const v1::Frame& frame, const FrameSettings& settings,
+                   const Arrival& arrival, v1::CloudReply* reply);
+
+  const std::string& instance() const { return instance_; }
+
+ private:
+  std::vector<std::unique_ptr<FrameProcessor>> processors_;
+  Metrics* const metrics_;
+  const std::string instance_;
+};
+
+// This thread's CPU time in seconds (CLOCK_THREAD_CPUTIME_ID).
+double ThreadCpuSeconds();
+
+}  // namespace cloudcast::server

@@ -1,0 +1,63 @@
+// cloudcast-server: serves the CloudCast gRPC API (proto/cloudcast/v1/cloudcast.proto).
+//
+// SIGINT / SIGTERM start a graceful shutdown: health checks go NOT_SERVING, new calls are refused,
+// frames in flight get --shutdown-grace seconds, then the process exits 0. A second signal exits
+// at once. Signals are taken by sigwait on a thread, never handled inside a signal handler.
+#include <pthread.h>
+#include <signal.h>
+#include <spdlog/spdlog.h>
+#include <string.h>
+
+#include <CLI/CLI.hpp>
+#include <cstdlib>
+#include <iostream>
+#include <string>
+#include <thread>
+
+#include "cloudcast/server/cli.h"
+#include "cloudcast/server/server.h"
+
+int main(int argc, char** argv) {
+  CLI::App app{
+      "cloudcast-server: stereo frames (disparity + colour) in, filtered and Draco-compressed "
+      "point clouds out, over gRPC (cloudcast.v1.CloudCast). Health checking and reflection are "
+      "on; Prometheus metrics are served over HTTP."};
+  cloudcast::server::ServerFlags flags(app);
+  CLI11_PARSE(app, argc, argv);
+  spdlog::set_level(spdlog::level::from_str(flags.log_level()));
+
+  auto options = flags.Options();
+  if (!options.ok()) {
+    std::cerr << "cloudcast-server: " << options.status().message() << "\n";
+    return 2;
+  }
+
+  // Blocked before any thread starts, so that every thread inherits the mask and only sigwait
+  // below ever sees these signals.
+  sigset_t signals;
+  sigemptyset(&signals);
+  sigaddset(&signals, SIGINT);
+  sigaddset(&signals, SIGTERM);
+  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
+
+  auto server = cloudcast::server::Server::Start(*options);
+  if (!server.ok()) {
+    spdlog::critical("{}", std::string(server.status().message()));
+    return 1;
+  }
+
+  int signal_number = 0;
+  sigwait(&signals, &signal_number);
+  spdlog::info("{}: shutting down gracefully (again to stop at once)", strsignal(signal_number));
+  std::thread([signals] {
+    int again = 0;
+    sigwait(&signals, &again);
+    spdlog::warn("{} during shutdown: exiting now", strsignal(again));
+    std::_Exit(1);
+  }).detach();
+
+  (*server)->Shutdown();
+  server->reset();
+  spdlog::info("bye");
+  return 0;
+}

@@ -1,0 +1,64 @@
+#include "cloudcast/server/options.h"
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <thread>
+
+#include "absl/strings/str_cat.h"
+
+namespace cloudcast::server {
+namespace {
+
+absl::Status Invalid(const std::string& message) { return absl::InvalidArgumentError(message); }
+
+}  // namespace
+
+absl::Status ServerOptions::Validate() const {
+  if (listen.empty()) return Invalid("--listen must not be empty");
+  if (threads < 0 || threads > 1024) {
+    return Invalid(absl::StrCat("--threads is ", threads, "; it must be in [0, 1024]"));
+  }
+  if (max_message_bytes < 1024 || max_message_bytes > (std::uint64_t{1} << 31) - 1) {
+    // gRPC takes an int.
+    return Invalid(absl::StrCat("--max-message-bytes is ", max_message_bytes,
+                                "; it must be in [1024, 2^31 - 1]"));
+  }
+  if (limits.max_side == 0) return Invalid("--max-side must be at least 1");
+  if (limits.max_pixels == 0 || limits.max_pixels > (std::uint64_t{1} << 24)) {
+    // Beyond 2^24 pixels the core's per-voxel colour sums could overflow (core/limits.h).
+    return Invalid(absl::StrCat("--max-pixels is ", limits.max_pixels,
+                                "; it must be in [1, 2^24 = 16777216]"));
+  }
+  if (max_streams == 0) return Invalid("--max-streams must be at least 1");
+  if (idle_timeout.count() <= 0) return Invalid("--idle-timeout must be positive");
+  if (max_queued_frames == 0 || max_queued_frames > 1024) {
+    return Invalid(
+        absl::StrCat("--max-queued-frames is ", max_queued_frames, "; it must be in [1, 1024]"));
+  }
+  if (shutdown_grace.count() < 0) return Invalid("--shutdown-grace must not be negative");
+  if (auto s = defaults.frame.Validate("defaults"); !s.ok()) {
+    return Invalid(absl::StrCat("stream defaults: ", s.message()));
+  }
+  return absl::OkStatus();
+}
+
+int ServerOptions::ResolvedThreads() const {
+  if (threads > 0) return threads;
+  return std::max(1u, std::thread::hardware_concurrency());
+}
+
+std::string ServerOptions::ResolvedInstance() const {
+  if (!instance.empty()) return instance;
+  char host[256] = {};
+  if (gethostname(host, sizeof host - 1) != 0 || host[0] == '\0') return "cloudcast";
+  return host;
+}
+
+StreamSettings ServerOptions::StreamDefaults() const {
+  StreamSettings s = defaults;
+  s.frame.pipeline.limits = limits;
+  return s;
+}
+
+}  // namespace cloudcast::server

@@ -1,0 +1,175 @@
+#include "cloudcast/server/server.h"
+
+#include <arpa/inet.h>
+#include <grpcpp/ext/proto_server_reflection_plugin.h>
+#include <grpcpp/health_check_service_interface.h>
+#include <netinet/in.h>
+#include <prometheus/exposer.h>
+#include <spdlog/spdlog.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <exception>
+#include <thread>
+#include <utility>
+
+#include "absl/strings/str_cat.h"
+#include "metrics.h"
+#include "service.h"
+
+namespace cloudcast::server {
+namespace {
+
+// Stops the metrics exporter without its usual wait: civetweb's accept loop polls with a 2 s
+// timeout and only then notices it was told to stop; a connection to its port wakes it at once.
+void StopExposer(std::unique_ptr<prometheus::Exposer> exposer, const std::string& listen,
+                 int port) {
+  if (exposer == nullptr) return;
+  std::atomic<bool> stopped{false};
+  std::thread stopper([&] {
+    exposer.reset();
+    stopped.store(true);
+  });
+  std::string host = listen.substr(0, listen.rfind(':'));
+  if (host.empty() || host == "0.0.0.0" || host == "localhost") host = "127.0.0.1";
+  const bool v6 = host.front() == '[';
+  if (v6) host = host.substr(1, host.size() - 2);
+  if (v6 && host == "::") host = "::1";
+  while (!stopped.load() && port > 0) {
+    const int fd = socket(v6 ? AF_INET6 : AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    if (fd >= 0) {
+      if (v6) {
+        sockaddr_in6 addr{};
+        addr.sin6_family = AF_INET6;
+        addr.sin6_port = htons(static_cast<std::uint16_t>(port));
+        if (inet_pton(AF_INET6, host.c_str(), &addr.sin6_addr) == 1) {
+          connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr);
+        }
+      } else {
+        sockaddr_in addr{};
+        addr.sin_family = AF_INET;
+        addr.sin_port = htons(static_cast<std::uint16_t>(port));
+        if (inet_pton(AF_INET, host.c_str(), &addr.sin_addr) == 1) {
+          connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr);
+        }
+      }
+      close(fd);
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  stopper.join();
+}
+
+// "host:port" -> "host:<port>"; IPv6 hosts keep their brackets.
+std::string WithPort(const std::string& listen, int port) {
+  const std::size_t colon = listen.rfind(':');
+  const std::string host = colon == std::string::npos ? listen : listen.substr(0, colon);
+  return absl::StrCat(host, ":", port);
+}
+
+}  // namespace
+
+const char* HealthServiceName() { return "cloudcast.v1.CloudCast"; }
+
+Server::Server(const ServerOptions& options) : options_(options) {}
+
+absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& options) {
+  if (absl::Status s = options.Validate(); !s.ok()) return s;
+  std::unique_ptr<Server> server(new Server(options));
+  server->metrics_ = std::make_unique<Metrics>();
+  server->service_ = std::make_unique<CloudCastService>(options, server->metrics_.get());
+
+  // Both are process-wide switches read when a server is built.
+  grpc::EnableDefaultHealthCheckService(true);
+  grpc::reflection::InitProtoReflectionServerBuilderPlugin();
+
+  grpc::ServerBuilder builder;
+  builder.AddListeningPort(options.listen, grpc::InsecureServerCredentials(), &server->port_);
+  builder.SetMaxReceiveMessageSize(static_cast<int>(options.max_message_bytes));
+  // gRPC sets SO_REUSEPORT by default, so a second server on a busy port would silently share
+  // it; an operator wants "address in use" instead.
+  builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
+  builder.RegisterService(server->service_.get());
+  server->server_ = builder.BuildAndStart();
+  if (server->server_ == nullptr || server->port_ == 0) {
+    server->Abandon();
+    return absl::UnavailableError(absl::StrCat("cannot serve gRPC on ", options.listen,
+                                               " (--listen): address in use, or "
+                                               "not an address of this machine"));
+  }
+  server->address_ = WithPort(options.listen, server->port_);
+
+  if (!options.metrics_listen.empty()) {
+    try {
+      server->exposer_ = std::make_unique<prometheus::Exposer>(options.metrics_listen);
+      for (const auto& c : server->metrics_->collectables())
+        server->exposer_->RegisterCollectable(c);
+      const std::vector<int> ports = server->exposer_->GetListeningPorts();
+      server->metrics_port_ = ports.empty() ? 0 : ports.front();
+    } catch (const std::exception& e) {
+      server->Abandon();
+      return absl::UnavailableError(absl::StrCat("cannot serve metrics on ", options.metrics_listen,
+                                                 " (--metrics-listen): ", e.what()));
+    }
+  }
+
+  grpc::HealthCheckServiceInterface* health = server->server_->GetHealthCheckService();
+  health->SetServingStatus("", true);
+  health->SetServingStatus(HealthServiceName(), true);
+  spdlog::info("cloudcast-server listening on {} ({} workers, metrics {})", server->address_,
+               server->service_->worker_threads(),
+               server->metrics_port_ > 0 ? WithPort(options.metrics_listen, server->metrics_port_)
+                                         : std::string("off"));
+  return server;
+}
+
+Server::~Server() { Shutdown(); }
+
+std::uint32_t Server::queued_frames_high_water() const {
+  return service_->queued_frames_high_water();
+}
+
+void Server::Abandon() {
+  if (server_ != nullptr) server_->Shutdown(std::chrono::system_clock::now());
+  service_->StopWorkers();
+  std::lock_guard<std::mutex> lock(shutdown_mu_);
+  shut_down_ = true;
+}
+
+void Server::StartDraining() {
+  if (service_->draining()) return;
+  // NOT_SERVING first, so that load balancers stop sending before calls are refused.
+  grpc::HealthCheckServiceInterface* health = server_->GetHealthCheckService();
+  health->SetServingStatus("", false);
+  health->SetServingStatus(HealthServiceName(), false);
+  service_->StartDraining();
+}
+
+void Server::Shutdown(std::chrono::milliseconds grace) {
+  std::unique_lock<std::mutex> lock(shutdown_mu_);
+  if (shut_down_) return;
+  const auto start = std::chrono::steady_clock::now();
+  spdlog::info("shutting down (grace {} ms)", grace.count());
+  StartDraining();
+  // Waits for the calls to end; at the deadline it cancels the rest, whose reactors then finish
+  // as soon as no write of theirs is outstanding.
+  server_->Shutdown(std::chrono::system_clock::now() + grace);
+  // gRPC has seen every OnDone by now; a frame still in work holds its reactor until its
+  // worker is done, which StopWorkers waits for.
+  service_->WaitForStreams(std::chrono::steady_clock::now() + std::chrono::seconds(1));
+  service_->StopWorkers();
+  StopExposer(std::move(exposer_), options_.metrics_listen, metrics_port_);
+  shut_down_ = true;
+  spdlog::info("shut down in {} ms", std::chrono::duration_cast<std::chrono::milliseconds>(
+                                         std::chrono::steady_clock::now() - start)
+                                         .count());
+  shutdown_cv_.notify_all();
+}
+
+void Server::Wait() {
+  std::unique_lock<std::mutex> lock(shutdown_mu_);
+  shutdown_cv_.wait(lock, [this] { return shut_down_; });
+}
+
+}  // namespace cloudcast::server

@@ -1,0 +1,576 @@
+#include "service.h"
+
+#include <algorithm>
+#include <optional>
+#include <string>
+#include <utility>
+
+#include "absl/strings/str_cat.h"
+#include "draco/core/draco_version.h"
+#include "spdlog/spdlog.h"
+#include "stream_queue.h"
+
+#ifndef CLOUDCAST_VERSION
+#define CLOUDCAST_VERSION "unknown"
+#endif
+
+namespace cloudcast::server {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+std::int64_t UnixNanos() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(
+             std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+double Seconds(Clock::duration d) { return std::chrono::duration<double>(d).count(); }
+
+grpc::Status ToGrpc(const absl::Status& s) {
+  // absl and gRPC share the canonical code numbers.
+  return grpc::Status(static_cast<grpc::StatusCode>(s.code()), std::string(s.message()));
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+// One Stream call: gRPC's op sequencing around the stream's StreamQueue.
+//
+// Lifetime: the reactor counts references: one for gRPC (dropped in OnDone), one per frame in
+// the worker pool, one per housekeeping visit. The last Unref deletes it, so a worker can still
+// touch its stream after gRPC is done with the call.
+//
+// Locking: mu_ guards the state. Every decision to call StartRead / StartWrite / Finish /
+// TryCancel is taken under mu_; the calls themselves are made after mu_ is released, under
+// ops_mu_, which is taken before mu_ is let go. So the calls reach gRPC in the order they were
+// decided and none comes after Finish. (Reactions are not run inline by gRPC for non-inlineable
+// reactors, so holding ops_mu_ across the calls cannot deadlock.)
+class CloudCastService::StreamReactor final
+    : public grpc::ServerBidiReactor<v1::StreamRequest, v1::StreamReply> {
+ public:
+  StreamReactor(CloudCastService* service, grpc::CallbackServerContext* context)
+      : service_(service),
+        context_(context),
+        peer_(context->peer()),
+        settings_(service->default_settings_),
+        queue_(service->options_.max_queued_frames),
+        last_activity_(Clock::now()) {
+    spdlog::info("stream from {} opened ({} active)", peer_, service_->active_streams());
+    service_->Register(this);
+    std::unique_lock<std::mutex> lock(mu_);
+    draining_ = service_->draining();
+    Pump(lock);
+  }
+
+  void OnReadDone(bool ok) override {
+    std::unique_lock<std::mutex> lock(mu_);
+    Job* job = reading_;
+    reading_ = nullptr;
+    last_activity_ = Clock::now();
+    if (!ok) {
+      read_open_ = false;  // the client closed its side, or the call is gone
+      Release(job);
+    } else if (finished_ || broken_ || draining_) {
+      Release(job);  // read after draining began: not answered
+    } else {
+      service_->metrics_->bytes_received.Increment(
+          static_cast<double>(job->request.ByteSizeLong()));
+      Accept(job);
+    }
+    Pump(lock);
+  }
+
+  void OnWriteDone(bool ok) override {
+    std::unique_lock<std::mutex> lock(mu_);
+    Job* job = writing_;
+    writing_ = nullptr;
+    last_activity_ = Clock::now();
+    queue_.Written();
+    Release(job);
+    if (!ok) Break();  // cancelled, or the client went away
+    Pump(lock);
+  }
+
+  void OnCancel() override {
+    std::unique_lock<std::mutex> lock(mu_);
+    Break();
+    Pump(lock);
+  }
+
+  void OnDone() override {
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      spdlog::info("stream from {} done: {} replies, {} dropped", peer_, queue_.written(),
+                   queue_.dropped());
+    }
+    service_->Unregister(this);
+    Unref();
+  }
+
+  void Ref() { refs_.fetch_add(1, std::memory_order_relaxed); }
+  void Unref() {
+    if (refs_.fetch_sub(1, std::memory_order_acq_rel) == 1) delete this;
+  }
+
+  // Ends the stream if nothing moved on it for the idle timeout.
+  void CheckIdle(Clock::time_point now) {
+    std::unique_lock<std::mutex> lock(mu_);
+    if (finished_ || ending_ || broken_ || queue_.in_work() > 0) return;
+    if (now - last_activity_ < service_->options_.idle_timeout) return;
+    const double seconds = Seconds(service_->options_.idle_timeout);
+    spdlog::info("stream from {} idle for {} s: ending it", peer_, seconds);
+    service_->metrics_->streams_idle_timeout.Increment();
+    ending_ = grpc::Status(grpc::StatusCode::DEADLINE_EXCEEDED,
+                           absl::StrCat("stream idle: nothing received or sent for ", seconds,
+                                        " s (the server's idle timeout, --idle-timeout)"));
+    // A Finish must wait for an outstanding write, which a client that takes nothing never
+    // completes: cancel the call instead.
+    Pump(lock, /*cancel=*/writing_ != nullptr);
+  }
+
+  // Stops reading; the frames already held are answered, then the stream ends (UNAVAILABLE).
+  void BeginDrain() {
+    std::unique_lock<std::mutex> lock(mu_);
+    draining_ = true;
+    Pump(lock);
+  }
+
+ private:
+  // A request slot: what is read into it, and the reply it turns into.
+  struct Job : StreamSlot {
+    v1::StreamRequest request;
+    v1::StreamReply reply;
+    // The CloudReply last used by this job, kept out of `reply` between frames so that its
+    // draco buffer keeps its capacity (a oneof member is freed when the oneof is cleared).
+    std::unique_ptr<v1::CloudReply> spare_cloud;
+    std::shared_ptr<const StreamSettings> settings;
+    Arrival arrival;
+  };
+
+  // The calls decided under mu_, made by Pump after it is released.
+  struct Ops {
+    Job* write = nullptr;
+    Job* read = nullptr;
+    bool cancel = false;
+    std::optional<grpc::Status> finish;
+  };
+
+  ~StreamReactor() override = default;
+
+  // Decides what can happen next and hands it to gRPC. `lock` holds mu_ and is released here.
+  void Pump(std::unique_lock<std::mutex>& lock, bool cancel = false) {
+    Ops ops;
+    ops.cancel = cancel;
+    // A reply that is ready goes out first: in DELIVERY_LATEST the next frame may start only
+    // once no finished reply waits, so processing it then overlaps this write.
+    StartWriteIfReady(&ops);
+    Dispatch();
+    StartWriteIfReady(&ops);  // an error reply queued behind the frames may be next
+    // End the call when its time has come (never with a write outstanding).
+    if (!finished_ && writing_ == nullptr) {
+      if (broken_) {
+        ops.finish = grpc::Status(grpc::StatusCode::CANCELLED, "stream cancelled");
+      } else if (ending_) {
+        ops.finish = *ending_;
+      } else if (queue_.Empty() && !read_open_) {
+        ops.finish = grpc::Status::OK;
+      } else if (queue_.Empty() && draining_) {
+        ops.finish = grpc::Status(grpc::StatusCode::UNAVAILABLE,
+                                  "the server is shutting down; frames received before were "
+                                  "answered");
+      }
+      if (ops.finish) finished_ = true;
+    }
+    // Read the next message when there is room for it.
+    if (reading_ == nullptr && !finished_ && read_open_ && !draining_ && !broken_ && !ending_ &&
+        queue_.CanRead(settings_->delivery)) {
+      reading_ = Acquire();
+      ops.read = reading_;
+    }
+    if (ops.write == nullptr && ops.read == nullptr && !ops.cancel && !ops.finish) {
+      lock.unlock();
+      return;
+    }
+    std::lock_guard<std::mutex> order(ops_mu_);
+    lock.unlock();
+    if (ops.write != nullptr) StartWrite(&ops.write->reply);
+    if (ops.read != nullptr) StartRead(&ops.read->request);
+    if (ops.cancel) context_->TryCancel();
+    if (ops.finish) Finish(*std::move(ops.finish));
+  }
+
+  // The call can no longer be written to: everything it holds is let go.
+  void Break() {
+    if (broken_) return;
+    broken_ = true;
+    std::vector<StreamSlot*> released;
+    queue_.Abandon(&released);
+    for (StreamSlot* s : released) Release(static_cast<Job*>(s));
+  }
+
+  Job* Acquire() {
+    if (free_.empty()) {
+      jobs_.push_back(std::make_unique<Job>());
+      return jobs_.back().get();
+    }
+    Job* job = free_.back();
+    free_.pop_back();
+    return job;
+  }
+
+  // Frees the request's pixels now (so a free slot costs no memory) and keeps the reply's cloud
+  // buffer for the next frame.
+  void Release(Job* job) {
+    job->request.Clear();
+    if (job->reply.has_cloud()) job->spare_cloud.reset(job->reply.release_cloud());
+    job->reply.Clear();
+    job->settings.reset();
+    free_.push_back(job);
+  }
+
+  // A message arrived: a config takes effect at once; a frame or an error reply joins the queue.
+  void Accept(Job* job) {
+    switch (job->request.kind_case()) {
+      case v1::StreamRequest::kConfig: {
+        auto settings = convert::Resolve(job->request.config(), *service_->default_settings_);
+        if (settings.ok()) {
+          settings_ = std::make_shared<const StreamSettings>(*std::move(settings));
+          spdlog::debug("stream from {}: new config, delivery {}", peer_,
+                        convert::Name(settings_->delivery));
+          Release(job);
+          return;
+        }
+        // The previous config stays; the client hears why in order with its frames.
+        QueueError(job, v1::ERROR_KIND_CONFIG, settings.status());
+        return;
+      }
+      case v1::StreamRequest::kFrame: {
+        job->settings = settings_;
+        job->delivery = settings_->delivery;
+        job->arrival = {last_activity_, UnixNanos()};
+        std::vector<StreamSlot*> dropped;
+        queue_.PushFrame(job, &dropped);
+        for (StreamSlot* s : dropped) {
+          service_->metrics_->frames_dropped.Increment();
+          Release(static_cast<Job*>(s));
+        }
+        service_->NoteQueued(queue_.held());
+        return;
+      }
+      default:
+        QueueError(job, v1::ERROR_KIND_REQUEST,
+                   absl::InvalidArgumentError(
+                       "request: a StreamRequest must hold a config or a frame; it held neither"));
+        return;
+    }
+  }
+
+  // An error reply for a request that needs no work, in order with the frame replies.
+  void QueueError(Job* job, v1::ErrorKind kind, const absl::Status& status) {
+    job->request.Clear();
+    FillError(status, kind, 0, "", job->reply.mutable_error());
+    queue_.PushReply(job);
+    service_->NoteQueued(queue_.held());
+  }
+
+  // Fills a FrameError (it is the client's error, not the server's: logged at debug level only,
+  // so that a misbehaving client cannot flood the log) and counts it.
+  void FillError(const absl::Status& status, v1::ErrorKind kind, std::uint64_t sequence,
+                 const std::string& frame_id, v1::FrameError* error) {
+    spdlog::debug("frame error from {}: {}", peer_, status.ToString());
+    service_->metrics_->FrameErrors(status.code()).Increment();
+    convert::FillError(status, kind, sequence, frame_id, error);
+    error->set_server_instance(service_->runner_.instance());
+  }
+
+  // Hands the frames that may start to the worker pool.
+  void Dispatch() {
+    while (StreamSlot* slot = queue_.NextToProcess()) {
+      Job* job = static_cast<Job*>(slot);
+      Ref();
+      if (!service_->pool_.Submit([this, job](std::size_t worker) { Work(job, worker); })) {
+        // The pool is stopping: the server is past its grace period.
+        queue_.Processed(job);
+        Release(job);
+        Break();
+        Unref();  // never the last reference: gRPC still holds one
+        return;
+      }
+    }
+  }
+
+  // Hands the next reply in order to the writer, if it is done and no write is outstanding.
+  void StartWriteIfReady(Ops* ops) {
+    if (writing_ != nullptr || finished_) return;
+    Job* job = static_cast<Job*>(queue_.NextToWrite());
+    if (job == nullptr) return;
+    writing_ = job;
+    if (job->reply.has_cloud()) {
+      v1::CloudReply* cloud = job->reply.mutable_cloud();
+      cloud->set_frames_dropped(queue_.dropped());
+      cloud->set_send_time_unix_ns(UnixNanos());
+      service_->metrics_->total_seconds.Observe(Seconds(Clock::now() - job->arrival.time));
+    } else {
+      job->reply.mutable_error()->set_frames_dropped(queue_.dropped());
+    }
+    service_->metrics_->bytes_sent.Increment(static_cast<double>(job->reply.ByteSizeLong()));
+    ops->write = job;
+  }
+
+  // On a worker thread; this job holds a reference to the reactor.
+  void Work(Job* job, std::size_t worker) {
+    bool skip;
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      skip = queue_.abandoned();
+    }
+    if (!skip) {
+      v1::CloudReply* cloud = job->spare_cloud ? job->spare_cloud.release() : new v1::CloudReply;
+      cloud->Clear();  // keeps the draco buffer's capacity
+      job->reply.set_allocated_cloud(cloud);
+      const v1::Frame& frame = job->request.frame();
+      const absl::Status status =
+          service_->runner_.Run(worker, frame, job->settings->frame, job->arrival, cloud);
+      if (!status.ok()) {
+        const std::uint64_t sequence = frame.sequence();
+        const std::string frame_id = frame.frame_id();
+        job->spare_cloud.reset(job->reply.release_cloud());
+        spdlog::debug("frame error from {}: {}", peer_, status.ToString());
+        convert::FillError(status, v1::ERROR_KIND_FRAME, sequence, frame_id,
+                           job->reply.mutable_error());
+        job->reply.mutable_error()->set_server_instance(service_->runner_.instance());
+      }
+      // The pixels are no longer needed; free them before the reply waits for the writer.
+      job->request.Clear();
+    }
+    {
+      std::unique_lock<std::mutex> lock(mu_);
+      last_activity_ = Clock::now();
+      if (!queue_.Processed(job)) Release(job);  // nobody will write it
+      Pump(lock);
+    }
+    Unref();  // last: may delete this
+  }
+
+  CloudCastService* const service_;
+  grpc::CallbackServerContext* const context_;
+  const std::string peer_;
+  std::atomic<int> refs_{1};
+
+  std::mutex ops_mu_;  // see the class comment
+  std::mutex mu_;
+  std::vector<std::unique_ptr<Job>> jobs_;  // every slot this stream ever needed
+  std::vector<Job*> free_;
+  std::shared_ptr<const StreamSettings> settings_;
+  StreamQueue queue_;
+  Job* reading_ = nullptr;
+  Job* writing_ = nullptr;
+  bool read_open_ = true;  // false once the client half-closed (or the read side failed)
+  bool draining_ = false;  // the server is shutting down: answer what is held, then UNAVAILABLE
+  bool broken_ = false;    // cancelled or a write failed: nothing more is written
+  std::optional<grpc::Status> ending_;  // the server ends the call (idle) with this status
+  bool finished_ = false;               // Finish has been called
+  Clock::time_point last_activity_;
+};
+
+// Ends a call at once: over the stream limit, or while shutting down.
+class RejectedStream final : public grpc::ServerBidiReactor<v1::StreamRequest, v1::StreamReply> {
+ public:
+  explicit RejectedStream(grpc::Status status) { Finish(std::move(status)); }
+  void OnDone() override { delete this; }
+};
+
+// ---------------------------------------------------------------------------------------------
+
+CloudCastService::CloudCastService(const ServerOptions& options, Metrics* metrics)
+    : options_(options),
+      default_settings_(std::make_shared<const StreamSettings>(options.StreamDefaults())),
+      metrics_(metrics),
+      runner_(options.ResolvedThreads(), metrics, options.ResolvedInstance()),
+      pool_(options.ResolvedThreads()) {
+  housekeeping_ = std::thread([this] { Housekeeping(); });
+}
+
+CloudCastService::~CloudCastService() { StopWorkers(); }
+
+grpc::ServerBidiReactor<v1::StreamRequest, v1::StreamReply>* CloudCastService::Stream(
+    grpc::CallbackServerContext* context) {
+  if (draining_.load()) {
+    metrics_->streams_rejected_shutdown.Increment();
+    return new RejectedStream(
+        grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
+  }
+  if (active_streams_.fetch_add(1) >= static_cast<int>(options_.max_streams)) {
+    active_streams_.fetch_sub(1);
+    metrics_->streams_rejected_limit.Increment();
+    spdlog::warn("stream from {} refused: {} streams open, the limit", context->peer(),
+                 options_.max_streams);
+    return new RejectedStream(
+        grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED,
+                     absl::StrCat("too many concurrent streams: the server's limit is ",
+                                  options_.max_streams, " (max_streams, --max-streams)")));
+  }
+  metrics_->streams_accepted.Increment();
+  metrics_->active_streams.Increment();
+  return new StreamReactor(this, context);
+}
+
+grpc::ServerUnaryReactor* CloudCastService::Process(grpc::CallbackServerContext* context,
+                                                    const v1::ProcessRequest* request,
+                                                    v1::CloudReply* reply) {
+  grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
+  const Clock::time_point received = Clock::now();
+  const std::int64_t received_ns = UnixNanos();
+  metrics_->bytes_received.Increment(static_cast<double>(request->ByteSizeLong()));
+  if (draining_.load()) {
+    reactor->Finish(grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
+    return reactor;
+  }
+  auto settings = convert::Resolve(request->config(), *default_settings_);
+  if (!settings.ok()) {
+    metrics_->FrameErrors(settings.status().code()).Increment();
+    reactor->Finish(ToGrpc(settings.status()));
+    return reactor;
+  }
+  // Each call holds its frame until a worker is done with it; bound them like streams.
+  if (active_process_calls_.fetch_add(1) >= static_cast<int>(options_.max_streams)) {
+    active_process_calls_.fetch_sub(1);
+    reactor->Finish(
+        grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED,
+                     absl::StrCat("too many Process calls in flight: the server's limit is ",
+                                  options_.max_streams, " (max_streams, --max-streams)")));
+    return reactor;
+  }
+  auto shared_settings = std::make_shared<const StreamSettings>(*std::move(settings));
+  const Arrival arrival{received, received_ns};
+  const bool submitted =
+      pool_.Submit([this, reactor, request, reply, arrival, shared_settings](std::size_t worker) {
+        const absl::Status status =
+            runner_.Run(worker, request->frame(), shared_settings->frame, arrival, reply);
+        grpc::Status result;
+        if (status.ok()) {
+          reply->set_send_time_unix_ns(UnixNanos());
+          metrics_->total_seconds.Observe(Seconds(Clock::now() - arrival.time));
+          metrics_->bytes_sent.Increment(static_cast<double>(reply->ByteSizeLong()));
+        } else {
+          result = ToGrpc(status);
+        }
+        active_process_calls_.fetch_sub(1);
+        reactor->Finish(std::move(result));
+      });
+  if (!submitted) {
+    active_process_calls_.fetch_sub(1);
+    reactor->Finish(grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
+  }
+  return reactor;
+}
+
+grpc::ServerUnaryReactor* CloudCastService::GetInfo(grpc::CallbackServerContext* context,
+                                                    const v1::GetInfoRequest* /*request*/,
+                                                    v1::ServerInfo* info) {
+  info->set_version(CLOUDCAST_VERSION);
+  v1::ServerLimits* limits = info->mutable_limits();
+  limits->set_max_message_bytes(options_.max_message_bytes);
+  limits->set_max_side(options_.limits.max_side);
+  limits->set_max_pixels(options_.limits.max_pixels);
+  limits->set_max_streams(options_.max_streams);
+  const auto idle_ms = options_.idle_timeout.count();
+  limits->set_idle_timeout_seconds(static_cast<std::uint32_t>((idle_ms + 999) / 1000));
+  limits->set_max_queued_frames(options_.max_queued_frames);
+  *info->mutable_defaults() = convert::ToProto(*default_settings_);
+  for (auto e : {v1::DISPARITY_U8, v1::DISPARITY_U16, v1::DISPARITY_F32}) {
+    info->add_disparity_encodings(e);
+  }
+  for (auto e : {v1::COLOR_BGR8, v1::COLOR_RGB8, v1::COLOR_RGBA8, v1::COLOR_MONO8}) {
+    info->add_color_encodings(e);
+  }
+  // What core/image_io decodes through OpenCV's imgcodecs.
+  for (const char* f : {"png", "jpeg", "tiff", "pnm", "pfm"}) info->add_image_formats(f);
+  info->set_worker_threads(static_cast<std::uint32_t>(pool_.size()));
+  info->set_draco_version(draco::kDracoVersion);
+  info->set_instance(runner_.instance());
+  grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
+  reactor->Finish(grpc::Status::OK);
+  return reactor;
+}
+
+void CloudCastService::NoteQueued(std::uint32_t held) {
+  std::uint32_t seen = queued_high_water_.load(std::memory_order_relaxed);
+  while (held > seen && !queued_high_water_.compare_exchange_weak(seen, held)) {
+  }
+}
+
+void CloudCastService::Register(StreamReactor* stream) {
+  std::lock_guard<std::mutex> lock(streams_mu_);
+  streams_.insert(stream);
+}
+
+void CloudCastService::Unregister(StreamReactor* stream) {
+  {
+    std::lock_guard<std::mutex> lock(streams_mu_);
+    streams_.erase(stream);
+  }
+  active_streams_.fetch_sub(1);
+  metrics_->active_streams.Decrement();
+  streams_cv_.notify_all();
+}
+
+void CloudCastService::StartDraining() {
+  draining_.store(true);
+  std::vector<StreamReactor*> streams;
+  {
+    std::lock_guard<std::mutex> lock(streams_mu_);
+    for (StreamReactor* s : streams_) {
+      s->Ref();
+      streams.push_back(s);
+    }
+  }
+  spdlog::info("draining {} open streams", streams.size());
+  for (StreamReactor* s : streams) {
+    s->BeginDrain();
+    s->Unref();
+  }
+}
+
+bool CloudCastService::WaitForStreams(Clock::time_point deadline) {
+  std::unique_lock<std::mutex> lock(streams_mu_);
+  return streams_cv_.wait_until(lock, deadline, [this] { return streams_.empty(); });
+}
+
+void CloudCastService::StopWorkers() {
+  std::call_once(stop_once_, [this] {
+    {
+      std::lock_guard<std::mutex> lock(streams_mu_);
+      stop_housekeeping_ = true;
+    }
+    streams_cv_.notify_all();
+    if (housekeeping_.joinable()) housekeeping_.join();
+    pool_.Stop();
+  });
+}
+
+void CloudCastService::Housekeeping() {
+  // Checks often enough that a stream ends within about a tenth of the timeout of going idle.
+  const auto tick = std::clamp<std::chrono::milliseconds>(
+      options_.idle_timeout / 10, std::chrono::milliseconds(10), std::chrono::milliseconds(1000));
+  std::unique_lock<std::mutex> lock(streams_mu_);
+  while (!stop_housekeeping_) {
+    streams_cv_.wait_for(lock, tick, [this] { return stop_housekeeping_; });
+    if (stop_housekeeping_) break;
+    std::vector<StreamReactor*> streams;
+    for (StreamReactor* s : streams_) {
+      s->Ref();
+      streams.push_back(s);
+    }
+    lock.unlock();
+    const Clock::time_point now = Clock::now();
+    for (StreamReactor* s : streams) {
+      s->CheckIdle(now);
+      s->Unref();
+    }
+    lock.lock();
+  }
+}
+
+}  // namespace cloudcast::server

@@ -1,0 +1,95 @@
+// The CloudCast gRPC service on the callback API.
+//
+// Threading: gRPC's threads only move messages: they run the reactions (OnReadDone, OnWriteDone,
+// ...), which check configs, queue frames and start reads and writes. Frames are processed on a
+// WorkerPool of `threads` workers, each with its own FrameProcessor (a core Pipeline is not
+// thread-safe). A housekeeping thread ends idle streams.
+//
+// One StreamReactor per Stream call: a thin shell that sequences gRPC's reads, writes and Finish
+// around the stream's StreamQueue, which holds the delivery policy (see stream_queue.h).
+#pragma once
+
+#include <grpcpp/grpcpp.h>
+
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <set>
+#include <thread>
+#include <vector>
+
+#include "cloudcast/server/options.h"
+#include "cloudcast/v1/cloudcast.grpc.pb.h"
+#include "frame_processor.h"
+#include "metrics.h"
+#include "worker_pool.h"
+
+namespace cloudcast::server {
+
+class CloudCastService final : public v1::CloudCast::CallbackService {
+ public:
+  // `options` must be valid (ServerOptions::Validate); `metrics` must outlive the service.
+  CloudCastService(const ServerOptions& options, Metrics* metrics);
+  ~CloudCastService() override;  // StopWorkers()
+  CloudCastService(const CloudCastService&) = delete;
+  CloudCastService& operator=(const CloudCastService&) = delete;
+
+  grpc::ServerBidiReactor<v1::StreamRequest, v1::StreamReply>* Stream(
+      grpc::CallbackServerContext* context) override;
+  grpc::ServerUnaryReactor* Process(grpc::CallbackServerContext* context,
+                                    const v1::ProcessRequest* request,
+                                    v1::CloudReply* reply) override;
+  grpc::ServerUnaryReactor* GetInfo(grpc::CallbackServerContext* context,
+                                    const v1::GetInfoRequest* request,
+                                    v1::ServerInfo* info) override;
+
+  // Shutdown, step 1: new Stream and Process calls get UNAVAILABLE; every open stream stops
+  // reading, answers the frames it already holds and ends with UNAVAILABLE.
+  void StartDraining();
+  bool draining() const { return draining_.load(); }
+  // Waits until every Stream call is done (OnDone) or `deadline` passes; true if none is left.
+  bool WaitForStreams(std::chrono::steady_clock::time_point deadline);
+  // Runs the frames still queued, then joins the workers and the housekeeping thread. Call once
+  // the gRPC server has shut down. Idempotent.
+  void StopWorkers();
+
+  int active_streams() const { return active_streams_.load(); }
+  int worker_threads() const { return static_cast<int>(pool_.size()); }
+  // The most frames one stream held at once (waiting + in work + replies not yet written), over
+  // all streams since the start or the last reset. Tests check it against max_queued_frames.
+  std::uint32_t queued_frames_high_water() const { return queued_high_water_.load(); }
+  void ResetQueuedFramesHighWater() { queued_high_water_.store(0); }
+
+ private:
+  class StreamReactor;
+
+  void NoteQueued(std::uint32_t held);
+  void Register(StreamReactor* stream);
+  void Unregister(StreamReactor* stream);
+  void Housekeeping();
+
+  const ServerOptions options_;
+  const std::shared_ptr<const StreamSettings> default_settings_;
+  Metrics* const metrics_;
+  // Before pool_: the workers use it until the pool is stopped.
+  FrameRunner runner_;
+  WorkerPool pool_;
+
+  std::atomic<bool> draining_{false};
+  std::atomic<int> active_streams_{0};
+  std::atomic<int> active_process_calls_{0};
+  std::atomic<std::uint32_t> queued_high_water_{0};
+
+  // Open streams, for the idle check and draining. Lock order: streams_mu_, then a stream's own.
+  std::mutex streams_mu_;
+  std::condition_variable streams_cv_;
+  std::set<StreamReactor*> streams_;
+  bool stop_housekeeping_ = false;
+  std::thread housekeeping_;
+  std::once_flag stop_once_;
+};
+
+}  // namespace cloudcast::server

@@ -1,0 +1,679 @@
+#include "app/app.h"
+
+#include <spdlog/fmt/fmt.h>
+#include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/spdlog.h>
+
+#include <CLI/CLI.hpp>
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <condition_variable>
+#include <csignal>
+#include <cstdint>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <thread>
+#include <utility>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "app/frame_source.h"
+#include "app/recorder.h"
+#include "app/session.h"
+#include "app/stats.h"
+#include "app/viewer.h"
+#include "cloudcast/cli/checks.h"
+#include "cloudcast/cli/stage_flags.h"
+#include "cloudcast/client/config.h"
+#include "cloudcast/core/camera.h"
+#include "cloudcast/core/draco_codec.h"
+#include "cloudcast/core/filters.h"
+#include "cloudcast/core/limits.h"
+#include "cloudcast/core/settings.h"
+#include "cloudcast/datasets/tsukuba.h"
+#include "cloudcast/io/cloud_io.h"
+
+namespace cloudcast::client::app {
+namespace {
+
+constexpr int kExitFailure = 1;
+constexpr int kExitUsage = 2;
+
+// Set by SIGINT / SIGTERM (a lock-free atomic store is async-signal-safe) and by a failing
+// recorder; every loop of the program polls it.
+std::atomic<bool> g_stop{false};
+
+extern "C" void OnSignal(int signal_number) {
+  g_stop.store(true);
+  // A second Ctrl-C ends the program at once.
+  std::signal(signal_number, SIG_DFL);
+}
+
+struct Flags {
+  // Source
+  std::string tsukuba;
+  std::string illumination = "daylight";
+  std::string disparity_glob, colour_glob;
+  std::string disparity_video, colour_video;
+  std::string synthetic;
+  std::string disparity, colour;
+  bool loop = false;
+  std::uint64_t frames = 0;
+
+  // Streaming
+  std::string server = "localhost:50051";
+  double connect_timeout_s = 5;
+  double fps = 0;
+  int in_flight = 2;
+  bool lossless = false;
+  std::string encoding = "raw";
+  int jpeg_quality = 90;
+
+  // Camera and stages: cli::StageFlags.
+
+  // Viewer
+  bool no_window = false;
+  std::vector<std::string> open;
+  std::string window = "1280x720";
+  bool hidden = false;
+  float point_size = 2.0f;
+  std::string snapshot;
+  std::uint64_t snapshot_after = 10;
+  bool exit_at_end = false;
+
+  // Output
+  std::string record;
+  std::string record_format = "pcd";
+  std::string json;
+  double progress_s = 2;
+  bool print_frames = false;
+  bool quiet = false;
+};
+
+// ---------------------------------------------------------------------------------------------
+// Validators: they see the raw string, so they reject "nan" and "inf", which CLI11's own number
+// conversion accepts.
+
+using cli::NumberCheck;
+using cli::ParseSize;
+using cli::SizeCheck;
+using cli::Wrap;
+
+// Output folders are checked before any work, so a typo costs nothing.
+std::string MissingFolder(const std::string& flag, const std::string& path) {
+  const std::filesystem::path parent = std::filesystem::path(path).parent_path();
+  std::error_code ec;
+  if (!path.empty() && !parent.empty() && !std::filesystem::is_directory(parent, ec)) {
+    return fmt::format("{} {}: folder '{}' does not exist", flag, path, parent.string());
+  }
+  return std::string();
+}
+
+// ---------------------------------------------------------------------------------------------
+
+// The stage flags go in the middle of --help, so AddFlags registers them too.
+std::unique_ptr<cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
+  const std::string source = "Source (one of; default below)";
+  app.add_option("--tsukuba", f.tsukuba,
+                 "A New Tsukuba folder: groundtruth/disparity_maps/left/*.png "
+                 "with illumination/<illumination>/left/*.png, paired by frame "
+                 "number")
+      ->type_name("DIR")
+      ->group(source);
+  app.add_option("--illumination", f.illumination,
+                 "New Tsukuba illumination folder (daylight, fluorescent, lamps, flashlight)")
+      ->capture_default_str()
+      ->type_name("NAME")
+      ->group(source);
+  app.add_option("--disparity-glob", f.disparity_glob,
+                 "Disparity images, a glob in quotes (e.g. 'd/*.png'), natural "
+                 "sort order; 8/16-bit PNG/TIFF or float TIFF/PFM")
+      ->type_name("GLOB")
+      ->group(source);
+  app.add_option("--colour-glob", f.colour_glob,
+                 "Colour images paired with --disparity-glob in sorted order (the "
+                 "counts must match)")
+      ->type_name("GLOB")
+      ->group(source);
+  app.add_option("--disparity-video", f.disparity_video,
+                 "Disparity video; must be lossless (PNG in .avi, FFV1 in .mkv): "
+                 "lossy codecs change disparities (warned)")
+      ->type_name("FILE")
+      ->group(source);
+  app.add_option("--colour-video", f.colour_video,
+                 "Colour video paired frame by frame with --disparity-video (HuffYUV "
+                 "in .avi: exact, and decodes faster than PNG stills)")
+      ->type_name("FILE")
+      ->group(source);
+  app.add_option("--synthetic", f.synthetic,
+                 "The synthetic scene at WIDTHxHEIGHT, camera moving frame by "
+                 "frame; endless")
+      ->check(SizeCheck(Limits{}.max_side, Limits{}.max_pixels))
+      ->type_name("WxH")
+      ->group(source);
+  app.add_option("--disparity", f.disparity,
+                 "One disparity image, sent again and again with --colour "
+                 "(endless)")
+      ->type_name("FILE")
+      ->group(source);
+  app.add_option("--colour", f.colour, "The colour image for --disparity")
+      ->type_name("FILE")
+      ->group(source);
+  app.add_option("--open", f.open,
+                 "View local cloud files (.pcd, .ply, .drc) instead of streaming; "
+                 "arrow keys step through several")
+      ->type_name("FILE")
+      ->expected(1, -1)
+      ->group(source);
+  app.add_flag("--loop", f.loop,
+               "Start finite sources (folder, globs, videos) again at their end; decoded images "
+               "are kept in memory (up to 512 MB) so later passes cost no decoding")
+      ->group(source);
+  app.add_option("--frames", f.frames, "Send at most N frames; 0 = all (endless sources: forever)")
+      ->capture_default_str()
+      ->type_name("N")
+      ->group(source);
+
+  const std::string streaming = "Streaming";
+  app.add_option("--server", f.server, "The cloudcast server, HOST:PORT (any gRPC target)")
+      ->capture_default_str()
+      ->type_name("HOST:PORT")
+      ->group(streaming);
+  app.add_option("--connect-timeout", f.connect_timeout_s, "Seconds to wait for the server")
+      ->type_name("SECONDS")
+      ->check(NumberCheck("a number of seconds in (0, 3600]",
+                          [](double v) { return v > 0 && v <= 3600; }))
+      ->capture_default_str()
+      ->group(streaming);
+  app.add_option("--fps", f.fps,
+                 "Frames per second to send; 0 = as fast as the server answers (and the viewer "
+                 "draws), with at most --in-flight frames awaiting their reply")
+      ->check(NumberCheck("a rate in [0, 10000]", [](double v) { return v >= 0 && v <= 1e4; }))
+      ->capture_default_str()
+      ->group(streaming);
+  app.add_option("--in-flight", f.in_flight, "Frames sent and not yet answered, with --fps 0")
+      ->check(CLI::Range(1, 64))
+      ->capture_default_str()
+      ->group(streaming);
+  app.add_flag("--lossless", f.lossless,
+               "Every frame is answered (DELIVERY_ALL). Default: DELIVERY_LATEST, the server "
+               "skips stale frames to stay real-time")
+      ->group(streaming);
+  app.add_option("--encoding", f.encoding,
+                 "How images travel: raw pixels; png (lossless); jpeg (colour JPEG, disparity "
+                 "still lossless) for a thin uplink")
+      ->check(CLI::IsMember({"raw", "png", "jpeg"}))
+      ->capture_default_str()
+      ->group(streaming);
+  app.add_option("--jpeg-quality", f.jpeg_quality, "JPEG quality with --encoding jpeg")
+      ->check(CLI::Range(1, 100))
+      ->capture_default_str()
+      ->group(streaming);
+
+  const std::string stages = "Camera and stages (stage flags left out: the server's defaults)";
+  auto stage_flags =
+      std::make_unique<cli::StageFlags>(app, cli::StageFlags::Groups{stages, stages, stages});
+
+  const std::string viewer = "Viewer";
+  app.add_flag("--no-window", f.no_window,
+               "No window and no OpenGL at all: stream and print statistics")
+      ->group(viewer);
+  app.add_option("--window", f.window, "Window size")
+      ->check(SizeCheck(16384, std::uint64_t{1} << 26))
+      ->capture_default_str()
+      ->type_name("WxH")
+      ->group(viewer);
+  app.add_flag("--hidden", f.hidden,
+               "Render into a hidden window (for --snapshot without showing anything); exits "
+               "when the stream ends")
+      ->group(viewer);
+  app.add_option("--point-size", f.point_size, "Point size in pixels ('+' / '-' change it)")
+      ->check(NumberCheck("a size in [1, 255]", [](double v) { return v >= 1 && v <= 255; }))
+      ->capture_default_str()
+      ->group(viewer);
+  app.add_option("--snapshot", f.snapshot,
+                 "Write the view as PNG once --snapshot-after clouds were shown and the current "
+                 "one has points (or at the end of the stream), then exit; works under Xvfb")
+      ->type_name("FILE.png")
+      ->group(viewer);
+  app.add_option("--snapshot-after", f.snapshot_after,
+                 "Clouds displayed (files: frames drawn) before --snapshot")
+      ->check(
+          NumberCheck("a whole number >= 1", [](double v) { return v >= 1 && v == std::floor(v); }))
+      ->capture_default_str()
+      ->type_name("N")
+      ->group(viewer);
+  app.add_flag("--exit-at-end", f.exit_at_end,
+               "Close the window when the stream ends (default: keep showing the last cloud)")
+      ->group(viewer);
+
+  const std::string output = "Output";
+  app.add_option("--record", f.record,
+                 "Save every received cloud in DIR as cloud_<sequence>.<format> (created when "
+                 "missing)")
+      ->type_name("DIR")
+      ->group(output);
+  app.add_option("--record-format", f.record_format,
+                 "pcd / ply (PCL's writers) or drc (the server's Draco bytes, not re-encoded)")
+      ->check(CLI::IsMember({"pcd", "ply", "drc"}))
+      ->capture_default_str()
+      ->group(output);
+  app.add_option("--json", f.json, "Write the final statistics as JSON")
+      ->type_name("FILE")
+      ->group(output);
+  app.add_option("--progress", f.progress_s, "Seconds between progress lines; 0 = none")
+      ->type_name("SECONDS")
+      ->check(NumberCheck("a number of seconds >= 0", [](double v) { return v >= 0; }))
+      ->capture_default_str()
+      ->group(output);
+  app.add_flag("--print-frames", f.print_frames,
+               "Print one line per reply: sequence, points after each stage, Draco bytes, server "
+               "stage times and end-to-end latency")
+      ->group(output);
+  app.add_flag("--quiet,-q", f.quiet, "Log only warnings and errors (the summary still prints)")
+      ->group(output);
+
+  for (CLI::Option* option : app.get_options()) {
+    option->description(Wrap(option->get_description()));
+  }
+  return stage_flags;
+}
+
+// The StreamConfig the flags ask for. The camera is always sent (it belongs to the source);
+// stage settings only when given, so that the server's configured defaults apply otherwise.
+StreamConfig BuildConfig(const Flags& f, const cli::StageFlags& stages, const SourceInfo& info) {
+  StreamConfig config = stages.GivenStageConfig();
+  FrameSettings source;
+  source.pipeline.camera = info.camera;
+  // The source's camera with the camera flags on top (Apply cannot fail: each flag was checked).
+  const FrameSettings camera = stages.Apply(source).value_or(source);
+  SetCamera(camera.pipeline.camera, &config);
+  // Unset, the principal point follows each frame's centre (PCL's rule), which stays right if
+  // frames change size mid-stream.
+  if (camera.cx) {
+    config.mutable_camera()->set_cx(*camera.cx);
+  } else {
+    config.mutable_camera()->clear_cx();
+  }
+  if (camera.cy) {
+    config.mutable_camera()->set_cy(*camera.cy);
+  } else {
+    config.mutable_camera()->clear_cy();
+  }
+  config.set_delivery(f.lossless ? v1::DELIVERY_ALL : v1::DELIVERY_LATEST);
+  return config;
+}
+
+// Opens the source the flags name, or the default one.
+absl::StatusOr<std::unique_ptr<FrameSource>> OpenSource(const Flags& f) {
+  SourceOptions options;
+  options.loop = f.loop;
+  absl::StatusOr<std::unique_ptr<FrameSource>> source;
+  if (!f.tsukuba.empty()) {
+    source = OpenTsukuba(f.tsukuba, f.illumination, options);
+  } else if (!f.disparity_glob.empty()) {
+    source = OpenGlobs(f.disparity_glob, f.colour_glob, options);
+  } else if (!f.disparity_video.empty()) {
+    source = OpenVideos(f.disparity_video, f.colour_video, options);
+  } else if (!f.synthetic.empty()) {
+    std::uint32_t w = 0, h = 0;
+    ParseSize(f.synthetic, &w, &h);
+    source = OpenSynthetic(w, h);
+  } else if (!f.disparity.empty()) {
+    source = OpenPair(f.disparity, f.colour, options);
+  } else {
+    const std::string dir =
+        std::filesystem::path(tsukuba::DefaultDir()).lexically_normal().string();
+    if (LooksLikeTsukuba(dir, f.illumination)) {
+      // Ten frames go by in a blink: the default source is endless, like the synthetic scene.
+      options.loop = true;
+      spdlog::info("no source given: New Tsukuba frames from {}, looped", dir);
+      source = OpenTsukuba(dir, f.illumination, options);
+    } else {
+      spdlog::info(
+          "no source given and no New Tsukuba data at {} (set CLOUDCAST_DATA): "
+          "synthetic scene 640x480",
+          dir);
+      source = OpenSynthetic(640, 480);
+    }
+  }
+  if (!source.ok()) return source.status();
+  return LimitFrames(*std::move(source), f.frames);
+}
+
+// One line per reply, for --print-frames (the demo's per-frame latency).
+void PrintFrameLine(const Result& r) {
+  const double latency_ms = std::chrono::duration<double, std::milli>(r.latency()).count();
+  if (!r.ok()) {
+    std::printf("frame %6llu  error: %s\n", static_cast<unsigned long long>(r.sequence),
+                r.status.ToString().c_str());
+  } else {
+    const auto& c = r.reply.counts();
+    const auto& t = r.reply.times();
+    std::printf(
+        "frame %6llu  %7llu valid  %7llu passthrough  %6llu voxels  %6.1f KB  server "
+        "decode %5.2f  pipeline %5.2f  draco %5.2f ms  latency %6.2f ms\n",
+        static_cast<unsigned long long>(r.sequence),
+        static_cast<unsigned long long>(c.valid_points()),
+        static_cast<unsigned long long>(c.after_passthrough()),
+        static_cast<unsigned long long>(c.after_voxel_grid()), r.draco_bytes() / 1024.0,
+        t.decode_us() / 1000.0, t.pipeline_us() / 1000.0, t.encode_us() / 1000.0, latency_ms);
+  }
+  std::fflush(stdout);
+}
+
+int Fail(const absl::Status& status) {
+  spdlog::error("{}", std::string(status.message()));
+  return kExitFailure;
+}
+
+bool WriteJson(const std::string& path, const Json& j) {
+  std::ofstream file(path, std::ios::trunc);
+  file << j.dump(2) << "\n";
+  file.close();
+  return static_cast<bool>(file);
+}
+
+// Logs StreamStats::ProgressLine every `period` until destroyed.
+class ProgressReporter {
+ public:
+  ProgressReporter(StreamStats* stats, double period_s) {
+    if (period_s <= 0) return;
+    const auto period = std::chrono::duration_cast<std::chrono::milliseconds>(
+        std::chrono::duration<double>(period_s));
+    thread_ = std::thread([this, stats, period] {
+      std::unique_lock<std::mutex> lock(mu_);
+      while (!cv_.wait_for(lock, period, [this] { return stop_; })) {
+        spdlog::info("{}", stats->ProgressLine());
+      }
+    });
+  }
+  ~ProgressReporter() {
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      stop_ = true;
+    }
+    cv_.notify_all();
+    if (thread_.joinable()) thread_.join();
+  }
+
+ private:
+  std::mutex mu_;
+  std::condition_variable cv_;
+  bool stop_ = false;
+  std::thread thread_;
+};
+
+ViewerOptions MakeViewerOptions(const Flags& f, bool exit_at_end) {
+  ViewerOptions v;
+  std::uint32_t w = 1280, h = 720;
+  ParseSize(f.window, &w, &h);
+  v.window.width = static_cast<int>(w);
+  v.window.height = static_cast<int>(h);
+  v.window.visible = !f.hidden;
+  v.window.point_size = f.point_size;
+  v.window.title = "cloudcast";
+  v.snapshot_path = f.snapshot;
+  v.snapshot_after = f.snapshot_after;
+  v.exit_at_end = exit_at_end;
+  return v;
+}
+
+int Run(const Flags& f, const cli::StageFlags& stages) {
+  // ---- local files: no server
+  if (!f.open.empty()) {
+    ViewerOptions v = MakeViewerOptions(f, false);
+    v.window.title = "cloudcast: " + f.open.front();
+    auto clouds = LoadCloudFiles(f.open);
+    if (!clouds.ok()) return Fail(clouds.status());
+    auto renderer = OpenWindow(v);
+    if (!renderer.ok()) return Fail(renderer.status());
+    absl::Status s = RunFileViewer(**renderer, f.open, *clouds, v, g_stop);
+    return s.ok() ? 0 : Fail(s);
+  }
+
+  const bool windowed = !f.no_window;
+  const bool interactive = windowed && !f.hidden && f.snapshot.empty();
+  auto source = OpenSource(f);
+  if (!source.ok()) return Fail(source.status());
+  FrameSource& src = **source;
+  spdlog::info("source: {}{}", src.info().description, src.info().looped ? ", looped" : "");
+  for (const std::string& w : src.info().warnings) spdlog::warn("{}", w);
+  const bool endless = !src.info().frames_per_pass || src.info().looped;
+  if (endless && f.frames == 0 && !interactive && f.snapshot.empty()) {
+    spdlog::info("the source is endless: Ctrl-C (or --frames N) ends the stream");
+  }
+
+  std::optional<Recorder> recorder;
+  if (!f.record.empty()) {
+    auto r = Recorder::Create(f.record, f.record_format);
+    if (!r.ok()) return Fail(r.status());
+    recorder.emplace(*std::move(r));
+    if (!f.lossless) {
+      spdlog::info(
+          "--record saves the clouds the server delivers; add --lossless to have every "
+          "frame answered");
+    }
+  }
+
+  SessionOptions options;
+  options.server = f.server;
+  options.connect_timeout = std::chrono::milliseconds(
+      static_cast<std::int64_t>(std::llround(f.connect_timeout_s * 1000)));
+  options.config = BuildConfig(f, stages, src.info());
+  options.fps = f.fps;
+  options.max_in_flight = f.in_flight;
+  ParseImageEncoding(f.encoding, &options.encoding);
+  options.jpeg_quality = f.jpeg_quality;
+
+  // The window opens first: without a display there is no point in connecting.
+  std::unique_ptr<render::Renderer> renderer;
+  // A hidden window nobody can close ends with its stream.
+  const ViewerOptions viewer_options = MakeViewerOptions(f, f.exit_at_end || f.hidden);
+  if (windowed) {
+    auto r = OpenWindow(viewer_options);
+    if (!r.ok()) return Fail(r.status());
+    renderer = *std::move(r);
+  }
+
+  StreamStats stats;
+  // With --fps 0 the display paces the stream (see CloudMailbox); a paced camera must not wait.
+  CloudMailbox mailbox(/*wait_for_viewer=*/f.fps == 0);
+  std::mutex record_mu;
+  absl::Status record_status;
+  auto on_result = [&](Result& result) {
+    if (f.print_frames) PrintFrameLine(result);
+    if (recorder) {
+      absl::Status s = recorder->Save(result);
+      if (!s.ok()) {
+        std::lock_guard<std::mutex> lock(record_mu);
+        if (record_status.ok()) record_status = s;
+        g_stop.store(true);
+      }
+    }
+    if (windowed) mailbox.Put(result);
+  };
+
+  auto session = Session::Start(options, &src, &stats, on_result);
+  if (!session.ok()) return Fail(session.status());
+  spdlog::info("streaming to {}: {}, {} images, delivery {}", f.server,
+               f.fps > 0 ? fmt::format("{} frames/s", f.fps)
+                         : fmt::format("as fast as answered ({} in flight)", f.in_flight),
+               f.encoding, f.lossless ? "all (lossless)" : "latest");
+
+  absl::Status viewer_status;
+  {
+    ProgressReporter progress(&stats, f.quiet ? 0 : f.progress_s);
+    if (windowed) {
+      viewer_status = RunLiveViewer(*renderer, **session, mailbox, stats, viewer_options, g_stop);
+      mailbox.Close();
+    } else {
+      while (!(*session)->WaitFor(std::chrono::milliseconds(100))) {
+        if (g_stop.load()) (*session)->Stop();
+      }
+    }
+  }
+  absl::Status status = (*session)->Wait();
+  {
+    std::lock_guard<std::mutex> lock(record_mu);
+    if (status.ok() && !record_status.ok()) status = record_status;
+  }
+  if (status.ok() && !viewer_status.ok()) status = viewer_status;
+  session->reset();
+
+  const StatsSnapshot snapshot = stats.Snapshot();
+  std::string summary = "source: " + src.info().description +
+                        (src.info().looped ? ", looped\n" : "\n") +
+                        StreamStats::SummaryText(snapshot, windowed);
+  if (windowed) {
+    summary +=
+        fmt::format("viewer: {} clouds replaced before they were drawn\n", mailbox.skipped());
+  }
+  if (recorder) {
+    summary += fmt::format("recorded: {} {} files in {}\n", recorder->files_written(),
+                           recorder->format(), recorder->dir());
+  }
+  std::fputs(summary.c_str(), stdout);
+  std::fflush(stdout);
+
+  if (!f.json.empty()) {
+    Json j;
+    j["program"] = "cloudcast-client";
+    j["status"] = status.ok() ? std::string("ok") : std::string(status.message());
+    j["server"] = f.server;
+    j["source"] = {{"kind", src.info().kind},
+                   {"description", src.info().description},
+                   {"width", src.info().width},
+                   {"height", src.info().height}};
+    if (src.info().frames_per_pass) j["source"]["frames_per_pass"] = *src.info().frames_per_pass;
+    j["settings"] = {{"fps", f.fps},
+                     {"in_flight", f.in_flight},
+                     {"delivery", f.lossless ? "all" : "latest"},
+                     {"encoding", f.encoding},
+                     {"window", windowed}};
+    j.update(StreamStats::ToJson(snapshot, windowed));
+    if (windowed) j["viewer_skipped"] = mailbox.skipped();
+    if (recorder) {
+      j["record"] = {{"dir", recorder->dir()},
+                     {"format", recorder->format()},
+                     {"files", recorder->files_written()}};
+    }
+    if (!WriteJson(f.json, j)) {
+      spdlog::error("--json {}: cannot write the file", f.json);
+      return kExitFailure;
+    }
+  }
+  return status.ok() ? 0 : Fail(status);
+}
+
+}  // namespace
+
+int ClientMain(int argc, char** argv) {
+  Flags f;
+  CLI::App app(
+      "cloudcast-client: streams stereo frames (disparity + colour) to a cloudcast server and\n"
+      "shows the filtered point clouds it sends back, live, in an OpenGL window; or records\n"
+      "them, or just measures the stream. It also opens local .pcd/.ply/.drc files.\n\n"
+      "Default source: the New Tsukuba frames in $CLOUDCAST_DATA, else ../shared/data/new_tsukuba\n"
+      "next to the checkout (looped), else the synthetic scene 640x480: endless either way.\n"
+      "The camera always goes with the stream; stage flags left out take the server's defaults\n"
+      "(shown below as they are out of the box).\n\n"
+      "Examples:\n"
+      "  cloudcast-server &                                  # serves on :50051\n"
+      "  cloudcast-client                                    # live view of the default source\n"
+      "  cloudcast-client --tsukuba ../shared/data/new_tsukuba --loop --fps 30\n"
+      "  cloudcast-client --synthetic 1280x720 --leaf 0.05 --encoding jpeg\n"
+      "  cloudcast-client --disparity-glob 'd/*.png' --colour-glob 'c/*.png' --lossless \\\n"
+      "    --record out --record-format drc --no-window --json stats.json\n"
+      "  cloudcast-client --disparity-video d.mkv --colour-video c.mkv --loop\n"
+      "  xvfb-run -a cloudcast-client --frames 30 --snapshot view.png\n"
+      "  cloudcast-client --open frame.pcd other.ply cloud.drc\n",
+      "cloudcast-client");
+  app.footer(
+      "Keys: mouse drag orbits (left) or pans (right), wheel zooms, space pauses, r resets the\n"
+      "view, +/- point size, s screenshot, arrows next/previous file (--open), q or Esc quits.\n"
+      "Exit status: 0 success, 1 failure while running (server, files, stream), 2 usage error.");
+  app.get_formatter()->column_width(34);
+  const std::unique_ptr<cli::StageFlags> stages = AddFlags(app, f);
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    // CLI11's own exit codes are 100+; usage errors are 2 here, as for most Unix tools.
+    return app.exit(e) == 0 ? 0 : kExitUsage;
+  }
+
+  auto usage = [](const std::string& message) {
+    std::fprintf(stderr, "cloudcast-client: %s\nRun with --help for more information.\n",
+                 message.c_str());
+    return kExitUsage;
+  };
+  // One source at most; paired flags come together.
+  const std::vector<std::vector<const char*>> sources = {{"--tsukuba"},
+                                                         {"--disparity-glob", "--colour-glob"},
+                                                         {"--disparity-video", "--colour-video"},
+                                                         {"--synthetic"},
+                                                         {"--disparity", "--colour"},
+                                                         {"--open"}};
+  std::vector<std::string> given;
+  for (const auto& kind : sources) {
+    std::string names;
+    for (const char* name : kind) {
+      if (app.count(name) > 0) names += (names.empty() ? "" : " + ") + std::string(name);
+    }
+    if (names.empty()) continue;
+    given.push_back(names);
+    for (const char* name : kind) {
+      if (app.count(name) == 0) {
+        return usage(fmt::format("{} needs {}", names, name));
+      }
+    }
+  }
+  if (given.size() > 1) {
+    return usage(fmt::format("choose one source: {} and {} were both given", given[0], given[1]));
+  }
+  if (f.no_window) {
+    for (const char* flag : {"--open", "--snapshot", "--hidden", "--window"}) {
+      if (app.count(flag) > 0)
+        return usage(fmt::format("{} needs a window: drop --no-window", flag));
+    }
+  }
+  if (auto s = stages->Apply(FrameSettings{}); !s.ok()) {
+    return usage(std::string(s.status().message()));
+  }
+  if (!f.open.empty()) {
+    for (const char* flag :
+         {"--record", "--json", "--lossless", "--fps", "--frames", "--loop", "--server"}) {
+      if (app.count(flag) > 0) return usage(fmt::format("{} does not apply to --open", flag));
+    }
+  }
+  if (!f.snapshot.empty()) {
+    std::string ext = std::filesystem::path(f.snapshot).extension().string();
+    std::transform(ext.begin(), ext.end(), ext.begin(),
+                   [](unsigned char c) { return std::tolower(c); });
+    if (ext != ".png") return usage("--snapshot " + f.snapshot + ": the file must end in .png");
+  }
+  for (const auto& [flag, path] :
+       {std::pair<const char*, const std::string&>{"--json", f.json}, {"--snapshot", f.snapshot}}) {
+    if (std::string m = MissingFolder(flag, path); !m.empty()) return usage(m);
+  }
+
+  auto logger = spdlog::stderr_color_mt("cloudcast-client");
+  logger->set_pattern("%n: %^%l%$: %v");
+  logger->set_level(f.quiet ? spdlog::level::warn : spdlog::level::info);
+  spdlog::set_default_logger(logger);
+
+  std::signal(SIGINT, OnSignal);
+  std::signal(SIGTERM, OnSignal);
+  return Run(f, *stages);
+}
+
+}  // namespace cloudcast::client::app
