@@ -1,0 +1,45 @@
+#!/usr/bin/env bash
+# The installable client library, end to end: a client-only build of cloudcast (what a robot
+# builds: engine, contract, client; gRPC, Protobuf, Draco and Abseil only), `cmake --install`
+# into a scratch prefix, a separate project that finds it with find_package(cloudcast), and that
+# project's program streaming one frame to a real cloudcast-server on loopback.
+#   run.sh SOURCE_DIR SCRATCH_DIR SERVER_BINARY
+set -euo pipefail
+src=$1 scratch=$2 server=$3
+launcher=()
+command -v ccache >/dev/null && launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
+rm -rf "$scratch" && mkdir -p "$scratch"
+
+echo "== client-only build of cloudcast"
+cmake -S "$src" -B "$scratch/cloudcast" -G Ninja -DCMAKE_BUILD_TYPE=Release \
+  -DCLOUDCAST_CLIENT_ONLY=ON "${launcher[@]}" >"$scratch/configure.log" ||
+  { cat "$scratch/configure.log"; exit 1; }
+grep -q "CLOUDCAST_WITH_PCL:BOOL=OFF" "$scratch/cloudcast/CMakeCache.txt"
+cmake --build "$scratch/cloudcast" -j "$(nproc)" >"$scratch/build.log" ||
+  { tail -50 "$scratch/build.log"; exit 1; }
+# Nothing beyond the client's own dependencies may have been built or linked.
+if grep -qiE "opencv|pcl_|open3d|prometheus|CLI11" "$scratch/cloudcast/build.ninja"; then
+  echo "the client-only build references OpenCV, PCL, Open3D, prometheus-cpp or CLI11"; exit 1
+fi
+cmake --install "$scratch/cloudcast" --prefix "$scratch/prefix" >/dev/null
+
+echo "== a robot project finds it with find_package(cloudcast)"
+cmake -S "$src/tests/package" -B "$scratch/robot" -G Ninja -DCMAKE_BUILD_TYPE=Release \
+  -DCMAKE_PREFIX_PATH="$scratch/prefix" "${launcher[@]}" >"$scratch/robot-configure.log" ||
+  { cat "$scratch/robot-configure.log"; exit 1; }
+cmake --build "$scratch/robot" >"$scratch/robot-build.log" || { cat "$scratch/robot-build.log"; exit 1; }
+
+echo "== and streams one frame to a real server"
+"$server" --listen 127.0.0.1:0 --metrics-listen "" --instance package-test >"$scratch/server.log" 2>&1 &
+pid=$!
+trap 'kill -TERM $pid 2>/dev/null || true; wait $pid 2>/dev/null || true' EXIT
+port=""
+for _ in $(seq 1 100); do
+  port=$(sed -n 's/.*listening on 127\.0\.0\.1:\([0-9]*\).*/\1/p' "$scratch/server.log" | head -n 1)
+  [ -n "$port" ] && break
+  kill -0 $pid 2>/dev/null || { cat "$scratch/server.log"; exit 1; }
+  sleep 0.1
+done
+[ -n "$port" ] || { cat "$scratch/server.log"; echo "the server reported no port"; exit 1; }
+"$scratch/robot/robot" "127.0.0.1:$port" | tee "$scratch/robot.out"
+grep -q "from package-test" "$scratch/robot.out"
