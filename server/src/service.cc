@@ -479,11 +479,13 @@ grpc::ServerUnaryReactor* CloudCastService::GetInfo(grpc::CallbackServerContext*
   limits->set_idle_timeout_seconds(static_cast<std::uint32_t>((idle_ms + 999) / 1000));
   limits->set_max_queued_frames(options_.max_queued_frames);
   *info->mutable_defaults() = convert::ToProto(*default_settings_);
-  for (auto e : {v1::DISPARITY_U8, v1::DISPARITY_U16, v1::DISPARITY_F32}) {
-    info->add_disparity_encodings(e);
+  // Every encoding the core reads.
+  for (auto e : {DisparityEncoding::kU8, DisparityEncoding::kU16, DisparityEncoding::kF32}) {
+    info->add_disparity_encodings(convert::ToProto(e));
   }
-  for (auto e : {v1::COLOR_BGR8, v1::COLOR_RGB8, v1::COLOR_RGBA8, v1::COLOR_MONO8}) {
-    info->add_color_encodings(e);
+  for (auto e : {ColorEncoding::kBGR8, ColorEncoding::kRGB8, ColorEncoding::kRGBA8,
+                 ColorEncoding::kMono8}) {
+    info->add_color_encodings(convert::ToProto(e));
   }
   // What core/image_io decodes through OpenCV's imgcodecs.
   for (const char* f : {"png", "jpeg", "tiff", "pnm", "pfm"}) info->add_image_formats(f);
