@@ -10,9 +10,11 @@
 #include <deque>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <thread>
 #include <utility>
+#include <vector>
 
 #include "absl/strings/str_cat.h"
 #include "cloudcast/core/draco_codec.h"
@@ -71,47 +73,73 @@ void DecodeInto(bool decode, Result* result) {
   result->times.decode_us = MicrosSince(start);
 }
 
-// What the reader needs to know about a frame in flight.
+// A frame sent and not answered yet. `request` is kept only where a resilient stream may have to
+// send it again (DELIVERY_ALL); otherwise its buffers went back to the spares after the write.
 struct Pending {
   std::uint64_t sequence = 0;
+  std::string frame_id;
   std::int64_t capture_time_unix_ns = 0;
   Clock::time_point send;
   std::int64_t send_unix_ns = 0;
+  std::unique_ptr<v1::StreamRequest> request;
 };
+
+using StreamRpc = grpc::ClientReaderWriter<v1::StreamRequest, v1::StreamReply>;
 
 }  // namespace
 
 // ---------------------------------------------------------------------------------------------
 // Stream
+//
+// Locks, always taken in this order: finish_mu, read_mu, write_mu, then pending_mu or call_mu
+// (each held briefly). The reading side ends a call and opens the next one (a resilient
+// reconnect) while it holds write_mu, so no Send writes meanwhile.
 
 struct Stream::Impl {
   std::shared_ptr<Stub> stub;  // shared with the Client: a stream may outlive it
+  std::shared_ptr<grpc::Channel> channel;
   std::string target;
   bool decode_clouds = true;
+  bool wait_for_ready = false;
   StreamOptions options;
-  grpc::ClientContext context;
-  std::unique_ptr<grpc::ClientReaderWriter<v1::StreamRequest, v1::StreamReply>> rpc;
 
-  // Writer side. Frames and configs use separate messages: switching one message's oneof from
-  // frame to config would free the frame's pixel buffers, which Send reuses.
-  std::mutex write_mu;
-  v1::StreamRequest frame_request;
-  v1::StreamRequest config_request;
+  // The current call; replaced on reconnect. Cancel() reaches it through call_mu from any thread.
+  struct Call {
+    grpc::ClientContext context;
+    std::unique_ptr<StreamRpc> rpc;
+  };
+  std::mutex call_mu;
+  std::unique_ptr<Call> call;
+  bool cancelled = false;  // under call_mu
+
+  // Writer side. Configs and frames use separate messages: switching one message's oneof from
+  // frame to config would free the frame's pixel buffers, which later frames reuse.
+  std::timed_mutex write_mu;
+  v1::StreamRequest config_request;  // the stream's config, sent again on each new call
   bool writes_closed = false;
-  bool write_failed = false;
+  bool write_failed = false;  // the current call refused a write; the reader learns why
   std::uint64_t next_sequence = 0;
   std::atomic<std::uint64_t> frames_sent{0};
 
-  // Frames sent and not answered yet, in send order. Replies come in the same order; frames the
-  // server skipped (DELIVERY_LATEST) are passed over when a later reply arrives.
+  // Frames sent and not answered yet, in send order, and request buffers to reuse. Replies come
+  // in send order; frames the server skipped (DELIVERY_LATEST) are passed over when a later
+  // reply arrives.
   std::mutex pending_mu;
   std::deque<Pending> pending;
+  std::vector<std::unique_ptr<v1::StreamRequest>> spare_requests;
 
   // Reader side.
   std::mutex read_mu;
   v1::StreamReply reply;
   bool read_done = false;
+  std::deque<Result> lost;  // frames given up on, handed out before the stream ends
+  std::optional<Clock::time_point> failing_since;  // calls failing, no reply since
+  std::uint64_t dropped_before = 0;                // drops on earlier calls of this stream
+  std::uint64_t dropped_this_call = 0;
+  std::string last_instance;
   std::thread receiver;
+  std::atomic<int> reconnects{0};
+  std::atomic<std::uint64_t> frames_resent{0};
 
   std::mutex finish_mu;
   bool finished = false;
@@ -119,42 +147,261 @@ struct Stream::Impl {
 
   std::string What() const { return absl::StrCat("stream to ", target); }
 
-  absl::Status Write(const v1::StreamRequest& request) {
-    if (writes_closed) {
-      return absl::FailedPreconditionError(absl::StrCat(What(), ": already closed by CloseSend"));
-    }
-    if (write_failed || !rpc->Write(request)) {
-      write_failed = true;
-      return absl::UnavailableError(
-          absl::StrCat(What(), " has ended; Stream::Finish() returns the reason"));
-    }
-    return absl::OkStatus();
+  absl::Status Ended() const {
+    return absl::UnavailableError(
+        absl::StrCat(What(), " has ended; Stream::Finish() returns the reason"));
   }
 
-  // Takes the send record of `sequence` (and of any skipped frames before it).
+  // Frames are kept for a resend unless the stream says DELIVERY_LATEST (whose unanswered frames
+  // would be dropped anyway). An unset delivery may be the server's DELIVERY_ALL.
+  bool KeepsFrames() const {
+    return options.resilient && config_request.config().delivery() != v1::DELIVERY_LATEST;
+  }
+
+  std::unique_ptr<Call> StartCall() {
+    auto c = std::make_unique<Call>();
+    // A new call after a failure waits for a replica to be ready (bounded by the caller).
+    c->context.set_wait_for_ready(wait_for_ready || failing_since.has_value());
+    c->rpc = stub->Stream(&c->context);
+    return c;
+  }
+
+  std::unique_ptr<v1::StreamRequest> TakeSpare() {
+    std::lock_guard<std::mutex> lock(pending_mu);
+    if (spare_requests.empty()) return std::make_unique<v1::StreamRequest>();
+    auto r = std::move(spare_requests.back());
+    spare_requests.pop_back();
+    return r;
+  }
+  void ReturnSpare(std::unique_ptr<v1::StreamRequest> r) {
+    if (r == nullptr) return;
+    std::lock_guard<std::mutex> lock(pending_mu);
+    spare_requests.push_back(std::move(r));
+  }
+
+  // Takes the send record of `sequence` (and passes over skipped frames before it).
   bool TakePending(std::uint64_t sequence, Pending* out) {
     std::lock_guard<std::mutex> lock(pending_mu);
     auto it = std::find_if(pending.begin(), pending.end(),
                            [&](const Pending& p) { return p.sequence == sequence; });
     if (it == pending.end()) return false;
-    *out = *it;
+    for (auto i = pending.begin(); i != it; ++i) {
+      if (i->request != nullptr) spare_requests.push_back(std::move(i->request));
+    }
+    *out = std::move(*it);
+    if (out->request != nullptr) spare_requests.push_back(std::move(out->request));
     pending.erase(pending.begin(), it + 1);
     return true;
   }
 
+  absl::Status Send(const DisparityInput& disparity, const ColorInput& colour,
+                    const FrameMeta& meta) {
+    std::lock_guard<std::timed_mutex> lock(write_mu);
+    if (writes_closed) {
+      return absl::FailedPreconditionError(
+          absl::StrCat(What(), ": Send after CloseSend or Finish"));
+    }
+    std::unique_ptr<v1::StreamRequest> request = TakeSpare();
+    v1::Frame* frame = request->mutable_frame();
+    if (absl::Status s = internal::FillImages(disparity, colour, frame); !s.ok()) {
+      ReturnSpare(std::move(request));
+      return s;
+    }
+    const std::uint64_t sequence = meta.sequence.value_or(next_sequence);
+    internal::FillMeta(meta, sequence, frame);
+    v1::StreamRequest* to_write = request.get();
+    const bool keep = KeepsFrames();
+    {
+      // Recorded before the write: the reply may arrive before Write returns (gRPC has
+      // serialized the request by then, so the reader may recycle it).
+      Pending p{sequence,     meta.frame_id,  frame->capture_time_unix_ns(),
+                Clock::now(), UnixNanosNow(), keep ? std::move(request) : nullptr};
+      std::lock_guard<std::mutex> plock(pending_mu);
+      pending.push_back(std::move(p));
+    }
+    next_sequence = sequence + 1;
+    if (!write_failed && !call->rpc->Write(*to_write)) write_failed = true;
+    ReturnSpare(std::move(request));  // nullptr when kept
+    if (write_failed && !options.resilient) return Ended();
+    // A resilient stream sends the frame again on its next call (or reports it lost).
+    frames_sent.fetch_add(1, std::memory_order_relaxed);
+    return absl::OkStatus();
+  }
+
+  absl::Status Reconfigure(const StreamConfig& config) {
+    std::lock_guard<std::timed_mutex> lock(write_mu);
+    if (writes_closed) {
+      return absl::FailedPreconditionError(absl::StrCat(What(), ": already closed by CloseSend"));
+    }
+    *config_request.mutable_config() = config;
+    if (!write_failed && !call->rpc->Write(config_request)) write_failed = true;
+    return write_failed && !options.resilient ? Ended() : absl::OkStatus();
+  }
+
+  absl::Status CloseSend() {
+    std::lock_guard<std::timed_mutex> lock(write_mu);
+    if (writes_closed) return absl::OkStatus();
+    writes_closed = true;
+    if (write_failed) return absl::OkStatus();  // nothing to close; Finish reports why
+    if (!call->rpc->WritesDone()) {
+      write_failed = true;
+      if (!options.resilient) return Ended();
+    }
+    return absl::OkStatus();
+  }
+
+  // The current call's reads have ended: takes write_mu from the writers. A Write blocked on an
+  // ended call fails by itself once gRPC sees the end (trailers, RST_STREAM or a dead
+  // connection); if one still holds on after a while, the call is cancelled, which would turn
+  // an OK ending into CANCELLED, so it is the last resort.
+  std::unique_lock<std::timed_mutex> TakeWriters() {
+    std::unique_lock<std::timed_mutex> writers(write_mu, std::defer_lock);
+    if (!writers.try_lock_for(std::chrono::seconds(2))) {
+      {
+        std::lock_guard<std::mutex> lock(call_mu);
+        call->context.TryCancel();
+      }
+      writers.lock();
+    }
+    return writers;
+  }
+
+  // Opens a new call after `cause` ended the last one and sends it the config and (DELIVERY_ALL)
+  // every unanswered frame. Holds write_mu. False once reconnect_timeout has passed since the
+  // calls started failing, or on Cancel.
+  bool Reconnect(const absl::Status& cause, Reconnect* event) {
+    const Clock::time_point start = Clock::now();
+    if (!failing_since) failing_since = start;
+    const Clock::time_point give_up = *failing_since + options.reconnect_timeout;
+    event->cause = cause;
+    event->old_instance = last_instance;
+    {
+      // DELIVERY_LATEST frames are not sent again: the server would have dropped them anyway.
+      std::lock_guard<std::mutex> lock(pending_mu);
+      for (auto it = pending.begin(); it != pending.end();) {
+        if (it->request == nullptr) {
+          ++event->frames_dropped;
+          it = pending.erase(it);
+        } else {
+          ++it;
+        }
+      }
+    }
+    dropped_before += dropped_this_call + event->frames_dropped;
+    dropped_this_call = 0;
+    auto backoff = std::chrono::milliseconds(20);
+    while (Clock::now() < give_up) {
+      {
+        std::lock_guard<std::mutex> lock(call_mu);
+        if (cancelled) return false;
+      }
+      // Bounded waits, so that a Cancel or the deadline is noticed.
+      const auto wait_until = std::min(give_up, Clock::now() + std::chrono::seconds(1));
+      if (!channel->WaitForConnected(std::chrono::system_clock::now() +
+                                     (wait_until - Clock::now()))) {
+        continue;
+      }
+      std::unique_ptr<Call> next = StartCall();
+      bool ok = next->rpc != nullptr && next->rpc->Write(config_request);
+      std::uint64_t resent = 0;
+      {
+        std::lock_guard<std::mutex> lock(pending_mu);
+        for (const Pending& p : pending) {
+          if (!ok) break;
+          ok = next->rpc->Write(*p.request);
+          ++resent;
+        }
+      }
+      if (ok && writes_closed) ok = next->rpc->WritesDone();
+      if (ok) {
+        std::lock_guard<std::mutex> lock(call_mu);
+        if (cancelled) next->context.TryCancel();
+        call = std::move(next);
+        write_failed = false;
+        event->attempt = reconnects.fetch_add(1) + 1;
+        event->frames_resent = resent;
+        event->took =
+            std::chrono::duration_cast<std::chrono::milliseconds>(Clock::now() - *failing_since);
+        frames_resent.fetch_add(resent);
+        return true;
+      }
+      if (next->rpc != nullptr) next->rpc->Finish().IgnoreError();
+      std::this_thread::sleep_until(std::min(give_up, Clock::now() + backoff));
+      backoff = std::min<std::chrono::milliseconds>(backoff * 2, std::chrono::seconds(1));
+    }
+    return false;
+  }
+
+  // The stream is over: `why` is its final status. A resilient stream reports every frame still
+  // unanswered as lost.
+  void GiveUp(absl::Status why) {
+    read_done = true;
+    final_status = std::move(why);
+    if (!options.resilient) return;
+    std::lock_guard<std::mutex> lock(pending_mu);
+    for (Pending& p : pending) {
+      Result r;
+      r.status = absl::UnavailableError(absl::StrCat(
+          "frame ", p.sequence, " was sent but never answered: ", final_status.message()));
+      r.sequence = p.sequence;
+      r.frame_id = p.frame_id;
+      r.capture_time_unix_ns = p.capture_time_unix_ns;
+      r.times.send = p.send;
+      r.times.send_unix_ns = p.send_unix_ns;
+      r.frames_dropped = dropped_before + dropped_this_call;
+      lost.push_back(std::move(r));
+      if (p.request != nullptr) spare_requests.push_back(std::move(p.request));
+    }
+    pending.clear();
+  }
+
+  // The next reply, or false once the stream has ended (its status then in final_status).
   bool ReadOne(Result* result, bool decode) {
     std::lock_guard<std::mutex> lock(read_mu);
-    if (read_done) return false;
-    if (!rpc->Read(&reply)) {
-      read_done = true;
-      return false;
+    for (;;) {
+      if (!lost.empty()) {
+        *result = std::move(lost.front());
+        lost.pop_front();
+        return true;
+      }
+      if (read_done) return false;
+      if (call->rpc->Read(&reply)) {
+        failing_since.reset();
+        Fill(result, decode);
+        return true;
+      }
+      std::unique_lock<std::timed_mutex> writers = TakeWriters();
+      const absl::Status ended = FromGrpc(call->rpc->Finish(), What());
+      bool is_cancelled;
+      {
+        std::lock_guard<std::mutex> c(call_mu);
+        is_cancelled = cancelled;
+      }
+      if (options.resilient && ended.code() == absl::StatusCode::kUnavailable && !is_cancelled) {
+        ::cloudcast::client::Reconnect event;
+        if (Reconnect(ended, &event)) {
+          writers.unlock();
+          if (options.on_reconnect) options.on_reconnect(event);
+          continue;
+        }
+        GiveUp(absl::UnavailableError(absl::StrCat(
+            What(), " lost its call (", ended.message(), ") and could not open a new one within ",
+            options.reconnect_timeout.count(), " ms (StreamOptions::reconnect_timeout)")));
+        continue;
+      }
+      GiveUp(ended);
     }
+  }
+
+  // Fills `result` from `reply`.
+  void Fill(Result* result, bool decode) {
     result->times = ClientTimes{};
     result->times.receive = Clock::now();
     result->times.receive_unix_ns = UnixNanosNow();
     result->status = absl::OkStatus();
     result->config_rejected = false;
     bool answers_frame = true;
+    std::uint64_t dropped = 0;
     switch (reply.kind_case()) {
       case v1::StreamReply::kCloud:
         // Swapped, not copied: the Draco bytes move into the result.
@@ -162,7 +409,8 @@ struct Stream::Impl {
         result->sequence = result->reply.sequence();
         result->frame_id = result->reply.frame_id();
         result->capture_time_unix_ns = result->reply.capture_time_unix_ns();
-        result->frames_dropped = result->reply.frames_dropped();
+        result->server_instance = result->reply.server_instance();
+        dropped = result->reply.frames_dropped();
         break;
       case v1::StreamReply::kError: {
         const v1::FrameError& error = reply.error();
@@ -171,7 +419,8 @@ struct Stream::Impl {
         result->sequence = error.sequence();
         result->frame_id = error.frame_id();
         result->capture_time_unix_ns = 0;
-        result->frames_dropped = error.frames_dropped();
+        result->server_instance = error.server_instance();
+        dropped = error.frames_dropped();
         if (convert::AnswersNoFrame(error)) {
           answers_frame = false;
           result->config_rejected = error.kind() == v1::ERROR_KIND_CONFIG;
@@ -186,9 +435,12 @@ struct Stream::Impl {
         result->sequence = 0;
         result->frame_id.clear();
         result->capture_time_unix_ns = 0;
-        result->frames_dropped = 0;
+        result->server_instance.clear();
         break;
     }
+    if (!result->server_instance.empty()) last_instance = result->server_instance;
+    dropped_this_call = std::max(dropped_this_call, dropped);
+    result->frames_dropped = dropped_before + dropped_this_call;
     if (Pending p; answers_frame && TakePending(result->sequence, &p)) {
       result->times.send = p.send;
       result->times.send_unix_ns = p.send_unix_ns;
@@ -200,20 +452,6 @@ struct Stream::Impl {
     } else {
       result->cloud.ResizeUnorganized(0);
     }
-    return true;
-  }
-
-  absl::Status CloseSend() {
-    std::lock_guard<std::mutex> lock(write_mu);
-    if (writes_closed) return absl::OkStatus();
-    writes_closed = true;
-    if (write_failed) return absl::OkStatus();  // nothing to close; Finish reports why
-    if (!rpc->WritesDone()) {
-      write_failed = true;
-      return absl::UnavailableError(
-          absl::StrCat(What(), " has ended; Stream::Finish() returns the reason"));
-    }
-    return absl::OkStatus();
   }
 
   absl::Status Finish() {
@@ -223,14 +461,19 @@ struct Stream::Impl {
     if (receiver.joinable()) {
       receiver.join();
     } else {
-      // gRPC's Finish must follow the last Read: drain what nobody will read, undecoded.
+      // The call's status follows its last read: drain what nobody will read, undecoded.
       Result discard;
       while (ReadOne(&discard, /*decode=*/false)) {
       }
     }
-    final_status = FromGrpc(rpc->Finish(), What());
     finished = true;
     return final_status;
+  }
+
+  void Cancel() {
+    std::lock_guard<std::mutex> lock(call_mu);
+    cancelled = true;
+    if (call != nullptr) call->context.TryCancel();
   }
 };
 
@@ -240,44 +483,17 @@ Stream::~Stream() {
   if (impl_ == nullptr) return;
   {
     std::lock_guard<std::mutex> lock(impl_->finish_mu);
-    if (!impl_->finished) impl_->context.TryCancel();
+    if (!impl_->finished) impl_->Cancel();
   }
   impl_->Finish().IgnoreError();
 }
 
 absl::Status Stream::Send(const DisparityInput& disparity, const ColorInput& colour,
                           const FrameMeta& meta) {
-  std::lock_guard<std::mutex> lock(impl_->write_mu);
-  if (impl_->writes_closed) {
-    return absl::FailedPreconditionError(
-        absl::StrCat(impl_->What(), ": Send after CloseSend or Finish"));
-  }
-  v1::Frame* frame = impl_->frame_request.mutable_frame();
-  if (absl::Status s = internal::FillImages(disparity, colour, frame); !s.ok()) return s;
-  const std::uint64_t sequence = meta.sequence.value_or(impl_->next_sequence);
-  internal::FillMeta(meta, sequence, frame);
-
-  Pending pending;
-  pending.sequence = sequence;
-  pending.capture_time_unix_ns = frame->capture_time_unix_ns();
-  pending.send = Clock::now();
-  pending.send_unix_ns = UnixNanosNow();
-  {
-    // Recorded before the write: the reply may arrive before Write returns.
-    std::lock_guard<std::mutex> plock(impl_->pending_mu);
-    impl_->pending.push_back(pending);
-  }
-  if (absl::Status s = impl_->Write(impl_->frame_request); !s.ok()) return s;
-  impl_->next_sequence = sequence + 1;
-  impl_->frames_sent.fetch_add(1, std::memory_order_relaxed);
-  return absl::OkStatus();
+  return impl_->Send(disparity, colour, meta);
 }
 
-absl::Status Stream::Reconfigure(const StreamConfig& config) {
-  std::lock_guard<std::mutex> lock(impl_->write_mu);
-  *impl_->config_request.mutable_config() = config;
-  return impl_->Write(impl_->config_request);
-}
+absl::Status Stream::Reconfigure(const StreamConfig& config) { return impl_->Reconfigure(config); }
 
 bool Stream::Read(Result* result) {
   if (impl_->options.on_result) return false;
@@ -288,11 +504,15 @@ absl::Status Stream::CloseSend() { return impl_->CloseSend(); }
 
 absl::Status Stream::Finish() { return impl_->Finish(); }
 
-void Stream::Cancel() { impl_->context.TryCancel(); }
+void Stream::Cancel() { impl_->Cancel(); }
 
 std::uint64_t Stream::frames_sent() const {
   return impl_->frames_sent.load(std::memory_order_relaxed);
 }
+
+int Stream::reconnects() const { return impl_->reconnects.load(); }
+
+std::uint64_t Stream::frames_resent() const { return impl_->frames_resent.load(); }
 
 // ---------------------------------------------------------------------------------------------
 // Client
@@ -318,6 +538,18 @@ absl::StatusOr<std::unique_ptr<Client>> Client::Connect(const std::string& targe
                                                         const ClientOptions& options) {
   if (target.empty()) return absl::InvalidArgumentError("cloudcast client: empty server target");
   grpc::ChannelArguments args;
+  if (options.load_balancing == "round_robin") {
+    // Health checking makes round_robin pass over replicas that are draining (NOT_SERVING).
+    args.SetServiceConfigJSON(
+        R"({"loadBalancingConfig": [{"round_robin": {}}],)"
+        R"( "healthCheckConfig": {"serviceName": "cloudcast.v1.CloudCast"}})");
+    // A DNS TXT record must not replace the policy the robot asked for.
+    args.SetInt(GRPC_ARG_SERVICE_CONFIG_DISABLE_RESOLUTION, 1);
+  } else if (!options.load_balancing.empty() && options.load_balancing != "pick_first") {
+    return absl::InvalidArgumentError(
+        absl::StrCat("ClientOptions::load_balancing is '", options.load_balancing,
+                     "'; it must be empty, \"pick_first\" or \"round_robin\""));
+  }
   args.SetMaxReceiveMessageSize(ClampToInt(options.max_message_bytes));
   args.SetMaxSendMessageSize(ClampToInt(options.max_message_bytes));
   if (options.max_reconnect_backoff.count() > 0) {
@@ -395,18 +627,19 @@ absl::StatusOr<std::unique_ptr<Stream>> Client::OpenStream(const StreamConfig& c
   }
   auto impl = std::make_unique<Stream::Impl>();
   impl->stub = impl_->stub;
+  impl->channel = impl_->channel;
   impl->target = impl_->target;
   impl->decode_clouds = impl_->options.decode_clouds;
+  impl->wait_for_ready = impl_->options.wait_for_ready;
   impl->options = std::move(options);
-  impl->context.set_wait_for_ready(impl_->options.wait_for_ready);
-  impl->rpc = impl->stub->Stream(&impl->context);
-  if (impl->rpc == nullptr) {
+  *impl->config_request.mutable_config() = config;
+  impl->call = impl->StartCall();
+  if (impl->call->rpc == nullptr) {
     return absl::InternalError(absl::StrCat("cannot start a stream to ", impl_->target));
   }
-  *impl->config_request.mutable_config() = config;
-  if (!impl->rpc->Write(impl->config_request)) {
+  if (!impl->call->rpc->Write(impl->config_request)) {
     // The call is dead before it began; its status says why (e.g. UNAVAILABLE).
-    absl::Status s = FromGrpc(impl->rpc->Finish(), impl->What());
+    absl::Status s = FromGrpc(impl->call->rpc->Finish(), impl->What());
     impl->finished = true;  // the destructor must not Finish twice
     impl->final_status = s;
     if (s.ok()) s = absl::UnavailableError(absl::StrCat(impl->What(), ": ended at once"));

@@ -44,6 +44,17 @@ ServerFlags::ServerFlags(CLI::App& app)
       ->check(CLI::Range(0.0, 3600.0))
       ->group("Service");
 
+  app.add_option("--max-connection-age", max_connection_age_seconds_,
+                 "Seconds after which a connection is told to go away (GOAWAY), so long-lived "
+                 "clients rebalance onto new replicas; 0 = never")
+      ->check(CLI::Range(0.0, 2.0e6))
+      ->group("Service");
+  app.add_option("--max-connection-age-grace", max_connection_age_grace_seconds_,
+                 "Seconds the streams of such a connection get to finish before they are "
+                 "cancelled; 0 = no limit")
+      ->check(CLI::Range(0.0, 2.0e6))
+      ->group("Service");
+
   app.add_option("--max-message-bytes", o.max_message_bytes,
                  "Largest request message; a larger one ends its call with RESOURCE_EXHAUSTED")
       ->group("Limits");
@@ -80,6 +91,8 @@ absl::StatusOr<ServerOptions> ServerFlags::Options() const {
   ServerOptions o = options_;
   o.idle_timeout = ToMillis(idle_timeout_seconds_);
   o.shutdown_grace = ToMillis(shutdown_grace_seconds_);
+  o.max_connection_age = ToMillis(max_connection_age_seconds_);
+  o.max_connection_age_grace = ToMillis(max_connection_age_grace_seconds_);
   auto frame = stages_->Apply(o.defaults.frame);
   if (!frame.ok()) return frame.status();
   o.defaults.frame = *std::move(frame);

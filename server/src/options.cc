@@ -3,6 +3,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <limits>
 #include <thread>
 
 #include "absl/strings/str_cat.h"
@@ -37,6 +38,14 @@ absl::Status ServerOptions::Validate() const {
         absl::StrCat("--max-queued-frames is ", max_queued_frames, "; it must be in [1, 1024]"));
   }
   if (shutdown_grace.count() < 0) return Invalid("--shutdown-grace must not be negative");
+  // gRPC takes both as int milliseconds.
+  constexpr std::int64_t kMaxMs = std::numeric_limits<int>::max();
+  if (max_connection_age.count() < 0 || max_connection_age.count() > kMaxMs) {
+    return Invalid("--max-connection-age must be in [0, 2^31 ms)");
+  }
+  if (max_connection_age_grace.count() < 0 || max_connection_age_grace.count() > kMaxMs) {
+    return Invalid("--max-connection-age-grace must be in [0, 2^31 ms)");
+  }
   if (auto s = defaults.frame.Validate("defaults"); !s.ok()) {
     return Invalid(absl::StrCat("stream defaults: ", s.message()));
   }

@@ -72,8 +72,12 @@ class Stream {
   // Aborts the call (any thread): pending Send and Read return promptly, Finish gives CANCELLED.
   void Cancel();
 
-  // Frames written so far.
+  // Frames written so far (each once, however often a resilient stream sent it again).
   std::uint64_t frames_sent() const;
+  // Resilient streams (StreamOptions::resilient): new calls opened after a lost one, and frames
+  // sent again on them.
+  int reconnects() const;
+  std::uint64_t frames_resent() const;
 
  private:
   friend class Client;

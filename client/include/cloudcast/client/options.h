@@ -5,8 +5,12 @@
 
 #include <chrono>
 #include <cstddef>
+#include <cstdint>
 #include <functional>
 #include <memory>
+#include <string>
+
+#include "absl/status/status.h"
 
 namespace cloudcast::client {
 
@@ -45,6 +49,23 @@ struct ClientOptions {
   // false: Results carry the reply (Draco bytes, counts, times) but no decoded cloud, e.g. for a
   // load tester measuring the server rather than the Draco decoder.
   bool decode_clouds = true;
+
+  // How calls are spread over the addresses a target resolves to. "" or "pick_first" (gRPC's
+  // default): one address at a time. "round_robin": every address, call by call, and only those
+  // whose health service says SERVING (so a draining replica gets no new streams). Use it with a
+  // target that names several replicas: "dns:///cloudcast-headless.robots.svc.cluster.local:50051"
+  // (a Kubernetes headless Service) or "ipv4:10.0.0.1:50051,10.0.0.2:50051".
+  std::string load_balancing;
+};
+
+// What happened when a resilient stream lost its call and opened a new one.
+struct Reconnect {
+  int attempt = 0;                    // 1 for the stream's first reconnect, then 2, ...
+  absl::Status cause;                 // how the old call ended (UNAVAILABLE)
+  std::string old_instance;           // the replica that answered last before ("" if none did)
+  std::chrono::milliseconds took{0};  // from the failure to the new call carrying the resends
+  std::uint64_t frames_resent = 0;    // DELIVERY_ALL: sent again on the new call
+  std::uint64_t frames_dropped = 0;   // DELIVERY_LATEST: unanswered frames given up on
 };
 
 // How one Stream delivers its replies.
@@ -54,6 +75,21 @@ struct StreamOptions {
   // used. It runs on that thread, so a slow callback delays the next reply, never a Send. It
   // must not destroy or Finish its own Stream (Finish joins that thread).
   std::function<void(Result&&)> on_result;
+
+  // Resilience. false (the default): a lost connection ends the stream (Finish says why). true:
+  // when the call ends with UNAVAILABLE (the replica was killed, drained on shutdown, or sent
+  // GOAWAY), the stream opens a new call (on another replica when the channel has one, see
+  // ClientOptions::load_balancing) and sends its StreamConfig again. With DELIVERY_ALL it also
+  // sends again every frame that was sent but not answered, in order, so each frame is answered
+  // exactly once; with DELIVERY_LATEST those frames count as dropped. Send blocks while a new
+  // call is being opened. After `reconnect_timeout` without a working call the stream gives up:
+  // every frame still unanswered comes back as a Result with UNAVAILABLE, and Finish returns
+  // UNAVAILABLE saying so. The frames kept for resending are those in flight, which gRPC flow
+  // control bounds (a few per stream).
+  bool resilient = false;
+  std::chrono::milliseconds reconnect_timeout{30000};
+  // Called on the reading thread after each reconnect.
+  std::function<void(const Reconnect&)> on_reconnect;
 };
 
 }  // namespace cloudcast::client

@@ -36,8 +36,11 @@ struct Result {
   std::uint64_t sequence = 0;
   std::string frame_id;
   std::int64_t capture_time_unix_ns = 0;
-  // Frames the server skipped on this stream so far (DELIVERY_LATEST only).
+  // Frames skipped on this stream so far (DELIVERY_LATEST only): by the server, and by a
+  // resilient stream's reconnects.
   std::uint64_t frames_dropped = 0;
+  // The replica that answered (its --instance); empty for frames a stream gave up on.
+  std::string server_instance;
   // The error answers a StreamConfig (OpenStream's or a Reconfigure), not a frame: the server
   // keeps the previous settings, and sequence / frame_id are 0 / empty. Streams only.
   bool config_rejected = false;

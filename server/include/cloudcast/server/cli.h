@@ -25,6 +25,8 @@ class ServerFlags {
   ServerOptions options_;
   double idle_timeout_seconds_;
   double shutdown_grace_seconds_;
+  double max_connection_age_seconds_ = 0;
+  double max_connection_age_grace_seconds_ = 0;
   std::string delivery_;
   std::unique_ptr<cli::StageFlags> stages_;  // after the service flags in --help
   std::string log_level_ = "info";

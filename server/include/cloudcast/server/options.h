@@ -36,6 +36,12 @@ struct ServerOptions {
   std::uint32_t max_queued_frames = 4;
   // On shutdown, how long frames in flight may take before their calls are cancelled.
   std::chrono::milliseconds shutdown_grace{5'000};
+  // Connections older than this are told to go away (GOAWAY), so that long-lived clients spread
+  // onto replicas added since they connected; 0 keeps connections forever. gRPC adds +-10%
+  // jitter. Streams still open on such a connection get `max_connection_age_grace` to finish,
+  // then are cancelled (a resilient client then reopens them elsewhere; 0: no limit).
+  std::chrono::milliseconds max_connection_age{0};
+  std::chrono::milliseconds max_connection_age_grace{0};
   // host:port for Prometheus' /metrics; empty switches the HTTP exporter off.
   std::string metrics_listen = "0.0.0.0:9464";
   // This replica's name, sent in every reply and in GetInfo. Empty: the host name.

@@ -1,0 +1,109 @@
+// Replicas for the scale-out tests: real cloudcast-server processes on loopback addresses
+// (127.0.0.1, 127.0.0.2, ... are all loopback), which a test can kill or drain with a signal.
+#pragma once
+
+#include <arpa/inet.h>
+#include <fcntl.h>
+#include <grpcpp/grpcpp.h>
+#include <netinet/in.h>
+#include <signal.h>
+#include <sys/socket.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "program_support.h"
+
+namespace cloudcast::testing {
+
+// A port that is free on 127.0.0.1 now (the kernel's pick); the replicas then bind it on their
+// own addresses.
+inline int FreeLoopbackPort() {
+  const int fd = socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in addr{};
+  addr.sin_family = AF_INET;
+  addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  addr.sin_port = 0;
+  socklen_t len = sizeof addr;
+  int port = 0;
+  if (fd >= 0 && bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr) == 0 &&
+      getsockname(fd, reinterpret_cast<sockaddr*>(&addr), &len) == 0) {
+    port = ntohs(addr.sin_port);
+  }
+  if (fd >= 0) close(fd);
+  return port;
+}
+
+// One cloudcast-server process. Its output goes to `log_path`.
+class ServerProcess {
+ public:
+  ServerProcess(const std::string& address, const std::string& instance,
+                const std::vector<std::string>& extra_args, const std::string& log_path)
+      : address_(address), instance_(instance), log_path_(log_path) {
+    std::vector<std::string> args = {BinDir() + "/cloudcast-server",
+                                     "--listen",
+                                     address,
+                                     "--metrics-listen",
+                                     "",
+                                     "--instance",
+                                     instance,
+                                     "--log-level",
+                                     "warn"};
+    args.insert(args.end(), extra_args.begin(), extra_args.end());
+    pid_ = fork();
+    if (pid_ == 0) {
+      const int out = open(log_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+      dup2(out, 1);
+      dup2(out, 2);
+      std::vector<char*> argv;
+      for (std::string& a : args) argv.push_back(a.data());
+      argv.push_back(nullptr);
+      execv(argv[0], argv.data());
+      _exit(127);
+    }
+  }
+  ~ServerProcess() {
+    if (running()) Signal(SIGKILL);
+    Wait();
+  }
+  ServerProcess(const ServerProcess&) = delete;
+  ServerProcess& operator=(const ServerProcess&) = delete;
+
+  // Waits until the server answers on its address (gRPC channel READY), or the deadline.
+  bool WaitUntilServing(std::chrono::seconds timeout = std::chrono::seconds(20)) {
+    auto channel = grpc::CreateChannel(address_, grpc::InsecureChannelCredentials());
+    return channel->WaitForConnected(std::chrono::system_clock::now() + timeout);
+  }
+
+  void Signal(int signal_number) {
+    if (pid_ > 0) kill(pid_, signal_number);
+  }
+  // Waits for the process to end; its exit status, or nullopt when a signal ended it.
+  std::optional<int> Wait() {
+    if (pid_ <= 0) return exit_status_;
+    int status = 0;
+    if (waitpid(pid_, &status, 0) == pid_) {
+      exit_status_ = WIFEXITED(status) ? std::optional<int>(WEXITSTATUS(status)) : std::nullopt;
+    }
+    pid_ = -1;
+    return exit_status_;
+  }
+  bool running() const { return pid_ > 0; }
+
+  const std::string& address() const { return address_; }
+  const std::string& instance() const { return instance_; }
+  std::string log() const { return ReadText(log_path_); }
+
+ private:
+  const std::string address_;
+  const std::string instance_;
+  const std::string log_path_;
+  pid_t pid_ = -1;
+  std::optional<int> exit_status_;
+};
+
+}  // namespace cloudcast::testing
