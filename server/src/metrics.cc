@@ -81,6 +81,13 @@ Metrics::Metrics()
                                            "Stream calls refused: shutting down")),
       streams_idle_timeout(NewCounter(*registry_, "cloudcast_streams_idle_timeout_total",
                                       "Stream calls ended by the idle timeout")),
+      unparsable_family_(prometheus::BuildCounter()
+                             .Name("cloudcast_requests_unparsable_total")
+                             .Help("Requests whose bytes did not parse as their RPC's message; "
+                                   "the call ends with INVALID_ARGUMENT")
+                             .Register(*registry_)),
+      stream_requests_unparsable(unparsable_family_.Add({{"method", "Stream"}})),
+      process_requests_unparsable(unparsable_family_.Add({{"method", "Process"}})),
       stage_family_(prometheus::BuildHistogram()
                         .Name("cloudcast_stage_seconds")
                         .Help("Time per frame in each stage: decode (PNG/JPEG, frames that had "

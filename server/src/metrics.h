@@ -49,6 +49,14 @@ class Metrics {
   prometheus::Counter& streams_idle_timeout;
 
  private:
+  prometheus::Family<prometheus::Counter>& unparsable_family_;
+
+ public:
+  // Requests whose bytes were not a valid message of their RPC (the call ends).
+  prometheus::Counter& stream_requests_unparsable;
+  prometheus::Counter& process_requests_unparsable;
+
+ private:
   prometheus::Family<prometheus::Histogram>& stage_family_;
 
  public:

@@ -7,6 +7,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "draco/core/draco_version.h"
+#include "grpcpp/support/proto_buffer_reader.h"
 #include "spdlog/spdlog.h"
 #include "stream_queue.h"
 
@@ -26,6 +27,26 @@ std::int64_t UnixNanos() {
 }
 
 double Seconds(Clock::duration d) { return std::chrono::duration<double>(d).count(); }
+
+// Parses a request message from the bytes gRPC read; false when they are not one.
+bool Parse(grpc::ByteBuffer* bytes, google::protobuf::Message* message) {
+  grpc::ProtoBufferReader reader(bytes);
+  return message->ParseFromZeroCopyStream(&reader);
+}
+
+grpc::Status Unparsable(const char* what, std::size_t bytes) {
+  return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
+                      absl::StrCat("the request could not be parsed as a cloudcast.v1.", what, " (",
+                                   bytes, " bytes): not a valid protobuf message"));
+}
+
+// Serializes a reply for gRPC; false only on a message too large for protobuf (2 GB).
+bool Serialize(const google::protobuf::Message& message, grpc::ByteBuffer* bytes) {
+  bool own_buffer;
+  return grpc::SerializationTraits<google::protobuf::Message>::Serialize(message, bytes,
+                                                                         &own_buffer)
+      .ok();
+}
 
 grpc::Status ToGrpc(const absl::Status& s) {
   // absl and gRPC share the canonical code numbers.
@@ -47,7 +68,7 @@ grpc::Status ToGrpc(const absl::Status& s) {
 // decided and none comes after Finish. (Reactions are not run inline by gRPC for non-inlineable
 // reactors, so holding ops_mu_ across the calls cannot deadlock.)
 class CloudCastService::StreamReactor final
-    : public grpc::ServerBidiReactor<v1::StreamRequest, v1::StreamReply> {
+    : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer> {
  public:
   StreamReactor(CloudCastService* service, grpc::CallbackServerContext* context)
       : service_(service),
@@ -59,23 +80,40 @@ class CloudCastService::StreamReactor final
     spdlog::info("stream from {} opened ({} active)", peer_, service_->active_streams());
     service_->Register(this);
     std::unique_lock<std::mutex> lock(mu_);
-    draining_ = service_->draining();
+    if (service_->draining()) closing_ = Draining();
     Pump(lock);
   }
 
   void OnReadDone(bool ok) override {
+    Job* job;
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      job = reading_;
+    }
+    // Parsed outside the lock: a frame is a megabyte or more.
+    std::size_t bytes = 0;
+    bool parsed = false;
+    if (ok) {
+      bytes = job->in.Length();
+      parsed = Parse(&job->in, &job->request);
+      job->in.Clear();
+    }
     std::unique_lock<std::mutex> lock(mu_);
-    Job* job = reading_;
     reading_ = nullptr;
     last_activity_ = Clock::now();
     if (!ok) {
       read_open_ = false;  // the client closed its side, or the call is gone
       Release(job);
-    } else if (finished_ || broken_ || draining_) {
-      Release(job);  // read after draining began: not answered
+    } else if (finished_ || broken_ || closing_) {
+      Release(job);  // read after the stream began to close: not answered
+    } else if (!parsed) {
+      // The stream cannot be trusted past bytes it cannot parse: answer what it holds, then end.
+      service_->metrics_->stream_requests_unparsable.Increment();
+      spdlog::debug("stream from {}: {} bytes do not parse as a StreamRequest", peer_, bytes);
+      closing_ = Unparsable("StreamRequest", bytes);
+      Release(job);
     } else {
-      service_->metrics_->bytes_received.Increment(
-          static_cast<double>(job->request.ByteSizeLong()));
+      service_->metrics_->bytes_received.Increment(static_cast<double>(bytes));
       Accept(job);
     }
     Pump(lock);
@@ -132,13 +170,15 @@ class CloudCastService::StreamReactor final
   // Stops reading; the frames already held are answered, then the stream ends (UNAVAILABLE).
   void BeginDrain() {
     std::unique_lock<std::mutex> lock(mu_);
-    draining_ = true;
+    if (!closing_) closing_ = Draining();
     Pump(lock);
   }
 
  private:
   // A request slot: what is read into it, and the reply it turns into.
   struct Job : StreamSlot {
+    grpc::ByteBuffer in;   // what gRPC read, until parsed into `request`
+    grpc::ByteBuffer out;  // `reply` serialized, while gRPC writes it
     v1::StreamRequest request;
     v1::StreamReply reply;
     // The CloudReply last used by this job, kept out of `reply` between frames so that its
@@ -158,6 +198,11 @@ class CloudCastService::StreamReactor final
 
   ~StreamReactor() override = default;
 
+  static grpc::Status Draining() {
+    return grpc::Status(grpc::StatusCode::UNAVAILABLE,
+                        "the server is shutting down; frames received before were answered");
+  }
+
   // Decides what can happen next and hands it to gRPC. `lock` holds mu_ and is released here.
   void Pump(std::unique_lock<std::mutex>& lock, bool cancel = false) {
     Ops ops;
@@ -173,17 +218,15 @@ class CloudCastService::StreamReactor final
         ops.finish = grpc::Status(grpc::StatusCode::CANCELLED, "stream cancelled");
       } else if (ending_) {
         ops.finish = *ending_;
+      } else if (queue_.Empty() && closing_) {
+        ops.finish = *closing_;
       } else if (queue_.Empty() && !read_open_) {
         ops.finish = grpc::Status::OK;
-      } else if (queue_.Empty() && draining_) {
-        ops.finish = grpc::Status(grpc::StatusCode::UNAVAILABLE,
-                                  "the server is shutting down; frames received before were "
-                                  "answered");
       }
       if (ops.finish) finished_ = true;
     }
     // Read the next message when there is room for it.
-    if (reading_ == nullptr && !finished_ && read_open_ && !draining_ && !broken_ && !ending_ &&
+    if (reading_ == nullptr && !finished_ && read_open_ && !closing_ && !broken_ && !ending_ &&
         queue_.CanRead(settings_->delivery)) {
       reading_ = Acquire();
       ops.read = reading_;
@@ -194,8 +237,8 @@ class CloudCastService::StreamReactor final
     }
     std::lock_guard<std::mutex> order(ops_mu_);
     lock.unlock();
-    if (ops.write != nullptr) StartWrite(&ops.write->reply);
-    if (ops.read != nullptr) StartRead(&ops.read->request);
+    if (ops.write != nullptr) StartWrite(&ops.write->out);
+    if (ops.read != nullptr) StartRead(&ops.read->in);
     if (ops.cancel) context_->TryCancel();
     if (ops.finish) Finish(*std::move(ops.finish));
   }
@@ -222,6 +265,8 @@ class CloudCastService::StreamReactor final
   // Frees the request's pixels now (so a free slot costs no memory) and keeps the reply's cloud
   // buffer for the next frame.
   void Release(Job* job) {
+    job->in.Clear();
+    job->out.Clear();
     job->request.Clear();
     if (job->reply.has_cloud()) job->spare_cloud.reset(job->reply.release_cloud());
     job->reply.Clear();
@@ -314,7 +359,9 @@ class CloudCastService::StreamReactor final
     } else {
       job->reply.mutable_error()->set_frames_dropped(queue_.dropped());
     }
-    service_->metrics_->bytes_sent.Increment(static_cast<double>(job->reply.ByteSizeLong()));
+    // Serialized here rather than by gRPC, so the reactor owns its bytes (the stream is raw).
+    Serialize(job->reply, &job->out);
+    service_->metrics_->bytes_sent.Increment(static_cast<double>(job->out.Length()));
     ops->write = job;
   }
 
@@ -367,15 +414,17 @@ class CloudCastService::StreamReactor final
   Job* reading_ = nullptr;
   Job* writing_ = nullptr;
   bool read_open_ = true;  // false once the client half-closed (or the read side failed)
-  bool draining_ = false;  // the server is shutting down: answer what is held, then UNAVAILABLE
-  bool broken_ = false;    // cancelled or a write failed: nothing more is written
+  // Reading has stopped for good: answer what is held, then end with this status (the server
+  // drains, or the client sent bytes that do not parse).
+  std::optional<grpc::Status> closing_;
+  bool broken_ = false;                 // cancelled or a write failed: nothing more is written
   std::optional<grpc::Status> ending_;  // the server ends the call (idle) with this status
   bool finished_ = false;               // Finish has been called
   Clock::time_point last_activity_;
 };
 
 // Ends a call at once: over the stream limit, or while shutting down.
-class RejectedStream final : public grpc::ServerBidiReactor<v1::StreamRequest, v1::StreamReply> {
+class RejectedStream final : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer> {
  public:
   explicit RejectedStream(grpc::Status status) { Finish(std::move(status)); }
   void OnDone() override { delete this; }
@@ -394,7 +443,7 @@ CloudCastService::CloudCastService(const ServerOptions& options, Metrics* metric
 
 CloudCastService::~CloudCastService() { StopWorkers(); }
 
-grpc::ServerBidiReactor<v1::StreamRequest, v1::StreamReply>* CloudCastService::Stream(
+grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* CloudCastService::Stream(
     grpc::CallbackServerContext* context) {
   if (draining_.load()) {
     metrics_->streams_rejected_shutdown.Increment();
@@ -417,22 +466,36 @@ grpc::ServerBidiReactor<v1::StreamRequest, v1::StreamReply>* CloudCastService::S
 }
 
 grpc::ServerUnaryReactor* CloudCastService::Process(grpc::CallbackServerContext* context,
-                                                    const v1::ProcessRequest* request,
-                                                    v1::CloudReply* reply) {
+                                                    const grpc::ByteBuffer* request_bytes,
+                                                    grpc::ByteBuffer* reply_bytes) {
   grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
-  const Clock::time_point received = Clock::now();
-  const std::int64_t received_ns = UnixNanos();
-  metrics_->bytes_received.Increment(static_cast<double>(request->ByteSizeLong()));
+  const Arrival arrival{Clock::now(), UnixNanos()};
+  // The request and its reply live until the worker is done with them.
+  struct Call {
+    v1::ProcessRequest request;
+    v1::CloudReply reply;
+    std::shared_ptr<const StreamSettings> settings;
+  };
+  auto call = std::make_shared<Call>();
+  const std::size_t bytes = request_bytes->Length();
+  grpc::ByteBuffer copy(*request_bytes);  // shares the slices; the reader consumes the copy
+  if (!Parse(&copy, &call->request)) {
+    metrics_->process_requests_unparsable.Increment();
+    reactor->Finish(Unparsable("ProcessRequest", bytes));
+    return reactor;
+  }
+  metrics_->bytes_received.Increment(static_cast<double>(bytes));
   if (draining_.load()) {
     reactor->Finish(grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
     return reactor;
   }
-  auto settings = convert::Resolve(request->config(), *default_settings_);
+  auto settings = convert::Resolve(call->request.config(), *default_settings_);
   if (!settings.ok()) {
     metrics_->FrameErrors(settings.status().code()).Increment();
     reactor->Finish(ToGrpc(settings.status()));
     return reactor;
   }
+  call->settings = std::make_shared<const StreamSettings>(*std::move(settings));
   // Each call holds its frame until a worker is done with it; bound them like streams.
   if (active_process_calls_.fetch_add(1) >= static_cast<int>(options_.max_streams)) {
     active_process_calls_.fetch_sub(1);
@@ -442,17 +505,16 @@ grpc::ServerUnaryReactor* CloudCastService::Process(grpc::CallbackServerContext*
                                   options_.max_streams, " (max_streams, --max-streams)")));
     return reactor;
   }
-  auto shared_settings = std::make_shared<const StreamSettings>(*std::move(settings));
-  const Arrival arrival{received, received_ns};
   const bool submitted =
-      pool_.Submit([this, reactor, request, reply, arrival, shared_settings](std::size_t worker) {
-        const absl::Status status =
-            runner_.Run(worker, request->frame(), shared_settings->frame, arrival, reply);
+      pool_.Submit([this, reactor, reply_bytes, arrival, call](std::size_t worker) {
+        const absl::Status status = runner_.Run(worker, call->request.frame(),
+                                                call->settings->frame, arrival, &call->reply);
         grpc::Status result;
         if (status.ok()) {
-          reply->set_send_time_unix_ns(UnixNanos());
+          call->reply.set_send_time_unix_ns(UnixNanos());
           metrics_->total_seconds.Observe(Seconds(Clock::now() - arrival.time));
-          metrics_->bytes_sent.Increment(static_cast<double>(reply->ByteSizeLong()));
+          Serialize(call->reply, reply_bytes);
+          metrics_->bytes_sent.Increment(static_cast<double>(reply_bytes->Length()));
         } else {
           result = ToGrpc(status);
         }
@@ -483,8 +545,8 @@ grpc::ServerUnaryReactor* CloudCastService::GetInfo(grpc::CallbackServerContext*
   for (auto e : {DisparityEncoding::kU8, DisparityEncoding::kU16, DisparityEncoding::kF32}) {
     info->add_disparity_encodings(convert::ToProto(e));
   }
-  for (auto e : {ColorEncoding::kBGR8, ColorEncoding::kRGB8, ColorEncoding::kRGBA8,
-                 ColorEncoding::kMono8}) {
+  for (auto e :
+       {ColorEncoding::kBGR8, ColorEncoding::kRGB8, ColorEncoding::kRGBA8, ColorEncoding::kMono8}) {
     info->add_color_encodings(convert::ToProto(e));
   }
   // What core/image_io decodes through OpenCV's imgcodecs.

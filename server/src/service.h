@@ -29,7 +29,13 @@
 
 namespace cloudcast::server {
 
-class CloudCastService final : public v1::CloudCast::CallbackService {
+// Stream and Process take raw bytes and parse them here, so that bytes which are not a valid
+// message get a status that says so (gRPC's own parsing reports a half-close, or UNIMPLEMENTED).
+using CallbackBase = v1::CloudCast::WithRawCallbackMethod_Stream<
+    v1::CloudCast::WithRawCallbackMethod_Process<v1::CloudCast::WithCallbackMethod_GetInfo<
+        v1::CloudCast::Service>>>;
+
+class CloudCastService final : public CallbackBase {
  public:
   // `options` must be valid (ServerOptions::Validate); `metrics` must outlive the service.
   CloudCastService(const ServerOptions& options, Metrics* metrics);
@@ -37,11 +43,11 @@ class CloudCastService final : public v1::CloudCast::CallbackService {
   CloudCastService(const CloudCastService&) = delete;
   CloudCastService& operator=(const CloudCastService&) = delete;
 
-  grpc::ServerBidiReactor<v1::StreamRequest, v1::StreamReply>* Stream(
+  grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* Stream(
       grpc::CallbackServerContext* context) override;
   grpc::ServerUnaryReactor* Process(grpc::CallbackServerContext* context,
-                                    const v1::ProcessRequest* request,
-                                    v1::CloudReply* reply) override;
+                                    const grpc::ByteBuffer* request,
+                                    grpc::ByteBuffer* reply) override;
   grpc::ServerUnaryReactor* GetInfo(grpc::CallbackServerContext* context,
                                     const v1::GetInfoRequest* request,
                                     v1::ServerInfo* info) override;

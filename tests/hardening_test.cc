@@ -1,0 +1,167 @@
+// Defects an outside tester found, each pinned by a test that failed before its fix: what a
+// hostile or careless client does to the service, and what it must get instead.
+#include <grpcpp/generic/generic_stub.h>
+#include <grpcpp/grpcpp.h>
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "cloudcast/datasets/synthetic.h"
+#include "cloudcast/proto/convert.h"
+#include "cloudcast/server/server.h"
+#include "cloudcast/testing/metrics_scrape.h"
+#include "cloudcast/v1/cloudcast.grpc.pb.h"
+
+namespace cloudcast {
+namespace {
+
+using std::chrono::milliseconds;
+using std::chrono::seconds;
+
+const SyntheticFrame& Frame() {
+  static const SyntheticFrame frame = [] {
+    SyntheticOptions o;
+    o.width = 160;
+    o.height = 120;
+    return *SyntheticScene::Default().Render(o);
+  }();
+  return frame;
+}
+
+v1::StreamRequest FrameRequest(std::uint64_t sequence) {
+  v1::StreamRequest request;
+  v1::Frame* frame = request.mutable_frame();
+  frame->set_sequence(sequence);
+  EXPECT_TRUE(
+      convert::ToProto(Frame().disparity_view(), "d", frame->mutable_disparity()->mutable_raw())
+          .ok());
+  EXPECT_TRUE(
+      convert::ToProto(Frame().colour_view(), "c", frame->mutable_colour()->mutable_raw()).ok());
+  return request;
+}
+
+grpc::ByteBuffer Bytes(const std::string& s) {
+  grpc::Slice slice(s);
+  return grpc::ByteBuffer(&slice, 1);
+}
+
+grpc::ByteBuffer Serialized(const google::protobuf::Message& m) {
+  return Bytes(m.SerializeAsString());
+}
+
+class HardeningTest : public ::testing::Test {
+ protected:
+  void SetUp() override { Start(server::ServerOptions{}); }
+
+  void Start(server::ServerOptions options) {
+    server_.reset();
+    options.listen = "127.0.0.1:0";
+    options.metrics_listen = "127.0.0.1:0";
+    auto s = server::Server::Start(options);
+    ASSERT_TRUE(s.ok()) << s.status();
+    server_ = *std::move(s);
+    channel_ = grpc::CreateChannel(server_->address(), grpc::InsecureChannelCredentials());
+    generic_ = std::make_unique<grpc::GenericStub>(channel_);
+  }
+
+  // A Stream call that writes the given messages as raw bytes (valid or not), then half-closes,
+  // and reads everything: the replies and the final status.
+  struct RawStreamResult {
+    std::vector<v1::StreamReply> replies;
+    grpc::Status status;
+  };
+  RawStreamResult RawStream(const std::vector<grpc::ByteBuffer>& messages) {
+    grpc::ClientContext ctx;
+    ctx.set_deadline(std::chrono::system_clock::now() + seconds(30));
+    grpc::CompletionQueue cq;
+    auto call = generic_->PrepareCall(&ctx, "/cloudcast.v1.CloudCast/Stream", &cq);
+    void* tag;
+    bool ok;
+    call->StartCall(reinterpret_cast<void*>(1));
+    EXPECT_TRUE(cq.Next(&tag, &ok) && ok);
+    for (const grpc::ByteBuffer& m : messages) {
+      call->Write(m, reinterpret_cast<void*>(2));
+      if (!cq.Next(&tag, &ok) || !ok) break;
+    }
+    call->WritesDone(reinterpret_cast<void*>(3));
+    cq.Next(&tag, &ok);
+    RawStreamResult result;
+    for (;;) {
+      grpc::ByteBuffer in;
+      call->Read(&in, reinterpret_cast<void*>(4));
+      if (!cq.Next(&tag, &ok) || !ok) break;
+      std::vector<grpc::Slice> slices;
+      EXPECT_TRUE(in.Dump(&slices).ok());
+      std::string bytes;
+      for (const grpc::Slice& s : slices)
+        bytes.append(reinterpret_cast<const char*>(s.begin()), s.size());
+      v1::StreamReply reply;
+      EXPECT_TRUE(reply.ParseFromString(bytes));
+      result.replies.push_back(reply);
+    }
+    call->Finish(&result.status, reinterpret_cast<void*>(5));
+    cq.Next(&tag, &ok);
+    return result;
+  }
+
+  std::unique_ptr<server::Server> server_;
+  std::shared_ptr<grpc::Channel> channel_;
+  std::unique_ptr<grpc::GenericStub> generic_;
+};
+
+// Defect 1: bytes that are not a StreamRequest ended the stream with OK, and the frames after
+// them were silently lost. Now: the frames before are answered, then the stream ends with
+// INVALID_ARGUMENT saying the request could not be parsed, and the metrics count it.
+TEST_F(HardeningTest, UnparsableStreamRequestEndsTheStreamWithInvalidArgument) {
+  // A length-delimited field that claims 1 GB, and plain garbage.
+  const std::string claims_a_gigabyte = std::string("\x12\x80\x80\x80\x80\x04", 6) + "abc";
+  for (const std::string& bad : {claims_a_gigabyte, std::string("\xff\xff\xff garbage", 12)}) {
+    const RawStreamResult r = RawStream({Serialized(FrameRequest(1)), Serialized(FrameRequest(2)),
+                                         Bytes(bad), Serialized(FrameRequest(3))});
+    EXPECT_EQ(r.status.error_code(), grpc::StatusCode::INVALID_ARGUMENT)
+        << r.status.error_message();
+    EXPECT_NE(r.status.error_message().find("could not be parsed"), std::string::npos)
+        << r.status.error_message();
+    // What came before the bad bytes is answered; nothing after it is taken.
+    ASSERT_EQ(r.replies.size(), 2u);
+    EXPECT_EQ(r.replies[0].cloud().sequence(), 1u);
+    EXPECT_EQ(r.replies[1].cloud().sequence(), 2u);
+  }
+  const std::string metrics = server::ScrapeMetrics(server_->metrics_port());
+  EXPECT_NE(metrics.find("cloudcast_requests_unparsable_total{method=\"Stream\"} 2"),
+            std::string::npos)
+      << metrics;
+  // A client that half-closes normally still gets OK.
+  const RawStreamResult good = RawStream({Serialized(FrameRequest(1))});
+  EXPECT_TRUE(good.status.ok()) << good.status.error_message();
+  EXPECT_EQ(good.replies.size(), 1u);
+}
+
+// Defect 1, Process: unparsable bytes got UNIMPLEMENTED with an empty message.
+TEST_F(HardeningTest, UnparsableProcessRequestGetsInvalidArgument) {
+  grpc::ClientContext ctx;
+  ctx.set_deadline(std::chrono::system_clock::now() + seconds(30));
+  grpc::CompletionQueue cq;
+  const grpc::ByteBuffer bad = Bytes(std::string("\x0a\xff\xff\xff\xff\x0f", 6));
+  auto call = generic_->PrepareUnaryCall(&ctx, "/cloudcast.v1.CloudCast/Process", bad, &cq);
+  call->StartCall();
+  grpc::ByteBuffer reply;
+  grpc::Status status;
+  call->Finish(&reply, &status, reinterpret_cast<void*>(1));
+  void* tag;
+  bool ok;
+  ASSERT_TRUE(cq.Next(&tag, &ok));
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(status.error_message().find("could not be parsed"), std::string::npos)
+      << status.error_message();
+  const std::string metrics = server::ScrapeMetrics(server_->metrics_port());
+  EXPECT_NE(metrics.find("cloudcast_requests_unparsable_total{method=\"Process\"} 1"),
+            std::string::npos)
+      << metrics;
+}
+
+}  // namespace
+}  // namespace cloudcast
