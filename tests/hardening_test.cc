@@ -5,10 +5,15 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <condition_variable>
 #include <memory>
+#include <mutex>
 #include <string>
+#include <thread>
 #include <vector>
 
+#include "cloudcast/client/client.h"
+#include "cloudcast/client/opencv.h"
 #include "cloudcast/datasets/synthetic.h"
 #include "cloudcast/proto/convert.h"
 #include "cloudcast/server/server.h"
@@ -161,6 +166,94 @@ TEST_F(HardeningTest, UnparsableProcessRequestGetsInvalidArgument) {
   EXPECT_NE(metrics.find("cloudcast_requests_unparsable_total{method=\"Process\"} 1"),
             std::string::npos)
       << metrics;
+}
+
+// Defect 6: a DELIVERY_LATEST stream whose client never reads kept being read and its frames
+// dropped at full speed, costing every other stream. Now the server stops reading it.
+TEST_F(HardeningTest, LatestStreamThatNeverReadsStopsBeingRead) {
+  // A small receive window fills after a reply or two, as a real frame's replies fill gRPC's
+  // default window within a few seconds (without it, replies pile up in the window first).
+  grpc::ChannelArguments args;
+  args.SetInt(GRPC_ARG_HTTP2_BDP_PROBE, 0);
+  args.SetInt(GRPC_ARG_HTTP2_STREAM_LOOKAHEAD_BYTES, 16 * 1024);
+  auto stub = v1::CloudCast::NewStub(
+      grpc::CreateCustomChannel(server_->address(), grpc::InsecureChannelCredentials(), args));
+  grpc::ClientContext ctx;
+  auto call = stub->Stream(&ctx);
+  v1::StreamRequest config;
+  config.mutable_config()->set_delivery(v1::DELIVERY_LATEST);
+  ASSERT_TRUE(call->Write(config));
+  // Before the fix about a thousand such frames were read and dropped per second.
+  SyntheticOptions o;
+  o.width = 320;
+  o.height = 240;
+  const SyntheticFrame small = *SyntheticScene::Default().Render(o);
+  v1::StreamRequest request;
+  ASSERT_TRUE(convert::ToProto(small.disparity_view(), "d",
+                               request.mutable_frame()->mutable_disparity()->mutable_raw())
+                  .ok());
+  ASSERT_TRUE(convert::ToProto(small.colour_view(), "c",
+                               request.mutable_frame()->mutable_colour()->mutable_raw())
+                  .ok());
+  constexpr int kFrames = 4000;
+  std::mutex mu;
+  std::condition_variable cv;
+  bool writer_done = false;
+  int written = 0;
+  std::thread writer([&] {
+    for (int i = 0; i < kFrames; ++i) {
+      request.mutable_frame()->set_sequence(static_cast<std::uint64_t>(i));
+      if (!call->Write(request)) break;
+      std::lock_guard<std::mutex> lock(mu);
+      ++written;
+    }
+    std::lock_guard<std::mutex> lock(mu);
+    writer_done = true;
+    cv.notify_all();
+  });
+  // Observed for a few seconds: the writer must be held back by flow control, the server having
+  // stopped reading, rather than have every frame read and dropped.
+  {
+    std::unique_lock<std::mutex> lock(mu);
+    cv.wait_for(lock, seconds(3), [&] { return writer_done; });
+    EXPECT_FALSE(writer_done) << "the server read all " << kFrames << " frames";
+  }
+  const double dropped = server::MetricValue(server::ScrapeMetrics(server_->metrics_port()),
+                                             "cloudcast_frames_dropped_total");
+  std::printf("frames written %d, dropped by the server %.0f\n", written, dropped);
+  EXPECT_LT(dropped, 100) << "written " << written;
+  ctx.TryCancel();
+  writer.join();
+}
+
+// Defect 8: a JPEG sent as disparity was accepted without a word, although lossy compression
+// corrupts disparities (the proto says so). Now it is refused, naming the field.
+TEST_F(HardeningTest, JpegDisparityIsRefused) {
+  auto client = client::Client::Connect(server_->address());
+  ASSERT_TRUE(client.ok());
+  const SyntheticFrame& f = Frame();
+  cv::Mat disparity(static_cast<int>(f.height), static_cast<int>(f.width), CV_8U);
+  for (int v = 0; v < disparity.rows; ++v) {
+    for (int u = 0; u < disparity.cols; ++u) disparity.at<std::uint8_t>(v, u) = 100 + u % 50;
+  }
+  auto jpeg = client::EncodeJpeg(disparity, 95);
+  ASSERT_TRUE(jpeg.ok());
+  auto png = client::EncodePng(disparity);
+  ASSERT_TRUE(png.ok());
+  const client::EncodedImage as_jpeg{*jpeg}, as_png{*png};
+  auto refused = (*client)->Process(as_jpeg, f.colour_view());
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(refused.status().code(), absl::StatusCode::kInvalidArgument);
+  const std::string m(refused.status().message());
+  EXPECT_NE(m.find("frame.disparity.encoded is a JPEG"), std::string::npos) << m;
+  EXPECT_NE(m.find("lossy"), std::string::npos) << m;
+  // The same map as PNG (lossless) is fine, and so is JPEG colour.
+  EXPECT_TRUE((*client)->Process(as_png, f.colour_view()).ok());
+  cv::Mat colour(static_cast<int>(f.height), static_cast<int>(f.width), CV_8UC3,
+                 const_cast<std::uint8_t*>(f.colour.data()));
+  auto colour_jpeg = client::EncodeJpeg(colour, 90);
+  ASSERT_TRUE(colour_jpeg.ok());
+  EXPECT_TRUE((*client)->Process(as_png, client::EncodedImage{*colour_jpeg}).ok());
 }
 
 }  // namespace

@@ -119,6 +119,28 @@ TEST_F(StreamQueueTest, LatestModeReplacesTheWaitingFrameAndCountsTheDrop) {
   EXPECT_TRUE(q.Empty());
 }
 
+// Defect 6: a DELIVERY_LATEST client that never takes its replies kept being read, and every
+// frame dropped, at full speed. Reading now stops after a few drops during one write.
+TEST_F(StreamQueueTest, LatestModeStopsReadingAClientThatDoesNotTakeItsReplies) {
+  StreamQueue q(4);
+  std::vector<StreamSlot*> dropped;
+  Slot* a = Frame(Delivery::kLatest);
+  q.PushFrame(a, &dropped);
+  ASSERT_EQ(q.NextToProcess(), a);
+  q.Processed(a);
+  ASSERT_EQ(q.NextToWrite(), a);  // the client never completes this write
+  std::uint32_t read = 0;
+  while (q.CanRead(Delivery::kLatest) && read < 1000) {
+    q.PushFrame(Frame(Delivery::kLatest), &dropped);
+    ++read;
+  }
+  EXPECT_EQ(read, StreamQueue::kMaxDropsPerWrite + 1);  // one waits, the others were dropped
+  EXPECT_EQ(q.dropped(), StreamQueue::kMaxDropsPerWrite);
+  // Once the client takes the reply, reading goes on.
+  q.Written();
+  EXPECT_TRUE(q.CanRead(Delivery::kLatest));
+}
+
 TEST_F(StreamQueueTest, RepliesWithoutWorkKeepTheirPlaceAmongFrames) {
   StreamQueue q(4);
   std::vector<StreamSlot*> dropped;
@@ -146,7 +168,7 @@ TEST_F(StreamQueueTest, LatestModeDoesNotDropRepliesOrAllModeFrames) {
   Slot* busy = Frame(Delivery::kLatest);
   q.PushFrame(busy, &dropped);
   ASSERT_EQ(q.NextToProcess(), busy);
-  q.PushReply(Frame(Delivery::kLatest));     // a config error: never dropped
+  q.PushReply(Frame(Delivery::kLatest));         // a config error: never dropped
   q.PushFrame(Frame(Delivery::kAll), &dropped);  // sent under an earlier DELIVERY_ALL config
   q.PushFrame(Frame(Delivery::kLatest), &dropped);
   EXPECT_TRUE(dropped.empty());

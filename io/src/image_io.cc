@@ -341,7 +341,7 @@ bool SniffImageSize(std::string_view bytes, std::uint32_t* width, std::uint32_t*
 }
 
 absl::Status CheckEncodedImage(std::string_view bytes, std::string_view field_name,
-                               const Limits& limits) {
+                               const Limits& limits, const char** format_out) {
   const std::string field(field_name);
   if (bytes.empty()) {
     return absl::InvalidArgumentError(absl::StrCat(field, " is empty"));
@@ -359,6 +359,7 @@ absl::Status CheckEncodedImage(std::string_view bytes, std::string_view field_na
     return absl::InvalidArgumentError(
         absl::StrCat(field, " is a ", format, " of ", w, "x", h, " pixels"));
   }
+  if (format_out != nullptr) *format_out = format;
   return check::ImageSize(absl::StrCat(field, " (", format, ")"), w, h, limits);
 }
 

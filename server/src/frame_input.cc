@@ -1,5 +1,8 @@
 #include "frame_input.h"
 
+#include <string_view>
+
+#include "absl/strings/str_cat.h"
 #include "cloudcast/proto/convert.h"
 
 namespace cloudcast::server {
@@ -7,10 +10,17 @@ namespace {
 
 // Decodes `bytes` into `owned` and views it. Formats the header check cannot size are refused
 // before the decoder runs; the decoded size is checked again (a TIFF may hold several pages).
+// `lossless` refuses JPEG, whose compression changes the values (disparities must stay exact).
 template <typename Owned, typename View, typename Decode>
 absl::Status DecodeChecked(std::string_view bytes, const char* field, const Limits& limits,
-                           Decode decode, Owned* owned, View* view) {
-  if (absl::Status s = CheckEncodedImage(bytes, field, limits); !s.ok()) return s;
+                           bool lossless, Decode decode, Owned* owned, View* view) {
+  const char* format = nullptr;
+  if (absl::Status s = CheckEncodedImage(bytes, field, limits, &format); !s.ok()) return s;
+  if (lossless && std::string_view(format) == "JPEG") {
+    return absl::InvalidArgumentError(absl::StrCat(
+        field, " is a JPEG: its lossy compression changes disparity values; send it raw or as "
+               "PNG, TIFF, PNM or PFM"));
+  }
   auto decoded = decode(bytes, field);
   if (!decoded.ok()) return decoded.status();
   *owned = *std::move(decoded);
@@ -33,7 +43,7 @@ absl::Status PrepareFrameImages(const v1::Frame& frame, const Limits& limits,
       break;
     case v1::DisparityImage::kEncoded:
       if (auto s = DecodeChecked(
-              frame.disparity().encoded(), "frame.disparity.encoded", limits,
+              frame.disparity().encoded(), "frame.disparity.encoded", limits, /*lossless=*/true,
               [](std::string_view b, const char* f) { return DecodeDisparity(b, f); },
               &scratch->disparity, &out->disparity);
           !s.ok()) {
@@ -54,7 +64,7 @@ absl::Status PrepareFrameImages(const v1::Frame& frame, const Limits& limits,
       break;
     case v1::ColorImage::kEncoded:
       if (auto s = DecodeChecked(
-              frame.colour().encoded(), "frame.colour.encoded", limits,
+              frame.colour().encoded(), "frame.colour.encoded", limits, /*lossless=*/false,
               [](std::string_view b, const char* f) { return DecodeColor(b, f); }, &scratch->colour,
               &out->colour);
           !s.ok()) {

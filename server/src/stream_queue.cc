@@ -18,6 +18,7 @@ void StreamQueue::PushFrame(StreamSlot* slot, std::vector<StreamSlot*>* dropped)
         it = waiting_.erase(it);
         --held_;
         ++dropped_;
+        if (writing_) ++dropped_during_write_;
         dropped->push_back(s);
       } else {
         ++it;
@@ -80,12 +81,15 @@ StreamSlot* StreamQueue::NextToWrite() {
 
 void StreamQueue::Written() {
   writing_ = false;
+  dropped_during_write_ = 0;
   --held_;
 }
 
 bool StreamQueue::CanRead(Delivery current) const {
   if (abandoned_) return false;
   if (current == Delivery::kAll) return held_ < max_held_;
+  // A client that does not take its replies gets no more frames read than this.
+  if (writing_ && dropped_during_write_ >= kMaxDropsPerWrite) return false;
   // DELIVERY_LATEST keeps reading so that the newest frame is the one waiting; a waiting frame
   // will be replaced, so it does not count. Error replies and unwritten clouds do, so that a
   // client that sends bad configs and reads nothing cannot grow the queue.

@@ -9,6 +9,9 @@
 //
 //   DELIVERY_LATEST  one frame in work at a time, and none started while a finished reply waits
 //                    for the writer; a newer frame replaces the ones still waiting (dropped).
+//                    While a reply is being written, at most kMaxDropsPerWrite frames are read
+//                    and dropped; then the stream is not read until the client takes the reply,
+//                    so a client that never reads costs nothing.
 //   DELIVERY_ALL     every frame is processed, several at once; replies are written in order
 //                    (a reorder buffer); at most `max_held` slots are held, after which the
 //                    stream should not be read (gRPC flow control then slows the client).
@@ -33,6 +36,8 @@ struct StreamSlot {
 
 class StreamQueue {
  public:
+  static constexpr std::uint32_t kMaxDropsPerWrite = 8;
+
   // `max_held`: slots held at once in DELIVERY_ALL (waiting + in work + replies not yet written).
   explicit StreamQueue(std::uint32_t max_held);
   StreamQueue(const StreamQueue&) = delete;
@@ -84,6 +89,7 @@ class StreamQueue {
   bool writing_ = false;    // a slot from NextToWrite is being written
   std::uint32_t held_ = 0;  // waiting + in work + ready + writing
   std::uint64_t dropped_ = 0;
+  std::uint32_t dropped_during_write_ = 0;  // since the write outstanding began
   bool abandoned_ = false;
 };
 

@@ -62,7 +62,8 @@ bool SniffImageSize(std::string_view bytes, std::uint32_t* width, std::uint32_t*
 // Checks encoded bytes before a decoder allocates anything for them: not empty, a format whose
 // header gives the size (a decoder allocates whatever an unchecked header claims, and OpenCV
 // allows 2^30 pixels), and that size within `limits` (RESOURCE_EXHAUSTED). Errors name `field`.
+// `format`, when given, gets the format's name as SniffImageSize gives it.
 absl::Status CheckEncodedImage(std::string_view bytes, std::string_view field,
-                               const Limits& limits);
+                               const Limits& limits, const char** format = nullptr);
 
 }  // namespace cloudcast
