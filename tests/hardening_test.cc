@@ -1,8 +1,12 @@
 // Defects an outside tester found, each pinned by a test that failed before its fix: what a
 // hostile or careless client does to the service, and what it must get instead.
+#include <arpa/inet.h>
 #include <grpcpp/generic/generic_stub.h>
 #include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
 
 #include <chrono>
 #include <condition_variable>
@@ -224,6 +228,49 @@ TEST_F(HardeningTest, LatestStreamThatNeverReadsStopsBeingRead) {
   EXPECT_LT(dropped, 100) << "written " << written;
   ctx.TryCancel();
   writer.join();
+}
+
+// A TCP connection to the metrics port that sends nothing (or half a request) and stays open.
+int IdleConnection(int port, const std::string& partial = "") {
+  const int fd = socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in addr{};
+  addr.sin_family = AF_INET;
+  addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  addr.sin_port = htons(static_cast<std::uint16_t>(port));
+  EXPECT_EQ(connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr), 0);
+  if (!partial.empty()) EXPECT_GT(write(fd, partial.data(), partial.size()), 0);
+  return fd;
+}
+
+// Defect 2: two idle TCP connections to the metrics port blocked /metrics for 30 s each. Now a
+// scrape is answered at once, however many slow or idle connections are open.
+TEST_F(HardeningTest, MetricsAreServedWhileIdleConnectionsAreOpen) {
+  std::vector<int> idle;
+  for (int i = 0; i < 64; ++i) {
+    idle.push_back(IdleConnection(server_->metrics_port(), i % 2 ? "GET /metr" : ""));
+  }
+  for (int scrape = 0; scrape < 3; ++scrape) {
+    const std::string text =
+        server::ScrapeMetrics(server_->metrics_port(), "/metrics", /*timeout_ms=*/5000);
+    EXPECT_NE(text.find("HTTP/1.1 200 OK"), std::string::npos) << "scrape " << scrape;
+    EXPECT_NE(text.find("cloudcast_frames_processed_total"), std::string::npos);
+  }
+  for (int fd : idle) close(fd);
+  // Anything else is refused politely.
+  EXPECT_NE(server::ScrapeMetrics(server_->metrics_port(), "/other", 5000).find("404"),
+            std::string::npos);
+}
+
+// The exporter listens where the service does unless told otherwise: with --listen on loopback,
+// /metrics is on loopback too, not on every interface.
+TEST_F(HardeningTest, MetricsListenWhereTheServiceListensByDefault) {
+  server::ServerOptions options;
+  options.listen = "127.0.0.1:0";
+  options.metrics_listen = ":0";
+  auto s = server::Server::Start(options);
+  ASSERT_TRUE(s.ok()) << s.status();
+  EXPECT_EQ((*s)->metrics_address().rfind("127.0.0.1:", 0), 0u) << (*s)->metrics_address();
+  EXPECT_EQ(server::ServerOptions{}.metrics_listen, ":9464");
 }
 
 // Defect 8: a JPEG sent as disparity was accepted without a word, although lossy compression

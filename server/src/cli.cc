@@ -30,7 +30,8 @@ ServerFlags::ServerFlags(CLI::App& app)
       ->check(CLI::Range(0, 1024))
       ->group("Service");
   app.add_option("--metrics-listen", o.metrics_listen,
-                 "Prometheus /metrics address, host:port; empty switches it off")
+                 "Prometheus /metrics address, host:port; ':port' uses the host of --listen "
+                 "(metrics are reachable where the service is); empty switches it off")
       ->group("Service");
   app.add_option("--instance", o.instance,
                  "This replica's name, sent in every reply and in GetInfo; default: the host name")

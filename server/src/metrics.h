@@ -22,10 +22,6 @@ class Metrics {
   Metrics(const Metrics&) = delete;
   Metrics& operator=(const Metrics&) = delete;
 
-  // What an exporter serves: the registry and the process CPU collector.
-  std::vector<std::shared_ptr<prometheus::Collectable>> collectables() const {
-    return {registry_, process_cpu_};
-  }
   // Everything in Prometheus' text format, as /metrics serves it.
   std::string Serialize() const;
 

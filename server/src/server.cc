@@ -4,7 +4,6 @@
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
 #include <grpcpp/health_check_service_interface.h>
 #include <netinet/in.h>
-#include <prometheus/exposer.h>
 #include <spdlog/spdlog.h>
 #include <sys/socket.h>
 #include <unistd.h>
@@ -16,56 +15,27 @@
 
 #include "absl/strings/str_cat.h"
 #include "metrics.h"
+#include "metrics_http.h"
 #include "service.h"
 
 namespace cloudcast::server {
 namespace {
-
-// Stops the metrics exporter without its usual wait: civetweb's accept loop polls with a 2 s
-// timeout and only then notices it was told to stop; a connection to its port wakes it at once.
-void StopExposer(std::unique_ptr<prometheus::Exposer> exposer, const std::string& listen,
-                 int port) {
-  if (exposer == nullptr) return;
-  std::atomic<bool> stopped{false};
-  std::thread stopper([&] {
-    exposer.reset();
-    stopped.store(true);
-  });
-  std::string host = listen.substr(0, listen.rfind(':'));
-  if (host.empty() || host == "0.0.0.0" || host == "localhost") host = "127.0.0.1";
-  const bool v6 = host.front() == '[';
-  if (v6) host = host.substr(1, host.size() - 2);
-  if (v6 && host == "::") host = "::1";
-  while (!stopped.load() && port > 0) {
-    const int fd = socket(v6 ? AF_INET6 : AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
-    if (fd >= 0) {
-      if (v6) {
-        sockaddr_in6 addr{};
-        addr.sin6_family = AF_INET6;
-        addr.sin6_port = htons(static_cast<std::uint16_t>(port));
-        if (inet_pton(AF_INET6, host.c_str(), &addr.sin6_addr) == 1) {
-          connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr);
-        }
-      } else {
-        sockaddr_in addr{};
-        addr.sin_family = AF_INET;
-        addr.sin_port = htons(static_cast<std::uint16_t>(port));
-        if (inet_pton(AF_INET, host.c_str(), &addr.sin_addr) == 1) {
-          connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr);
-        }
-      }
-      close(fd);
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  }
-  stopper.join();
-}
 
 // "host:port" -> "host:<port>"; IPv6 hosts keep their brackets.
 std::string WithPort(const std::string& listen, int port) {
   const std::size_t colon = listen.rfind(':');
   const std::string host = colon == std::string::npos ? listen : listen.substr(0, colon);
   return absl::StrCat(host, ":", port);
+}
+
+// The metrics address: ":PORT" takes the gRPC address' host, so metrics are reachable exactly
+// where the service is (all interfaces for 0.0.0.0:50051, loopback only for 127.0.0.1:50051).
+std::string MetricsAddress(const ServerOptions& options) {
+  if (options.metrics_listen.empty() || options.metrics_listen.front() != ':') {
+    return options.metrics_listen;
+  }
+  const std::size_t colon = options.listen.rfind(':');
+  return options.listen.substr(0, colon == std::string::npos ? 0 : colon) + options.metrics_listen;
 }
 
 }  // namespace
@@ -109,17 +79,17 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& optio
   server->address_ = WithPort(options.listen, server->port_);
 
   if (!options.metrics_listen.empty()) {
-    try {
-      server->exposer_ = std::make_unique<prometheus::Exposer>(options.metrics_listen);
-      for (const auto& c : server->metrics_->collectables())
-        server->exposer_->RegisterCollectable(c);
-      const std::vector<int> ports = server->exposer_->GetListeningPorts();
-      server->metrics_port_ = ports.empty() ? 0 : ports.front();
-    } catch (const std::exception& e) {
+    const std::string metrics_address = MetricsAddress(options);
+    Metrics* metrics = server->metrics_.get();
+    auto http =
+        MetricsHttpServer::Start({metrics_address}, [metrics] { return metrics->Serialize(); });
+    if (!http.ok()) {
       server->Abandon();
-      return absl::UnavailableError(absl::StrCat("cannot serve metrics on ", options.metrics_listen,
-                                                 " (--metrics-listen): ", e.what()));
+      return absl::UnavailableError(absl::StrCat(http.status().message(), " (--metrics-listen)"));
     }
+    server->metrics_http_ = *std::move(http);
+    server->metrics_port_ = server->metrics_http_->port();
+    server->metrics_address_ = WithPort(metrics_address, server->metrics_port_);
   }
 
   grpc::HealthCheckServiceInterface* health = server->server_->GetHealthCheckService();
@@ -127,7 +97,7 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& optio
   health->SetServingStatus(HealthServiceName(), true);
   spdlog::info("cloudcast-server listening on {} ({} workers, metrics {})", server->address_,
                server->service_->worker_threads(),
-               server->metrics_port_ > 0 ? WithPort(options.metrics_listen, server->metrics_port_)
+               server->metrics_port_ > 0 ? "http://" + server->metrics_address_ + "/metrics"
                                          : std::string("off"));
   return server;
 }
@@ -167,7 +137,7 @@ void Server::Shutdown(std::chrono::milliseconds grace) {
   // worker is done, which StopWorkers waits for.
   service_->WaitForStreams(std::chrono::steady_clock::now() + std::chrono::seconds(1));
   service_->StopWorkers();
-  StopExposer(std::move(exposer_), options_.metrics_listen, metrics_port_);
+  metrics_http_.reset();
   shut_down_ = true;
   spdlog::info("shut down in {} ms", std::chrono::duration_cast<std::chrono::milliseconds>(
                                          std::chrono::steady_clock::now() - start)

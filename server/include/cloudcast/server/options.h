@@ -42,8 +42,9 @@ struct ServerOptions {
   // then are cancelled (a resilient client then reopens them elsewhere; 0: no limit).
   std::chrono::milliseconds max_connection_age{0};
   std::chrono::milliseconds max_connection_age_grace{0};
-  // host:port for Prometheus' /metrics; empty switches the HTTP exporter off.
-  std::string metrics_listen = "0.0.0.0:9464";
+  // host:port for Prometheus' /metrics; ":port" takes the host of `listen` (metrics are
+  // reachable exactly where the service is); empty switches the exporter off.
+  std::string metrics_listen = ":9464";
   // This replica's name, sent in every reply and in GetInfo. Empty: the host name.
   std::string instance;
   // What a stream gets for every StreamConfig field it leaves unset (GetInfo's `defaults`).

@@ -14,14 +14,11 @@
 #include "absl/status/statusor.h"
 #include "cloudcast/server/options.h"
 
-namespace prometheus {
-class Exposer;
-}
-
 namespace cloudcast::server {
 
 class CloudCastService;
 class Metrics;
+class MetricsHttpServer;
 
 class Server {
  public:
@@ -37,8 +34,9 @@ class Server {
   int port() const { return port_; }
   // options.listen with the bound port, e.g. "127.0.0.1:43121".
   const std::string& address() const { return address_; }
-  // The metrics exporter's bound port; 0 when it is switched off.
+  // The metrics exporter's bound port and host:port; 0 and "" when it is switched off.
   int metrics_port() const { return metrics_port_; }
+  const std::string& metrics_address() const { return metrics_address_; }
   const ServerOptions& options() const { return options_; }
 
   // Shutdown, first step (Shutdown() does it too): health checks answer NOT_SERVING, new calls
@@ -68,9 +66,10 @@ class Server {
   std::unique_ptr<Metrics> metrics_;
   std::unique_ptr<CloudCastService> service_;
   std::unique_ptr<grpc::Server> server_;
-  std::unique_ptr<prometheus::Exposer> exposer_;
+  std::unique_ptr<MetricsHttpServer> metrics_http_;
   int port_ = 0;
   int metrics_port_ = 0;
+  std::string metrics_address_;
   std::string address_;
 
   std::mutex shutdown_mu_;

@@ -14,10 +14,14 @@
 
 namespace cloudcast::server {
 
-// The whole HTTP response (headers and body) of GET `path` on 127.0.0.1:`port`; "" on failure.
-inline std::string ScrapeMetrics(int port, const std::string& path = "/metrics") {
+// The whole HTTP response (headers and body) of GET `path` on 127.0.0.1:`port`; "" on failure,
+// or when the server has not answered within `timeout_ms`.
+inline std::string ScrapeMetrics(int port, const std::string& path = "/metrics",
+                                 int timeout_ms = 30000) {
   const int fd = socket(AF_INET, SOCK_STREAM, 0);
   if (fd < 0) return "";
+  timeval tv{timeout_ms / 1000, (timeout_ms % 1000) * 1000};
+  setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
   sockaddr_in addr{};
   addr.sin_family = AF_INET;
   addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
