@@ -1,0 +1,438 @@
+// cloudcast-load: a fleet of camera streams against a cloudcast server or a replica set, with
+// latency measured from each frame's intended send time (no coordinated omission). See
+// load/include/cloudcast/load/fleet.h for how the schedule works, and README.md for the figures.
+//
+// SIGINT / SIGTERM end the run cleanly: no more frames are sent, answers still due are awaited
+// (--drain-timeout), and the report is written as usual. A second signal exits at once.
+#include <pthread.h>
+#include <signal.h>
+#include <spdlog/fmt/fmt.h>
+
+#include <CLI/CLI.hpp>
+#include <atomic>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <thread>
+
+#include "cloudcast/cli/checks.h"
+#include "cloudcast/cli/stage_flags.h"
+#include "cloudcast/core/limits.h"
+#include "cloudcast/load/fleet.h"
+#include "cloudcast/load/frame_store.h"
+#include "cloudcast/load/probe.h"
+#include "cloudcast/load/report.h"
+#include "cloudcast/proto/convert.h"
+
+namespace {
+
+using cloudcast::cli::NumberCheck;
+using cloudcast::cli::Wrap;
+namespace load = cloudcast::load;
+
+constexpr int kExitFailure = 1;
+constexpr int kExitUsage = 2;
+// Hard bounds on a run, whatever the flags say.
+constexpr double kMaxDurationS = 3600;
+constexpr double kMaxFrames = 1e8;
+
+struct Flags {
+  std::string server = "localhost:50051";
+  double connect_timeout_s = 5;
+  bool probe = false;
+  std::string probe_service = "cloudcast.v1.CloudCast";
+  int streams = 1;
+  int connections = 0;
+  double fps = 30;
+  int in_flight = 1;
+  std::string schedule = "const";
+  double load_start = 0, load_step = 0, load_end = 0, load_step_duration_s = 1;
+  double duration_s = 10;
+  double frames = 0;
+  double drain_timeout_s = 5;
+  std::uint64_t seed = 1;
+  int scheduler_threads = 1;
+  // Frames
+  std::string tsukuba, illumination = "daylight", disparity_glob, colour_glob, synthetic;
+  int synthetic_frames = 10;
+  std::string encoding = "raw";
+  int jpeg_quality = 90;
+  bool lossless = false;
+  // Output
+  std::string json, html;
+  double progress_s = 1;
+  bool quiet = false;
+};
+
+std::string MissingFolder(const std::string& flag, const std::string& path) {
+  const std::filesystem::path parent = std::filesystem::path(path).parent_path();
+  std::error_code ec;
+  if (!path.empty() && !parent.empty() && !std::filesystem::is_directory(parent, ec)) {
+    return fmt::format("{} {}: folder '{}' does not exist", flag, path, parent.string());
+  }
+  return "";
+}
+
+std::unique_ptr<cloudcast::cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
+  const std::string target = "Target";
+  app.add_option("--server", f.server,
+                 "The server or load balancer, any gRPC target (HOST:PORT, dns:///name:port, "
+                 "ipv4:a:p,b:p ...)")
+      ->capture_default_str()
+      ->type_name("TARGET")
+      ->group(target);
+  app.add_option("--connect-timeout", f.connect_timeout_s,
+                 "Seconds to wait for every channel to connect (and for --probe)")
+      ->check(NumberCheck("a number of seconds in (0, 600]",
+                          [](double v) { return v > 0 && v <= 600; }))
+      ->capture_default_str()
+      ->group(target);
+  app.add_flag("--probe", f.probe,
+               "Only check the server's gRPC health (grpc.health.v1) for --probe-service: exit 0 "
+               "when SERVING, 1 otherwise (a container HEALTHCHECK)")
+      ->group(target);
+  app.add_option("--probe-service", f.probe_service, "The health service name --probe asks for")
+      ->capture_default_str()
+      ->group(target);
+
+  const std::string load_group = "Load";
+  app.add_option("--streams", f.streams, "Concurrent Stream calls (robots)")
+      ->check(CLI::Range(1, 10000))
+      ->capture_default_str()
+      ->group(load_group);
+  app.add_option("--connections", f.connections,
+                 "gRPC channels (TCP connections) the streams share, round robin; 0 = one per "
+                 "stream")
+      ->check(CLI::Range(0, 10000))
+      ->capture_default_str()
+      ->group(load_group);
+  app.add_option("--fps", f.fps,
+                 "Frames per second per stream, open loop: every frame has an intended send time "
+                 "fixed before the run; 0 = closed loop with --in-flight frames awaiting replies")
+      ->check(NumberCheck("a rate in [0, 10000]", [](double v) { return v >= 0 && v <= 1e4; }))
+      ->capture_default_str()
+      ->group(load_group);
+  app.add_option("--in-flight", f.in_flight,
+                 "Closed loop (--fps 0): frames awaiting their reply per stream")
+      ->check(CLI::Range(1, 64))
+      ->capture_default_str()
+      ->group(load_group);
+  app.add_option("--schedule", f.schedule,
+                 "Rate over time (as ghz's --load-schedule): const (--fps), step (--load-start, "
+                 "+--load-step every --load-step-duration up to --load-end) or line (+--load-step "
+                 "per second); rates are per stream")
+      ->check(CLI::IsMember({"const", "step", "line"}))
+      ->capture_default_str()
+      ->group(load_group);
+  app.add_option("--load-start", f.load_start,
+                 "First rate of a step/line ramp, fps per stream [default: --fps]")
+      ->check(NumberCheck("a rate in (0, 10000]", [](double v) { return v > 0 && v <= 1e4; }))
+      ->group(load_group);
+  app.add_option("--load-step", f.load_step,
+                 "Ramp step (step) or slope per second (line), fps per stream")
+      ->check(
+          NumberCheck("a rate in [-10000, 10000]", [](double v) { return std::fabs(v) <= 1e4; }))
+      ->group(load_group);
+  app.add_option("--load-end", f.load_end, "The rate where a ramp stops changing; 0 = none")
+      ->check(NumberCheck("a rate in [0, 10000]", [](double v) { return v >= 0 && v <= 1e4; }))
+      ->group(load_group);
+  app.add_option("--load-step-duration", f.load_step_duration_s, "Seconds per step of a step ramp")
+      ->check(NumberCheck("a number of seconds in [0.001, 3600]",
+                          [](double v) { return v >= 0.001 && v <= 3600; }))
+      ->capture_default_str()
+      ->group(load_group);
+  app.add_option("--duration", f.duration_s,
+                 fmt::format("Seconds during which frames are due; 0 = bounded by --frames only "
+                             "(at most {:g})",
+                             kMaxDurationS))
+      ->check(NumberCheck(fmt::format("a number of seconds in [0, {:g}]", kMaxDurationS),
+                          [](double v) { return v >= 0 && v <= kMaxDurationS; }))
+      ->capture_default_str()
+      ->group(load_group);
+  app.add_option("--frames", f.frames,
+                 fmt::format("Frames in all, shared out over the streams; 0 = bounded by "
+                             "--duration only (at most {:g})",
+                             kMaxFrames))
+      ->check(NumberCheck(fmt::format("a whole number in [0, {:g}]", kMaxFrames),
+                          [](double v) { return v >= 0 && v <= kMaxFrames && v == std::floor(v); }))
+      ->type_name("N")
+      ->group(load_group);
+  app.add_option("--drain-timeout", f.drain_timeout_s,
+                 "Seconds to wait for answers after the last frame is due (or after a stop); then "
+                 "the calls are cancelled")
+      ->check(NumberCheck("a number of seconds in [0, 600]",
+                          [](double v) { return v >= 0 && v <= 600; }))
+      ->capture_default_str()
+      ->group(load_group);
+  app.add_option("--seed", f.seed, "Seed of the streams' random phases")
+      ->capture_default_str()
+      ->group(load_group);
+  app.add_option("--scheduler-threads", f.scheduler_threads,
+                 "Threads that send frames at their intended times (streams are shared out)")
+      ->check(CLI::Range(1, 16))
+      ->capture_default_str()
+      ->group(load_group);
+
+  const std::string frames =
+      "Frames (prepared before the run; default: New Tsukuba when present, else synthetic 640x480)";
+  app.add_option("--tsukuba", f.tsukuba, "A New Tsukuba folder (every frame in it)")
+      ->type_name("DIR")
+      ->group(frames);
+  app.add_option("--illumination", f.illumination, "New Tsukuba illumination folder")
+      ->capture_default_str()
+      ->group(frames);
+  app.add_option("--disparity-glob", f.disparity_glob,
+                 "Disparity images, a glob in quotes, natural order")
+      ->type_name("GLOB")
+      ->group(frames);
+  app.add_option("--colour-glob", f.colour_glob, "Colour images paired with --disparity-glob")
+      ->type_name("GLOB")
+      ->group(frames);
+  app.add_option("--synthetic", f.synthetic, "The synthetic scene at WIDTHxHEIGHT")
+      ->check(
+          cloudcast::cli::SizeCheck(cloudcast::Limits{}.max_side, cloudcast::Limits{}.max_pixels))
+      ->type_name("WxH")
+      ->group(frames);
+  app.add_option("--synthetic-frames", f.synthetic_frames,
+                 "Distinct synthetic frames (camera poses)")
+      ->check(CLI::Range(1, 1000))
+      ->capture_default_str()
+      ->group(frames);
+  app.add_option("--encoding", f.encoding,
+                 "How images travel: raw pixels; png (lossless); jpeg (colour JPEG, disparity "
+                 "PNG)")
+      ->check(CLI::IsMember({"raw", "png", "jpeg"}))
+      ->capture_default_str()
+      ->group(frames);
+  app.add_option("--jpeg-quality", f.jpeg_quality, "JPEG quality with --encoding jpeg")
+      ->check(CLI::Range(1, 100))
+      ->capture_default_str()
+      ->group(frames);
+  app.add_flag("--lossless", f.lossless,
+               "Every frame is answered (DELIVERY_ALL). Default: DELIVERY_LATEST, the server "
+               "skips stale frames (counted as drops)")
+      ->group(frames);
+
+  const std::string stages = "Camera and stages (stage flags left out: the server's defaults)";
+  auto stage_flags = std::make_unique<cloudcast::cli::StageFlags>(
+      app, cloudcast::cli::StageFlags::Groups{stages, stages, stages});
+
+  const std::string output = "Output";
+  app.add_option("--json", f.json, "Write the report in ghz's JSON shape (plus per-frame fields)")
+      ->type_name("FILE")
+      ->group(output);
+  app.add_option("--html", f.html, "Write the report as one self-contained HTML page")
+      ->type_name("FILE")
+      ->group(output);
+  app.add_option("--progress", f.progress_s, "Seconds between progress lines on stderr; 0 = none")
+      ->check(NumberCheck("0 or 1", [](double v) { return v == 0 || v == 1; }))
+      ->capture_default_str()
+      ->group(output);
+  app.add_flag("--quiet,-q", f.quiet, "No progress lines (the report still prints)")->group(output);
+  for (CLI::Option* option : app.get_options())
+    option->description(Wrap(option->get_description()));
+  return stage_flags;
+}
+
+// The signal thread's target: set once the fleet exists.
+std::atomic<load::Fleet*> g_fleet{nullptr};
+std::atomic<bool> g_stop{false};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{
+      "cloudcast-load: a fleet of camera streams against a cloudcast server or a load-balanced "
+      "replica set. Open loop: latency counts from each frame's intended send time, so a slow "
+      "server cannot hide behind a slowed sender (no coordinated omission)."};
+  Flags f;
+  auto stages = AddFlags(app, f);
+  CLI11_PARSE(app, argc, argv);
+
+  if (f.probe) {
+    const absl::Status s = load::ProbeHealth(
+        f.server, f.probe_service,
+        std::chrono::milliseconds(static_cast<std::int64_t>(f.connect_timeout_s * 1000)));
+    if (!s.ok()) {
+      std::cerr << "cloudcast-load --probe: " << s.message() << "\n";
+      return kExitFailure;
+    }
+    std::cout << f.server << ": " << f.probe_service << " is SERVING\n";
+    return 0;
+  }
+
+  auto usage = [](const std::string& message) {
+    std::cerr << "cloudcast-load: " << message << "\n";
+    return kExitUsage;
+  };
+  const int sources = !f.tsukuba.empty() + !f.disparity_glob.empty() + !f.synthetic.empty();
+  if (sources > 1) return usage("give one of --tsukuba, --disparity-glob, --synthetic");
+  if (!f.colour_glob.empty() && f.disparity_glob.empty()) {
+    return usage("--colour-glob needs --disparity-glob");
+  }
+  if (f.duration_s == 0 && f.frames == 0) {
+    return usage("--duration 0 needs --frames N: a run must be bounded");
+  }
+  for (const auto& [flag, path] :
+       {std::pair<std::string, std::string>{"--json", f.json}, {"--html", f.html}}) {
+    if (const std::string m = MissingFolder(flag, path); !m.empty()) return usage(m);
+  }
+  const bool ramp = f.schedule != "const";
+  if (!ramp && (app.count("--load-step") || app.count("--load-end"))) {
+    return usage("--load-step and --load-end need --schedule step or line");
+  }
+  if (ramp && f.fps == 0)
+    return usage("--schedule " + f.schedule + " needs an open loop (--fps > 0)");
+  if (f.fps == 0 && app.count("--load-start")) return usage("--load-start needs --fps > 0");
+  if (f.fps > 0 && app.count("--in-flight")) {
+    return usage("--in-flight is for the closed loop (--fps 0); open loop sends on schedule");
+  }
+
+  load::FrameSourceOptions source;
+  source.tsukuba_dir = f.tsukuba;
+  source.illumination = f.illumination;
+  source.disparity_glob = f.disparity_glob;
+  source.colour_glob = f.colour_glob;
+  if (!f.synthetic.empty()) {
+    cloudcast::cli::ParseSize(f.synthetic, &source.synthetic_width, &source.synthetic_height);
+  }
+  source.synthetic_frames = f.synthetic_frames;
+  load::ParseUplink(f.encoding, &source.uplink);
+  source.jpeg_quality = f.jpeg_quality;
+
+  load::FleetOptions o;
+  o.server = f.server;
+  o.streams = f.streams;
+  o.connections = f.connections;
+  o.closed_loop = f.fps == 0;
+  o.in_flight = f.in_flight;
+  load::ParseScheduleKind(f.schedule, &o.schedule.kind);
+  o.schedule.start = app.count("--load-start") ? f.load_start : f.fps;
+  o.schedule.step = f.load_step;
+  o.schedule.end = f.load_end;
+  o.schedule.step_duration =
+      std::chrono::nanoseconds(static_cast<std::int64_t>(f.load_step_duration_s * 1e9));
+  o.duration = std::chrono::nanoseconds(static_cast<std::int64_t>(f.duration_s * 1e9));
+  o.frames = static_cast<std::uint64_t>(f.frames);
+  o.connect_timeout =
+      std::chrono::nanoseconds(static_cast<std::int64_t>(f.connect_timeout_s * 1e9));
+  o.drain_timeout = std::chrono::nanoseconds(static_cast<std::int64_t>(f.drain_timeout_s * 1e9));
+  o.seed = f.seed;
+  o.scheduler_threads = f.scheduler_threads;
+  std::string schedule_text =
+      "closed loop, " + std::to_string(f.in_flight) + " in flight per stream";
+  if (!o.closed_loop) {
+    auto schedule = load::Schedule::Create(o.schedule);
+    if (!schedule.ok()) return usage(std::string(schedule.status().message()));
+    schedule_text = schedule->Describe();
+  }
+
+  auto t_prepare = std::chrono::steady_clock::now();
+  auto store = load::FrameStore::Prepare(source);
+  if (!store.ok()) return usage(std::string(store.status().message()));
+  const double prepare_s =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t_prepare).count();
+
+  // The StreamConfig: the source's camera, the stage flags given, the delivery mode.
+  cloudcast::FrameSettings camera_settings;
+  camera_settings.pipeline.camera = store->camera();
+  auto applied = stages->Apply(camera_settings);
+  if (!applied.ok()) return usage(std::string(applied.status().message()));
+  o.config = stages->GivenStageConfig();
+  cloudcast::convert::SetCamera(applied->pipeline.camera, &o.config);
+  if (applied->cx)
+    o.config.mutable_camera()->set_cx(*applied->cx);
+  else
+    o.config.mutable_camera()->clear_cx();
+  if (applied->cy)
+    o.config.mutable_camera()->set_cy(*applied->cy);
+  else
+    o.config.mutable_camera()->clear_cy();
+  o.config.set_delivery(f.lossless ? cloudcast::v1::DELIVERY_ALL : cloudcast::v1::DELIVERY_LATEST);
+
+  // Signals: blocked before any thread starts, taken by sigwait on a thread of ours.
+  sigset_t signals;
+  sigemptyset(&signals);
+  sigaddset(&signals, SIGINT);
+  sigaddset(&signals, SIGTERM);
+  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
+  std::thread([signals] {
+    int signal_number = 0;
+    sigwait(&signals, &signal_number);
+    g_stop.store(true);
+    if (load::Fleet* fleet = g_fleet.load()) fleet->Stop();
+    std::fprintf(stderr, "cloudcast-load: %s, stopping (again to exit at once)\n",
+                 strsignal(signal_number));
+    sigwait(&signals, &signal_number);
+    std::_Exit(130);
+  }).detach();
+
+  auto fleet = load::Fleet::Connect(o, &*store);
+  if (!fleet.ok()) {
+    std::cerr << "cloudcast-load: " << fleet.status().message() << "\n";
+    return absl::IsInvalidArgument(fleet.status()) ? kExitUsage : kExitFailure;
+  }
+  g_fleet.store(fleet->get());
+  if (g_stop.load()) (*fleet)->Stop();  // a signal that came while connecting
+
+  const bool progress = f.progress_s > 0 && !f.quiet;
+  if (progress) {
+    std::fprintf(stderr, "cloudcast-load: %d streams -> %s, %s; %s (prepared in %.1f s)\n",
+                 f.streams, f.server.c_str(), schedule_text.c_str(), store->description().c_str(),
+                 prepare_s);
+  }
+  std::uint64_t errors = 0, drops = 0;
+  const load::FleetResult result = (*fleet)->Run([&](const load::SecondStats& s) {
+    errors += s.errors;
+    drops += s.drops;
+    if (progress) std::fprintf(stderr, "%s\n", load::ProgressLine(s, errors, drops).c_str());
+  });
+
+  nlohmann::json options = {
+      {"call", "cloudcast.v1.CloudCast.Stream"},
+      {"host", f.server},
+      {"insecure", true},
+      {"concurrency", f.streams},
+      {"connections", o.connections == 0 ? f.streams : std::min(o.connections, f.streams)},
+      {"rps", o.closed_loop ? 0.0 : o.schedule.start * f.streams},
+      {"fps", f.fps},
+      {"in-flight", f.in_flight},
+      {"load-schedule", f.schedule},
+      {"load-start", o.schedule.start},
+      {"load-step", o.schedule.step},
+      {"load-end", o.schedule.end},
+      {"load-step-duration", o.schedule.step_duration.count()},
+      {"total", o.frames},
+      {"duration", o.duration.count()},
+      {"drain-timeout", o.drain_timeout.count()},
+      {"delivery", f.lossless ? "all" : "latest"},
+      {"encoding", f.encoding},
+      {"frames-source", store->description()},
+      {"seed", f.seed},
+      {"config", o.config.ShortDebugString()},
+  };
+  const load::Report report =
+      load::MakeReport(**fleet, result, store->description(), schedule_text, options);
+  std::cout << load::FormatTable(report) << std::flush;
+  int code = 0;
+  if (!f.json.empty()) {
+    std::ofstream out(f.json);
+    out << load::GhzJson(report).dump(2) << "\n";
+    if (!out) {
+      std::cerr << "cloudcast-load: cannot write --json " << f.json << "\n";
+      code = kExitFailure;
+    }
+  }
+  if (!f.html.empty()) {
+    std::ofstream out(f.html);
+    out << load::Html(report);
+    if (!out) {
+      std::cerr << "cloudcast-load: cannot write --html " << f.html << "\n";
+      code = kExitFailure;
+    }
+  }
+  g_fleet.store(nullptr);
+  return code;
+}

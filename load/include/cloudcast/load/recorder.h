@@ -1,0 +1,95 @@
+// What a load run measured, gathered from every stream's callbacks (thread-safe), and the
+// per-second series the progress line and the reports show.
+//
+// Two latencies per answered frame:
+//   latency       reply - intended send time (the schedule's): what a camera feeding the
+//                 stream sees, coordinated-omission free;
+//   service time  reply - actual send (when the generator handed the frame to gRPC).
+// In closed loop there is no schedule, and the two are the same.
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <map>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include "cloudcast/load/histogram.h"
+
+namespace cloudcast::load {
+
+// One second of the run (or the last, partial one).
+struct SecondStats {
+  double t_end_s = 0;          // end of the interval, seconds since the run's start
+  double duration_s = 0;       // the interval's length (1 but for the last)
+  std::uint64_t sent = 0;      // frames handed to gRPC
+  std::uint64_t answered = 0;  // clouds received
+  std::uint64_t errors = 0;    // frame errors and frames lost with their call
+  std::uint64_t drops = 0;     // frames the server skipped (DELIVERY_LATEST)
+  std::uint64_t late = 0;      // sends that went after their intended time
+  int open_streams = 0;
+  // Latency from the intended time and service time of the frames answered in it, ns.
+  std::int64_t p50 = 0, p90 = 0, p99 = 0, max = 0;
+  std::int64_t service_p50 = 0, service_p99 = 0;
+  double fps() const { return duration_s > 0 ? answered / duration_s : 0; }
+};
+
+struct Totals {
+  std::uint64_t sent = 0;
+  std::uint64_t answered = 0;
+  std::uint64_t frame_errors = 0;  // FrameError replies
+  std::uint64_t lost = 0;          // sent, never answered: the call ended first
+  std::uint64_t unsent = 0;        // due, never sent: the call ended or the run stopped first
+  std::uint64_t drops = 0;
+  std::uint64_t server_dropped = 0;     // sum over streams of the last frames_dropped reported
+  std::uint64_t late_flow_control = 0;  // the stream's previous write had not completed
+  std::uint64_t late_scheduler = 0;     // the generator itself was over 1 ms behind
+  std::uint64_t bytes_sent = 0, bytes_received = 0;
+  std::uint64_t late() const { return late_flow_control + late_scheduler; }
+};
+
+class Recorder {
+ public:
+  Recorder() = default;
+
+  void Sent(std::size_t bytes);
+  void Late(bool flow_control);
+  void Answered(std::int64_t latency_ns, std::int64_t service_ns, const std::string& instance,
+                std::size_t bytes);
+  // A FrameError: its code's name (e.g. "INVALID_ARGUMENT") and message.
+  void FrameError(const std::string& code, const std::string& message, const std::string& instance);
+  void Dropped(std::uint64_t frames);
+  // A stream's last frames_dropped; summed into server_dropped when the stream ends.
+  void StreamEnded(std::uint64_t server_dropped);
+  // Frames sent and never answered because their call ended with `code` / `message` (also used
+  // with code "OK" for frames whose call ended cleanly without answering them).
+  void Lost(std::uint64_t frames, const std::string& code, const std::string& message);
+  void Unsent(std::uint64_t frames);
+  void CallStatus(const std::string& code);
+
+  // Closes the interval ending at `t_end_s` (seconds since the start) and starts the next.
+  SecondStats CloseInterval(double t_end_s, int open_streams);
+
+  // Snapshots (copies) of the totals, under the lock.
+  Totals totals() const;
+  Histogram latency() const;
+  Histogram service() const;
+  std::map<std::string, std::uint64_t> per_instance() const;
+  std::map<std::string, std::uint64_t> status_codes() const;  // per frame: OK, error codes
+  std::map<std::string, std::uint64_t> errors() const;        // "CODE: message" -> frames
+  std::map<std::string, std::uint64_t> call_status() const;   // per Stream call
+  std::vector<SecondStats> series() const;
+
+ private:
+  mutable std::mutex mu_;
+  Totals totals_;
+  Histogram latency_, service_;
+  Histogram interval_latency_, interval_service_;
+  SecondStats interval_;
+  double interval_start_s_ = 0;
+  std::map<std::string, std::uint64_t> per_instance_, status_codes_, errors_, call_status_;
+  std::vector<SecondStats> series_;
+};
+
+}  // namespace cloudcast::load

@@ -1,0 +1,52 @@
+// A load run's report, and its three renderings: a table for the terminal, ghz's JSON report
+// shape (so ghz tooling reads it) with the per-frame figures ghz cannot give in extra fields, and
+// a self-contained HTML page with SVG charts (no scripts, no fonts, nothing from the network).
+#pragma once
+
+#include <map>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "cloudcast/load/fleet.h"
+#include "cloudcast/load/histogram.h"
+#include "cloudcast/load/recorder.h"
+
+namespace cloudcast::load {
+
+struct Report {
+  // What ran.
+  std::string target;
+  std::string frames;    // FrameStore::description()
+  std::string schedule;  // e.g. "const 30 fps per stream" or "closed loop, 2 in flight"
+  std::string delivery;  // "DELIVERY_ALL" / "DELIVERY_LATEST"
+  int streams = 0, connections = 0;
+  nlohmann::json options;  // echoed as ghz's "options"
+  // How it went.
+  FleetResult result;
+  Totals totals;
+  Histogram latency, service;
+  std::map<std::string, std::uint64_t> per_instance, status_codes, errors, call_status;
+  std::vector<SecondStats> series;
+
+  double answered_fps() const {
+    return result.elapsed_s > 0 ? totals.answered / result.elapsed_s : 0;
+  }
+};
+
+// Gathers the figures of a finished run.
+Report MakeReport(Fleet& fleet, const FleetResult& result, const std::string& frames,
+                  const std::string& schedule, nlohmann::json options);
+
+// The percentiles every rendering shows.
+const std::vector<double>& ReportPercentiles();  // 50, 90, 99, 99.9
+
+std::string FormatTable(const Report& report);
+nlohmann::json GhzJson(const Report& report);
+std::string Html(const Report& report);
+
+// The per-second line printed while a run goes on.
+std::string ProgressLine(const SecondStats& s, std::uint64_t errors_so_far,
+                         std::uint64_t drops_so_far);
+
+}  // namespace cloudcast::load

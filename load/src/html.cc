@@ -1,0 +1,284 @@
+// The HTML report: one file, inline CSS and SVG, system fonts only, nothing loaded from anywhere.
+#include <spdlog/fmt/fmt.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "cloudcast/load/report.h"
+
+namespace cloudcast::load {
+namespace {
+
+std::string Escape(const std::string& s) {
+  std::string out;
+  for (char c : s) {
+    switch (c) {
+      case '&':
+        out += "&amp;";
+        break;
+      case '<':
+        out += "&lt;";
+        break;
+      case '>':
+        out += "&gt;";
+        break;
+      case '"':
+        out += "&quot;";
+        break;
+      default:
+        out += c;
+    }
+  }
+  return out;
+}
+
+// A "nice" axis maximum and tick step for values up to `max`.
+void NiceAxis(double max, double* top, double* step) {
+  if (!(max > 0)) max = 1;
+  const double raw = max / 5;
+  const double mag = std::pow(10, std::floor(std::log10(raw)));
+  const double f = raw / mag;
+  *step = (f <= 1 ? 1 : f <= 2 ? 2 : f <= 5 ? 5 : 10) * mag;
+  *top = std::ceil(max / *step) * *step;
+}
+
+struct Line {
+  std::string name, colour;
+  std::vector<double> y;
+  bool dashed = false;
+};
+
+constexpr int kW = 900, kH = 300, kLeft = 70, kRight = 20, kTop = 30, kBottom = 45;
+
+std::string Frame(const std::string& id, const std::string& title) {
+  return fmt::format(
+      "<svg id=\"{}\" class=\"chart\" xmlns=\"http://www.w3.org/2000/svg\" width=\"{}\" "
+      "height=\"{}\" viewBox=\"0 0 {} {}\" role=\"img\" aria-label=\"{}\">\n"
+      "<rect x=\"0\" y=\"0\" width=\"{}\" height=\"{}\" fill=\"#ffffff\"/>\n"
+      "<text x=\"{}\" y=\"18\" class=\"title\">{}</text>\n",
+      id, kW, kH, kW, kH, Escape(title), kW, kH, kLeft, Escape(title));
+}
+
+// A line chart of `lines` over x (seconds), with a y axis labelled `unit`.
+std::string LineChart(const std::string& id, const std::string& title, const std::string& unit,
+                      const std::vector<double>& x, const std::vector<Line>& lines) {
+  std::string svg = Frame(id, title);
+  const double pw = kW - kLeft - kRight, ph = kH - kTop - kBottom;
+  double xmax = x.empty() ? 1 : std::max(1.0, x.back()), ymax = 0;
+  for (const Line& l : lines) {
+    for (double v : l.y) ymax = std::max(ymax, v);
+  }
+  double ytop, ystep, xtop, xstep;
+  NiceAxis(ymax, &ytop, &ystep);
+  NiceAxis(xmax, &xtop, &xstep);
+  auto X = [&](double v) { return kLeft + pw * v / xtop; };
+  auto Y = [&](double v) { return kTop + ph * (1 - v / ytop); };
+  for (double v = 0; v <= ytop + ystep / 2; v += ystep) {
+    svg += fmt::format(
+        "<line x1=\"{}\" y1=\"{:.1f}\" x2=\"{}\" y2=\"{:.1f}\" class=\"grid\"/>"
+        "<text x=\"{}\" y=\"{:.1f}\" class=\"tick\" text-anchor=\"end\">{:g}</text>\n",
+        kLeft, Y(v), kW - kRight, Y(v), kLeft - 6, Y(v) + 4, v);
+  }
+  for (double v = 0; v <= xtop + xstep / 2; v += xstep) {
+    svg += fmt::format(
+        "<line x1=\"{:.1f}\" y1=\"{}\" x2=\"{:.1f}\" y2=\"{}\" class=\"axis\"/>"
+        "<text x=\"{:.1f}\" y=\"{}\" class=\"tick\" text-anchor=\"middle\">{:g}</text>\n",
+        X(v), kTop + ph, X(v), kTop + ph + 5, X(v), kTop + ph + 18, v);
+  }
+  svg += fmt::format(
+      "<line x1=\"{}\" y1=\"{}\" x2=\"{}\" y2=\"{}\" class=\"axis\"/>"
+      "<line x1=\"{}\" y1=\"{}\" x2=\"{}\" y2=\"{}\" class=\"axis\"/>\n",
+      kLeft, kTop, kLeft, kTop + ph, kLeft, kTop + ph, kW - kRight, kTop + ph);
+  svg +=
+      fmt::format("<text x=\"{}\" y=\"{}\" class=\"tick\" text-anchor=\"middle\">seconds</text>\n",
+                  kLeft + pw / 2, kH - 8);
+  svg += fmt::format(
+      "<text x=\"16\" y=\"{}\" class=\"tick\" text-anchor=\"middle\" transform=\"rotate(-90 16 "
+      "{})\">{}</text>\n",
+      kTop + ph / 2, kTop + ph / 2, Escape(unit));
+  double legend_x = kW - kRight - 10;
+  for (auto it = lines.rbegin(); it != lines.rend(); ++it) {
+    const Line& l = *it;
+    const double w = 14 + 7.0 * l.name.size() + 16;
+    legend_x -= w;
+    svg += fmt::format(
+        "<line x1=\"{:.0f}\" y1=\"14\" x2=\"{:.0f}\" y2=\"14\" stroke=\"{}\" stroke-width=\"3\"{}/>"
+        "<text x=\"{:.0f}\" y=\"18\" class=\"tick\">{}</text>\n",
+        legend_x, legend_x + 12, l.colour, l.dashed ? " stroke-dasharray=\"5 3\"" : "",
+        legend_x + 16, Escape(l.name));
+  }
+  for (const Line& l : lines) {
+    std::string points;
+    for (std::size_t i = 0; i < l.y.size() && i < x.size(); ++i) {
+      points += fmt::format("{:.1f},{:.1f} ", X(x[i]), Y(l.y[i]));
+    }
+    svg +=
+        fmt::format("<polyline points=\"{}\" fill=\"none\" stroke=\"{}\" stroke-width=\"2\"{}/>\n",
+                    points, l.colour, l.dashed ? " stroke-dasharray=\"5 3\"" : "");
+    if (l.y.size() == 1) {
+      svg += fmt::format("<circle cx=\"{:.1f}\" cy=\"{:.1f}\" r=\"3\" fill=\"{}\"/>\n", X(x[0]),
+                         Y(l.y[0]), l.colour);
+    }
+  }
+  return svg + "</svg>\n";
+}
+
+// The latency histogram on a logarithmic axis: 8 bins per doubling from the fastest frame to
+// the slowest.
+std::string HistogramChart(const Histogram& h) {
+  std::string svg = Frame("histogram", "Latency from the intended send time: frames per bin");
+  const double pw = kW - kLeft - kRight, ph = kH - kTop - kBottom;
+  if (h.count() == 0) {
+    return svg + fmt::format(
+                     "<text x=\"{}\" y=\"{}\" class=\"tick\">no frames answered</text>"
+                     "</svg>\n",
+                     kLeft + 10, kTop + 40);
+  }
+  const double lo = std::max<double>(1000, static_cast<double>(h.min()));  // >= 1 us
+  const double hi = std::max(lo * 1.01, static_cast<double>(h.max()) + 1);
+  const double decades_lo = std::floor(std::log10(lo)), decades_hi = std::ceil(std::log10(hi));
+  const int per_doubling = 8;
+  std::vector<std::int64_t> bounds;
+  for (double v = std::pow(10, decades_lo); v <= std::pow(10, decades_hi) * 1.0001;
+       v *= std::pow(2.0, 1.0 / per_doubling)) {
+    bounds.push_back(static_cast<std::int64_t>(v));
+  }
+  std::vector<std::uint64_t> counts = h.CountBetween(bounds);
+  std::uint64_t cmax = 1;
+  for (auto c : counts) cmax = std::max(cmax, c);
+  double ytop, ystep;
+  NiceAxis(static_cast<double>(cmax), &ytop, &ystep);
+  const double l0 = decades_lo, l1 = decades_hi;
+  auto X = [&](double v) { return kLeft + pw * (std::log10(v) - l0) / (l1 - l0); };
+  auto Y = [&](double v) { return kTop + ph * (1 - v / ytop); };
+  for (double v = 0; v <= ytop + ystep / 2; v += ystep) {
+    svg += fmt::format(
+        "<line x1=\"{}\" y1=\"{:.1f}\" x2=\"{}\" y2=\"{:.1f}\" class=\"grid\"/>"
+        "<text x=\"{}\" y=\"{:.1f}\" class=\"tick\" text-anchor=\"end\">{:g}</text>\n",
+        kLeft, Y(v), kW - kRight, Y(v), kLeft - 6, Y(v) + 4, v);
+  }
+  for (std::size_t i = 0; i < counts.size(); ++i) {
+    if (counts[i] == 0) continue;
+    const double x0 = X(static_cast<double>(bounds[i])), x1 = X(static_cast<double>(bounds[i + 1]));
+    svg += fmt::format(
+        "<rect x=\"{:.1f}\" y=\"{:.1f}\" width=\"{:.1f}\" height=\"{:.1f}\" class=\"bar\"/>\n", x0,
+        Y(static_cast<double>(counts[i])), std::max(1.0, x1 - x0 - 1),
+        ph - (Y(static_cast<double>(counts[i])) - kTop));
+  }
+  for (double d = l0; d <= l1 + 1e-9; d += 1) {
+    for (int m : {1, 2, 5}) {
+      const double v = m * std::pow(10, d);
+      if (std::log10(v) > l1 + 1e-9) break;
+      const double ms = v / 1e6;
+      svg += fmt::format(
+          "<line x1=\"{:.1f}\" y1=\"{}\" x2=\"{:.1f}\" y2=\"{}\" class=\"axis\"/>"
+          "<text x=\"{:.1f}\" y=\"{}\" class=\"tick\" text-anchor=\"middle\">{:g}</text>\n",
+          X(v), kTop + ph, X(v), kTop + ph + 5, X(v), kTop + ph + 18, ms);
+    }
+  }
+  for (double p : {50.0, 99.0, 99.9}) {
+    const double v = static_cast<double>(std::max<std::int64_t>(h.Percentile(p), 1000));
+    svg += fmt::format(
+        "<line x1=\"{:.1f}\" y1=\"{}\" x2=\"{:.1f}\" y2=\"{}\" class=\"marker\"/>"
+        "<text x=\"{:.1f}\" y=\"{}\" class=\"tick\">p{:g}</text>\n",
+        X(v), kTop, X(v), kTop + ph, X(v) + 3, kTop + 12, p);
+  }
+  svg += fmt::format(
+      "<line x1=\"{}\" y1=\"{}\" x2=\"{}\" y2=\"{}\" class=\"axis\"/>"
+      "<text x=\"{}\" y=\"{}\" class=\"tick\" text-anchor=\"middle\">milliseconds (log scale)"
+      "</text>\n",
+      kLeft, kTop + ph, kW - kRight, kTop + ph, kLeft + pw / 2, kH - 8);
+  return svg + "</svg>\n";
+}
+
+std::string Row(const std::string& name, const std::string& value) {
+  return fmt::format("<tr><th>{}</th><td>{}</td></tr>\n", Escape(name), Escape(value));
+}
+
+}  // namespace
+
+std::string Html(const Report& r) {
+  const Totals& t = r.totals;
+  std::string page =
+      "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\n"
+      "<title>cloudcast-load report</title>\n<style>\n"
+      "body{font-family:sans-serif;margin:24px;color:#222;background:#fafafa}"
+      "h1{font-size:22px;margin:0 0 4px}h2{font-size:17px;margin:24px 0 8px}"
+      "p.sub{color:#555;margin:0 0 16px}"
+      "table{border-collapse:collapse;background:#fff;margin:0 16px 12px 0}"
+      "th,td{border:1px solid #ddd;padding:4px 10px;text-align:right;font-size:14px}"
+      "th{background:#f0f0f0;text-align:left}.chart{display:block;margin:8px 0;"
+      "border:1px solid #ddd}.tables{display:flex;flex-wrap:wrap;align-items:flex-start}"
+      ".title{font-size:15px;font-weight:bold;fill:#222}.tick{font-size:12px;fill:#444}"
+      ".grid{stroke:#e6e6e6}.axis{stroke:#888}.bar{fill:#4c78a8}"
+      ".marker{stroke:#e45756;stroke-dasharray:4 3}\n"
+      "</style></head><body>\n";
+  page += "<h1>cloudcast-load</h1>\n";
+  page += fmt::format(
+      "<p class=\"sub\">{} streams over {} connections to {} &middot; {} "
+      "&middot; {}</p>\n",
+      r.streams, r.connections, Escape(r.target), Escape(r.schedule), Escape(r.delivery));
+  page += "<div class=\"tables\">\n<table id=\"summary\">\n";
+  page += Row("frames", r.frames);
+  page +=
+      Row("ended", fmt::format("{} after {:.2f} s", Name(r.result.end_reason), r.result.elapsed_s));
+  page += Row("sent / answered", fmt::format("{} / {}", t.sent, t.answered));
+  page += Row("throughput", fmt::format("{:.1f} frames/s", r.answered_fps()));
+  page += Row("frame errors / lost / unsent",
+              fmt::format("{} / {} / {}", t.frame_errors, t.lost, t.unsent));
+  page += Row("dropped (DELIVERY_LATEST)", std::to_string(t.drops));
+  page += Row("late sends", fmt::format("{} (previous write not done {}, generator behind {})",
+                                        t.late(), t.late_flow_control, t.late_scheduler));
+  page += "</table>\n<table id=\"latency\">\n<tr><th>ms</th>";
+  for (double p : ReportPercentiles()) page += fmt::format("<th>p{:g}</th>", p);
+  page += "<th>max</th><th>mean</th></tr>\n";
+  for (const auto* row : {&r.latency, &r.service}) {
+    page += fmt::format("<tr><th>{}</th>",
+                        row == &r.latency ? "latency from intended time" : "service time");
+    for (double p : ReportPercentiles()) {
+      page += fmt::format("<td>{:.2f}</td>", row->Percentile(p) / 1e6);
+    }
+    page +=
+        fmt::format("<td>{:.2f}</td><td>{:.2f}</td></tr>\n", row->max() / 1e6, row->mean() / 1e6);
+  }
+  page += "</table>\n";
+  if (!r.per_instance.empty()) {
+    page += "<table id=\"replicas\">\n<tr><th>replica</th><th>frames</th><th>share</th></tr>\n";
+    std::uint64_t sum = 0;
+    for (const auto& [name, n] : r.per_instance) sum += n;
+    for (const auto& [name, n] : r.per_instance) {
+      page += fmt::format("<tr><th>{}</th><td>{}</td><td>{:.1f}%</td></tr>\n", Escape(name), n,
+                          sum ? 100.0 * n / sum : 0.0);
+    }
+    page += "</table>\n";
+  }
+  page += "</div>\n";
+
+  std::vector<double> x;
+  Line p50{"p50", "#4c78a8", {}}, p90{"p90", "#f58518", {}}, p99{"p99", "#e45756", {}};
+  Line fps{"answered frames/s", "#54a24b", {}}, sent{"sent frames/s", "#9d755d", {}, true};
+  for (const SecondStats& s : r.series) {
+    if (s.duration_s < 0.05) continue;  // the sliver after the last full second
+    x.push_back(s.t_end_s);
+    p50.y.push_back(s.p50 / 1e6);
+    p90.y.push_back(s.p90 / 1e6);
+    p99.y.push_back(s.p99 / 1e6);
+    fps.y.push_back(s.fps());
+    sent.y.push_back(s.duration_s > 0 ? s.sent / s.duration_s : 0);
+  }
+  page += "<h2>Over time (per second)</h2>\n";
+  page += LineChart("latency-chart", "Latency from the intended send time, per second", "ms", x,
+                    {p50, p90, p99});
+  page += LineChart("throughput-chart", "Throughput", "frames/s", x, {fps, sent});
+  page += "<h2>Distribution</h2>\n";
+  page += HistogramChart(r.latency);
+  if (!r.errors.empty()) {
+    page += "<h2>Errors</h2>\n<table id=\"errors\">\n";
+    for (const auto& [message, n] : r.errors) page += Row(message, std::to_string(n));
+    page += "</table>\n";
+  }
+  page += "</body></html>\n";
+  return page;
+}
+
+}  // namespace cloudcast::load

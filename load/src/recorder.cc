@@ -1,0 +1,127 @@
+#include "cloudcast/load/recorder.h"
+
+namespace cloudcast::load {
+
+void Recorder::Sent(std::size_t bytes) {
+  std::lock_guard<std::mutex> lock(mu_);
+  ++totals_.sent;
+  ++interval_.sent;
+  totals_.bytes_sent += bytes;
+}
+
+void Recorder::Late(bool flow_control) {
+  std::lock_guard<std::mutex> lock(mu_);
+  ++(flow_control ? totals_.late_flow_control : totals_.late_scheduler);
+  ++interval_.late;
+}
+
+void Recorder::Answered(std::int64_t latency_ns, std::int64_t service_ns,
+                        const std::string& instance, std::size_t bytes) {
+  std::lock_guard<std::mutex> lock(mu_);
+  ++totals_.answered;
+  ++interval_.answered;
+  totals_.bytes_received += bytes;
+  latency_.Record(latency_ns);
+  service_.Record(service_ns);
+  interval_latency_.Record(latency_ns);
+  interval_service_.Record(service_ns);
+  ++per_instance_[instance.empty() ? "(unnamed)" : instance];
+  ++status_codes_["OK"];
+}
+
+void Recorder::FrameError(const std::string& code, const std::string& message,
+                          const std::string& instance) {
+  std::lock_guard<std::mutex> lock(mu_);
+  ++totals_.frame_errors;
+  ++interval_.errors;
+  ++status_codes_[code];
+  ++errors_[code + ": " + message];
+  ++per_instance_[instance.empty() ? "(unnamed)" : instance];
+}
+
+void Recorder::Dropped(std::uint64_t frames) {
+  std::lock_guard<std::mutex> lock(mu_);
+  totals_.drops += frames;
+  interval_.drops += frames;
+}
+
+void Recorder::StreamEnded(std::uint64_t server_dropped) {
+  std::lock_guard<std::mutex> lock(mu_);
+  totals_.server_dropped += server_dropped;
+}
+
+void Recorder::Lost(std::uint64_t frames, const std::string& code, const std::string& message) {
+  if (frames == 0) return;
+  std::lock_guard<std::mutex> lock(mu_);
+  totals_.lost += frames;
+  interval_.errors += frames;
+  status_codes_[code == "OK" ? "UNANSWERED" : code] += frames;
+  errors_[(code == "OK" ? std::string("UNANSWERED") : code) + ": " +
+          (message.empty() ? std::string("the call ended before the frame was answered")
+                           : message)] += frames;
+}
+
+void Recorder::Unsent(std::uint64_t frames) {
+  std::lock_guard<std::mutex> lock(mu_);
+  totals_.unsent += frames;
+}
+
+void Recorder::CallStatus(const std::string& code) {
+  std::lock_guard<std::mutex> lock(mu_);
+  ++call_status_[code];
+}
+
+SecondStats Recorder::CloseInterval(double t_end_s, int open_streams) {
+  std::lock_guard<std::mutex> lock(mu_);
+  SecondStats s = interval_;
+  s.t_end_s = t_end_s;
+  s.duration_s = t_end_s - interval_start_s_;
+  s.open_streams = open_streams;
+  s.p50 = interval_latency_.Percentile(50);
+  s.p90 = interval_latency_.Percentile(90);
+  s.p99 = interval_latency_.Percentile(99);
+  s.max = interval_latency_.max();
+  s.service_p50 = interval_service_.Percentile(50);
+  s.service_p99 = interval_service_.Percentile(99);
+  series_.push_back(s);
+  interval_ = SecondStats{};
+  interval_latency_.Reset();
+  interval_service_.Reset();
+  interval_start_s_ = t_end_s;
+  return s;
+}
+
+Totals Recorder::totals() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return totals_;
+}
+Histogram Recorder::latency() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return latency_;
+}
+Histogram Recorder::service() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return service_;
+}
+std::map<std::string, std::uint64_t> Recorder::per_instance() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return per_instance_;
+}
+std::map<std::string, std::uint64_t> Recorder::status_codes() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return status_codes_;
+}
+std::map<std::string, std::uint64_t> Recorder::errors() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return errors_;
+}
+std::map<std::string, std::uint64_t> Recorder::call_status() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return call_status_;
+}
+std::vector<SecondStats> Recorder::series() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return series_;
+}
+
+}  // namespace cloudcast::load

@@ -1,0 +1,201 @@
+#include "cloudcast/load/report.h"
+
+#include <spdlog/fmt/fmt.h>
+
+#include <algorithm>
+#include <ctime>
+
+namespace cloudcast::load {
+namespace {
+
+double Ms(std::int64_t ns) { return ns / 1e6; }
+
+std::string Rfc3339(std::chrono::system_clock::time_point t) {
+  const std::time_t secs = std::chrono::system_clock::to_time_t(t);
+  std::tm tm{};
+  gmtime_r(&secs, &tm);
+  char buf[64];
+  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
+  return buf;
+}
+
+nlohmann::json Percentiles(const Histogram& h) {
+  nlohmann::json j;
+  j["count"] = h.count();
+  j["p50"] = h.Percentile(50);
+  j["p90"] = h.Percentile(90);
+  j["p99"] = h.Percentile(99);
+  j["p99.9"] = h.Percentile(99.9);
+  j["max"] = h.max();
+  j["min"] = h.min();
+  j["mean"] = static_cast<std::int64_t>(h.mean());
+  j["unit"] = "ns";
+  return j;
+}
+
+}  // namespace
+
+const std::vector<double>& ReportPercentiles() {
+  static const std::vector<double> k = {50, 90, 99, 99.9};
+  return k;
+}
+
+Report MakeReport(Fleet& fleet, const FleetResult& result, const std::string& frames,
+                  const std::string& schedule, nlohmann::json options) {
+  Report r;
+  const FleetOptions& o = fleet.options();
+  r.target = o.server;
+  r.frames = frames;
+  r.schedule = schedule;
+  r.delivery = o.config.delivery() == v1::DELIVERY_ALL ? "DELIVERY_ALL" : "DELIVERY_LATEST";
+  r.streams = o.streams;
+  r.connections = o.connections == 0 ? o.streams : std::min(o.connections, o.streams);
+  r.options = std::move(options);
+  r.result = result;
+  Recorder& rec = fleet.recorder();
+  r.totals = rec.totals();
+  r.latency = rec.latency();
+  r.service = rec.service();
+  r.per_instance = rec.per_instance();
+  r.status_codes = rec.status_codes();
+  r.errors = rec.errors();
+  r.call_status = rec.call_status();
+  r.series = rec.series();
+  return r;
+}
+
+std::string FormatTable(const Report& r) {
+  const Totals& t = r.totals;
+  std::string out;
+  out += fmt::format("cloudcast-load: {} streams over {} connections to {}\n", r.streams,
+                     r.connections, r.target);
+  out += fmt::format("  schedule  {}, {}\n", r.schedule, r.delivery);
+  out += fmt::format("  frames    {}\n", r.frames);
+  out += fmt::format("  ended     {} after {:.2f} s (last frame sent at {:.2f} s)\n",
+                     Name(r.result.end_reason), r.result.elapsed_s, r.result.sending_s);
+  out += fmt::format(
+      "\n  sent {}  answered {}  frame errors {}  lost {}  unsent {}  dropped {} (server says "
+      "{})\n",
+      t.sent, t.answered, t.frame_errors, t.lost, t.unsent, t.drops, t.server_dropped);
+  out += fmt::format("  late sends {} (previous write not done {}, generator behind {})\n",
+                     t.late(), t.late_flow_control, t.late_scheduler);
+  out += fmt::format("  throughput {:.1f} frames/s answered, {:.1f} MB/s up, {:.2f} MB/s down\n",
+                     r.answered_fps(),
+                     r.result.elapsed_s > 0 ? t.bytes_sent / 1e6 / r.result.elapsed_s : 0.0,
+                     r.result.elapsed_s > 0 ? t.bytes_received / 1e6 / r.result.elapsed_s : 0.0);
+  out += "\n  ms                         p50       p90       p99     p99.9       max      mean\n";
+  auto row = [&](const char* name, const Histogram& h) {
+    out += fmt::format("  {:<22} {:>9.2f} {:>9.2f} {:>9.2f} {:>9.2f} {:>9.2f} {:>9.2f}\n", name,
+                       Ms(h.Percentile(50)), Ms(h.Percentile(90)), Ms(h.Percentile(99)),
+                       Ms(h.Percentile(99.9)), Ms(h.max()), h.mean() / 1e6);
+  };
+  row("latency (intended)", r.latency);
+  row("service time", r.service);
+  if (!r.per_instance.empty()) {
+    out += "\n  frames per replica (server_instance):\n";
+    std::uint64_t sum = 0;
+    for (const auto& [name, n] : r.per_instance) sum += n;
+    for (const auto& [name, n] : r.per_instance) {
+      out += fmt::format("    {:<30} {:>9} {:>6.1f}%\n", name, n, sum ? 100.0 * n / sum : 0.0);
+    }
+  }
+  if (!r.errors.empty()) {
+    out += "\n  errors:\n";
+    for (const auto& [message, n] : r.errors) out += fmt::format("    {:>7}  {}\n", n, message);
+  }
+  out += "  calls:";
+  for (const auto& [code, n] : r.call_status) out += fmt::format(" {} {}", code, n);
+  out += "\n";
+  return out;
+}
+
+nlohmann::json GhzJson(const Report& r) {
+  using nlohmann::json;
+  const Totals& t = r.totals;
+  const Histogram& h = r.latency;
+  json j;
+  j["date"] = Rfc3339(r.result.start);
+  j["endReason"] = Name(r.result.end_reason);
+  j["options"] = r.options;
+  // ghz's fields: count of frames (not calls), latencies from the intended send time.
+  j["count"] = t.sent;
+  j["total"] = static_cast<std::int64_t>(r.result.elapsed_s * 1e9);
+  j["average"] = static_cast<std::int64_t>(h.mean());
+  j["fastest"] = h.min();
+  j["slowest"] = h.max();
+  j["rps"] = r.answered_fps();
+  json distribution = json::array();
+  for (double p : {10.0, 25.0, 50.0, 75.0, 90.0, 95.0, 99.0, 99.9}) {
+    distribution.push_back({{"percentage", p}, {"latency", h.Percentile(p)}});
+  }
+  j["latencyDistribution"] = distribution;
+  // ghz's histogram: 11 marks evenly spaced from fastest to slowest, in seconds.
+  json buckets = json::array();
+  if (h.count() > 0) {
+    const int kBuckets = 10;
+    const double lo = static_cast<double>(h.min()), hi = static_cast<double>(h.max());
+    const double width = (hi - lo) / kBuckets;
+    std::vector<std::int64_t> bounds;
+    for (int i = 0; i <= kBuckets; ++i) bounds.push_back(static_cast<std::int64_t>(lo + width * i));
+    bounds.push_back(h.max() + 1);
+    std::vector<std::uint64_t> counts = h.CountBetween(bounds);
+    for (std::size_t i = 0; i < counts.size(); ++i) {
+      buckets.push_back({{"mark", bounds[i] / 1e9},
+                         {"count", counts[i]},
+                         {"frequency", static_cast<double>(counts[i]) / h.count()}});
+    }
+  }
+  j["histogram"] = buckets;
+  j["statusCodeDistribution"] = r.status_codes;
+  j["errorDistribution"] = r.errors;
+  j["details"] = json::array();  // per-frame details are not kept; see timeSeries
+
+  // What ghz cannot give: per-frame figures.
+  j["intendedLatency"] = Percentiles(r.latency);
+  j["serviceTime"] = Percentiles(r.service);
+  j["frames"] = {{"sent", t.sent},
+                 {"answered", t.answered},
+                 {"frameErrors", t.frame_errors},
+                 {"lost", t.lost},
+                 {"unsent", t.unsent},
+                 {"dropped", t.drops},
+                 {"serverReportedDropped", t.server_dropped},
+                 {"bytesSent", t.bytes_sent},
+                 {"bytesReceived", t.bytes_received}};
+  j["drops"] = t.drops;
+  j["lateSends"] = {{"total", t.late()},
+                    {"previousWriteNotDone", t.late_flow_control},
+                    {"generatorBehind", t.late_scheduler}};
+  j["framesPerReplica"] = r.per_instance;
+  j["callStatusDistribution"] = r.call_status;
+  j["sendingSeconds"] = r.result.sending_s;
+  json series = json::array();
+  for (const SecondStats& s : r.series) {
+    series.push_back({{"t", s.t_end_s},
+                      {"seconds", s.duration_s},
+                      {"sent", s.sent},
+                      {"answered", s.answered},
+                      {"fps", s.fps()},
+                      {"errors", s.errors},
+                      {"drops", s.drops},
+                      {"late", s.late},
+                      {"openStreams", s.open_streams},
+                      {"p50", s.p50},
+                      {"p90", s.p90},
+                      {"p99", s.p99},
+                      {"max", s.max},
+                      {"serviceP50", s.service_p50},
+                      {"serviceP99", s.service_p99}});
+  }
+  j["timeSeries"] = series;
+  return j;
+}
+
+std::string ProgressLine(const SecondStats& s, std::uint64_t errors, std::uint64_t drops) {
+  return fmt::format(
+      "{:7.1f} s  {:7.1f} frames/s  p50 {:7.2f} ms  p99 {:7.2f} ms  errors {}  drops {}  late {}  "
+      "open streams {}",
+      s.t_end_s, s.fps(), Ms(s.p50), Ms(s.p99), errors, drops, s.late, s.open_streams);
+}
+
+}  // namespace cloudcast::load

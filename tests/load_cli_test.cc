@@ -1,0 +1,175 @@
+// cloudcast-load and cloudcast-null-server as programs: flag errors that name the flag, the
+// health probe, SIGTERM ending a run with its report written, and the HTML page rendered by
+// Debian's chromium, headless, with its charts checked in the screenshot.
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/wait.h>
+
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <thread>
+
+#include "cloudcast/load/null_server.h"
+#include "program_support.h"
+
+extern char** environ;
+
+namespace cloudcast::testing {
+namespace {
+
+using nlohmann::json;
+
+std::string Load() { return BinDir() + "/cloudcast-load"; }
+
+class LoadCliTest : public ScratchDirTest {
+ protected:
+  void SetUp() override {
+    ScratchDirTest::SetUp();
+    null_ = load::NullServer::Start("127.0.0.1:0", "null").value();
+  }
+  RunResult Run(std::vector<std::string> args) { return RunProgram(Load(), args, dir_.string()); }
+  std::unique_ptr<load::NullServer> null_;
+};
+
+TEST_F(LoadCliTest, BadFlagsExitTwoNamingTheFlag) {
+  const std::vector<std::pair<std::vector<std::string>, std::string>> cases = {
+      {{"--streams", "0"}, "--streams"},
+      {{"--fps", "nan"}, "--fps"},
+      {{"--duration", "0"}, "--frames"},
+      {{"--duration", "99999"}, "--duration"},
+      {{"--frames", "1.5"}, "--frames"},
+      {{"--schedule", "step"}, "--load-step"},
+      {{"--schedule", "zigzag"}, "--schedule"},
+      {{"--load-end", "10"}, "--schedule"},
+      {{"--encoding", "webp"}, "--encoding"},
+      {{"--fps", "30", "--in-flight", "2"}, "--in-flight"},
+      {{"--synthetic", "0x10"}, "--synthetic"},
+      {{"--json", "/nonexistent/dir/r.json"}, "--json"},
+      {{"--tsukuba", "/nonexistent"}, "--tsukuba"},
+  };
+  for (const auto& [args, flag] : cases) {
+    std::vector<std::string> full = {"--server", null_->address(), "--synthetic", "64x48"};
+    if (args[0] == "--synthetic" || args[0] == "--tsukuba") full = {"--server", null_->address()};
+    full.insert(full.end(), args.begin(), args.end());
+    const RunResult r = Run(full);
+    EXPECT_FALSE(r.crashed()) << r;
+    EXPECT_NE(r.code, 0) << args[0] << "\n" << r;
+    EXPECT_NE((r.out + r.err).find(flag), std::string::npos) << args[0] << "\n" << r;
+  }
+}
+
+TEST_F(LoadCliTest, UnreachableServerExitsOneNamingIt) {
+  const RunResult r = Run({"--server", "127.0.0.1:1", "--connect-timeout", "0.3", "--synthetic",
+                           "64x48", "--frames", "5"});
+  EXPECT_EQ(r.code, 1) << r;
+  EXPECT_NE(r.err.find("--server 127.0.0.1:1"), std::string::npos) << r;
+}
+
+TEST_F(LoadCliTest, ProbeAnswersZeroWhenServingAndOneOtherwise) {
+  const RunResult ok = Run({"--probe", "--server", null_->address()});
+  EXPECT_EQ(ok.code, 0) << ok;
+  EXPECT_NE(ok.out.find("SERVING"), std::string::npos) << ok;
+  const RunResult bad = Run({"--probe", "--server", "127.0.0.1:1", "--connect-timeout", "0.3"});
+  EXPECT_EQ(bad.code, 1) << bad;
+  const RunResult unknown =
+      Run({"--probe", "--server", null_->address(), "--probe-service", "no.such.Service"});
+  EXPECT_EQ(unknown.code, 1) << unknown;
+}
+
+TEST_F(LoadCliTest, BoundedByFramesWritesTableAndJson) {
+  const RunResult r =
+      Run({"--server", null_->address(), "--synthetic", "64x48", "--streams", "3", "--fps", "100",
+           "--frames", "30", "--lossless", "--json", Path("r.json"), "-q"});
+  ASSERT_EQ(r.code, 0) << r;
+  EXPECT_NE(r.out.find("latency (intended)"), std::string::npos) << r;
+  const json j = json::parse(ReadText(Path("r.json")));
+  EXPECT_EQ(j["count"], 30);
+  EXPECT_EQ(j["frames"]["answered"], 30);
+  EXPECT_EQ(j["endReason"], "normal");
+  EXPECT_EQ(j["options"]["concurrency"], 3);
+}
+
+TEST_F(LoadCliTest, SigtermEndsTheRunAndStillWritesTheReport) {
+  const std::string json_path = Path("term.json"), out = Path("term.out"), err = Path("term.err");
+  const std::string command = ShellQuote(Load()) + " --server " + null_->address() +
+                              " --synthetic 160x120 --streams 2 --fps 50 --duration 120 --json " +
+                              ShellQuote(json_path) + " >" + ShellQuote(out) + " 2>" +
+                              ShellQuote(err);
+  pid_t pid = 0;
+  const char* argv[] = {"/bin/sh", "-c", command.c_str(), nullptr};
+  // exec, so the signal reaches cloudcast-load itself rather than the shell.
+  const std::string exec_command = "exec " + command;
+  argv[2] = exec_command.c_str();
+  ASSERT_EQ(posix_spawn(&pid, "/bin/sh", nullptr, nullptr, const_cast<char**>(argv), environ), 0);
+  // Once progress lines show frames flowing (bounded: 30 s).
+  for (int i = 0; i < 300 && ReadText(err).find("frames/s") == std::string::npos; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  ASSERT_EQ(kill(pid, SIGTERM), 0);
+  int status = 0;
+  ASSERT_EQ(waitpid(pid, &status, 0), pid);
+  ASSERT_TRUE(WIFEXITED(status)) << ReadText(err);
+  EXPECT_EQ(WEXITSTATUS(status), 0) << ReadText(err);
+  const json j = json::parse(ReadText(json_path));
+  EXPECT_EQ(j["endReason"], "cancel");
+  EXPECT_GT(j["frames"]["answered"].get<int>(), 0);
+  EXPECT_NE(ReadText(out).find("cancel"), std::string::npos);
+}
+
+// Pixels of roughly `bgr` in `image`.
+int CountColour(const cv::Mat& image, cv::Vec3b bgr) {
+  int n = 0;
+  for (int y = 0; y < image.rows; ++y) {
+    for (int x = 0; x < image.cols; ++x) {
+      const cv::Vec3b p = image.at<cv::Vec3b>(y, x);
+      if (std::abs(p[0] - bgr[0]) + std::abs(p[1] - bgr[1]) + std::abs(p[2] - bgr[2]) < 40) ++n;
+    }
+  }
+  return n;
+}
+
+TEST_F(LoadCliTest, HtmlReportRendersItsChartsInHeadlessChromium) {
+  const std::string chromium = "/usr/bin/chromium";
+  if (!std::filesystem::exists(chromium)) {
+    GTEST_SKIP() << "Debian's chromium is not installed (scripts/setup installs it): the HTML "
+                    "page cannot be rendered here";
+  }
+  const RunResult r = Run({"--server", null_->address(), "--synthetic", "160x120", "--streams", "4",
+                           "--fps", "60", "--duration", "3", "--html", Path("r.html"), "-q"});
+  ASSERT_EQ(r.code, 0) << r;
+  const std::string html = ReadText(Path("r.html"));
+  EXPECT_EQ(html.find("<script"), std::string::npos);
+  // Nothing from the network: the only address is the SVG namespace, which is no download.
+  std::string rest = html;
+  for (std::size_t at;
+       (at = rest.find("xmlns=\"http://www.w3.org/2000/svg\"")) != std::string::npos;) {
+    rest.erase(at, 34);
+  }
+  EXPECT_EQ(rest.find("http://"), std::string::npos);
+  EXPECT_EQ(rest.find("https://"), std::string::npos);
+  const std::string png = Path("r.png");
+  const RunResult shot =
+      RunProgram(chromium,
+                 {"--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                  "--disable-background-networking", "--disable-component-update", "--disable-sync",
+                  "--user-data-dir=" + Path("chrome-profile"), "--screenshot=" + png,
+                  "--window-size=1000,1400", "file://" + Path("r.html")},
+                 dir_.string(), "timeout 120");
+  ASSERT_TRUE(std::filesystem::exists(png)) << shot;
+  const cv::Mat image = cv::imread(png, cv::IMREAD_COLOR);
+  ASSERT_FALSE(image.empty());
+  // The p99 line (#e45756), the p50 line and the histogram's bars (#4c78a8), and the
+  // throughput line (#54a24b) are drawn.
+  EXPECT_GT(CountColour(image, {0x56, 0x57, 0xe4}), 200);
+  EXPECT_GT(CountColour(image, {0xa8, 0x78, 0x4c}), 1000);
+  EXPECT_GT(CountColour(image, {0x4b, 0xa2, 0x54}), 200);
+  // Keep the screenshot where a person can look at it.
+  std::filesystem::copy_file(png, std::string(CLOUDCAST_BIN_DIR) + "/../load_report_screenshot.png",
+                             std::filesystem::copy_options::overwrite_existing);
+}
+
+}  // namespace
+}  // namespace cloudcast::testing

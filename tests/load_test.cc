@@ -1,0 +1,335 @@
+// cloudcast-load's parts: the histogram against exact percentiles, the schedule, the frame
+// store's wire bytes, and fleets against a real cloudcast server and the null server on
+// loopback. No assertion on a time value: orderings and counts only.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <random>
+#include <thread>
+
+#include "cloudcast/load/fleet.h"
+#include "cloudcast/load/frame_store.h"
+#include "cloudcast/load/histogram.h"
+#include "cloudcast/load/null_server.h"
+#include "cloudcast/load/report.h"
+#include "cloudcast/load/schedule.h"
+#include "cloudcast/server/server.h"
+
+namespace cloudcast::load {
+namespace {
+
+using std::chrono::milliseconds;
+using std::chrono::nanoseconds;
+using std::chrono::seconds;
+
+TEST(HistogramTest, BucketsCoverEveryValueWithinAThousandth) {
+  for (std::int64_t v : {0L, 1L, 2047L, 2048L, 2049L, 4095L, 4096L, 123456789L, 1L << 40}) {
+    const int i = Histogram::IndexOf(v);
+    EXPECT_LE(Histogram::LowestOf(i), v) << v;
+    EXPECT_GE(Histogram::HighestOf(i), v) << v;
+    EXPECT_LE(Histogram::HighestOf(i) - Histogram::LowestOf(i), std::max<std::int64_t>(v / 1024, 0))
+        << v;
+  }
+  EXPECT_EQ(Histogram::IndexOf((std::int64_t{1} << 42) - 1), Histogram::BucketCount() - 1);
+}
+
+TEST(HistogramTest, PercentilesMatchExactOnesOfRandomSamples) {
+  std::mt19937_64 rng(42);
+  // Log-normal latencies from microseconds to seconds, as a loaded server gives.
+  std::lognormal_distribution<double> dist(std::log(5e6), 1.5);
+  for (int round = 0; round < 5; ++round) {
+    Histogram h;
+    std::vector<std::int64_t> values;
+    const int n = 1000 + round * 7919;
+    for (int i = 0; i < n; ++i) {
+      values.push_back(static_cast<std::int64_t>(dist(rng)));
+      h.Record(values.back());
+    }
+    std::sort(values.begin(), values.end());
+    for (double p : {0.0, 1.0, 10.0, 50.0, 90.0, 99.0, 99.9, 100.0}) {
+      std::size_t rank = static_cast<std::size_t>(std::ceil(p / 100 * n - 1e-9));
+      rank = std::clamp<std::size_t>(rank, 1, n);
+      const std::int64_t exact = values[rank - 1];
+      const std::int64_t got = h.Percentile(p);
+      EXPECT_GE(got, exact) << "p" << p;
+      EXPECT_LE(got - exact, exact / 1024 + 1) << "p" << p;
+    }
+    EXPECT_EQ(h.min(), values.front());
+    EXPECT_EQ(h.max(), values.back());
+    EXPECT_EQ(h.count(), static_cast<std::uint64_t>(n));
+    const std::vector<std::uint64_t> bins = h.CountBetween({0, 1000000, 10000000, h.max() + 1});
+    EXPECT_EQ(bins[0] + bins[1] + bins[2], h.count());
+  }
+}
+
+TEST(HistogramTest, AddMergesAndResetEmpties) {
+  Histogram a, b;
+  for (int i = 1; i <= 100; ++i) a.Record(i * 1000);
+  for (int i = 101; i <= 200; ++i) b.Record(i * 1000);
+  a.Add(b);
+  EXPECT_EQ(a.count(), 200u);
+  EXPECT_EQ(a.min(), 1000);
+  EXPECT_EQ(a.max(), 200000);
+  a.Reset();
+  EXPECT_EQ(a.count(), 0u);
+  EXPECT_EQ(a.Percentile(50), 0);
+}
+
+TEST(ScheduleTest, ConstantRateFixesEveryIntendedTime) {
+  auto s = Schedule::Create({ScheduleKind::kConst, 30});
+  ASSERT_TRUE(s.ok());
+  nanoseconds t = s->First(0.5);
+  EXPECT_EQ(t.count(), 1'000'000'000 / 60);
+  for (int i = 1; i <= 300; ++i) t = s->Next(t);
+  // 300 periods of 1/30 s: 10 s after the first frame, to within rounding per frame.
+  EXPECT_NEAR(static_cast<double>(t.count()), 1e9 / 60 + 10e9, 300);
+}
+
+TEST(ScheduleTest, StepAndLineRampsRiseToTheirEnd) {
+  ScheduleOptions step{ScheduleKind::kStep, 10, 10, 40, seconds(2)};
+  auto s = Schedule::Create(step);
+  ASSERT_TRUE(s.ok());
+  EXPECT_EQ(s->RateAt(seconds(0)), 10);
+  EXPECT_EQ(s->RateAt(milliseconds(1999)), 10);
+  EXPECT_EQ(s->RateAt(seconds(2)), 20);
+  EXPECT_EQ(s->RateAt(seconds(100)), 40);
+  ScheduleOptions line{ScheduleKind::kLine, 10, 5, 30, seconds(1)};
+  auto l = Schedule::Create(line);
+  ASSERT_TRUE(l.ok());
+  EXPECT_LT(l->RateAt(seconds(1)), l->RateAt(seconds(2)));
+  EXPECT_EQ(l->RateAt(seconds(100)), 30);
+}
+
+TEST(ScheduleTest, BadRampsNameTheFlag) {
+  auto bad = Schedule::Create({ScheduleKind::kStep, 10, 0, 40, seconds(1)});
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.status().message().find("--load-step"), std::string::npos);
+  auto away = Schedule::Create({ScheduleKind::kStep, 10, -5, 40, seconds(1)});
+  ASSERT_FALSE(away.ok());
+  EXPECT_NE(away.status().message().find("--load-end"), std::string::npos);
+  auto zero = Schedule::Create({ScheduleKind::kConst, 0});
+  ASSERT_FALSE(zero.ok());
+}
+
+FrameStore SmallStore(int frames = 3, std::uint32_t w = 64, std::uint32_t h = 48) {
+  FrameSourceOptions o;
+  o.synthetic_width = w;
+  o.synthetic_height = h;
+  o.synthetic_frames = frames;
+  return FrameStore::Prepare(o).value();
+}
+
+TEST(FrameStoreTest, RequestsParseAsStreamRequestsWithPatchedFields) {
+  FrameStore store = SmallStore();
+  ASSERT_EQ(store.size(), 3u);
+  for (std::uint64_t seq : {1ull, 127ull, 128ull, 1ull << 40}) {
+    grpc::ByteBuffer buffer = store.Request(seq, seq, 1'700'000'000'000'000'000 + seq);
+    std::vector<grpc::Slice> slices;
+    ASSERT_TRUE(buffer.Dump(&slices).ok());
+    std::string bytes;
+    for (auto& s : slices) bytes.append(reinterpret_cast<const char*>(s.begin()), s.size());
+    v1::StreamRequest request;
+    ASSERT_TRUE(request.ParseFromString(bytes)) << seq;
+    ASSERT_TRUE(request.has_frame());
+    EXPECT_EQ(request.frame().sequence(), seq);
+    EXPECT_EQ(request.frame().capture_time_unix_ns(), 1'700'000'000'000'000'000 + seq);
+    EXPECT_EQ(request.frame().frame_id(), "synthetic_" + std::to_string(seq % 3));
+    EXPECT_EQ(request.frame().disparity().raw().width(), 64u);
+    EXPECT_EQ(request.frame().colour().raw().pixels().size(), 64u * 48 * 3);
+  }
+}
+
+TEST(FrameStoreTest, PngAndJpegUplinksEncodeTheImages) {
+  FrameSourceOptions o;
+  o.synthetic_width = 64;
+  o.synthetic_height = 48;
+  o.synthetic_frames = 1;
+  o.uplink = Uplink::kJpeg;
+  FrameStore store = FrameStore::Prepare(o).value();
+  grpc::ByteBuffer buffer = store.Request(0, 1, 1);
+  std::vector<grpc::Slice> slices;
+  ASSERT_TRUE(buffer.Dump(&slices).ok());
+  std::string bytes;
+  for (auto& s : slices) bytes.append(reinterpret_cast<const char*>(s.begin()), s.size());
+  v1::StreamRequest request;
+  ASSERT_TRUE(request.ParseFromString(bytes));
+  EXPECT_FALSE(request.frame().colour().encoded().empty());
+  EXPECT_FALSE(request.frame().disparity().encoded().empty());  // 16-bit disparity as PNG
+}
+
+TEST(FrameStoreTest, MissingFilesNameTheFlag) {
+  FrameSourceOptions o;
+  o.disparity_glob = "/nonexistent/*.png";
+  o.colour_glob = "/nonexistent/*.png";
+  auto store = FrameStore::Prepare(o);
+  ASSERT_FALSE(store.ok());
+  EXPECT_NE(store.status().message().find("--disparity-glob"), std::string::npos);
+}
+
+// ---------------------------------------------------------------------------------------------
+
+class FleetTest : public ::testing::Test {
+ protected:
+  static std::unique_ptr<server::Server> StartServer(int threads, std::uint32_t queued = 4) {
+    server::ServerOptions options;
+    options.listen = "127.0.0.1:0";
+    options.metrics_listen = "";
+    options.threads = threads;
+    options.max_queued_frames = queued;
+    options.instance = "replica-a";
+    return server::Server::Start(options).value();
+  }
+
+  static FleetOptions Options(const std::string& target, int streams, double fps,
+                              std::uint64_t frames, bool lossless) {
+    FleetOptions o;
+    o.server = target;
+    o.streams = streams;
+    o.schedule.start = fps;
+    o.duration = seconds(30);  // the frame count ends these runs
+    o.frames = frames;
+    o.drain_timeout = seconds(30);
+    o.config.set_delivery(lossless ? v1::DELIVERY_ALL : v1::DELIVERY_LATEST);
+    return o;
+  }
+
+  static FleetResult Run(const FleetOptions& o, const FrameStore& store, Report* report) {
+    auto fleet = Fleet::Connect(o, &store);
+    EXPECT_TRUE(fleet.ok()) << fleet.status();
+    const FleetResult r = (*fleet)->Run();
+    *report = MakeReport(**fleet, r, store.description(), "test", nlohmann::json::object());
+    return r;
+  }
+};
+
+TEST_F(FleetTest, LosslessRunAgainstTheServerAnswersEveryFrame) {
+  auto server = StartServer(2);
+  FrameStore store = SmallStore(4, 160, 120);
+  Report report;
+  const FleetResult r = Run(Options(server->address(), 3, 50, 60, true), store, &report);
+  EXPECT_EQ(r.end_reason, EndReason::kNormal);
+  EXPECT_EQ(report.totals.sent, 60u);
+  EXPECT_EQ(report.totals.answered, 60u);
+  EXPECT_EQ(report.totals.lost + report.totals.unsent + report.totals.drops, 0u);
+  EXPECT_EQ(report.per_instance.at("replica-a"), 60u);
+  EXPECT_EQ(report.call_status.at("OK"), 3u);
+  EXPECT_EQ(report.latency.count(), 60u);
+  // Latency counts from the intended time, never after the actual send.
+  for (double p : {0.0, 50.0, 90.0, 100.0}) {
+    EXPECT_GE(report.latency.Percentile(p), report.service.Percentile(p)) << p;
+  }
+}
+
+TEST_F(FleetTest, AnOverloadedServerMakesLateSendsAndTheirWaitCounts) {
+  // One worker, one queued frame, 1280x960 frames far faster than it can process them: the
+  // stream's writes back up, later frames go late, and their wait is latency, not service time.
+  auto server = StartServer(1, 1);
+  FrameStore store = SmallStore(2, 1280, 960);
+  Report report;
+  Run(Options(server->address(), 1, 2000, 150, true), store, &report);
+  EXPECT_EQ(report.totals.answered, 150u);
+  EXPECT_GT(report.totals.late_flow_control, 0u);
+  EXPECT_GT(report.latency.Percentile(90), report.service.Percentile(90));
+  EXPECT_GE(report.latency.max(), report.service.max());
+  // The time series saw the same frames.
+  std::uint64_t answered = 0;
+  for (const SecondStats& s : report.series) answered += s.answered;
+  EXPECT_EQ(answered, 150u);
+}
+
+TEST_F(FleetTest, LatestDeliveryDropsUnderOverloadAndAccountsForEveryFrame) {
+  auto server = StartServer(1, 1);
+  FrameStore store = SmallStore(2, 1280, 960);
+  Report report;
+  Run(Options(server->address(), 2, 1000, 200, false), store, &report);
+  const Totals& t = report.totals;
+  EXPECT_EQ(t.sent, 200u);
+  EXPECT_GT(t.drops, 0u);
+  EXPECT_EQ(t.answered + t.drops + t.frame_errors + t.lost, t.sent);
+}
+
+TEST_F(FleetTest, ClosedLoopKeepsFramesInFlight) {
+  auto server = StartServer(2);
+  FrameStore store = SmallStore(3, 160, 120);
+  FleetOptions o = Options(server->address(), 2, 30, 40, true);
+  o.closed_loop = true;
+  o.in_flight = 2;
+  Report report;
+  Run(o, store, &report);
+  EXPECT_EQ(report.totals.sent, 40u);
+  EXPECT_EQ(report.totals.answered, 40u);
+  EXPECT_EQ(report.totals.late(), 0u);
+}
+
+TEST_F(FleetTest, NullServerAnswersAndStopEndsTheRunWithCancel) {
+  auto null = NullServer::Start("127.0.0.1:0", "null-1").value();
+  FrameStore store = SmallStore(2, 320, 240);
+  FleetOptions o = Options(null->address(), 4, 100, 0, true);
+  o.duration = seconds(60);
+  auto fleet = Fleet::Connect(o, &store).value();
+  std::thread stopper([&] {
+    // Stops once frames are flowing (bounded: at most 20 s).
+    for (int i = 0; i < 2000 && fleet->recorder().totals().answered < 50; ++i) {
+      std::this_thread::sleep_for(milliseconds(10));
+    }
+    fleet->Stop();
+  });
+  const FleetResult r = fleet->Run();
+  stopper.join();
+  EXPECT_EQ(r.end_reason, EndReason::kCancel);
+  const Totals t = fleet->recorder().totals();
+  EXPECT_GE(t.answered, 50u);
+  EXPECT_EQ(t.answered, t.sent);  // nothing in flight is lost on a clean stop
+  EXPECT_EQ(fleet->recorder().per_instance().at("null-1"), t.answered);
+}
+
+TEST_F(FleetTest, GhzJsonHasGhzFieldsAndTheExtraOnes) {
+  auto null = NullServer::Start("127.0.0.1:0", "null-1").value();
+  FrameStore store = SmallStore(2, 64, 48);
+  Report report;
+  Run(Options(null->address(), 2, 200, 40, true), store, &report);
+  const nlohmann::json j = GhzJson(report);
+  for (const char* key : {"count", "total", "average", "fastest", "slowest"}) {
+    ASSERT_TRUE(j.contains(key)) << key;
+    EXPECT_TRUE(j[key].is_number_integer()) << key;
+  }
+  EXPECT_EQ(j["count"], 40);
+  EXPECT_TRUE(j["rps"].is_number());
+  ASSERT_TRUE(j["latencyDistribution"].is_array());
+  for (const auto& d : j["latencyDistribution"]) {
+    EXPECT_TRUE(d["percentage"].is_number());
+    EXPECT_TRUE(d["latency"].is_number_integer());
+  }
+  ASSERT_TRUE(j["histogram"].is_array());
+  std::uint64_t in_histogram = 0;
+  for (const auto& b : j["histogram"]) {
+    EXPECT_TRUE(b["mark"].is_number_float());
+    in_histogram += b["count"].get<std::uint64_t>();
+  }
+  EXPECT_EQ(in_histogram, 40u);
+  EXPECT_EQ(j["statusCodeDistribution"]["OK"], 40);
+  EXPECT_TRUE(j["errorDistribution"].is_object());
+  EXPECT_EQ(j["endReason"], "normal");
+  EXPECT_EQ(j["date"].get<std::string>().size(), 20u);  // 2026-12-01T09:00:00Z
+  for (const char* key : {"p50", "p90", "p99", "p99.9", "max"}) {
+    EXPECT_TRUE(j["intendedLatency"][key].is_number_integer()) << key;
+    EXPECT_TRUE(j["serviceTime"][key].is_number_integer()) << key;
+  }
+  EXPECT_EQ(j["drops"], 0);
+  EXPECT_TRUE(j["lateSends"]["total"].is_number_integer());
+  EXPECT_EQ(j["framesPerReplica"]["null-1"], 40);
+  ASSERT_TRUE(j["timeSeries"].is_array());
+  EXPECT_FALSE(j["timeSeries"].empty());
+}
+
+TEST_F(FleetTest, UnreachableServerIsAClearError) {
+  FrameStore store = SmallStore(1, 64, 48);
+  FleetOptions o = Options("127.0.0.1:1", 1, 30, 10, true);
+  o.connect_timeout = milliseconds(300);
+  auto fleet = Fleet::Connect(o, &store);
+  ASSERT_FALSE(fleet.ok());
+  EXPECT_NE(fleet.status().message().find("--server 127.0.0.1:1"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace cloudcast::load
