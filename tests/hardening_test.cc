@@ -273,6 +273,48 @@ TEST_F(HardeningTest, MetricsListenWhereTheServiceListensByDefault) {
   EXPECT_EQ(server::ServerOptions{}.metrics_listen, ":9464");
 }
 
+// Defect 7: one idle client (a connection with no calls, or a stream that sends nothing) made
+// a graceful shutdown wait its whole grace period. Now the server ends at once when nothing is
+// in flight: the idle stream gets UNAVAILABLE and the idle connection is closed.
+TEST_F(HardeningTest, ShutdownDoesNotWaitForIdleClients) {
+  // Idle connections: a gRPC channel, a TCP connection that sent nothing, and one that sent
+  // the HTTP/2 preface and its SETTINGS and then nothing.
+  auto idle = grpc::CreateChannel(server_->address(), grpc::InsecureChannelCredentials());
+  ASSERT_TRUE(idle->WaitForConnected(std::chrono::system_clock::now() + seconds(10)));
+  const int silent = IdleConnection(server_->port());
+  const int preface = IdleConnection(
+      server_->port(), std::string("PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n\0\0\0\4\0\0\0\0\0", 33));
+  // ...and a stream that sits idle (its one frame answered, so the server surely holds it).
+  auto stub = v1::CloudCast::NewStub(channel_);
+  grpc::ClientContext ctx;
+  auto call = stub->Stream(&ctx);
+  ASSERT_TRUE(call->Write(FrameRequest(1)));
+  v1::StreamReply first;
+  ASSERT_TRUE(call->Read(&first));
+  std::mutex mu;
+  std::condition_variable cv;
+  bool done = false;
+  // A grace far longer than the wait below: a server that waits for its idle clients fails.
+  std::thread shutdown([&] {
+    server_->Shutdown(seconds(60));
+    std::lock_guard<std::mutex> lock(mu);
+    done = true;
+    cv.notify_all();
+  });
+  v1::StreamReply reply;
+  EXPECT_FALSE(call->Read(&reply));
+  const grpc::Status status = call->Finish();
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::UNAVAILABLE) << status.error_message();
+  {
+    std::unique_lock<std::mutex> lock(mu);
+    EXPECT_TRUE(cv.wait_for(lock, seconds(20), [&] { return done; }))
+        << "Shutdown is waiting for idle clients";
+  }
+  shutdown.join();
+  close(silent);
+  close(preface);
+}
+
 // Defect 8: a JPEG sent as disparity was accepted without a word, although lossy compression
 // corrupts disparities (the proto says so). Now it is refused, naming the field.
 TEST_F(HardeningTest, JpegDisparityIsRefused) {

@@ -130,12 +130,17 @@ void Server::Shutdown(std::chrono::milliseconds grace) {
   const auto start = std::chrono::steady_clock::now();
   spdlog::info("shutting down (grace {} ms)", grace.count());
   StartDraining();
-  // Waits for the calls to end; at the deadline it cancels the rest, whose reactors then finish
-  // as soon as no write of theirs is outstanding.
-  server_->Shutdown(std::chrono::system_clock::now() + grace);
+  // Our calls first: streams answer what they hold and end, Process calls finish their frame.
+  // Then gRPC's shutdown with no further wait: it sends GOAWAY and closes every connection left,
+  // which are idle ones (a client that keeps a connection open, or one that never finished its
+  // handshake, would otherwise hold the shutdown for the whole grace period).
+  const auto deadline = start + grace;
+  const bool drained = service_->WaitForCalls(deadline);
+  if (!drained) spdlog::warn("grace period over: cancelling the calls still in flight");
+  server_->Shutdown(std::chrono::system_clock::now());
   // gRPC has seen every OnDone by now; a frame still in work holds its reactor until its
   // worker is done, which StopWorkers waits for.
-  service_->WaitForStreams(std::chrono::steady_clock::now() + std::chrono::seconds(1));
+  service_->WaitForCalls(std::chrono::steady_clock::now() + std::chrono::seconds(1));
   service_->StopWorkers();
   metrics_http_.reset();
   shut_down_ = true;

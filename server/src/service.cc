@@ -518,12 +518,12 @@ grpc::ServerUnaryReactor* CloudCastService::Process(grpc::CallbackServerContext*
         } else {
           result = ToGrpc(status);
         }
-        active_process_calls_.fetch_sub(1);
         reactor->Finish(std::move(result));
+        ProcessCallDone();
       });
   if (!submitted) {
-    active_process_calls_.fetch_sub(1);
     reactor->Finish(grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
+    ProcessCallDone();
   }
   return reactor;
 }
@@ -597,9 +597,17 @@ void CloudCastService::StartDraining() {
   }
 }
 
-bool CloudCastService::WaitForStreams(Clock::time_point deadline) {
+bool CloudCastService::WaitForCalls(Clock::time_point deadline) {
   std::unique_lock<std::mutex> lock(streams_mu_);
-  return streams_cv_.wait_until(lock, deadline, [this] { return streams_.empty(); });
+  return streams_cv_.wait_until(
+      lock, deadline, [this] { return streams_.empty() && active_process_calls_.load() == 0; });
+}
+
+void CloudCastService::ProcessCallDone() {
+  active_process_calls_.fetch_sub(1);
+  // Taken so that a waiter cannot miss the wake-up between its check and its wait.
+  std::lock_guard<std::mutex> lock(streams_mu_);
+  streams_cv_.notify_all();
 }
 
 void CloudCastService::StopWorkers() {

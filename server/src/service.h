@@ -31,9 +31,9 @@ namespace cloudcast::server {
 
 // Stream and Process take raw bytes and parse them here, so that bytes which are not a valid
 // message get a status that says so (gRPC's own parsing reports a half-close, or UNIMPLEMENTED).
-using CallbackBase = v1::CloudCast::WithRawCallbackMethod_Stream<
-    v1::CloudCast::WithRawCallbackMethod_Process<v1::CloudCast::WithCallbackMethod_GetInfo<
-        v1::CloudCast::Service>>>;
+using CallbackBase =
+    v1::CloudCast::WithRawCallbackMethod_Stream<v1::CloudCast::WithRawCallbackMethod_Process<
+        v1::CloudCast::WithCallbackMethod_GetInfo<v1::CloudCast::Service>>>;
 
 class CloudCastService final : public CallbackBase {
  public:
@@ -56,8 +56,9 @@ class CloudCastService final : public CallbackBase {
   // reading, answers the frames it already holds and ends with UNAVAILABLE.
   void StartDraining();
   bool draining() const { return draining_.load(); }
-  // Waits until every Stream call is done (OnDone) or `deadline` passes; true if none is left.
-  bool WaitForStreams(std::chrono::steady_clock::time_point deadline);
+  // Waits until every Stream call is done (OnDone) and every Process call has finished, or
+  // `deadline` passes; true if none is left.
+  bool WaitForCalls(std::chrono::steady_clock::time_point deadline);
   // Runs the frames still queued, then joins the workers and the housekeeping thread. Call once
   // the gRPC server has shut down. Idempotent.
   void StopWorkers();
@@ -73,6 +74,7 @@ class CloudCastService final : public CallbackBase {
   class StreamReactor;
 
   void NoteQueued(std::uint32_t held);
+  void ProcessCallDone();
   void Register(StreamReactor* stream);
   void Unregister(StreamReactor* stream);
   void Housekeeping();
