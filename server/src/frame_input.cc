@@ -18,8 +18,9 @@ absl::Status DecodeChecked(std::string_view bytes, const char* field, const Limi
   if (absl::Status s = CheckEncodedImage(bytes, field, limits, &format); !s.ok()) return s;
   if (lossless && std::string_view(format) == "JPEG") {
     return absl::InvalidArgumentError(absl::StrCat(
-        field, " is a JPEG: its lossy compression changes disparity values; send it raw or as "
-               "PNG, TIFF, PNM or PFM"));
+        field,
+        " is a JPEG: its lossy compression changes disparity values; send it raw or as "
+        "PNG, TIFF, PNM or PFM"));
   }
   auto decoded = decode(bytes, field);
   if (!decoded.ok()) return decoded.status();
@@ -77,6 +78,19 @@ absl::Status PrepareFrameImages(const v1::Frame& frame, const Limits& limits,
           "frame.colour is missing: set frame.colour.raw or frame.colour.encoded");
   }
   return CheckSameSize(out->disparity, "frame.disparity", out->colour, "frame.colour");
+}
+
+std::uint64_t FramePixels(const v1::Frame& frame) {
+  const v1::DisparityImage& d = frame.disparity();
+  std::uint64_t pixels = 0;
+  if (d.has_raw()) {
+    pixels = std::uint64_t{d.raw().width()} * d.raw().height();
+  } else if (d.has_encoded()) {
+    std::uint32_t w = 0, h = 0;
+    const char* format = nullptr;
+    if (SniffImageSize(d.encoded(), &w, &h, &format)) pixels = std::uint64_t{w} * h;
+  }
+  return pixels > 0 ? pixels : 1;
 }
 
 }  // namespace cloudcast::server

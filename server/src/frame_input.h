@@ -1,6 +1,8 @@
 // A proto Frame as the core's image views: raw images viewed in place, encoded ones decoded.
 #pragma once
 
+#include <cstdint>
+
 #include "absl/status/status.h"
 #include "cloudcast/core/image.h"
 #include "cloudcast/core/limits.h"
@@ -30,5 +32,10 @@ struct DecodeScratch {
 // RESOURCE_EXHAUSTED for an image over `limits`, INVALID_ARGUMENT for anything malformed.
 absl::Status PrepareFrameImages(const v1::Frame& frame, const Limits& limits,
                                 DecodeScratch* scratch, FrameImages* out);
+
+// The frame's size in pixels as its message states it (raw sizes, or an encoded image's header),
+// without decoding anything: the cost the worker pool weighs it by. 1 when it cannot tell (such
+// a frame is refused quickly anyway).
+std::uint64_t FramePixels(const v1::Frame& frame);
 
 }  // namespace cloudcast::server

@@ -74,6 +74,8 @@ class CloudCastService::StreamReactor final
       : service_(service),
         context_(context),
         peer_(context->peer()),
+        client_key_(std::hash<std::string>{}(peer_)),
+        call_key_(service->next_call_key_.fetch_add(1)),
         settings_(service->default_settings_),
         queue_(service->options_.max_queued_frames),
         last_activity_(Clock::now()) {
@@ -334,7 +336,9 @@ class CloudCastService::StreamReactor final
     while (StreamSlot* slot = queue_.NextToProcess()) {
       Job* job = static_cast<Job*>(slot);
       Ref();
-      if (!service_->pool_.Submit([this, job](std::size_t worker) { Work(job, worker); })) {
+      // Fair between connections (weighted by pixels) and between the streams of one.
+      if (!service_->pool_.Submit([this, job](std::size_t worker) { Work(job, worker); },
+                                  client_key_, call_key_, FramePixels(job->request.frame()))) {
         // The pool is stopping: the server is past its grace period.
         queue_.Processed(job);
         Release(job);
@@ -403,6 +407,8 @@ class CloudCastService::StreamReactor final
   CloudCastService* const service_;
   grpc::CallbackServerContext* const context_;
   const std::string peer_;
+  const std::uint64_t client_key_;  // the connection, for the worker pool's fairness
+  const std::uint64_t call_key_;
   std::atomic<int> refs_{1};
 
   std::mutex ops_mu_;  // see the class comment
@@ -505,8 +511,9 @@ grpc::ServerUnaryReactor* CloudCastService::Process(grpc::CallbackServerContext*
                                   options_.max_streams, " (max_streams, --max-streams)")));
     return reactor;
   }
-  const bool submitted =
-      pool_.Submit([this, reactor, reply_bytes, arrival, call](std::size_t worker) {
+  const std::uint64_t pixels = FramePixels(call->request.frame());
+  const bool submitted = pool_.Submit(
+      [this, reactor, reply_bytes, arrival, call](std::size_t worker) {
         const absl::Status status = runner_.Run(worker, call->request.frame(),
                                                 call->settings->frame, arrival, &call->reply);
         grpc::Status result;
@@ -520,7 +527,8 @@ grpc::ServerUnaryReactor* CloudCastService::Process(grpc::CallbackServerContext*
         }
         reactor->Finish(std::move(result));
         ProcessCallDone();
-      });
+      },
+      std::hash<std::string>{}(context->peer()), next_call_key_.fetch_add(1), pixels);
   if (!submitted) {
     reactor->Finish(grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
     ProcessCallDone();

@@ -89,6 +89,7 @@ class CloudCastService final : public CallbackBase {
   std::atomic<bool> draining_{false};
   std::atomic<int> active_streams_{0};
   std::atomic<int> active_process_calls_{0};
+  std::atomic<std::uint64_t> next_call_key_{1};  // the worker pool's key of each call
   std::atomic<std::uint32_t> queued_high_water_{0};
 
   // Open streams, for the idle check and draining. Lock order: streams_mu_, then a stream's own.

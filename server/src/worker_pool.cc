@@ -13,11 +13,11 @@ WorkerPool::WorkerPool(int threads) : size_(threads > 0 ? static_cast<std::size_
 
 WorkerPool::~WorkerPool() { Stop(); }
 
-bool WorkerPool::Submit(Task task) {
+bool WorkerPool::Submit(Task task, std::uint64_t client, std::uint64_t call, std::uint64_t cost) {
   {
     std::lock_guard<std::mutex> lock(mu_);
     if (stopping_) return false;
-    tasks_.push_back(std::move(task));
+    tasks_.Push(client, call, cost, std::move(task));
   }
   cv_.notify_one();
   return true;
@@ -48,8 +48,7 @@ void WorkerPool::Loop(std::size_t worker) {
       cv_.wait(lock, [this] { return stopping_ || !tasks_.empty(); });
       // Drain before exiting: a queued task may hold a reference that only it releases.
       if (tasks_.empty()) return;
-      task = std::move(tasks_.front());
-      tasks_.pop_front();
+      task = tasks_.Pop();
     }
     task(worker);
   }

@@ -1,14 +1,18 @@
-// A fixed set of threads that run tasks in submission order. The server processes frames here,
-// never on gRPC's own threads, so a slow frame cannot stall the transport.
+// A fixed set of threads that run tasks fairly between clients and between each client's calls
+// (FairQueue). The server processes frames here, never on gRPC's own threads, so a slow frame
+// cannot stall the transport; with the client's connection, the call and the frame's pixels as
+// cost, one client's backlog cannot starve another.
 #pragma once
 
 #include <condition_variable>
 #include <cstddef>
-#include <deque>
+#include <cstdint>
 #include <functional>
 #include <mutex>
 #include <thread>
 #include <vector>
+
+#include "fair_queue.h"
 
 namespace cloudcast::server {
 
@@ -23,8 +27,12 @@ class WorkerPool {
   WorkerPool(const WorkerPool&) = delete;
   WorkerPool& operator=(const WorkerPool&) = delete;
 
-  // Queues `task`; false (and the task is dropped unrun) once Stop() has begun.
-  bool Submit(Task task);
+  // A turn's worth of cost: one 640x480 frame and some, in pixels.
+  static constexpr std::uint64_t kQuantum = std::uint64_t{1} << 19;
+
+  // Queues `task` for `client` and its `call` at `cost`; false (and the task is dropped unrun)
+  // once Stop() has begun.
+  bool Submit(Task task, std::uint64_t client, std::uint64_t call, std::uint64_t cost);
 
   // Runs every task already queued, then joins the threads. Idempotent.
   void Stop();
@@ -39,7 +47,7 @@ class WorkerPool {
   std::mutex stop_mu_;  // serialises Stop(): threads are joined once
   mutable std::mutex mu_;
   std::condition_variable cv_;
-  std::deque<Task> tasks_;
+  FairQueue<Task> tasks_{kQuantum};
   bool stopping_ = false;
   std::vector<std::thread> threads_;
 };
