@@ -381,6 +381,45 @@ TEST_F(HardeningTest, APacedStreamIsNotStarvedByGreedyOnes) {
   EXPECT_LE(median, 16u);
 }
 
+// Defect 5: one client could lock everyone out: 64 streams that never send took every slot
+// until the idle timeout (60 s). Now one client gets at most half of --max-streams, and a stream
+// that sends nothing is ended after --first-message-timeout.
+TEST_F(HardeningTest, OneClientCannotLockEveryoneOut) {
+  server::ServerOptions options;
+  options.max_streams = 8;  // a client's share: 4
+  options.first_message_timeout = milliseconds(300);
+  Start(options);
+  auto stub = v1::CloudCast::NewStub(channel_);
+  std::vector<std::unique_ptr<grpc::ClientContext>> contexts;
+  std::vector<std::unique_ptr<grpc::ClientReaderWriter<v1::StreamRequest, v1::StreamReply>>> calls;
+  for (int i = 0; i < 5; ++i) {
+    contexts.push_back(std::make_unique<grpc::ClientContext>());
+    calls.push_back(stub->Stream(contexts.back().get()));
+  }
+  // The fifth is refused at once, naming the limit; the four silent ones are ended soon.
+  v1::StreamReply reply;
+  EXPECT_FALSE(calls[4]->Read(&reply));
+  const grpc::Status refused = calls[4]->Finish();
+  EXPECT_EQ(refused.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
+  EXPECT_NE(refused.error_message().find("--max-streams-per-client"), std::string::npos)
+      << refused.error_message();
+  for (int i = 0; i < 4; ++i) {
+    EXPECT_FALSE(calls[i]->Read(&reply));
+    const grpc::Status s = calls[i]->Finish();
+    EXPECT_EQ(s.error_code(), grpc::StatusCode::DEADLINE_EXCEEDED) << i;
+    EXPECT_NE(s.error_message().find("--first-message-timeout"), std::string::npos)
+        << s.error_message();
+  }
+  // A stream that talks is not cut short by the first-message timeout.
+  grpc::ClientContext ctx;
+  auto call = stub->Stream(&ctx);
+  ASSERT_TRUE(call->Write(FrameRequest(7)));
+  ASSERT_TRUE(call->Read(&reply));
+  EXPECT_EQ(reply.cloud().sequence(), 7u);
+  ASSERT_TRUE(call->WritesDone());
+  EXPECT_TRUE(call->Finish().ok());
+}
+
 // Defect 8: a JPEG sent as disparity was accepted without a word, although lossy compression
 // corrupts disparities (the proto says so). Now it is refused, naming the field.
 TEST_F(HardeningTest, JpegDisparityIsRefused) {

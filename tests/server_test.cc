@@ -1143,6 +1143,7 @@ TEST(ServerLimitsTest, MessageOverTheSizeLimitEndsOnlyItsCall) {
 TEST(ServerLimitsTest, TooManyStreamsGetResourceExhausted) {
   ServerOptions options = TestOptions();
   options.max_streams = 2;
+  options.max_streams_per_client = 2;  // one client here: test the server-wide limit
   auto server = StartServer(options);
   ASSERT_NE(server, nullptr);
   auto stub = Stub(*server);

@@ -16,6 +16,8 @@ std::chrono::milliseconds ToMillis(double seconds) {
 
 ServerFlags::ServerFlags(CLI::App& app)
     : idle_timeout_seconds_(std::chrono::duration<double>(options_.idle_timeout).count()),
+      first_message_timeout_seconds_(
+          std::chrono::duration<double>(options_.first_message_timeout).count()),
       shutdown_grace_seconds_(std::chrono::duration<double>(options_.shutdown_grace).count()),
       delivery_(convert::Name(options_.defaults.delivery)) {
   app.option_defaults()->always_capture_default();
@@ -73,6 +75,18 @@ ServerFlags::ServerFlags(CLI::App& app)
                  "DEADLINE_EXCEEDED")
       ->check(CLI::Range(0.001, 86400.0))
       ->group("Limits");
+  app.add_option("--first-message-timeout", first_message_timeout_seconds_,
+                 "Seconds a new stream may take to send its first message before it is ended "
+                 "with DEADLINE_EXCEEDED")
+      ->check(CLI::Range(0.001, 86400.0))
+      ->group("Limits");
+  app.add_option("--max-streams-per-client", o.max_streams_per_client,
+                 "One client's share of --max-streams (a client is its peer address); 0 = half "
+                 "of --max-streams. Behind an L7 balancer every call comes from it: raise this")
+      ->group("Limits");
+  app.add_option("--max-process-per-client", o.max_process_per_client,
+                 "One client's share of the Process calls in flight; 0 = half of --max-streams")
+      ->group("Limits");
   app.add_option("--max-queued-frames", o.max_queued_frames,
                  "Frames held per stream in delivery 'all' (waiting + in work + replies not yet "
                  "written); when full the stream is not read")
@@ -91,6 +105,7 @@ ServerFlags::ServerFlags(CLI::App& app)
 absl::StatusOr<ServerOptions> ServerFlags::Options() const {
   ServerOptions o = options_;
   o.idle_timeout = ToMillis(idle_timeout_seconds_);
+  o.first_message_timeout = ToMillis(first_message_timeout_seconds_);
   o.shutdown_grace = ToMillis(shutdown_grace_seconds_);
   o.max_connection_age = ToMillis(max_connection_age_seconds_);
   o.max_connection_age_grace = ToMillis(max_connection_age_grace_seconds_);

@@ -33,6 +33,9 @@ absl::Status ServerOptions::Validate() const {
   }
   if (max_streams == 0) return Invalid("--max-streams must be at least 1");
   if (idle_timeout.count() <= 0) return Invalid("--idle-timeout must be positive");
+  if (first_message_timeout.count() <= 0) {
+    return Invalid("--first-message-timeout must be positive");
+  }
   if (max_queued_frames == 0 || max_queued_frames > 1024) {
     return Invalid(
         absl::StrCat("--max-queued-frames is ", max_queued_frames, "; it must be in [1, 1024]"));
@@ -55,6 +58,14 @@ absl::Status ServerOptions::Validate() const {
 int ServerOptions::ResolvedThreads() const {
   if (threads > 0) return threads;
   return std::max(1u, std::thread::hardware_concurrency());
+}
+
+std::uint32_t ServerOptions::ResolvedMaxStreamsPerClient() const {
+  return max_streams_per_client > 0 ? max_streams_per_client : std::max(1u, max_streams / 2);
+}
+
+std::uint32_t ServerOptions::ResolvedMaxProcessPerClient() const {
+  return max_process_per_client > 0 ? max_process_per_client : std::max(1u, max_streams / 2);
 }
 
 std::string ServerOptions::ResolvedInstance() const {

@@ -6,6 +6,7 @@
 #include <utility>
 
 #include "absl/strings/str_cat.h"
+#include "admission.h"
 #include "draco/core/draco_version.h"
 #include "grpcpp/support/proto_buffer_reader.h"
 #include "spdlog/spdlog.h"
@@ -70,8 +71,10 @@ grpc::Status ToGrpc(const absl::Status& s) {
 class CloudCastService::StreamReactor final
     : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer> {
  public:
-  StreamReactor(CloudCastService* service, grpc::CallbackServerContext* context)
+  StreamReactor(CloudCastService* service, grpc::CallbackServerContext* context,
+                Admission::Ticket ticket)
       : service_(service),
+        ticket_(std::move(ticket)),
         context_(context),
         peer_(context->peer()),
         client_key_(std::hash<std::string>{}(peer_)),
@@ -103,6 +106,7 @@ class CloudCastService::StreamReactor final
     std::unique_lock<std::mutex> lock(mu_);
     reading_ = nullptr;
     last_activity_ = Clock::now();
+    if (ok) got_message_ = true;
     if (!ok) {
       read_open_ = false;  // the client closed its side, or the call is gone
       Release(job);
@@ -144,6 +148,7 @@ class CloudCastService::StreamReactor final
       spdlog::info("stream from {} done: {} replies, {} dropped", peer_, queue_.written(),
                    queue_.dropped());
     }
+    ticket_.Release();
     service_->Unregister(this);
     Unref();
   }
@@ -157,13 +162,22 @@ class CloudCastService::StreamReactor final
   void CheckIdle(Clock::time_point now) {
     std::unique_lock<std::mutex> lock(mu_);
     if (finished_ || ending_ || broken_ || queue_.in_work() > 0) return;
-    if (now - last_activity_ < service_->options_.idle_timeout) return;
-    const double seconds = Seconds(service_->options_.idle_timeout);
-    spdlog::info("stream from {} idle for {} s: ending it", peer_, seconds);
+    const ServerOptions& o = service_->options_;
+    // A stream that has sent nothing at all gets a shorter time: it holds a slot for nothing.
+    const bool silent = !got_message_;
+    const auto timeout =
+        silent ? std::min(o.first_message_timeout, o.idle_timeout) : o.idle_timeout;
+    if (now - last_activity_ < timeout) return;
+    const double seconds = Seconds(timeout);
+    spdlog::info("stream from {} {} for {} s: ending it", peer_, silent ? "sent nothing" : "idle",
+                 seconds);
     service_->metrics_->streams_idle_timeout.Increment();
-    ending_ = grpc::Status(grpc::StatusCode::DEADLINE_EXCEEDED,
-                           absl::StrCat("stream idle: nothing received or sent for ", seconds,
-                                        " s (the server's idle timeout, --idle-timeout)"));
+    ending_ =
+        grpc::Status(grpc::StatusCode::DEADLINE_EXCEEDED,
+                     silent ? absl::StrCat("stream idle: it sent nothing within ", seconds,
+                                           " s of opening (the server's --first-message-timeout)")
+                            : absl::StrCat("stream idle: nothing received or sent for ", seconds,
+                                           " s (the server's idle timeout, --idle-timeout)"));
     // A Finish must wait for an outstanding write, which a client that takes nothing never
     // completes: cancel the call instead.
     Pump(lock, /*cancel=*/writing_ != nullptr);
@@ -405,6 +419,7 @@ class CloudCastService::StreamReactor final
   }
 
   CloudCastService* const service_;
+  Admission::Ticket ticket_;  // this stream's place among the server's and its client's
   grpc::CallbackServerContext* const context_;
   const std::string peer_;
   const std::uint64_t client_key_;  // the connection, for the worker pool's fairness
@@ -426,6 +441,7 @@ class CloudCastService::StreamReactor final
   bool broken_ = false;                 // cancelled or a write failed: nothing more is written
   std::optional<grpc::Status> ending_;  // the server ends the call (idle) with this status
   bool finished_ = false;               // Finish has been called
+  bool got_message_ = false;            // any message read (for --first-message-timeout)
   Clock::time_point last_activity_;
 };
 
@@ -440,6 +456,8 @@ class RejectedStream final : public grpc::ServerBidiReactor<grpc::ByteBuffer, gr
 
 CloudCastService::CloudCastService(const ServerOptions& options, Metrics* metrics)
     : options_(options),
+      admission_(Admission::Limits{options.max_streams, options.ResolvedMaxStreamsPerClient(),
+                                   options.max_streams, options.ResolvedMaxProcessPerClient()}),
       default_settings_(std::make_shared<const StreamSettings>(options.StreamDefaults())),
       metrics_(metrics),
       runner_(options.ResolvedThreads(), metrics, options.ResolvedInstance()),
@@ -456,19 +474,16 @@ grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* CloudCastService::S
     return new RejectedStream(
         grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
   }
-  if (active_streams_.fetch_add(1) >= static_cast<int>(options_.max_streams)) {
-    active_streams_.fetch_sub(1);
+  auto ticket = admission_.Admit(Admission::Kind::kStream, PeerHost(context->peer()));
+  if (!ticket.ok()) {
     metrics_->streams_rejected_limit.Increment();
-    spdlog::warn("stream from {} refused: {} streams open, the limit", context->peer(),
-                 options_.max_streams);
-    return new RejectedStream(
-        grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED,
-                     absl::StrCat("too many concurrent streams: the server's limit is ",
-                                  options_.max_streams, " (max_streams, --max-streams)")));
+    spdlog::warn("stream from {} refused: {}", context->peer(),
+                 std::string(ticket.status().message()));
+    return new RejectedStream(ToGrpc(ticket.status()));
   }
   metrics_->streams_accepted.Increment();
   metrics_->active_streams.Increment();
-  return new StreamReactor(this, context);
+  return new StreamReactor(this, context, *std::move(ticket));
 }
 
 grpc::ServerUnaryReactor* CloudCastService::Process(grpc::CallbackServerContext* context,
@@ -481,6 +496,7 @@ grpc::ServerUnaryReactor* CloudCastService::Process(grpc::CallbackServerContext*
     v1::ProcessRequest request;
     v1::CloudReply reply;
     std::shared_ptr<const StreamSettings> settings;
+    Admission::Ticket ticket;
   };
   auto call = std::make_shared<Call>();
   const std::size_t bytes = request_bytes->Length();
@@ -503,14 +519,13 @@ grpc::ServerUnaryReactor* CloudCastService::Process(grpc::CallbackServerContext*
   }
   call->settings = std::make_shared<const StreamSettings>(*std::move(settings));
   // Each call holds its frame until a worker is done with it; bound them like streams.
-  if (active_process_calls_.fetch_add(1) >= static_cast<int>(options_.max_streams)) {
-    active_process_calls_.fetch_sub(1);
-    reactor->Finish(
-        grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED,
-                     absl::StrCat("too many Process calls in flight: the server's limit is ",
-                                  options_.max_streams, " (max_streams, --max-streams)")));
+  auto ticket = admission_.Admit(Admission::Kind::kProcess, PeerHost(context->peer()));
+  if (!ticket.ok()) {
+    reactor->Finish(ToGrpc(ticket.status()));
     return reactor;
   }
+  call->ticket = *std::move(ticket);
+  active_process_calls_.fetch_add(1);
   const std::uint64_t pixels = FramePixels(call->request.frame());
   const bool submitted = pool_.Submit(
       [this, reactor, reply_bytes, arrival, call](std::size_t worker) {
@@ -525,6 +540,7 @@ grpc::ServerUnaryReactor* CloudCastService::Process(grpc::CallbackServerContext*
         } else {
           result = ToGrpc(status);
         }
+        call->ticket.Release();
         reactor->Finish(std::move(result));
         ProcessCallDone();
       },
@@ -583,7 +599,6 @@ void CloudCastService::Unregister(StreamReactor* stream) {
     std::lock_guard<std::mutex> lock(streams_mu_);
     streams_.erase(stream);
   }
-  active_streams_.fetch_sub(1);
   metrics_->active_streams.Decrement();
   streams_cv_.notify_all();
 }

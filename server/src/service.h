@@ -21,6 +21,7 @@
 #include <thread>
 #include <vector>
 
+#include "admission.h"
 #include "cloudcast/server/options.h"
 #include "cloudcast/v1/cloudcast.grpc.pb.h"
 #include "frame_processor.h"
@@ -63,7 +64,7 @@ class CloudCastService final : public CallbackBase {
   // the gRPC server has shut down. Idempotent.
   void StopWorkers();
 
-  int active_streams() const { return active_streams_.load(); }
+  int active_streams() const { return static_cast<int>(admission_.open(Admission::Kind::kStream)); }
   int worker_threads() const { return static_cast<int>(pool_.size()); }
   // The most frames one stream held at once (waiting + in work + replies not yet written), over
   // all streams since the start or the last reset. Tests check it against max_queued_frames.
@@ -80,6 +81,7 @@ class CloudCastService final : public CallbackBase {
   void Housekeeping();
 
   const ServerOptions options_;
+  Admission admission_;
   const std::shared_ptr<const StreamSettings> default_settings_;
   Metrics* const metrics_;
   // Before pool_: the workers use it until the pool is stopped.
@@ -87,7 +89,6 @@ class CloudCastService final : public CallbackBase {
   WorkerPool pool_;
 
   std::atomic<bool> draining_{false};
-  std::atomic<int> active_streams_{0};
   std::atomic<int> active_process_calls_{0};
   std::atomic<std::uint64_t> next_call_key_{1};  // the worker pool's key of each call
   std::atomic<std::uint32_t> queued_high_water_{0};

@@ -24,6 +24,7 @@ class ServerFlags {
  private:
   ServerOptions options_;
   double idle_timeout_seconds_;
+  double first_message_timeout_seconds_;
   double shutdown_grace_seconds_;
   double max_connection_age_seconds_ = 0;
   double max_connection_age_grace_seconds_ = 0;

@@ -28,10 +28,18 @@ struct ServerOptions {
   std::uint64_t max_message_bytes = std::uint64_t{64} << 20;
   // Largest image side and width x height (the core's limits).
   Limits limits;
-  // Concurrent Stream calls; the next one gets RESOURCE_EXHAUSTED.
+  // Concurrent Stream calls, and separately Process calls in flight; the next one gets
+  // RESOURCE_EXHAUSTED.
   std::uint32_t max_streams = 64;
+  // One client's share of those (a client is its peer address; with tokens, its tenant), so no
+  // client can take every slot. 0: half of max_streams. Behind an L7 load balancer every call
+  // comes from the balancer's address: raise these there, or give robots tokens.
+  std::uint32_t max_streams_per_client = 0;
+  std::uint32_t max_process_per_client = 0;
   // A stream on which nothing moved this long is ended with DEADLINE_EXCEEDED.
   std::chrono::milliseconds idle_timeout{60'000};
+  // A stream that has sent no message at all this long after opening is ended the same way.
+  std::chrono::milliseconds first_message_timeout{10'000};
   // Frames held per stream in DELIVERY_ALL mode (waiting + in work + replies not yet written).
   std::uint32_t max_queued_frames = 4;
   // On shutdown, how long frames in flight may take before their calls are cancelled.
@@ -56,6 +64,9 @@ struct ServerOptions {
   absl::Status Validate() const;
   // `threads`, or the number of cores when it is 0 (at least 1).
   int ResolvedThreads() const;
+  // The per-client shares with 0 resolved (half of max_streams, at least 1).
+  std::uint32_t ResolvedMaxStreamsPerClient() const;
+  std::uint32_t ResolvedMaxProcessPerClient() const;
   // `instance`, or the host name when it is empty.
   std::string ResolvedInstance() const;
   // `defaults` with `limits`: what a stream starts from.

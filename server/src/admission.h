@@ -1,0 +1,70 @@
+// Who may open a call now: the server-wide limits on streams and on Process calls in flight,
+// and each client's share of them, so that one client (a robot, a misbehaving script, or an
+// attacker) cannot take every slot. A client is its peer address without the port, or, with
+// authentication, its tenant.
+#pragma once
+
+#include <cstdint>
+#include <mutex>
+#include <string>
+#include <string_view>
+#include <unordered_map>
+
+#include "absl/status/statusor.h"
+
+namespace cloudcast::server {
+
+class Admission {
+ public:
+  enum class Kind { kStream, kProcess };
+
+  struct Limits {
+    std::uint32_t max_streams = 64;
+    std::uint32_t max_streams_per_client = 32;
+    std::uint32_t max_process = 64;
+    std::uint32_t max_process_per_client = 32;
+  };
+
+  // A place held for one call; giving it back (destruction) frees it.
+  class Ticket {
+   public:
+    Ticket() = default;
+    Ticket(Ticket&& other) noexcept { *this = std::move(other); }
+    Ticket& operator=(Ticket&& other) noexcept;
+    ~Ticket() { Release(); }
+    void Release();
+
+   private:
+    friend class Admission;
+    Admission* admission_ = nullptr;
+    Kind kind_ = Kind::kStream;
+    std::string client_;
+  };
+
+  explicit Admission(const Limits& limits) : limits_(limits) {}
+  Admission(const Admission&) = delete;
+  Admission& operator=(const Admission&) = delete;
+
+  // A place for `client`, or RESOURCE_EXHAUSTED saying which limit (and its flag) it hit.
+  absl::StatusOr<Ticket> Admit(Kind kind, const std::string& client);
+
+  std::uint32_t open(Kind kind) const;
+
+ private:
+  struct Counts {
+    std::uint32_t streams = 0;
+    std::uint32_t process = 0;
+  };
+  void Give(Kind kind, const std::string& client);
+
+  const Limits limits_;
+  mutable std::mutex mu_;
+  Counts total_;
+  std::unordered_map<std::string, Counts> clients_;
+};
+
+// The client of a call: gRPC's peer string without its port ("ipv4:10.1.2.3:40123" ->
+// "ipv4:10.1.2.3", "ipv6:[::1]:40123" -> "ipv6:[::1]").
+std::string PeerHost(std::string_view peer);
+
+}  // namespace cloudcast::server
