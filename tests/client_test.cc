@@ -8,8 +8,6 @@
 // point count, and a one-to-one matching in which every point lies within the reply's
 // position_error_bound per coordinate (Draco's quantization) with the exact colour (8-bit
 // colour is lossless).
-#include "cloudcast/client/client.h"
-
 #include <arpa/inet.h>
 #include <netinet/in.h>
 #include <sys/socket.h>
@@ -29,10 +27,10 @@
 #include <string>
 #include <thread>
 #include <tuple>
-#include <unordered_map>
 #include <utility>
 #include <vector>
 
+#include "cloudcast/client/client.h"
 #include "cloudcast/client/config.h"
 #include "cloudcast/client/opencv.h"
 #include "cloudcast/core/image.h"
@@ -118,68 +116,11 @@ ColorView ViewOf(const cv::Mat& m, ColorEncoding e) {
   return v;
 }
 
-// Same count; every reference point paired with its own decoded point within `bound` on each
-// coordinate (Draco's per-coordinate quantization error) and, unless `check_colour` is off, with
-// the same RGB. Pairing prefers the nearest unused candidate; colour makes the pairing
-// unambiguous where two centroids lie closer than the bound.
+// The decoded cloud is `reference` within the position error bound the reply reports, per
+// coordinate, with the same RGB (8-bit colour is lossless).
 ::testing::AssertionResult MatchesWithinBound(const PointCloud& reference,
-                                              const PointCloud& decoded, float bound,
-                                              bool check_colour = true) {
-  if (reference.size() != decoded.size()) {
-    return ::testing::AssertionFailure() << "point counts differ: reference " << reference.size()
-                                         << ", decoded " << decoded.size();
-  }
-  if (reference.empty()) return ::testing::AssertionSuccess();
-  // The bound is exact in real arithmetic; allow for float rounding in dequantization.
-  const double tol = static_cast<double>(bound) * 1.0001 + 1e-6;
-  const double cell = std::max(tol, 1e-4);
-  using Key = std::tuple<std::int64_t, std::int64_t, std::int64_t>;
-  struct KeyHash {
-    std::size_t operator()(const Key& k) const {
-      return std::hash<std::int64_t>()(std::get<0>(k) * 73856093 ^ std::get<1>(k) * 19349663 ^
-                                       std::get<2>(k) * 83492791);
-    }
-  };
-  auto key_of = [&](const Point& p) {
-    return Key(static_cast<std::int64_t>(std::floor(p.x / cell)),
-               static_cast<std::int64_t>(std::floor(p.y / cell)),
-               static_cast<std::int64_t>(std::floor(p.z / cell)));
-  };
-  std::unordered_map<Key, std::vector<std::size_t>, KeyHash> grid;
-  for (std::size_t i = 0; i < decoded.size(); ++i) grid[key_of(decoded.points[i])].push_back(i);
-  std::vector<bool> used(decoded.size(), false);
-  for (std::size_t r = 0; r < reference.size(); ++r) {
-    const Point& p = reference.points[r];
-    const auto [kx, ky, kz] = key_of(p);
-    std::size_t best = SIZE_MAX;
-    double best_d = 1e300;
-    // The partner lies within one cell (cell >= tol) on each axis.
-    for (int n = 0; n < 27; ++n) {
-      auto it = grid.find(Key(kx + n % 3 - 1, ky + n / 3 % 3 - 1, kz + n / 9 - 1));
-      if (it == grid.end()) continue;
-      for (std::size_t i : it->second) {
-        if (used[i]) continue;
-        const Point& q = decoded.points[i];
-        const double d = std::max({std::fabs(static_cast<double>(p.x) - q.x),
-                                   std::fabs(static_cast<double>(p.y) - q.y),
-                                   std::fabs(static_cast<double>(p.z) - q.z)});
-        if (d > tol) continue;
-        if (check_colour && (p.rgba & 0xFFFFFF) != (q.rgba & 0xFFFFFF)) continue;
-        if (d < best_d) {
-          best_d = d;
-          best = i;
-        }
-      }
-    }
-    if (best == SIZE_MAX) {
-      return ::testing::AssertionFailure()
-             << "reference point " << r << " (" << p.x << ", " << p.y << ", " << p.z << ", rgb "
-             << std::hex << (p.rgba & 0xFFFFFF) << std::dec << ") has no decoded partner within "
-             << tol << " per coordinate" << (check_colour ? " with the same colour" : "");
-    }
-    used[best] = true;
-  }
-  return ::testing::AssertionSuccess();
+                                              const PointCloud& decoded, float bound) {
+  return testing::CloudsMatch(reference, decoded, testing::CloudTolerance::DracoBound(bound));
 }
 
 // A loopback port with nothing listening: bound, read and released.

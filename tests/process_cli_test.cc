@@ -40,6 +40,7 @@
 #include "cloudcast/io/image_io.h"
 #include "cloudcast/reference/pcl_reference.h"
 #include "program_support.h"
+#include "support/cloud_match.h"
 #include "test_support.h"
 
 namespace cloudcast {
@@ -53,8 +54,11 @@ using Json = nlohmann::json;
 
 std::string Binary() { return std::string(CLOUDCAST_BIN_DIR) + "/cloudcast-process"; }
 
+using testing::CloudsMatch;
+using testing::CloudTolerance;
 using testing::ReadText;
 using testing::RunResult;
+using testing::SamePoints;
 using testing::ShellQuote;
 
 class CliTest : public testing::ScratchDirTest {
@@ -103,102 +107,6 @@ std::uint64_t StagePoints(const Json& report, const std::string& name) {
 
 bool Finite(const Point& p) {
   return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z);
-}
-
-std::uint32_t Bits(float f) {
-  std::uint32_t b;
-  std::memcpy(&b, &f, 4);
-  return b;
-}
-
-// Points sorted by their bits, optionally with alpha forced to 255 (for formats without alpha).
-std::vector<Point> Canonical(const PointCloud& cloud, bool keep_alpha = true) {
-  std::vector<Point> v(cloud.points.begin(), cloud.points.end());
-  for (Point& p : v) {
-    if (!keep_alpha) p.rgba |= 0xFF000000u;
-  }
-  std::sort(v.begin(), v.end(), [](const Point& a, const Point& b) {
-    return std::make_tuple(Bits(a.x), Bits(a.y), Bits(a.z), a.rgba) <
-           std::make_tuple(Bits(b.x), Bits(b.y), Bits(b.z), b.rgba);
-  });
-  return v;
-}
-
-// The same points (bit for bit) and colours, in any order.
-::testing::AssertionResult SamePoints(const PointCloud& expected, const PointCloud& actual,
-                                      bool compare_alpha = true) {
-  const auto a = Canonical(expected, compare_alpha), b = Canonical(actual, compare_alpha);
-  if (a.size() != b.size()) {
-    return ::testing::AssertionFailure() << "expected " << a.size() << " points, got " << b.size();
-  }
-  for (std::size_t i = 0; i < a.size(); ++i) {
-    if (Bits(a[i].x) != Bits(b[i].x) || Bits(a[i].y) != Bits(b[i].y) ||
-        Bits(a[i].z) != Bits(b[i].z) || a[i].rgba != b[i].rgba) {
-      return ::testing::AssertionFailure()
-             << "sorted point " << i << ": expected (" << a[i].x << ", " << a[i].y << ", " << a[i].z
-             << ", " << std::hex << a[i].rgba << std::dec << ") got (" << b[i].x << ", " << b[i].y
-             << ", " << b[i].z << ", " << std::hex << b[i].rgba << ")";
-    }
-  }
-  return ::testing::AssertionSuccess();
-}
-
-// Every decoded point has its own expected point with the same RGB within `tol` per coordinate
-// (Draco quantizes positions and does not keep the order).
-::testing::AssertionResult SameWithin(const PointCloud& expected, const PointCloud& decoded,
-                                      double tol) {
-  if (expected.size() != decoded.size()) {
-    return ::testing::AssertionFailure()
-           << "expected " << expected.size() << " points, decoded " << decoded.size();
-  }
-  const double cell = std::max(2 * tol, 1e-6);
-  auto key = [cell](double x, double y, double z) {
-    auto c = [cell](double v) { return static_cast<std::int64_t>(std::floor(v / cell)); };
-    return std::make_tuple(c(x), c(y), c(z));
-  };
-  struct Hash {
-    std::size_t operator()(const std::tuple<std::int64_t, std::int64_t, std::int64_t>& t) const {
-      return std::hash<std::int64_t>()(std::get<0>(t) * 73856093 ^ std::get<1>(t) * 19349663 ^
-                                       std::get<2>(t) * 83492791);
-    }
-  };
-  std::unordered_map<std::tuple<std::int64_t, std::int64_t, std::int64_t>, std::vector<std::size_t>,
-                     Hash>
-      grid;
-  for (std::size_t i = 0; i < expected.size(); ++i) {
-    const Point& p = expected.points[i];
-    grid[key(p.x, p.y, p.z)].push_back(i);
-  }
-  std::vector<bool> used(expected.size(), false);
-  for (std::size_t d = 0; d < decoded.size(); ++d) {
-    const Point& q = decoded.points[d];
-    const auto [kx, ky, kz] = key(q.x, q.y, q.z);
-    bool found = false;
-    for (int dx = -1; dx <= 1 && !found; ++dx) {
-      for (int dy = -1; dy <= 1 && !found; ++dy) {
-        for (int dz = -1; dz <= 1 && !found; ++dz) {
-          auto it = grid.find({kx + dx, ky + dy, kz + dz});
-          if (it == grid.end()) continue;
-          for (std::size_t i : it->second) {
-            const Point& p = expected.points[i];
-            if (used[i] || (p.rgba & 0xFFFFFF) != (q.rgba & 0xFFFFFF)) continue;
-            if (std::fabs(double(p.x) - q.x) <= tol && std::fabs(double(p.y) - q.y) <= tol &&
-                std::fabs(double(p.z) - q.z) <= tol) {
-              used[i] = found = true;
-              break;
-            }
-          }
-        }
-      }
-    }
-    if (!found) {
-      return ::testing::AssertionFailure()
-             << "decoded point " << d << " (" << q.x << ", " << q.y << ", " << q.z << ", "
-             << std::hex << q.rgba << std::dec << ") has no expected point of its colour within "
-             << tol;
-    }
-  }
-  return ::testing::AssertionSuccess();
 }
 
 PointCloud FromPclCloud(const pcl::PointCloud<pcl::PointXYZRGB>& in) {
@@ -549,12 +457,12 @@ TEST_F(CliTest, DrcDecodesToTheFusedCloud) {
   const double bound = encode.value("position_error_bound", 1.0);
   EXPECT_GT(bound, 0.0);
   EXPECT_LE(bound, 0.03 / 4 + 1e-6) << "max_position_error must be leaf / 4";
-  const double tol = bound * (1 + 1e-5) + 1e-6;
+  const CloudTolerance tolerance = CloudTolerance::DracoBound(bound);
 
   PointCloud ours;
   ASSERT_TRUE(LoadCloud(out, &ours).ok());
   EXPECT_EQ(ours.size(), StagePoints(report, "voxel_grid"));
-  EXPECT_TRUE(SameWithin(expected, ours, tol));
+  EXPECT_TRUE(CloudsMatch(expected, ours, tolerance));
 
   // The stock tool, when installed, reads the same file.
   if (std::system("command -v draco_decoder >/dev/null 2>&1") != 0) {
@@ -566,7 +474,7 @@ TEST_F(CliTest, DrcDecodesToTheFusedCloud) {
   ASSERT_EQ(std::system(command.c_str()), 0) << ReadText(Path("draco.log"));
   PointCloud decoded;
   ASSERT_TRUE(LoadCloud(ply, &decoded).ok());
-  EXPECT_TRUE(SameWithin(expected, decoded, tol));
+  EXPECT_TRUE(CloudsMatch(expected, decoded, tolerance));
 }
 
 TEST_F(CliTest, RepeatReportsMediansAndQuietPrintsNothing) {
@@ -744,7 +652,7 @@ TEST_F(CliTest, EveryDisparityDepthGivesTheSameCloudAsStockPcl) {
   reference::PclCloud voxels;
   reference::PclVoxelGrid(passed, VoxelGridParams{}, voxels);
   EXPECT_EQ(StagePoints(r8, "passthrough"), passed->size());
-  EXPECT_TRUE(testing::CloudsMatch(reference::FromPcl(voxels), c8));
+  EXPECT_TRUE(CloudsMatch(reference::FromPcl(voxels), c8, CloudTolerance::Equivalence()));
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -787,10 +695,12 @@ TEST_F(CliTest, TsukubaFrameMatchesStockPcl) {
 
   pcl::PointCloud<pcl::PointXYZRGB> pcl_cloud;
   ASSERT_EQ(pcl::io::loadPCDFile(out, pcl_cloud), 0);
-  EXPECT_TRUE(testing::CloudsMatch(reference::FromPcl(voxels), FromPclCloud(pcl_cloud)));
+  EXPECT_TRUE(CloudsMatch(reference::FromPcl(voxels), FromPclCloud(pcl_cloud),
+                          CloudTolerance::Equivalence()));
   open3d::geometry::PointCloud o3d;
   ASSERT_TRUE(open3d::io::ReadPointCloud(out, o3d));
-  EXPECT_TRUE(testing::CloudsMatch(reference::FromPcl(voxels), FromOpen3d(o3d)));
+  EXPECT_TRUE(
+      CloudsMatch(reference::FromPcl(voxels), FromOpen3d(o3d), CloudTolerance::Equivalence()));
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1125,7 +1035,7 @@ TEST_F(CloudIoTest, DrcKeepsFinitePointsWithinTheErrorBound) {
   PointCloud back;
   ASSERT_TRUE(LoadCloud(Path("o.drc"), &back).ok());
   EXPECT_EQ(back.height, 1u);
-  EXPECT_TRUE(SameWithin(FiniteOnly(cloud), back, 0.001 + 1e-6));
+  EXPECT_TRUE(CloudsMatch(FiniteOnly(cloud), back, CloudTolerance::PerCoordinate(0.001 + 1e-6)));
   for (const Point& p : back.points) EXPECT_EQ(AlphaOf(p.rgba), 255);
 }
 

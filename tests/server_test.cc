@@ -3,8 +3,6 @@
 //
 // Frames: the New Tsukuba sample when it is there, else frames of the synthetic scene (same size,
 // same camera), so that every test runs on a fresh machine.
-#include "cloudcast/server/server.h"
-
 #include <arpa/inet.h>
 #include <google/protobuf/descriptor.pb.h>
 #include <google/protobuf/unknown_field_set.h>
@@ -40,6 +38,7 @@
 #include "cloudcast/io/image_io.h"
 #include "cloudcast/server/cli.h"
 #include "cloudcast/server/options.h"
+#include "cloudcast/server/server.h"
 #include "cloudcast/testing/metrics_scrape.h"
 #include "cloudcast/v1/cloudcast.grpc.pb.h"
 #include "frame_input.h"
@@ -210,78 +209,6 @@ PointCloud Reference(const SourceFrame& f, const Params& p) {
   return cloud;
 }
 
-// `decoded` is `reference` moved by at most `tolerance` per coordinate (Draco's quantization),
-// point for point: a perfect matching between the two sets in which matched points are within
-// the tolerance and their colours within `colour_tolerance`. (testing::CloudsMatch searches a grid
-// of extent / 4096, finer than a Draco step, so it cannot take a tolerance this large.) Matching
-// by augmenting paths, so that two nearby centroids cannot steal each other's partner.
-::testing::AssertionResult MatchWithin(const PointCloud& reference, const PointCloud& decoded,
-                                       double tolerance, int colour_tolerance) {
-  if (reference.size() != decoded.size()) {
-    return ::testing::AssertionFailure() << "point counts differ: reference " << reference.size()
-                                         << ", decoded " << decoded.size();
-  }
-  const double cell = std::max(tolerance, 1e-9);
-  auto key = [&](double x, double y, double z) {
-    auto c = [&](double v) { return static_cast<std::int64_t>(std::floor(v / cell)); };
-    return std::make_tuple(c(x), c(y), c(z));
-  };
-  std::map<std::tuple<std::int64_t, std::int64_t, std::int64_t>, std::vector<std::size_t>> grid;
-  for (std::size_t i = 0; i < decoded.size(); ++i) {
-    const Point& q = decoded.points[i];
-    grid[key(q.x, q.y, q.z)].push_back(i);
-  }
-  auto close = [&](const Point& p, const Point& q) {
-    auto channel = [](std::uint8_t a, std::uint8_t b) { return std::abs(int(a) - int(b)); };
-    return std::fabs(double(p.x) - q.x) <= tolerance && std::fabs(double(p.y) - q.y) <= tolerance &&
-           std::fabs(double(p.z) - q.z) <= tolerance &&
-           channel(RedOf(p.rgba), RedOf(q.rgba)) <= colour_tolerance &&
-           channel(GreenOf(p.rgba), GreenOf(q.rgba)) <= colour_tolerance &&
-           channel(BlueOf(p.rgba), BlueOf(q.rgba)) <= colour_tolerance;
-  };
-  std::vector<std::vector<std::size_t>> candidates(reference.size());
-  for (std::size_t r = 0; r < reference.size(); ++r) {
-    const Point& p = reference.points[r];
-    const auto [cx, cy, cz] = key(p.x, p.y, p.z);
-    for (int dx = -1; dx <= 1; ++dx)
-      for (int dy = -1; dy <= 1; ++dy)
-        for (int dz = -1; dz <= 1; ++dz) {
-          auto it = grid.find({cx + dx, cy + dy, cz + dz});
-          if (it == grid.end()) continue;
-          for (std::size_t i : it->second) {
-            if (close(p, decoded.points[i])) candidates[r].push_back(i);
-          }
-        }
-    if (candidates[r].empty()) {
-      return ::testing::AssertionFailure()
-             << "reference point " << r << " (" << p.x << ", " << p.y << ", " << p.z
-             << ") has no decoded point within " << tolerance;
-    }
-  }
-  std::vector<std::size_t> partner(decoded.size(), SIZE_MAX);
-  std::vector<std::size_t> visited(decoded.size(), SIZE_MAX);
-  std::function<bool(std::size_t, std::size_t)> augment = [&](std::size_t r, std::size_t round) {
-    for (std::size_t i : candidates[r]) {
-      if (visited[i] == round) continue;
-      visited[i] = round;
-      if (partner[i] == SIZE_MAX || augment(partner[i], round)) {
-        partner[i] = r;
-        return true;
-      }
-    }
-    return false;
-  };
-  for (std::size_t r = 0; r < reference.size(); ++r) {
-    if (!augment(r, r)) {
-      const Point& p = reference.points[r];
-      return ::testing::AssertionFailure()
-             << "reference point " << r << " (" << p.x << ", " << p.y << ", " << p.z
-             << ") has no decoded partner left within " << tolerance;
-    }
-  }
-  return ::testing::AssertionSuccess();
-}
-
 // The reply's cloud is the core pipeline's `reference` within the quantization the reply reports.
 ::testing::AssertionResult CloudMatches(const PointCloud& reference, const v1::CloudReply& reply,
                                         bool compare_colour = true) {
@@ -299,9 +226,9 @@ PointCloud Reference(const SourceFrame& f, const Params& p) {
   if (!reference.empty() && !(reply.position_error_bound() > 0)) {
     return ::testing::AssertionFailure() << "position_error_bound " << reply.position_error_bound();
   }
-  // The bound is computed in double from float ranges; allow a float rounding on top.
-  const double tolerance = reply.position_error_bound() * (1 + 1e-6) + 1e-7;
-  return MatchWithin(reference, decoded, tolerance, compare_colour ? 0 : 255);
+  return testing::CloudsMatch(
+      reference, decoded,
+      testing::CloudTolerance::DracoBound(reply.position_error_bound(), compare_colour));
 }
 
 // ---------------------------------------------------------------------------------------------
