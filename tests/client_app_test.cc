@@ -37,8 +37,8 @@
 #include "cloudcast/client/opencv.h"
 #include "cloudcast/datasets/synthetic.h"
 #include "cloudcast/io/cloud_io.h"
-#include "cloudcast/server/server.h"  // cloudcast_server_lib
 #include "program_support.h"
+#include "support/server_fixture.h"
 #include "test_support.h"
 #include "xvfb_support.h"
 
@@ -575,33 +575,12 @@ TEST_F(ClientSourceTest, PairErrorsNameFlagAndFile) {
 // ---------------------------------------------------------------------------------------------
 // The session in-process, against a loopback server.
 
-class ClientSessionTest : public TempDirTest {
- protected:
-  static void SetUpTestSuite() {
-    server::ServerOptions options;
-    options.listen = "127.0.0.1:0";
-    options.metrics_listen = "";
-    auto s = server::Server::Start(options);
-    ASSERT_TRUE(s.ok()) << s.status();
-    server_ = s->release();
-    target_ = "127.0.0.1:" + std::to_string(server_->port());
-  }
-  static void TearDownTestSuite() {
-    if (server_ != nullptr) server_->Shutdown(std::chrono::milliseconds(2000));
-    delete server_;
-    server_ = nullptr;
-  }
-
-  static server::Server* server_;
-  static std::string target_;
-};
-server::Server* ClientSessionTest::server_ = nullptr;
-std::string ClientSessionTest::target_;
+class ClientSessionTest : public testing::SharedServer<TempDirTest> {};
 
 TEST_F(ClientSessionTest, SessionPacesFramesAndAnswersEveryOneLosslessly) {
   auto source = LimitFrames(*OpenSynthetic(160, 120), 8);
   SessionOptions options;
-  options.server = target_;
+  options.server = shared_target();
   options.fps = 20;
   options.config.set_delivery(v1::DELIVERY_ALL);
   StreamStats stats;
@@ -633,7 +612,7 @@ TEST_F(ClientSessionTest, SessionSendsEncodedImages) {
     SCOPED_TRACE(Name(encoding));
     auto source = LimitFrames(*OpenSynthetic(160, 120), 3);
     SessionOptions options;
-    options.server = target_;
+    options.server = shared_target();
     options.encoding = encoding;
     options.config.set_delivery(v1::DELIVERY_ALL);
     StreamStats stats;
@@ -739,7 +718,7 @@ TEST_F(ClientProgramTest, StreamsAndWritesANonTrivialSnapshot) {
     // passthrough, z = 615 / d in [3, 12]: 00800 and 01800 give empty clouds, 00200 and 00600 a
     // few thousand points; 00400, the 3rd, gives 27,557.)
     std::vector<std::string> args =
-        Join(SourceArgs(), {"--server", target_, "--lossless", "--snapshot", png,
+        Join(SourceArgs(), {"--server", shared_target(), "--lossless", "--snapshot", png,
                             "--snapshot-after", "3", "--json", json, "--window", "640x480"});
     if (hidden) args.push_back("--hidden");
     const RunResult r = Run(args);
@@ -764,7 +743,7 @@ TEST_F(ClientProgramTest, RecordedFilesHoldTheRepliesPointCounts) {
                       : *OpenSynthetic(640, 480),
                   10);
   ClientOptions client_options;
-  auto client = Client::Connect(target_, client_options);
+  auto client = Client::Connect(shared_target(), client_options);
   ASSERT_TRUE(client.ok()) << client.status();
   StreamConfig config;
   SetCamera(reference_source->info().camera, &config);
@@ -782,10 +761,10 @@ TEST_F(ClientProgramTest, RecordedFilesHoldTheRepliesPointCounts) {
   for (const std::string format : {"pcd", "ply", "drc"}) {
     SCOPED_TRACE(format);
     const std::string dir = Path("rec_" + format);
-    const RunResult r =
-        Run(Join(SourceArgs(), {"--server", target_, "--no-window", "--lossless", "--record", dir,
-                                "--record-format", format, "--json", Path("rec.json")}),
-            "env -u DISPLAY");
+    const RunResult r = Run(
+        Join(SourceArgs(), {"--server", shared_target(), "--no-window", "--lossless", "--record",
+                            dir, "--record-format", format, "--json", Path("rec.json")}),
+        "env -u DISPLAY");
     ASSERT_TRUE(r.exited && r.code == 0) << r;
     EXPECT_NE(r.out.find("recorded: 10 " + format + " files"), std::string::npos) << r;
     double total = 0;
@@ -807,8 +786,8 @@ TEST_F(ClientProgramTest, RecordedFilesHoldTheRepliesPointCounts) {
 TEST_F(ClientProgramTest, NoWindowPrintsStatisticsAndJson) {
   const std::string json = Path("stats.json");
   // No display at all: --no-window must not touch GL.
-  const RunResult r = Run(Join(SourceArgs(), {"--server", target_, "--no-window", "--lossless",
-                                              "--json", json, "--progress", "0.05"}),
+  const RunResult r = Run(Join(SourceArgs(), {"--server", shared_target(), "--no-window",
+                                              "--lossless", "--json", json, "--progress", "0.05"}),
                           "env -u DISPLAY");
   ASSERT_TRUE(r.exited && r.code == 0) << r;
   EXPECT_NE(r.out.find("frames: sent 10, received 10, dropped 0, errors 0"), std::string::npos)
@@ -834,8 +813,8 @@ TEST_F(ClientProgramTest, NoWindowPrintsStatisticsAndJson) {
 }
 
 TEST_F(ClientProgramTest, DefaultSourceIsTsukubaWhenPresentElseSynthetic) {
-  const RunResult r = Run({"--server", target_, "--no-window", "--frames", "3", "--lossless",
-                           "--json", Path("default.json")},
+  const RunResult r = Run({"--server", shared_target(), "--no-window", "--frames", "3",
+                           "--lossless", "--json", Path("default.json")},
                           "env -u DISPLAY");
   ASSERT_TRUE(r.exited && r.code == 0) << r;
   const Json j = Json::parse(ReadText(Path("default.json")));
@@ -989,10 +968,10 @@ TEST_F(ClientProgramTest, StreamsLosslessVideos) {
       !WriteVideo(Path("c.mkv"), "FFV1", colours)) {
     GTEST_SKIP() << "this OpenCV build cannot write FFV1";
   }
-  const RunResult r =
-      Run({"--disparity-video", Path("d.mkv"), "--colour-video", Path("c.mkv"), "--server", target_,
-           "--no-window", "--lossless", "--loop", "--frames", "15", "--json", Path("v.json")},
-          "env -u DISPLAY");
+  const RunResult r = Run({"--disparity-video", Path("d.mkv"), "--colour-video", Path("c.mkv"),
+                           "--server", shared_target(), "--no-window", "--lossless", "--loop",
+                           "--frames", "15", "--json", Path("v.json")},
+                          "env -u DISPLAY");
   ASSERT_TRUE(r.exited && r.code == 0) << r;
   EXPECT_EQ(r.err.find("not known to be lossless"), std::string::npos) << r;
   const Json j = Json::parse(ReadText(Path("v.json")));

@@ -38,8 +38,8 @@
 #include "cloudcast/core/point.h"
 #include "cloudcast/datasets/synthetic.h"
 #include "cloudcast/io/image_io.h"
-#include "cloudcast/server/server.h"  // cloudcast_server_lib
 #include "gtest/gtest.h"
+#include "support/server_fixture.h"
 #include "test_support.h"
 
 namespace cloudcast::client {
@@ -142,28 +142,13 @@ int DeadPort() {
 }
 
 // ---------------------------------------------------------------------------------------------
-// The fixture: one server for the whole suite (starting one per test would dominate the time).
+// The fixture: one server for the whole suite, a client of its own per test.
 
-class ClientTest : public ::testing::Test {
+class ClientTest : public testing::SharedServerTest {
  protected:
-  static void SetUpTestSuite() {
-    server::ServerOptions options;
-    options.listen = "127.0.0.1:0";
-    options.metrics_listen = "";
-    options.threads = 2;
-    absl::StatusOr<std::unique_ptr<server::Server>> s = server::Server::Start(options);
-    ASSERT_TRUE(s.ok()) << s.status();
-    server_ = std::move(s).value().release();
-    target_ = "127.0.0.1:" + std::to_string(server_->port());
-  }
-  static void TearDownTestSuite() {
-    delete server_;
-    server_ = nullptr;
-  }
-
   void SetUp() override {
-    ASSERT_NE(server_, nullptr) << "the in-process server did not start";
-    absl::StatusOr<std::unique_ptr<Client>> c = Client::Connect(target_);
+    testing::SharedServerTest::SetUp();
+    absl::StatusOr<std::unique_ptr<Client>> c = Client::Connect(shared_target());
     ASSERT_TRUE(c.ok()) << c.status();
     client_ = std::move(c).value();
   }
@@ -174,12 +159,8 @@ class ClientTest : public ::testing::Test {
     return s.ok() ? std::move(s).value() : nullptr;
   }
 
-  static server::Server* server_;
-  static std::string target_;
   std::unique_ptr<Client> client_;
 };
-server::Server* ClientTest::server_ = nullptr;
-std::string ClientTest::target_;
 
 // ---------------------------------------------------------------------------------------------
 // Connecting
@@ -272,7 +253,7 @@ TEST_F(ClientTest, ProcessRejectsAMalformedFrameWithTheServersError) {
   absl::StatusOr<Result> r = client_->Process(a.disparity_view(), b.colour_view());
   ASSERT_FALSE(r.ok());
   EXPECT_EQ(r.status().code(), absl::StatusCode::kInvalidArgument) << r.status();
-  EXPECT_NE(r.status().message().find(target_), std::string::npos) << r.status();
+  EXPECT_NE(r.status().message().find(shared_target()), std::string::npos) << r.status();
 }
 
 TEST_F(ClientTest, InputsThatCannotBeReadSafelyNeverLeaveTheClient) {
@@ -738,7 +719,7 @@ TEST_F(ClientTest, CancelEndsABlockedRead) {
 TEST_F(ClientTest, DecodingCanBeSwitchedOff) {
   ClientOptions options;
   options.decode_clouds = false;
-  absl::StatusOr<std::unique_ptr<Client>> c = Client::Connect(target_, options);
+  absl::StatusOr<std::unique_ptr<Client>> c = Client::Connect(shared_target(), options);
   ASSERT_TRUE(c.ok()) << c.status();
   const SyntheticFrame f = Render(160, 120, 1);
   absl::StatusOr<Result> r =

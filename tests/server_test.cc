@@ -43,6 +43,7 @@
 #include "cloudcast/v1/cloudcast.grpc.pb.h"
 #include "frame_input.h"
 #include "service.h"
+#include "support/server_fixture.h"
 #include "test_support.h"
 
 namespace cloudcast::server {
@@ -232,33 +233,7 @@ PointCloud Reference(const SourceFrame& f, const Params& p) {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Servers, channels, streams.
-
-ServerOptions TestOptions() {
-  ServerOptions o;
-  o.listen = "127.0.0.1:0";
-  o.metrics_listen = "";
-  o.threads = 2;
-  return o;
-}
-
-std::unique_ptr<Server> StartServer(const ServerOptions& options = TestOptions()) {
-  auto server = Server::Start(options);
-  EXPECT_TRUE(server.ok()) << server.status();
-  return server.ok() ? *std::move(server) : nullptr;
-}
-
-std::shared_ptr<grpc::Channel> Channel(const Server& server) {
-  grpc::ChannelArguments args;
-  args.SetMaxSendMessageSize(-1);
-  // Each test stream its own connection would hide nothing; one channel per server is what a
-  // client does. A unique argument keeps channels of different tests apart.
-  return grpc::CreateCustomChannel(server.address(), grpc::InsecureChannelCredentials(), args);
-}
-
-std::unique_ptr<v1::CloudCast::Stub> Stub(const Server& server) {
-  return v1::CloudCast::NewStub(Channel(server));
-}
+// Streams.
 
 void SetDeadline(grpc::ClientContext* ctx, seconds s = seconds(120)) {
   ctx->set_deadline(std::chrono::system_clock::now() + s);
@@ -416,22 +391,15 @@ using cloudcast::server::MetricValue;
 // ---------------------------------------------------------------------------------------------
 // The shared server for the tests that need nothing special.
 
-class ServerTest : public ::testing::Test {
+class ServerTest : public testing::SharedServerTest {
  protected:
-  static void SetUpTestSuite() { server_ = StartServer().release(); }
-  static void TearDownTestSuite() {
-    delete server_;
-    server_ = nullptr;
-  }
   void SetUp() override {
-    ASSERT_NE(server_, nullptr);
-    stub_ = Stub(*server_);
+    testing::SharedServerTest::SetUp();
+    stub_ = testing::NewStub(shared_server());
   }
 
-  static Server* server_;
   std::unique_ptr<v1::CloudCast::Stub> stub_;
 };
-Server* ServerTest::server_ = nullptr;
 
 // ---------------------------------------------------------------------------------------------
 // Results.
@@ -552,7 +520,7 @@ TEST_F(ServerTest, ConcurrentStreamsEachGetTheirOwnConfig) {
   std::vector<std::thread> clients;
   for (std::size_t s = 0; s < configs.size(); ++s) {
     clients.emplace_back([&, s] {
-      auto stub = Stub(*server_);  // a channel of its own
+      auto stub = testing::NewStub(shared_server());  // a channel of its own
       std::vector<v1::StreamRequest> requests = {
           ConfigRequest(ConfigFor(configs[s], v1::DELIVERY_ALL))};
       for (std::size_t i = 0; i < frames; ++i) {
@@ -638,11 +606,11 @@ TEST_F(ServerTest, LatestModeSlowReaderGetsDropsAndTheyAreReported) {
 }
 
 TEST(ServerAllModeTest, SlowReaderGetsEveryFrameInOrderWithBoundedMemory) {
-  ServerOptions options = TestOptions();
+  ServerOptions options = testing::TestServerOptions();
   options.max_queued_frames = 3;
-  auto server = StartServer(options);
+  auto server = testing::StartTestServer(options);
   ASSERT_NE(server, nullptr);
-  auto stub = Stub(*server);
+  auto stub = testing::NewStub(*server);
   constexpr int kFrames = 24;
   std::vector<v1::StreamRequest> requests = {ConfigRequest(ConfigFor(Params{}, v1::DELIVERY_ALL))};
   for (int i = 0; i < kFrames; ++i) {
@@ -947,7 +915,7 @@ TEST_F(ServerTest, BadFramesAndConfigsGetNamedErrorsAndEveryStreamGoesOn) {
   std::atomic<bool> stop{false};
   StreamResult bystander;
   std::thread other([&] {
-    auto stub = Stub(*server_);
+    auto stub = testing::NewStub(shared_server());
     grpc::ClientContext ctx;
     SetDeadline(&ctx);
     auto stream = stub->Stream(&ctx);
@@ -1049,11 +1017,11 @@ TEST_F(ServerTest, ProcessRpcReturnsFrameErrorsAsStatus) {
 }
 
 TEST(ServerLimitsTest, MessageOverTheSizeLimitEndsOnlyItsCall) {
-  ServerOptions options = TestOptions();
+  ServerOptions options = testing::TestServerOptions();
   options.max_message_bytes = 1 << 20;  // a raw 640x480 frame is 1.2 MB
-  auto server = StartServer(options);
+  auto server = testing::StartTestServer(options);
   ASSERT_NE(server, nullptr);
-  auto stub = Stub(*server);
+  auto stub = testing::NewStub(*server);
   const SourceFrame& f = Frames().front();
   const StreamResult big = RunStream(*stub, {FrameRequest(MakeFrame(f, 1))});
   EXPECT_EQ(big.status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED)
@@ -1068,11 +1036,11 @@ TEST(ServerLimitsTest, MessageOverTheSizeLimitEndsOnlyItsCall) {
 }
 
 TEST(ServerLimitsTest, TooManyStreamsGetResourceExhausted) {
-  ServerOptions options = TestOptions();
+  ServerOptions options = testing::TestServerOptions();
   options.max_streams = 2;
-  auto server = StartServer(options);
+  auto server = testing::StartTestServer(options);
   ASSERT_NE(server, nullptr);
-  auto stub = Stub(*server);
+  auto stub = testing::NewStub(*server);
   const SourceFrame& f = Frames().front();
   // Two streams, each proven open by a round trip.
   std::vector<std::unique_ptr<grpc::ClientContext>> contexts;
@@ -1107,11 +1075,11 @@ TEST(ServerLimitsTest, TooManyStreamsGetResourceExhausted) {
 }
 
 TEST(ServerLimitsTest, IdleStreamIsEndedWithDeadlineExceeded) {
-  ServerOptions options = TestOptions();
+  ServerOptions options = testing::TestServerOptions();
   options.idle_timeout = milliseconds(1000);
-  auto server = StartServer(options);
+  auto server = testing::StartTestServer(options);
   ASSERT_NE(server, nullptr);
-  auto stub = Stub(*server);
+  auto stub = testing::NewStub(*server);
   const SourceFrame& f = Frames().front();
 
   // A stream that keeps sending (every 400 ms, under the timeout) stays open.
@@ -1192,8 +1160,8 @@ TEST_F(ServerTest, ClientCancelsMidStreamAndTheServerCarriesOn) {
     }
     EXPECT_EQ(stream->Finish().error_code(), grpc::StatusCode::CANCELLED);
   }
-  EXPECT_TRUE(Eventually([&] { return server_->service().active_streams() == 0; }));
-  EXPECT_EQ(HealthStatus(Channel(*server_), ""), 1);
+  EXPECT_TRUE(Eventually([&] { return shared_server().service().active_streams() == 0; }));
+  EXPECT_EQ(HealthStatus(testing::NewChannel(shared_server()), ""), 1);
   const StreamResult after = RunStream(*stub_, {FrameRequest(MakeFrame(Frames()[1], 9))});
   ASSERT_TRUE(after.status.ok());
   ASSERT_EQ(after.replies.size(), 1u);
@@ -1201,7 +1169,7 @@ TEST_F(ServerTest, ClientCancelsMidStreamAndTheServerCarriesOn) {
 }
 
 TEST_F(ServerTest, HealthCheckingAndReflectionAnswer) {
-  const auto channel = Channel(*server_);
+  const auto channel = testing::NewChannel(shared_server());
   EXPECT_EQ(HealthStatus(channel, ""), 1);  // SERVING
   EXPECT_EQ(HealthStatus(channel, "cloudcast.v1.CloudCast"), 1);
 
@@ -1280,9 +1248,9 @@ TEST_F(ServerTest, GetInfoReportsLimitsAndDefaults) {
 }
 
 TEST(ServerShutdownTest, DrainingGoesNotServingAndRefusesNewStreams) {
-  auto server = StartServer();
+  auto server = testing::StartTestServer();
   ASSERT_NE(server, nullptr);
-  const auto channel = Channel(*server);
+  const auto channel = testing::NewChannel(*server);
   auto stub = v1::CloudCast::NewStub(channel);
   EXPECT_EQ(HealthStatus(channel, ""), 1);
   server->StartDraining();
@@ -1301,7 +1269,7 @@ TEST(ServerShutdownTest, DrainingGoesNotServingAndRefusesNewStreams) {
 }
 
 TEST(ServerShutdownTest, ShutdownUnderLoadReturnsWithinTheGracePeriod) {
-  auto server = StartServer();
+  auto server = testing::StartTestServer();
   ASSERT_NE(server, nullptr);
   // Four busy streams (latest and all) that read their replies, and one lossless stream whose
   // client stops reading: its frames can never all be answered, so only the grace period's end
@@ -1317,7 +1285,7 @@ TEST(ServerShutdownTest, ShutdownUnderLoadReturnsWithinTheGracePeriod) {
   std::vector<std::thread> clients;
   for (int s = 0; s < kStreams; ++s) {
     clients.emplace_back([&, s] {
-      auto stub = Stub(*server);
+      auto stub = testing::NewStub(*server);
       grpc::ClientContext ctx;
       SetDeadline(&ctx, seconds(60));
       auto stream = stub->Stream(&ctx);
@@ -1378,30 +1346,30 @@ TEST(ServerShutdownTest, ShutdownUnderLoadReturnsWithinTheGracePeriod) {
 }
 
 TEST(ServerShutdownTest, StartFailsCleanlyOnABusyAddress) {
-  auto first = StartServer();
+  auto first = testing::StartTestServer();
   ASSERT_NE(first, nullptr);
-  ServerOptions options = TestOptions();
+  ServerOptions options = testing::TestServerOptions();
   options.listen = first->address();
   auto second = Server::Start(options);
   EXPECT_EQ(second.status().code(), absl::StatusCode::kUnavailable) << second.status();
   EXPECT_NE(second.status().message().find("--listen"), std::string::npos);
-  options = TestOptions();
+  options = testing::TestServerOptions();
   options.metrics_listen = "256.1.1.1:0";
   auto third = Server::Start(options);
   EXPECT_EQ(third.status().code(), absl::StatusCode::kUnavailable) << third.status();
   EXPECT_NE(third.status().message().find("--metrics-listen"), std::string::npos);
-  options = TestOptions();
+  options = testing::TestServerOptions();
   options.max_queued_frames = 0;
   EXPECT_EQ(Server::Start(options).status().code(), absl::StatusCode::kInvalidArgument);
 }
 
 TEST(ServerMetricsTest, PrometheusEndpointServesTheCounters) {
-  ServerOptions options = TestOptions();
+  ServerOptions options = testing::TestServerOptions();
   options.metrics_listen = "127.0.0.1:0";
-  auto server = StartServer(options);
+  auto server = testing::StartTestServer(options);
   ASSERT_NE(server, nullptr);
   ASSERT_GT(server->metrics_port(), 0);
-  auto stub = Stub(*server);
+  auto stub = testing::NewStub(*server);
   v1::Frame bad = MakeFrame(Frames()[0], 2);
   bad.clear_colour();
   const StreamResult result =
