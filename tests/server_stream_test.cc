@@ -13,13 +13,10 @@
 
 #include "frame_input.h"
 #include "support/server_support.h"
+#include "support/waiting.h"
 
 namespace cloudcast::server {
 namespace {
-
-using Clock = std::chrono::steady_clock;
-using std::chrono::milliseconds;
-using std::chrono::seconds;
 
 // ---------------------------------------------------------------------------------------------
 // Results.
@@ -140,7 +137,7 @@ TEST_F(ServerTest, ConcurrentStreamsEachGetTheirOwnConfig) {
   std::vector<std::thread> clients;
   for (std::size_t s = 0; s < configs.size(); ++s) {
     clients.emplace_back([&, s] {
-      auto stub = testing::NewStub(shared_server());  // a channel of its own
+      auto stub = testing::NewStub(shared_server());  // a client of its own
       std::vector<v1::StreamRequest> requests = {
           ConfigRequest(ConfigFor(configs[s], v1::DELIVERY_ALL))};
       for (std::size_t i = 0; i < frames; ++i) {
@@ -193,20 +190,21 @@ TEST_F(ServerTest, ProcessRpcMatchesCorePipeline) {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Delivery modes.
+// Delivery modes. The slow readers read through FixedWindow() channels and send kUnfiltered
+// frames: a reader that stops reading stops the server's writes within a few replies.
 
 TEST_F(ServerTest, LatestModeSlowReaderGetsDropsAndTheyAreReported) {
-  // The client sends 30 frames without reading a reply: the server keeps reading, works on one
-  // frame at a time and cannot write past the client's flow-control window, so the waiting frame
-  // keeps being replaced.
+  // The client sends 30 frames before it reads a reply: the server keeps reading, works on one
+  // frame at a time, and once the replies fill the client's window it cannot write the next, so
+  // the waiting frame keeps being replaced.
   constexpr int kFrames = 30;
+  auto stub = testing::NewStub(shared_server(), FixedWindow());
   std::vector<v1::StreamRequest> requests = {
-      ConfigRequest(ConfigFor(Params{}, v1::DELIVERY_LATEST))};
+      ConfigRequest(ConfigFor(kUnfiltered, v1::DELIVERY_LATEST))};
   for (int i = 0; i < kFrames; ++i) {
     requests.push_back(FrameRequest(MakeFrame(Frames()[i % Frames().size()], i)));
   }
-  const StreamResult result =
-      RunStream(*stub_, requests, milliseconds(20), /*write_all_first=*/true);
+  const StreamResult result = RunStream(*stub, requests, /*write_all_first=*/true);
   ASSERT_TRUE(result.status.ok()) << result.status.error_message();
   ASSERT_FALSE(result.replies.empty());
   std::uint64_t last_dropped = 0;
@@ -230,13 +228,33 @@ TEST(ServerAllModeTest, SlowReaderGetsEveryFrameInOrderWithBoundedMemory) {
   options.max_queued_frames = 3;
   auto server = testing::StartTestServer(options);
   ASSERT_NE(server, nullptr);
-  auto stub = testing::NewStub(*server);
+  auto stub = testing::NewStub(*server, FixedWindow());
   constexpr int kFrames = 24;
-  std::vector<v1::StreamRequest> requests = {ConfigRequest(ConfigFor(Params{}, v1::DELIVERY_ALL))};
+  std::vector<v1::StreamRequest> requests = {
+      ConfigRequest(ConfigFor(kUnfiltered, v1::DELIVERY_ALL))};
   for (int i = 0; i < kFrames; ++i) {
     requests.push_back(FrameRequest(MakeFrame(Frames()[i % Frames().size()], i)));
   }
-  const StreamResult result = RunStream(*stub, requests, milliseconds(30));
+  // The slowest reader: it reads nothing until the server holds the stream's limit of frames
+  // (its replies cannot be written, so it stops reading), then reads everything.
+  grpc::ClientContext ctx;
+  SetDeadline(&ctx);
+  auto stream = stub->Stream(&ctx);
+  std::thread writer([&] {
+    for (const auto& r : requests) {
+      if (!stream->Write(r)) break;
+    }
+    stream->WritesDone();
+  });
+  // The server announces no queue level: its high-water mark (this is its only stream) is polled.
+  EXPECT_TRUE(testing::Eventually([&] { return server->queued_frames_high_water() >= 3; }))
+      << "the server never held 3 frames of a stream whose client did not read";
+  StreamResult result;
+  v1::StreamReply reply;
+  while (stream->Read(&reply)) result.replies.push_back(reply);
+  writer.join();
+  result.status = stream->Finish();
+
   ASSERT_TRUE(result.status.ok()) << result.status.error_message();
   ASSERT_EQ(result.replies.size(), static_cast<std::size_t>(kFrames));
   for (int i = 0; i < kFrames; ++i) {
@@ -244,13 +262,12 @@ TEST(ServerAllModeTest, SlowReaderGetsEveryFrameInOrderWithBoundedMemory) {
     EXPECT_EQ(result.replies[i].cloud().sequence(), static_cast<std::uint64_t>(i));
     EXPECT_EQ(result.replies[i].cloud().frames_dropped(), 0u);
   }
-  EXPECT_TRUE(
-      CloudMatches(Reference(Frames()[5 % Frames().size()], Params{}), result.replies[5].cloud()));
+  EXPECT_TRUE(CloudMatches(Reference(Frames()[5 % Frames().size()], kUnfiltered),
+                           result.replies[5].cloud()));
   // The server held at most max_queued_frames frames of the stream, and did fill its queue.
   const std::uint32_t high_water = server->queued_frames_high_water();
   std::cout << "queued-frame high-water mark: " << high_water << " (limit 3)\n";
-  EXPECT_LE(high_water, 3u);
-  EXPECT_GE(high_water, 2u);
+  EXPECT_EQ(high_water, 3u);
 }
 
 }  // namespace

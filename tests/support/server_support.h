@@ -17,7 +17,6 @@
 #include <condition_variable>
 #include <cstdint>
 #include <fstream>
-#include <functional>
 #include <memory>
 #include <mutex>
 #include <opencv2/core.hpp>
@@ -183,6 +182,17 @@ inline v1::StreamConfig ConfigFor(const Params& p, v1::DeliveryMode delivery) {
   return c;
 }
 
+// Without the passthrough every frame gives many voxels, so every reply is large (tens of KB
+// and more): with FixedWindow(), a client that does not read stops the server's writes within
+// a few replies, whatever the frames and the machine's speed.
+const Params kUnfiltered{0.03f, /*passthrough=*/false};
+
+inline testing::ChannelOptions FixedWindow() {
+  testing::ChannelOptions options;
+  options.fixed_receive_window = true;
+  return options;
+}
+
 inline PointCloud Reference(const SourceFrame& f, const Params& p) {
   PipelineOptions o;
   o.camera = CameraModel::PclCompatible(f.disparity.width, f.disparity.height, 615.0);
@@ -234,12 +244,10 @@ struct StreamResult {
 };
 
 // Sends `requests` from a writer thread while this thread reads (a client that only wrote first
-// would deadlock a lossless stream: the server stops reading when its queue is full).
-// `read_delay` makes a slow reader. With `write_all_first`, reading starts only once every
-// request is sent.
+// would deadlock a lossless stream: the server stops reading when its queue is full). With
+// `write_all_first`, reading starts only once every request is sent.
 inline StreamResult RunStream(v1::CloudCast::Stub& stub,
                               const std::vector<v1::StreamRequest>& requests,
-                              std::chrono::milliseconds read_delay = std::chrono::milliseconds(0),
                               bool write_all_first = false) {
   grpc::ClientContext ctx;
   SetDeadline(&ctx);
@@ -262,24 +270,10 @@ inline StreamResult RunStream(v1::CloudCast::Stub& stub,
   }
   StreamResult result;
   v1::StreamReply reply;
-  while (stream->Read(&reply)) {
-    result.replies.push_back(reply);
-    if (read_delay.count() > 0) std::this_thread::sleep_for(read_delay);  // a slow consumer
-  }
+  while (stream->Read(&reply)) result.replies.push_back(reply);
   writer.join();
   result.status = stream->Finish();
   return result;
-}
-
-// Waits for `condition` with a deadline instead of sleeping a fixed time.
-inline bool Eventually(const std::function<bool()>& condition,
-                       std::chrono::milliseconds timeout = std::chrono::milliseconds(10000)) {
-  const auto deadline = std::chrono::steady_clock::now() + timeout;
-  while (std::chrono::steady_clock::now() < deadline) {
-    if (condition()) return true;
-    std::this_thread::sleep_for(std::chrono::milliseconds(5));
-  }
-  return condition();
 }
 
 // ---------------------------------------------------------------------------------------------
