@@ -8,6 +8,8 @@
 // point count, and a one-to-one matching in which every point lies within the reply's
 // position_error_bound per coordinate (Draco's quantization) with the exact colour (8-bit
 // colour is lossless).
+#include "cloudcast/client/client.h"
+
 #include <arpa/inet.h>
 #include <netinet/in.h>
 #include <sys/socket.h>
@@ -30,7 +32,6 @@
 #include <utility>
 #include <vector>
 
-#include "cloudcast/client/client.h"
 #include "cloudcast/client/config.h"
 #include "cloudcast/client/opencv.h"
 #include "cloudcast/core/image.h"
@@ -40,6 +41,7 @@
 #include "cloudcast/io/image_io.h"
 #include "gtest/gtest.h"
 #include "support/server_fixture.h"
+#include "support/waiting.h"
 #include "test_support.h"
 
 namespace cloudcast::client {
@@ -169,15 +171,12 @@ TEST(ClientConnectTest, DeadPortFailsWithinTheDeadline) {
   const std::string target = "127.0.0.1:" + std::to_string(DeadPort());
   ClientOptions options;
   options.connect_timeout = milliseconds(500);
-  const auto start = std::chrono::steady_clock::now();
+  // It returns (a hang would be the test's timeout), with the deadline it gave up at.
   absl::StatusOr<std::unique_ptr<Client>> c = Client::Connect(target, options);
-  const auto elapsed = std::chrono::steady_clock::now() - start;
   ASSERT_FALSE(c.ok());
   EXPECT_EQ(c.status().code(), absl::StatusCode::kUnavailable) << c.status();
   EXPECT_NE(c.status().message().find(target), std::string::npos) << c.status();
   EXPECT_NE(c.status().message().find("500 ms"), std::string::npos) << c.status();
-  // Generous slack for a loaded CI machine; the point is that it does not hang.
-  EXPECT_LT(elapsed, std::chrono::seconds(10));
 }
 
 TEST(ClientConnectTest, WithoutWaitingTheFirstCallReportsTheDeadServer) {
@@ -476,8 +475,8 @@ TEST_F(ClientTest, StreamRoundTripsEveryFrameInOrder) {
     EXPECT_GT(r.times.send_unix_ns, 0);
     EXPECT_GE(r.times.receive_unix_ns, r.times.send_unix_ns);
     EXPECT_GE(r.round_trip().count(), 0);
-    // Unix and steady clocks differ by their rates only; 50 ms absorbs any slew.
-    EXPECT_GE(r.latency(), r.round_trip() - milliseconds(50));
+    // The latency runs from the capture, which precedes the send: it holds the round trip.
+    EXPECT_LE(r.capture_time_unix_ns, r.times.send_unix_ns);
     EXPECT_EQ(r.frames_dropped, 0u);
     EXPECT_EQ(r.cloud.size(), r.reply.point_count());
     const PointCloud reference =
@@ -706,13 +705,21 @@ TEST_F(ClientTest, StreamOutlivesItsClient) {
 TEST_F(ClientTest, CancelEndsABlockedRead) {
   std::unique_ptr<Stream> stream = Open(StreamConfig());
   ASSERT_NE(stream, nullptr);
+  // The canceller acts once this thread is inside Read and asleep in the kernel (a blocked call
+  // announces nothing, so its thread's state is polled).
+  const pid_t reader = testing::CurrentThreadId();
+  std::atomic<bool> reading{false};
+  std::atomic<bool> seen_blocked{false};
   std::thread canceller([&] {
-    std::this_thread::sleep_for(milliseconds(100));
+    seen_blocked =
+        testing::Eventually([&] { return reading.load() && testing::ThreadIsBlocked(reader); });
     stream->Cancel();
   });
   Result r;
+  reading.store(true);
   EXPECT_FALSE(stream->Read(&r));  // nothing was sent: only the cancel ends this
   canceller.join();
+  EXPECT_TRUE(seen_blocked.load()) << "the Read never blocked";
   EXPECT_EQ(stream->Finish().code(), absl::StatusCode::kCancelled);
 }
 
