@@ -184,23 +184,30 @@ TEST(CloudMailboxTest, WaitPolicyHoldsTheReceiverUntilTheViewerTakes) {
   CloudMailbox mailbox(/*wait_for_viewer=*/true);
   std::atomic<int> put{0};
   std::thread receiver([&] {
-    for (std::uint64_t i = 0; i < 3; ++i) {
+    for (std::uint64_t i = 0; i < 4; ++i) {
       Result r = CloudResult(i, 5);
       mailbox.Put(r);
       ++put;
     }
   });
-  std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  // The mailbox tells when a Put has had to wait (the 10 s only turn a hang into a failure).
+  // EXPECT, not ASSERT: the receiver must be released and joined whatever happens.
+  constexpr std::chrono::seconds kHang(10);
+  EXPECT_TRUE(mailbox.WaitForPutsHeld(1, kHang));
   EXPECT_EQ(put.load(), 1);  // the second Put waits for the first cloud to be taken
   PointCloud cloud;
   CloudMeta meta;
-  ASSERT_TRUE(mailbox.Take(&cloud, &meta, std::chrono::milliseconds(1000)));
+  EXPECT_TRUE(mailbox.Take(&cloud, &meta, std::chrono::milliseconds(1000)));
   EXPECT_EQ(meta.sequence, 0u);
-  ASSERT_TRUE(mailbox.Take(&cloud, &meta, std::chrono::milliseconds(1000)));
+  EXPECT_TRUE(mailbox.WaitForPutsHeld(2, kHang));
+  EXPECT_EQ(put.load(), 2);  // the second went in; the third waits
+  EXPECT_TRUE(mailbox.Take(&cloud, &meta, std::chrono::milliseconds(1000)));
   EXPECT_EQ(meta.sequence, 1u);
-  mailbox.Close();  // the viewer is gone: the last Put must not hang
+  EXPECT_TRUE(mailbox.WaitForPutsHeld(3, kHang));
+  EXPECT_EQ(put.load(), 3);  // the fourth waits behind the third
+  mailbox.Close();           // the viewer is gone: the waiting Put must not hang
   receiver.join();
-  EXPECT_EQ(put.load(), 3);
+  EXPECT_EQ(put.load(), 4);
   EXPECT_EQ(mailbox.skipped(), 0u);
 }
 

@@ -66,7 +66,11 @@ void CloudMailbox::Put(Result& result) {
   if (!result.ok()) return;
   {
     std::unique_lock<std::mutex> lock(mu_);
-    if (wait_for_viewer_) taken_cv_.wait(lock, [this] { return !full_ || closed_; });
+    if (wait_for_viewer_ && full_ && !closed_) {
+      ++puts_held_;
+      held_cv_.notify_all();
+      taken_cv_.wait(lock, [this] { return !full_ || closed_; });
+    }
     if (closed_) return;
     if (full_) ++skipped_;
     std::swap(slot_, result.cloud);
@@ -107,6 +111,11 @@ bool CloudMailbox::has_new() const {
 std::uint64_t CloudMailbox::skipped() const {
   std::lock_guard<std::mutex> lock(mu_);
   return skipped_;
+}
+
+bool CloudMailbox::WaitForPutsHeld(std::uint64_t count, milliseconds timeout) const {
+  std::unique_lock<std::mutex> lock(mu_);
+  return held_cv_.wait_for(lock, timeout, [&] { return puts_held_ >= count; });
 }
 
 std::string OverlayLine(double fps, double latency_ms, std::size_t points, std::size_t bytes,

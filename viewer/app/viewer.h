@@ -51,11 +51,16 @@ class CloudMailbox {
   void Close();
   bool has_new() const;
   std::uint64_t skipped() const;
+  // For tests, which must see the wait policy hold a Put instead of guessing with a sleep: waits
+  // until `count` Put calls in all have had to wait for the viewer, or `timeout` passes (false).
+  bool WaitForPutsHeld(std::uint64_t count, std::chrono::milliseconds timeout) const;
 
  private:
   const bool wait_for_viewer_;
   mutable std::mutex mu_;
   std::condition_variable taken_cv_, put_cv_;
+  mutable std::condition_variable held_cv_;
+  std::uint64_t puts_held_ = 0;
   PointCloud slot_;
   CloudMeta meta_;
   bool full_ = false;
