@@ -767,6 +767,54 @@ TEST_F(ClientProgramTest, StreamsAndWritesANonTrivialSnapshot) {
   }
 }
 
+// A stream that ends on an empty cloud (its filters kept nothing) is pictured by its last cloud
+// with points, and the log says so: an empty picture helps nobody.
+TEST_F(ClientProgramTest, SnapshotAtAnEmptyEndShowsTheLastCloudWithPoints) {
+  CLOUDCAST_REQUIRE_DISPLAY();
+  fs::create_directories(dir_ / "d");
+  fs::create_directories(dir_ / "c");
+  // f1, f2: a tilted plane at disparities 60..90, inside the default passthrough (z = 615 / d in
+  // [3, 12]); f3: no valid disparity at all.
+  for (int i = 1; i <= 3; ++i) {
+    cv::Mat d(120, 160, CV_8UC1, cv::Scalar(0));
+    for (int y = 0; y < d.rows && i < 3; ++y) {
+      for (int x = 0; x < d.cols; ++x) d.at<std::uint8_t>(y, x) = 60 + (x + y + i) % 31;
+    }
+    ASSERT_TRUE(cv::imwrite(Path("d/f" + std::to_string(i) + ".png"), d));
+    ASSERT_TRUE(cv::imwrite(Path("c/f" + std::to_string(i) + ".png"), TestColour(160, 120, i)));
+  }
+  const std::string png = Path("end.png");
+  const RunResult r =
+      Run({"--disparity-glob", Path("d/*.png"), "--colour-glob", Path("c/*.png"), "--server",
+           shared_target(), "--lossless", "--hidden", "--snapshot", png, "--window", "640x480"});
+  ASSERT_TRUE(r.exited && r.code == 0) << r;
+  const PictureStats p = Analyse(png);
+  EXPECT_GT(p.foreground, 640 * 440 / 20) << "the snapshot is empty: " << png;
+  EXPECT_GT(p.colours, 20u);
+  EXPECT_NE(r.err.find("the last cloud (frame f3) was empty: the snapshot shows frame f2"),
+            std::string::npos)
+      << r;
+}
+
+// The README's example on the New Tsukuba folder: at the paper's parameters (the server's
+// defaults) its last frame, 01800, keeps no point, and 01600 before it under 2,000.
+TEST_F(ClientProgramTest, SnapshotOfTheTsukubaFolderShowsItsLastCloudWithPoints) {
+  CLOUDCAST_REQUIRE_DISPLAY();
+  CLOUDCAST_REQUIRE_TSUKUBA();
+  const std::string png = Path("tsukuba.png");
+  const RunResult r =
+      Run({"--tsukuba", cloudcast::testing::TsukubaDir(), "--server", shared_target(), "--lossless",
+           "--hidden", "--snapshot", png, "--window", "640x480"});
+  ASSERT_TRUE(r.exited && r.code == 0) << r;
+  const PictureStats p = Analyse(png);
+  // 01600's few hundred points, in the view the first cloud (00001) framed.
+  EXPECT_GT(p.foreground, 200) << "the snapshot is empty: " << png;
+  EXPECT_NE(r.err.find("the last cloud (frame tsukuba_01800) was empty: the snapshot shows "
+                       "frame tsukuba_01600"),
+            std::string::npos)
+      << r;
+}
+
 TEST_F(ClientProgramTest, RecordedFilesHoldTheRepliesPointCounts) {
   // The reference: the same frames through the server one by one, with the same settings.
   auto reference_source =
