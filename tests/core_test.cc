@@ -17,6 +17,7 @@ namespace {
 
 using testing::CloudsIdentical;
 using testing::CloudsMatch;
+using testing::CloudTolerance;
 using testing::MakeFrame;
 using testing::RandomFrame;
 using testing::SetSample;
@@ -70,8 +71,7 @@ TEST(Camera, RejectsBadFields) {
       {[](CameraModel& c) { c.disparity_scale = 0; }, "camera.disparity_scale"},
       {[&](CameraModel& c) { c.disparity_offset = nan; }, "camera.disparity_offset"},
       {[&](CameraModel& c) { c.invalid_disparities = {nan}; }, "camera.invalid_disparities"},
-      {[](CameraModel& c) { c.invalid_disparities.assign(17, 1.0); },
-       "camera.invalid_disparities"},
+      {[](CameraModel& c) { c.invalid_disparities.assign(17, 1.0); }, "camera.invalid_disparities"},
   };
   for (const Case& k : cases) {
     CameraModel c;
@@ -153,8 +153,7 @@ TEST(Validation, BadFramesGetErrorsNamingTheField) {
   EXPECT_THAT(pipeline.Run(options, f.disparity, f.colour, &out),
               StatusMentions("passthrough.min (5) must not exceed passthrough.max (4)"));
   options.passthrough.max = std::numeric_limits<float>::infinity();
-  EXPECT_THAT(pipeline.Run(options, f.disparity, f.colour, &out),
-              StatusMentions("must be finite"));
+  EXPECT_THAT(pipeline.Run(options, f.disparity, f.colour, &out), StatusMentions("must be finite"));
   // The pipeline still works after all those errors.
   options.passthrough = PassThroughParams{};
   EXPECT_TRUE(pipeline.Run(options, f.disparity, f.colour, &out).ok());
@@ -318,7 +317,9 @@ TEST(VoxelGrid, MatchesBruteForceOnRandomCloudsIncludingWideKeys) {
     p.leaf_x = leaf;
     PointCloud out;
     ASSERT_TRUE(grid.Filter(in, p, &out).ok()) << grid.Filter(in, p, &out);
-    EXPECT_TRUE(CloudsMatch(testing::BruteForceVoxelGrid(in, p), out, 1e-5, 0)) << "leaf " << leaf;
+    EXPECT_TRUE(CloudsMatch(testing::BruteForceVoxelGrid(in, p), out,
+                            CloudTolerance::Equivalence(/*colour=*/0)))
+        << "leaf " << leaf;
   }
 }
 
@@ -386,7 +387,8 @@ TEST(Pipeline, FallsBackToWideKeys) {
   ASSERT_TRUE(ConvertToOrganized(o.camera, f.disparity, f.colour, &organized).ok());
   ASSERT_TRUE(PassThrough(organized, o.passthrough, &passed).ok());
   EXPECT_EQ(counts.valid_points, passed.size());
-  EXPECT_TRUE(CloudsMatch(testing::BruteForceVoxelGrid(passed, o.voxel), fused, 1e-5, 0));
+  EXPECT_TRUE(CloudsMatch(testing::BruteForceVoxelGrid(passed, o.voxel), fused,
+                          CloudTolerance::Equivalence(/*colour=*/0)));
 }
 
 }  // namespace

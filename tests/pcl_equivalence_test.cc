@@ -21,6 +21,7 @@ using reference::PclCloud;
 using reference::ToPcl;
 using testing::CloudsIdentical;
 using testing::CloudsMatch;
+using testing::CloudTolerance;
 
 // PCL VoxelGrid's own test (voxel_grid.hpp): it gives up when the voxel count along the bounding
 // box exceeds INT32_MAX.
@@ -111,14 +112,18 @@ bool ExpectSameAsPcl(const DisparityView& disparity, const ColorView& colour,
     // check against the definition.
     EXPECT_EQ(pcl_voxel.size(), pcl_passed->size());
     const PointCloud brute = testing::BruteForceVoxelGrid(ours.passed, voxel);
-    EXPECT_TRUE(CloudsMatch(brute, ours.voxel, 1e-5, 0)) << "voxel grid (PCL overflowed)";
-    EXPECT_TRUE(CloudsMatch(brute, ours.fused, 1e-5, 0)) << "fused chain (PCL overflowed)";
+    EXPECT_TRUE(CloudsMatch(brute, ours.voxel, CloudTolerance::Equivalence(/*colour=*/0)))
+        << "voxel grid (PCL overflowed)";
+    EXPECT_TRUE(CloudsMatch(brute, ours.fused, CloudTolerance::Equivalence(/*colour=*/0)))
+        << "fused chain (PCL overflowed)";
     expected_voxels = brute.size();
     pcl_gave_up = true;
   } else if (voxel.enabled) {
     // PCL sums voxel points in float in sort order; ours in double: compare within tolerance.
-    EXPECT_TRUE(CloudsMatch(FromPcl(pcl_voxel), ours.voxel)) << "voxel grid";
-    EXPECT_TRUE(CloudsMatch(FromPcl(pcl_voxel), ours.fused)) << "fused chain";
+    EXPECT_TRUE(CloudsMatch(FromPcl(pcl_voxel), ours.voxel, CloudTolerance::Equivalence()))
+        << "voxel grid";
+    EXPECT_TRUE(CloudsMatch(FromPcl(pcl_voxel), ours.fused, CloudTolerance::Equivalence()))
+        << "fused chain";
   } else {
     EXPECT_TRUE(CloudsIdentical(FromPcl(*pcl_passed), ours.fused)) << "fused chain, no voxels";
   }
@@ -207,13 +212,13 @@ TEST(OverflowCase, Frame01200WithoutPassthrough) {
   const PointCloud brute = testing::BruteForceVoxelGrid(ours_organized, voxel);
   EXPECT_LT(brute.size(), organized->size());  // really downsampled (about 80% remain: far
                                                // surfaces are sparse at 3 cm)
-  EXPECT_TRUE(CloudsMatch(brute, ours_voxel, 1e-5, 0));
+  EXPECT_TRUE(CloudsMatch(brute, ours_voxel, CloudTolerance::Equivalence(/*colour=*/0)));
   Pipeline pipeline;
   PipelineOptions options;
   options.passthrough = off;
   StageCounts counts;
   ASSERT_TRUE(pipeline.Run(options, t.disparity.view(), t.colour.view(), &fused, &counts).ok());
-  EXPECT_TRUE(CloudsMatch(brute, fused, 1e-5, 0));
+  EXPECT_TRUE(CloudsMatch(brute, fused, CloudTolerance::Equivalence(/*colour=*/0)));
   EXPECT_EQ(counts.valid_points, 640u * 480u);
 }
 

@@ -1,8 +1,8 @@
 // End-to-end tests of cloudcast-process: the real binary, run through the shell on synthetic
 // frames, on image files of every depth written here, and on a New Tsukuba frame. Its files are
 // read back by PCL, Open3D and the draco_decoder tool and compared with an in-process run of the
-// pipeline and with stock PCL's chain. Also: image_io (OpenCV) and cloud_io (PCD/PLY/DRC) on
-// their own, including files other tools wrote.
+// pipeline and with stock PCL's chain. (image_io and cloud_io on their own: image_io_test.cc,
+// cloud_io_test.cc.)
 #include <gtest/gtest.h>
 #include <open3d/geometry/PointCloud.h>
 #include <open3d/io/PointCloudIO.h>
@@ -40,6 +40,8 @@
 #include "cloudcast/io/image_io.h"
 #include "cloudcast/reference/pcl_reference.h"
 #include "program_support.h"
+#include "support/cloud_match.h"
+#include "support/image_files.h"
 #include "test_support.h"
 
 namespace cloudcast {
@@ -53,9 +55,18 @@ using Json = nlohmann::json;
 
 std::string Binary() { return std::string(CLOUDCAST_BIN_DIR) + "/cloudcast-process"; }
 
+using testing::Be16;
+using testing::Bytes;
+using testing::CloudsMatch;
+using testing::CloudTolerance;
+using testing::FloatTiff;
+using testing::Png;
 using testing::ReadText;
+using testing::RgbaRowsFromBgr;
 using testing::RunResult;
+using testing::SamePoints;
 using testing::ShellQuote;
+using testing::WriteFile;
 
 class CliTest : public testing::ScratchDirTest {
  protected:
@@ -100,106 +111,6 @@ std::uint64_t StagePoints(const Json& report, const std::string& name) {
 
 // ---------------------------------------------------------------------------------------------
 // Clouds.
-
-bool Finite(const Point& p) {
-  return std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z);
-}
-
-std::uint32_t Bits(float f) {
-  std::uint32_t b;
-  std::memcpy(&b, &f, 4);
-  return b;
-}
-
-// Points sorted by their bits, optionally with alpha forced to 255 (for formats without alpha).
-std::vector<Point> Canonical(const PointCloud& cloud, bool keep_alpha = true) {
-  std::vector<Point> v(cloud.points.begin(), cloud.points.end());
-  for (Point& p : v) {
-    if (!keep_alpha) p.rgba |= 0xFF000000u;
-  }
-  std::sort(v.begin(), v.end(), [](const Point& a, const Point& b) {
-    return std::make_tuple(Bits(a.x), Bits(a.y), Bits(a.z), a.rgba) <
-           std::make_tuple(Bits(b.x), Bits(b.y), Bits(b.z), b.rgba);
-  });
-  return v;
-}
-
-// The same points (bit for bit) and colours, in any order.
-::testing::AssertionResult SamePoints(const PointCloud& expected, const PointCloud& actual,
-                                      bool compare_alpha = true) {
-  const auto a = Canonical(expected, compare_alpha), b = Canonical(actual, compare_alpha);
-  if (a.size() != b.size()) {
-    return ::testing::AssertionFailure() << "expected " << a.size() << " points, got " << b.size();
-  }
-  for (std::size_t i = 0; i < a.size(); ++i) {
-    if (Bits(a[i].x) != Bits(b[i].x) || Bits(a[i].y) != Bits(b[i].y) ||
-        Bits(a[i].z) != Bits(b[i].z) || a[i].rgba != b[i].rgba) {
-      return ::testing::AssertionFailure()
-             << "sorted point " << i << ": expected (" << a[i].x << ", " << a[i].y << ", " << a[i].z
-             << ", " << std::hex << a[i].rgba << std::dec << ") got (" << b[i].x << ", " << b[i].y
-             << ", " << b[i].z << ", " << std::hex << b[i].rgba << ")";
-    }
-  }
-  return ::testing::AssertionSuccess();
-}
-
-// Every decoded point has its own expected point with the same RGB within `tol` per coordinate
-// (Draco quantizes positions and does not keep the order).
-::testing::AssertionResult SameWithin(const PointCloud& expected, const PointCloud& decoded,
-                                      double tol) {
-  if (expected.size() != decoded.size()) {
-    return ::testing::AssertionFailure()
-           << "expected " << expected.size() << " points, decoded " << decoded.size();
-  }
-  const double cell = std::max(2 * tol, 1e-6);
-  auto key = [cell](double x, double y, double z) {
-    auto c = [cell](double v) { return static_cast<std::int64_t>(std::floor(v / cell)); };
-    return std::make_tuple(c(x), c(y), c(z));
-  };
-  struct Hash {
-    std::size_t operator()(const std::tuple<std::int64_t, std::int64_t, std::int64_t>& t) const {
-      return std::hash<std::int64_t>()(std::get<0>(t) * 73856093 ^ std::get<1>(t) * 19349663 ^
-                                       std::get<2>(t) * 83492791);
-    }
-  };
-  std::unordered_map<std::tuple<std::int64_t, std::int64_t, std::int64_t>, std::vector<std::size_t>,
-                     Hash>
-      grid;
-  for (std::size_t i = 0; i < expected.size(); ++i) {
-    const Point& p = expected.points[i];
-    grid[key(p.x, p.y, p.z)].push_back(i);
-  }
-  std::vector<bool> used(expected.size(), false);
-  for (std::size_t d = 0; d < decoded.size(); ++d) {
-    const Point& q = decoded.points[d];
-    const auto [kx, ky, kz] = key(q.x, q.y, q.z);
-    bool found = false;
-    for (int dx = -1; dx <= 1 && !found; ++dx) {
-      for (int dy = -1; dy <= 1 && !found; ++dy) {
-        for (int dz = -1; dz <= 1 && !found; ++dz) {
-          auto it = grid.find({kx + dx, ky + dy, kz + dz});
-          if (it == grid.end()) continue;
-          for (std::size_t i : it->second) {
-            const Point& p = expected.points[i];
-            if (used[i] || (p.rgba & 0xFFFFFF) != (q.rgba & 0xFFFFFF)) continue;
-            if (std::fabs(double(p.x) - q.x) <= tol && std::fabs(double(p.y) - q.y) <= tol &&
-                std::fabs(double(p.z) - q.z) <= tol) {
-              used[i] = found = true;
-              break;
-            }
-          }
-        }
-      }
-    }
-    if (!found) {
-      return ::testing::AssertionFailure()
-             << "decoded point " << d << " (" << q.x << ", " << q.y << ", " << q.z << ", "
-             << std::hex << q.rgba << std::dec << ") has no expected point of its colour within "
-             << tol;
-    }
-  }
-  return ::testing::AssertionSuccess();
-}
 
 PointCloud FromPclCloud(const pcl::PointCloud<pcl::PointXYZRGB>& in) {
   PointCloud out;
@@ -258,125 +169,6 @@ PointCloud ExpectedSynthetic(std::uint32_t w, std::uint32_t h, std::uint64_t fra
 }
 
 // ---------------------------------------------------------------------------------------------
-// Image files written by hand (PNG with stored deflate blocks, TIFF, PNM, PFM), so the tests need
-// no image library of their own and control every byte the decoder sees.
-
-void WriteFile(const std::string& path, const std::string& bytes) {
-  std::ofstream file(path, std::ios::binary);
-  file.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
-  ASSERT_TRUE(file.good()) << path;
-}
-
-void PutBe32(std::string* s, std::uint32_t v) {
-  for (int shift = 24; shift >= 0; shift -= 8) s->push_back(static_cast<char>(v >> shift));
-}
-void PutLe(std::string* s, std::uint32_t v, int bytes) {
-  for (int i = 0; i < bytes; ++i) s->push_back(static_cast<char>(v >> (8 * i)));
-}
-
-std::uint32_t Crc32(const std::string& bytes) {
-  std::uint32_t crc = 0xFFFFFFFFu;
-  for (unsigned char c : bytes) {
-    crc ^= c;
-    for (int k = 0; k < 8; ++k) crc = (crc >> 1) ^ (0xEDB88320u & (0u - (crc & 1u)));
-  }
-  return crc ^ 0xFFFFFFFFu;
-}
-
-// A PNG of `rows` (already in PNG sample order, 16-bit samples big-endian).
-// colour_type: 0 grey, 2 RGB, 4 grey + alpha, 6 RGBA.
-std::string Png(std::uint32_t w, std::uint32_t h, int bit_depth, int colour_type,
-                const std::string& rows) {
-  const std::size_t row_bytes = rows.size() / h;
-  std::string raw;
-  for (std::uint32_t v = 0; v < h; ++v) raw += '\0' + rows.substr(v * row_bytes, row_bytes);
-  std::string zlib = "\x78\x01";
-  for (std::size_t at = 0; at < raw.size() || at == 0; at += 65535) {
-    const std::size_t n = std::min<std::size_t>(65535, raw.size() - at);
-    zlib.push_back(at + n >= raw.size() ? 1 : 0);
-    PutLe(&zlib, static_cast<std::uint32_t>(n), 2);
-    PutLe(&zlib, static_cast<std::uint32_t>(~n & 0xFFFF), 2);
-    zlib += raw.substr(at, n);
-  }
-  std::uint32_t a = 1, b = 0;
-  for (unsigned char c : raw) {
-    a = (a + c) % 65521;
-    b = (b + a) % 65521;
-  }
-  PutBe32(&zlib, (b << 16) | a);
-  auto chunk = [](const std::string& type, const std::string& data) {
-    std::string c;
-    PutBe32(&c, static_cast<std::uint32_t>(data.size()));
-    c += type + data;
-    PutBe32(&c, Crc32(type + data));
-    return c;
-  };
-  std::string ihdr;
-  PutBe32(&ihdr, w);
-  PutBe32(&ihdr, h);
-  ihdr += {static_cast<char>(bit_depth), static_cast<char>(colour_type), 0, 0, 0};
-  return std::string("\x89PNG\r\n\x1a\n", 8) + chunk("IHDR", ihdr) + chunk("IDAT", zlib) +
-         chunk("IEND", "");
-}
-
-std::string Bytes(const std::vector<std::uint8_t>& v) { return std::string(v.begin(), v.end()); }
-std::string Be16(const std::vector<std::uint16_t>& v) {
-  std::string s;
-  for (std::uint16_t x : v) s += {static_cast<char>(x >> 8), static_cast<char>(x & 0xFF)};
-  return s;
-}
-
-// BGR8 rows -> RGBA PNG rows with the given alpha pattern (as New Tsukuba's colour PNGs).
-std::string RgbaRowsFromBgr(const std::vector<std::uint8_t>& bgr) {
-  std::string s;
-  for (std::size_t i = 0; i + 2 < bgr.size(); i += 3) {
-    const std::uint8_t alpha = static_cast<std::uint8_t>((i / 3) % 3 == 0 ? 0 : 136 + i % 120);
-    s += {static_cast<char>(bgr[i + 2]), static_cast<char>(bgr[i + 1]), static_cast<char>(bgr[i]),
-          static_cast<char>(alpha)};
-  }
-  return s;
-}
-
-// Baseline little-endian TIFF, one strip, uncompressed, one 32-bit float sample per pixel.
-std::string FloatTiff(std::uint32_t w, std::uint32_t h, const std::vector<float>& v) {
-  const std::uint32_t data_bytes = static_cast<std::uint32_t>(v.size() * 4);
-  std::string s("II*\0", 4);
-  PutLe(&s, 8 + data_bytes, 4);  // the IFD follows the pixels
-  s.append(reinterpret_cast<const char*>(v.data()), data_bytes);
-  const std::vector<std::tuple<int, int, std::uint32_t>> entries = {
-      {256, 4, w}, {257, 4, h}, {258, 3, 32}, {259, 3, 1},          {262, 3, 1},
-      {273, 4, 8}, {277, 3, 1}, {278, 4, h},  {279, 4, data_bytes}, {339, 3, 3}};
-  PutLe(&s, static_cast<std::uint32_t>(entries.size()), 2);
-  for (const auto& [tag, type, value] : entries) {
-    PutLe(&s, tag, 2);
-    PutLe(&s, type, 2);
-    PutLe(&s, 1, 4);
-    PutLe(&s, value, 4);  // SHORT values sit in the low bytes (little-endian)
-  }
-  PutLe(&s, 0, 4);
-  return s;
-}
-
-std::string PnmHeader(const char* magic, std::uint32_t w, std::uint32_t h, int maxval) {
-  return std::string(magic) + "\n" + std::to_string(w) + " " + std::to_string(h) + "\n" +
-         std::to_string(maxval) + "\n";
-}
-
-// PFM: grey float, little-endian (negative scale), rows stored bottom to top.
-std::string Pfm(std::uint32_t w, std::uint32_t h, const std::vector<float>& v) {
-  std::string s = "Pf\n" + std::to_string(w) + " " + std::to_string(h) + "\n-1.0\n";
-  for (std::uint32_t r = h; r-- > 0;) {
-    s.append(reinterpret_cast<const char*>(v.data() + std::size_t{r} * w), w * sizeof(float));
-  }
-  return s;
-}
-
-template <typename T>
-std::vector<T> Samples(const std::vector<std::uint8_t>& bytes) {
-  std::vector<T> v(bytes.size() / sizeof(T));
-  std::memcpy(v.data(), bytes.data(), v.size() * sizeof(T));
-  return v;
-}
 
 // ---------------------------------------------------------------------------------------------
 // --help
@@ -549,12 +341,12 @@ TEST_F(CliTest, DrcDecodesToTheFusedCloud) {
   const double bound = encode.value("position_error_bound", 1.0);
   EXPECT_GT(bound, 0.0);
   EXPECT_LE(bound, 0.03 / 4 + 1e-6) << "max_position_error must be leaf / 4";
-  const double tol = bound * (1 + 1e-5) + 1e-6;
+  const CloudTolerance tolerance = CloudTolerance::DracoBound(bound);
 
   PointCloud ours;
   ASSERT_TRUE(LoadCloud(out, &ours).ok());
   EXPECT_EQ(ours.size(), StagePoints(report, "voxel_grid"));
-  EXPECT_TRUE(SameWithin(expected, ours, tol));
+  EXPECT_TRUE(CloudsMatch(expected, ours, tolerance));
 
   // The stock tool, when installed, reads the same file.
   if (std::system("command -v draco_decoder >/dev/null 2>&1") != 0) {
@@ -566,7 +358,7 @@ TEST_F(CliTest, DrcDecodesToTheFusedCloud) {
   ASSERT_EQ(std::system(command.c_str()), 0) << ReadText(Path("draco.log"));
   PointCloud decoded;
   ASSERT_TRUE(LoadCloud(ply, &decoded).ok());
-  EXPECT_TRUE(SameWithin(expected, decoded, tol));
+  EXPECT_TRUE(CloudsMatch(expected, decoded, tolerance));
 }
 
 TEST_F(CliTest, RepeatReportsMediansAndQuietPrintsNothing) {
@@ -744,7 +536,7 @@ TEST_F(CliTest, EveryDisparityDepthGivesTheSameCloudAsStockPcl) {
   reference::PclCloud voxels;
   reference::PclVoxelGrid(passed, VoxelGridParams{}, voxels);
   EXPECT_EQ(StagePoints(r8, "passthrough"), passed->size());
-  EXPECT_TRUE(testing::CloudsMatch(reference::FromPcl(voxels), c8));
+  EXPECT_TRUE(CloudsMatch(reference::FromPcl(voxels), c8, CloudTolerance::Equivalence()));
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -787,10 +579,12 @@ TEST_F(CliTest, TsukubaFrameMatchesStockPcl) {
 
   pcl::PointCloud<pcl::PointXYZRGB> pcl_cloud;
   ASSERT_EQ(pcl::io::loadPCDFile(out, pcl_cloud), 0);
-  EXPECT_TRUE(testing::CloudsMatch(reference::FromPcl(voxels), FromPclCloud(pcl_cloud)));
+  EXPECT_TRUE(CloudsMatch(reference::FromPcl(voxels), FromPclCloud(pcl_cloud),
+                          CloudTolerance::Equivalence()));
   open3d::geometry::PointCloud o3d;
   ASSERT_TRUE(open3d::io::ReadPointCloud(out, o3d));
-  EXPECT_TRUE(testing::CloudsMatch(reference::FromPcl(voxels), FromOpen3d(o3d)));
+  EXPECT_TRUE(
+      CloudsMatch(reference::FromPcl(voxels), FromOpen3d(o3d), CloudTolerance::Equivalence()));
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -923,354 +717,6 @@ INSTANTIATE_TEST_SUITE_P(Cases, BadInputTest, ::testing::ValuesIn(BadCases()),
                          [](const ::testing::TestParamInfo<BadCase>& info) {
                            return info.param.name;
                          });
-
-// ---------------------------------------------------------------------------------------------
-// image_io on its own.
-
-class ImageIoTest : public CliTest {};
-
-TEST_F(ImageIoTest, DisparityKeepsDepthAndValues) {
-  WriteFile(Path("d8.png"), Png(3, 2, 8, 0, Bytes({0, 1, 2, 100, 254, 255})));
-  WriteFile(Path("d16.png"), Png(3, 2, 16, 0, Be16({0, 1, 256, 2047, 40000, 65535})));
-  WriteFile(Path("d32.tif"), FloatTiff(3, 2, {0.0f, 0.5f, 1.25f, 100.0f, -3.0f, 1e6f}));
-  WriteFile(Path("d32.pfm"), Pfm(3, 2, {0.0f, 0.5f, 1.25f, 100.0f, -3.0f, 1e6f}));
-  WriteFile(Path("d16.pgm"), PnmHeader("P5", 3, 2, 65535) + Be16({0, 1, 256, 2047, 40000, 65535}));
-
-  auto d8 = LoadDisparity(Path("d8.png"));
-  ASSERT_TRUE(d8.ok()) << d8.status();
-  EXPECT_EQ(d8->encoding, DisparityEncoding::kU8);
-  EXPECT_EQ(d8->width, 3u);
-  EXPECT_EQ(d8->height, 2u);
-  EXPECT_EQ(d8->pixels, (std::vector<std::uint8_t>{0, 1, 2, 100, 254, 255}));
-
-  for (const char* name : {"d16.png", "d16.pgm"}) {
-    SCOPED_TRACE(name);
-    auto d16 = LoadDisparity(Path(name));
-    ASSERT_TRUE(d16.ok()) << d16.status();
-    EXPECT_EQ(d16->encoding, DisparityEncoding::kU16);
-    EXPECT_EQ(Samples<std::uint16_t>(d16->pixels),
-              (std::vector<std::uint16_t>{0, 1, 256, 2047, 40000, 65535}));
-  }
-  for (const char* name : {"d32.tif", "d32.pfm"}) {
-    SCOPED_TRACE(name);
-    auto d32 = LoadDisparity(Path(name));
-    ASSERT_TRUE(d32.ok()) << d32.status();
-    EXPECT_EQ(d32->encoding, DisparityEncoding::kF32);
-    EXPECT_EQ(Samples<float>(d32->pixels),
-              (std::vector<float>{0.0f, 0.5f, 1.25f, 100.0f, -3.0f, 1e6f}));
-    EXPECT_TRUE(ValidateView(d32->view(), Limits{}).ok());
-  }
-
-  // From bytes, as the server receives them.
-  auto d16 = LoadDisparity(Path("d16.png"));
-  ASSERT_TRUE(d16.ok()) << d16.status();
-  auto decoded = DecodeDisparity(ReadText(Path("d16.png")));
-  ASSERT_TRUE(decoded.ok()) << decoded.status();
-  EXPECT_EQ(decoded->pixels, d16->pixels);
-}
-
-TEST_F(ImageIoTest, ColourDropsAlphaAndNarrows16Bit) {
-  // RGBA with alpha 0, 136 and 255: the colour stays, alpha goes (New Tsukuba's PNGs are RGBA).
-  WriteFile(Path("rgba.png"),
-            Png(3, 1, 8, 6, Bytes({10, 20, 30, 0, 40, 50, 60, 136, 70, 80, 90, 255})));
-  auto rgba = LoadColor(Path("rgba.png"));
-  ASSERT_TRUE(rgba.ok()) << rgba.status();
-  EXPECT_EQ(rgba->encoding, ColorEncoding::kBGR8);
-  EXPECT_EQ(rgba->pixels, (std::vector<std::uint8_t>{30, 20, 10, 60, 50, 40, 90, 80, 70}));
-
-  WriteFile(Path("c16.png"), Png(2, 1, 16, 2, Be16({0, 257, 65535, 128, 32896, 1000})));
-  auto c16 = LoadColor(Path("c16.png"));
-  ASSERT_TRUE(c16.ok()) << c16.status();
-  EXPECT_EQ(c16->encoding, ColorEncoding::kBGR8);
-  // v / 257 rounded, in BGR order.
-  EXPECT_EQ(c16->pixels, (std::vector<std::uint8_t>{255, 1, 0, 4, 128, 0}));
-
-  WriteFile(Path("grey.png"), Png(2, 1, 8, 0, Bytes({7, 200})));
-  WriteFile(Path("grey.pgm"), PnmHeader("P5", 2, 1, 255) + Bytes({7, 200}));
-  for (const char* name : {"grey.png", "grey.pgm"}) {
-    SCOPED_TRACE(name);
-    auto grey = LoadColor(Path(name));
-    ASSERT_TRUE(grey.ok()) << grey.status();
-    EXPECT_EQ(grey->encoding, ColorEncoding::kMono8);
-    EXPECT_EQ(grey->pixels, (std::vector<std::uint8_t>{7, 200}));
-  }
-  // OpenCV expands grey + alpha PNGs to BGRA; the grey survives as equal channels.
-  WriteFile(Path("grey_alpha.png"), Png(2, 1, 8, 4, Bytes({7, 0, 200, 255})));
-  auto grey_alpha = LoadColor(Path("grey_alpha.png"));
-  ASSERT_TRUE(grey_alpha.ok()) << grey_alpha.status();
-  EXPECT_EQ(grey_alpha->pixels, (std::vector<std::uint8_t>{7, 7, 7, 200, 200, 200}));
-
-  auto decoded = DecodeColor(ReadText(Path("rgba.png")));
-  ASSERT_TRUE(decoded.ok()) << decoded.status();
-  EXPECT_EQ(decoded->pixels, rgba->pixels);
-}
-
-TEST_F(ImageIoTest, TsukubaColourIsRgbaAndLoadsAsBgr) {
-  CLOUDCAST_REQUIRE_TSUKUBA();
-  // Frame 00600 has alpha down to 0; its colour must survive.
-  auto c = LoadColor(testing::TsukubaColourPath("00600"));
-  ASSERT_TRUE(c.ok()) << c.status();
-  EXPECT_EQ(c->encoding, ColorEncoding::kBGR8);
-  EXPECT_EQ(c->width, 640u);
-  EXPECT_EQ(c->height, 480u);
-  auto d = LoadDisparity(testing::TsukubaDisparityPath("00600"));
-  ASSERT_TRUE(d.ok()) << d.status();
-  EXPECT_EQ(d->encoding, DisparityEncoding::kU8);
-  EXPECT_EQ(std::count(d->pixels.begin(), d->pixels.end(), 0), 447);  // README: 447 zeros
-}
-
-TEST_F(ImageIoTest, ErrorsNameTheFileAndTheReason) {
-  WriteFile(Path("c.png"), Png(2, 2, 8, 2, std::string(12, '\x09')));
-  WriteFile(Path("bad.png"), Png(2, 2, 8, 2, std::string(12, '\x09')).substr(0, 40));
-  WriteFile(Path("float.tif"), FloatTiff(1, 1, {1.0f}));
-
-  auto missing = LoadDisparity(Path("missing.png"));
-  EXPECT_EQ(missing.status().code(), absl::StatusCode::kNotFound);
-  EXPECT_NE(missing.status().message().find(Path("missing.png")), std::string::npos);
-
-  auto colour_as_disparity = LoadDisparity(Path("c.png"));
-  EXPECT_EQ(colour_as_disparity.status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_NE(colour_as_disparity.status().message().find("3 channels"), std::string::npos)
-      << colour_as_disparity.status();
-
-  auto float_colour = LoadColor(Path("float.tif"));
-  EXPECT_EQ(float_colour.status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_NE(float_colour.status().message().find("32-bit float"), std::string::npos)
-      << float_colour.status();
-
-  auto bad = LoadColor(Path("bad.png"));
-  EXPECT_EQ(bad.status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_NE(bad.status().message().find(Path("bad.png")), std::string::npos) << bad.status();
-
-  EXPECT_FALSE(DecodeColor("").ok());
-  EXPECT_FALSE(DecodeDisparity("not an image").ok());
-  EXPECT_NE(DecodeDisparity("not an image").status().message().find("disparity bytes"),
-            std::string::npos);
-}
-
-// ---------------------------------------------------------------------------------------------
-// cloud_io on its own: SaveCloud -> LoadCloud for each format, and files other tools wrote.
-
-PointCloud OrganizedCloudWithHoles() {
-  PointCloud c;
-  c.width = 4;
-  c.height = 3;
-  const float nan = std::numeric_limits<float>::quiet_NaN();
-  for (std::uint32_t v = 0; v < c.height; ++v) {
-    for (std::uint32_t u = 0; u < c.width; ++u) {
-      const bool hole = (u + v) % 5 == 0;
-      const auto fu = static_cast<float>(u), fv = static_cast<float>(v);
-      c.points.push_back(hole ? Point{nan, nan, nan, 0}
-                              : Point{0.1f * fu - 0.15f, 0.2f * fv + 0.01f, 3.0f + 0.37f * fu * fv,
-                                      PackRgba(static_cast<std::uint8_t>(20 * u),
-                                               static_cast<std::uint8_t>(250 - 30 * v),
-                                               static_cast<std::uint8_t>(u * v),
-                                               static_cast<std::uint8_t>(200 + u))});
-    }
-  }
-  return c;
-}
-
-PointCloud FiniteOnly(const PointCloud& in) {
-  PointCloud out;
-  for (const Point& p : in.points) {
-    if (Finite(p)) out.points.push_back(p);
-  }
-  out.width = static_cast<std::uint32_t>(out.size());
-  out.height = 1;
-  return out;
-}
-
-class CloudIoTest : public CliTest {};
-
-TEST_F(CloudIoTest, PcdKeepsOrganizedShapeNanPointsAndAlpha) {
-  const PointCloud cloud = OrganizedCloudWithHoles();
-  ASSERT_TRUE(SaveCloud(Path("o.pcd"), cloud).ok());
-  PointCloud back;
-  ASSERT_TRUE(LoadCloud(Path("o.pcd"), &back).ok());
-  EXPECT_EQ(back.width, 4u);
-  EXPECT_EQ(back.height, 3u);
-  EXPECT_TRUE(testing::CloudsIdentical(cloud, back));
-
-  pcl::PointCloud<pcl::PointXYZRGB> pcl_cloud;
-  ASSERT_EQ(pcl::io::loadPCDFile(Path("o.pcd"), pcl_cloud), 0);
-  EXPECT_EQ(pcl_cloud.width, 4u);
-  EXPECT_EQ(pcl_cloud.height, 3u);
-  EXPECT_FALSE(pcl_cloud.is_dense);
-
-  // Unorganized: the finite points, in order.
-  const PointCloud flat = FiniteOnly(cloud);
-  ASSERT_TRUE(SaveCloud(Path("flat.PCD"), flat).ok());  // extensions are case-insensitive
-  ASSERT_TRUE(LoadCloud(Path("flat.PCD"), &back).ok());
-  EXPECT_EQ(back.height, 1u);
-  EXPECT_TRUE(testing::CloudsIdentical(flat, back));
-}
-
-TEST_F(CloudIoTest, PlyKeepsFinitePointsInOrder) {
-  const PointCloud cloud = OrganizedCloudWithHoles();
-  ASSERT_TRUE(SaveCloud(Path("o.ply"), cloud).ok());
-  PointCloud back;
-  ASSERT_TRUE(LoadCloud(Path("o.ply"), &back).ok());
-  PointCloud expected = FiniteOnly(cloud);
-  for (Point& p : expected.points) p.rgba |= 0xFF000000u;  // PLY carries no alpha
-  EXPECT_EQ(back.height, 1u);
-  EXPECT_TRUE(testing::CloudsIdentical(expected, back));
-}
-
-TEST_F(CloudIoTest, DrcKeepsFinitePointsWithinTheErrorBound) {
-  const PointCloud cloud = OrganizedCloudWithHoles();
-  DracoOptions options;
-  options.max_position_error = 0.001f;
-  ASSERT_TRUE(SaveCloud(Path("o.drc"), cloud, options).ok());
-  PointCloud back;
-  ASSERT_TRUE(LoadCloud(Path("o.drc"), &back).ok());
-  EXPECT_EQ(back.height, 1u);
-  EXPECT_TRUE(SameWithin(FiniteOnly(cloud), back, 0.001 + 1e-6));
-  for (const Point& p : back.points) EXPECT_EQ(AlphaOf(p.rgba), 255);
-}
-
-TEST_F(CloudIoTest, EmptyCloudsRoundTrip) {
-  for (const char* name : {"e.pcd", "e.ply", "e.drc"}) {
-    SCOPED_TRACE(name);
-    const absl::Status saved = SaveCloud(Path(name), PointCloud{});
-    ASSERT_TRUE(saved.ok()) << saved;
-    PointCloud back;
-    back.points.resize(3);
-    const absl::Status loaded = LoadCloud(Path(name), &back);
-    ASSERT_TRUE(loaded.ok()) << loaded;
-    EXPECT_TRUE(back.empty());
-  }
-}
-
-TEST_F(CloudIoTest, ReadsFilesOtherToolsWrote) {
-  // PCL, positions only: white points.
-  pcl::PointCloud<pcl::PointXYZ> xyz;
-  xyz.push_back(pcl::PointXYZ(1, 2, 3));
-  xyz.push_back(pcl::PointXYZ(-1, 0.5f, 7));
-  ASSERT_EQ(pcl::io::savePCDFileASCII(Path("xyz.pcd"), xyz), 0);
-  PointCloud back;
-  ASSERT_TRUE(LoadCloud(Path("xyz.pcd"), &back).ok());
-  ASSERT_EQ(back.size(), 2u);
-  EXPECT_EQ(back.points[1].z, 7.0f);
-  EXPECT_EQ(back.points[0].rgba, PackRgba(255, 255, 255));
-
-  // Open3D (PLY with double coordinates; PCD), with colours.
-  open3d::geometry::PointCloud o3d;
-  o3d.points_ = {{1.5, -2.25, 3.0}, {0.125, 4.0, 9.5}};
-  o3d.colors_ = {{1.0, 0.0, 0.5}, {0.2, 0.4, 0.6}};
-  const PointCloud expected = {{Point{1.5f, -2.25f, 3.0f, PackRgba(255, 0, 128)},
-                                Point{0.125f, 4.0f, 9.5f, PackRgba(51, 102, 153)}},
-                               2,
-                               1};
-  for (const char* name : {"o3d.ply", "o3d.pcd"}) {
-    SCOPED_TRACE(name);
-    ASSERT_TRUE(open3d::io::WritePointCloud(Path(name), o3d));
-    const absl::Status s = LoadCloud(Path(name), &back);
-    ASSERT_TRUE(s.ok()) << s;
-    EXPECT_TRUE(SamePoints(expected, back, /*compare_alpha=*/false));
-  }
-
-  // A hand-written ASCII PLY as CloudCompare and MeshLab write them.
-  WriteFile(Path("ascii.ply"),
-            "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\n"
-            "property float z\nproperty uchar red\nproperty uchar green\nproperty uchar blue\n"
-            "end_header\n1 2 3 255 0 0\n4 5 6 0 0 255\n");
-  ASSERT_TRUE(LoadCloud(Path("ascii.ply"), &back).ok());
-  ASSERT_EQ(back.size(), 2u);
-  EXPECT_EQ(back.points[0].rgba, PackRgba(255, 0, 0));
-  EXPECT_EQ(back.points[1].rgba, PackRgba(0, 0, 255));
-  EXPECT_EQ(back.points[1].y, 5.0f);
-}
-
-// Truncated and corrupted files of every kind give an error or a cloud, never a crash (PCL's
-// readers alone crash on some of these, see cloud_io.cc).
-TEST_F(CloudIoTest, DamagedFilesNeverCrash) {
-  const PointCloud cloud = OrganizedCloudWithHoles();
-  pcl::PointCloud<pcl::PointXYZRGB> pcl_cloud;
-  for (const Point& p : cloud.points) {
-    pcl::PointXYZRGB q;
-    q.x = p.x;
-    q.y = p.y;
-    q.z = p.z;
-    q.rgba = p.rgba;
-    pcl_cloud.push_back(q);
-  }
-  ASSERT_TRUE(SaveCloud(Path("good.pcd"), cloud).ok());
-  ASSERT_TRUE(SaveCloud(Path("good.ply"), cloud).ok());
-  ASSERT_TRUE(SaveCloud(Path("good.drc"), cloud).ok());
-  ASSERT_EQ(pcl::io::savePCDFileASCII(Path("ascii.pcd"), pcl_cloud), 0);
-  ASSERT_EQ(pcl::io::savePCDFileBinaryCompressed(Path("compressed.pcd"), pcl_cloud), 0);
-  ASSERT_EQ(pcl::io::savePLYFileASCII(Path("ascii.ply"), pcl_cloud), 0);
-
-  std::mt19937 rng(7);
-  int loaded = 0, refused = 0;
-  for (const char* name :
-       {"good.pcd", "good.ply", "good.drc", "ascii.pcd", "compressed.pcd", "ascii.ply"}) {
-    const std::string bytes = ReadText(Path(name));
-    const std::string ext = fs::path(name).extension().string();
-    std::vector<std::string> variants;
-    for (std::size_t n = 0; n < bytes.size(); n += 1 + n / 8) {
-      variants.push_back(bytes.substr(0, n));
-    }
-    for (int i = 0; i < 60; ++i) {
-      std::string damaged = bytes;
-      const int flips = 1 + static_cast<int>(rng() % 4);
-      for (int k = 0; k < flips; ++k) {
-        damaged[rng() % damaged.size()] = static_cast<char>(rng());
-      }
-      variants.push_back(damaged);
-    }
-    for (std::size_t i = 0; i < variants.size(); ++i) {
-      const std::string path = Path("damaged" + ext);
-      WriteFile(path, variants[i]);
-      PointCloud back;
-      const absl::Status s = LoadCloud(path, &back);  // a crash ends the test binary
-      if (!s.ok()) {
-        ++refused;
-        continue;
-      }
-      ++loaded;
-      if (!back.organized()) {
-        for (const Point& p : back.points) ASSERT_TRUE(Finite(p)) << name << " variant " << i;
-      } else {
-        ASSERT_EQ(std::uint64_t{back.width} * back.height, back.size()) << name << " " << i;
-      }
-    }
-  }
-  EXPECT_GT(refused, 0);
-  EXPECT_GT(loaded, 0);
-}
-
-TEST_F(CloudIoTest, ErrorsNameTheFileAndTheReason) {
-  PointCloud cloud = FiniteOnly(OrganizedCloudWithHoles());
-  PointCloud back;
-
-  const absl::Status unknown = SaveCloud(Path("c.xyz"), cloud);
-  EXPECT_EQ(unknown.code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_NE(unknown.message().find(".pcd, .ply, .drc"), std::string::npos) << unknown;
-  EXPECT_FALSE(LoadCloud(Path("c.xyz"), &back).ok());
-
-  const absl::Status no_folder = SaveCloud(Path("none/c.pcd"), cloud);
-  EXPECT_FALSE(no_folder.ok());
-  EXPECT_NE(no_folder.message().find(Path("none")), std::string::npos) << no_folder;
-
-  const absl::Status missing = LoadCloud(Path("missing.ply"), &back);
-  EXPECT_EQ(missing.code(), absl::StatusCode::kNotFound);
-  EXPECT_NE(missing.message().find(Path("missing.ply")), std::string::npos) << missing;
-
-  for (const char* name : {"junk.pcd", "junk.ply", "junk.drc"}) {
-    WriteFile(Path(name), "definitely not a point cloud\n");
-    const absl::Status s = LoadCloud(Path(name), &back);
-    EXPECT_FALSE(s.ok()) << name;
-    EXPECT_NE(s.message().find(Path(name)), std::string::npos) << s;
-  }
-
-  PointCloud bad_shape = OrganizedCloudWithHoles();
-  bad_shape.points.pop_back();
-  const absl::Status shape = SaveCloud(Path("shape.pcd"), bad_shape);
-  EXPECT_FALSE(shape.ok());
-  EXPECT_NE(shape.message().find("4x3"), std::string::npos) << shape;
-}
 
 }  // namespace
 }  // namespace cloudcast

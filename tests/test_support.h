@@ -1,5 +1,5 @@
-// Shared test helpers: where the New Tsukuba data is, random frames, a brute-force voxel grid
-// and cloud matching with the tolerances the equivalence tests use.
+// Shared test helpers: where the New Tsukuba data is, random frames, a brute-force voxel grid,
+// bit-for-bit cloud equality; and (support/cloud_match.h) the one cloud matcher.
 #pragma once
 
 #include <gtest/gtest.h>
@@ -7,18 +7,19 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <map>
 #include <random>
 #include <string>
 #include <tuple>
-#include <unordered_map>
 #include <vector>
 
 #include "cloudcast/core/filters.h"
 #include "cloudcast/core/image.h"
 #include "cloudcast/core/point.h"
 #include "cloudcast/datasets/tsukuba.h"
+#include "support/cloud_match.h"
 
 namespace cloudcast::testing {
 
@@ -135,81 +136,6 @@ inline PointCloud BruteForceVoxelGrid(const PointCloud& in, const VoxelGridParam
   out.width = static_cast<std::uint32_t>(out.size());
   out.height = 1;
   return out;
-}
-
-// The equivalence criterion: the same number of points, and every reference point has its own
-// one of ours within 1e-5 of its norm (relative), with colour channels within 1.
-inline ::testing::AssertionResult CloudsMatch(const PointCloud& reference, const PointCloud& ours,
-                                              double rel_tol = 1e-5, int colour_tol = 1) {
-  if (reference.size() != ours.size()) {
-    return ::testing::AssertionFailure()
-           << "point counts differ: reference " << reference.size() << ", ours " << ours.size();
-  }
-  // Bucket ours on a coarse grid; search the reference point's cell and its neighbours.
-  double extent = 1e-9;
-  for (const Point& p : ours.points) {
-    extent =
-        std::max({extent, std::fabs(double(p.x)), std::fabs(double(p.y)), std::fabs(double(p.z))});
-  }
-  const double cell = std::max(extent / 4096.0, 1e-6);
-  auto key_of = [&](double x, double y, double z) {
-    auto c = [&](double v) { return static_cast<std::int64_t>(std::floor(v / cell)); };
-    return std::make_tuple(c(x), c(y), c(z));
-  };
-  struct TupleHash {
-    std::size_t operator()(const std::tuple<std::int64_t, std::int64_t, std::int64_t>& t) const {
-      return std::hash<std::int64_t>()(std::get<0>(t) * 73856093 ^ std::get<1>(t) * 19349663 ^
-                                       std::get<2>(t) * 83492791);
-    }
-  };
-  std::unordered_map<std::tuple<std::int64_t, std::int64_t, std::int64_t>, std::vector<std::size_t>,
-                     TupleHash>
-      grid;
-  for (std::size_t i = 0; i < ours.size(); ++i) {
-    const Point& p = ours.points[i];
-    grid[key_of(p.x, p.y, p.z)].push_back(i);
-  }
-  std::vector<bool> used(ours.size(), false);
-  for (std::size_t r = 0; r < reference.size(); ++r) {
-    const Point& p = reference.points[r];
-    const double norm = std::sqrt(double(p.x) * p.x + double(p.y) * p.y + double(p.z) * p.z);
-    const double tol = rel_tol * std::max(norm, 1e-12);
-    const auto [cx, cy, cz] = key_of(p.x, p.y, p.z);
-    std::size_t best = SIZE_MAX;
-    double best_d = 1e300;
-    for (int dx = -1; dx <= 1; ++dx)
-      for (int dy = -1; dy <= 1; ++dy)
-        for (int dz = -1; dz <= 1; ++dz) {
-          auto it = grid.find({cx + dx, cy + dy, cz + dz});
-          if (it == grid.end()) continue;
-          for (std::size_t i : it->second) {
-            if (used[i]) continue;
-            const Point& q = ours.points[i];
-            const double d = std::sqrt((double(p.x) - q.x) * (double(p.x) - q.x) +
-                                       (double(p.y) - q.y) * (double(p.y) - q.y) +
-                                       (double(p.z) - q.z) * (double(p.z) - q.z));
-            if (d < best_d) {
-              best_d = d;
-              best = i;
-            }
-          }
-        }
-    if (best == SIZE_MAX || best_d > tol) {
-      return ::testing::AssertionFailure()
-             << "reference point " << r << " (" << p.x << ", " << p.y << ", " << p.z
-             << ") has no match within " << tol << " (nearest unused at " << best_d << ")";
-    }
-    const Point& q = ours.points[best];
-    auto channel_diff = [](std::uint8_t a, std::uint8_t b) { return std::abs(int(a) - int(b)); };
-    if (channel_diff(RedOf(p.rgba), RedOf(q.rgba)) > colour_tol ||
-        channel_diff(GreenOf(p.rgba), GreenOf(q.rgba)) > colour_tol ||
-        channel_diff(BlueOf(p.rgba), BlueOf(q.rgba)) > colour_tol) {
-      return ::testing::AssertionFailure() << "reference point " << r << " colour " << std::hex
-                                           << p.rgba << " vs ours " << q.rgba;
-    }
-    used[best] = true;
-  }
-  return ::testing::AssertionSuccess();
 }
 
 // Bit-for-bit equality of two clouds' points in order (NaN equals NaN). Width and height are not

@@ -17,8 +17,10 @@
 #include <gtest/gtest.h>
 #include <poll.h>
 #include <signal.h>
+#include <sys/inotify.h>
 #include <sys/prctl.h>
 #include <sys/stat.h>
+#include <sys/syscall.h>
 #include <sys/types.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -29,13 +31,12 @@
 #include <fstream>
 #include <sstream>
 #include <string>
-#include <thread>
 #include <vector>
 
 namespace cloudcast::testing {
 
 // An Xvfb server owned by this object: started by Start, terminated (SIGTERM, then SIGKILL
-// after 5 s) by the destructor.
+// if it has not exited 5 s later) by the destructor.
 class XvfbServer {
  public:
   // "1280x1024x24": the screen Xvfb emulates. Windows larger than it are clipped by X but
@@ -123,13 +124,10 @@ class XvfbServer {
     number.pop_back();
     display_ = ":" + number;
     const std::string socket = "/tmp/.X11-unix/X" + number;
-    while (!std::filesystem::exists(socket)) {
-      if (std::chrono::steady_clock::now() > deadline) {
-        const std::string why = "Xvfb's socket " + socket + " did not appear: " + LogTail();
-        Stop();
-        return why;
-      }
-      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    if (!WaitForFile(socket, deadline)) {
+      const std::string why = "Xvfb's socket " + socket + " did not appear: " + LogTail();
+      Stop();
+      return why;
     }
     return "";
   }
@@ -142,21 +140,61 @@ class XvfbServer {
     if (pid_ <= 0) return;
     ::kill(pid_, SIGTERM);
     int status = 0;
-    bool reaped = false;
-    for (int i = 0; i < 500 && !reaped; ++i) {
-      reaped = ::waitpid(pid_, &status, WNOHANG) == pid_;
-      if (!reaped) std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    }
-    if (!reaped) {
+    if (!WaitForExit(pid_, std::chrono::seconds(5))) {
       ::kill(pid_, SIGKILL);
-      ::waitpid(pid_, &status, 0);
     }
+    ::waitpid(pid_, &status, 0);
     pid_ = -1;
     std::error_code ec;
     std::filesystem::remove(log_path_, ec);
   }
 
  private:
+  // Waits until child `pid` has exited (not reaped yet), up to `timeout`: poll() on a pidfd,
+  // which becomes readable when the process ends. False on timeout, or when the kernel has no
+  // pidfd_open (then the caller kills at once).
+  static bool WaitForExit(pid_t pid, std::chrono::milliseconds timeout) {
+#ifdef SYS_pidfd_open
+    const int fd = static_cast<int>(::syscall(SYS_pidfd_open, pid, 0));
+    if (fd < 0) return false;
+    pollfd p{fd, POLLIN, 0};
+    const int ready = ::poll(&p, 1, static_cast<int>(timeout.count()));
+    ::close(fd);
+    return ready > 0;
+#else
+    (void)pid;
+    (void)timeout;
+    return false;
+#endif
+  }
+
+  // Waits until `path` exists, up to `deadline`: an inotify watch on its folder wakes us when
+  // entries appear. -displayfd reports the number once Xvfb listens, so the socket is normally
+  // there already.
+  static bool WaitForFile(const std::filesystem::path& path,
+                          std::chrono::steady_clock::time_point deadline) {
+    const int fd = ::inotify_init1(IN_CLOEXEC | IN_NONBLOCK);
+    if (fd < 0) return std::filesystem::exists(path);
+    // The watch before the check, so that an entry made in between is not missed.
+    const bool watching =
+        ::inotify_add_watch(fd, path.parent_path().c_str(), IN_CREATE | IN_MOVED_TO) >= 0;
+    bool found = std::filesystem::exists(path);
+    while (!found && watching) {
+      const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
+          deadline - std::chrono::steady_clock::now());
+      if (left.count() <= 0) break;
+      pollfd p{fd, POLLIN, 0};
+      if (::poll(&p, 1, static_cast<int>(left.count())) > 0) {
+        char events[4096];
+        while (::read(fd, events, sizeof(events)) > 0) {
+        }
+      }
+      found = std::filesystem::exists(path);
+    }
+    ::close(fd);
+    return found;
+  }
+
   std::string LogTail() const {
     std::ifstream file(log_path_);
     std::stringstream ss;

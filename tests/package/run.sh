@@ -30,16 +30,24 @@ cmake -S "$src/tests/package" -B "$scratch/robot" -G Ninja -DCMAKE_BUILD_TYPE=Re
 cmake --build "$scratch/robot" >"$scratch/robot-build.log" || { cat "$scratch/robot-build.log"; exit 1; }
 
 echo "== and streams one frame to a real server"
-"$server" --listen 127.0.0.1:0 --metrics-listen "" --instance package-test >"$scratch/server.log" 2>&1 &
+# The server's log comes through a pipe, read line by line until it names its port: each read
+# blocks until the next line (or the server's exit), so nothing polls. A background cat drains
+# the rest, so that the server never blocks on a full pipe.
+mkfifo "$scratch/server.pipe"
+: >"$scratch/server.log"
+"$server" --listen 127.0.0.1:0 --metrics-listen "" --instance package-test \
+  >"$scratch/server.pipe" 2>&1 &
 pid=$!
 trap 'kill -TERM $pid 2>/dev/null || true; wait $pid 2>/dev/null || true' EXIT
+exec 3<"$scratch/server.pipe"
 port=""
-for _ in $(seq 1 100); do
-  port=$(sed -n 's/.*listening on 127\.0\.0\.1:\([0-9]*\).*/\1/p' "$scratch/server.log" | head -n 1)
-  [ -n "$port" ] && break
-  kill -0 $pid 2>/dev/null || { cat "$scratch/server.log"; exit 1; }
-  sleep 0.1
+# -t 60 only turns a hang into a failure.
+while [ -z "$port" ] && IFS= read -r -t 60 line <&3; do
+  printf '%s\n' "$line" >>"$scratch/server.log"
+  port=$(printf '%s\n' "$line" | sed -n 's/.*listening on 127\.0\.0\.1:\([0-9]*\).*/\1/p')
 done
+cat <&3 >>"$scratch/server.log" &
+exec 3<&-
 [ -n "$port" ] || { cat "$scratch/server.log"; echo "the server reported no port"; exit 1; }
 "$scratch/robot/robot" "127.0.0.1:$port" | tee "$scratch/robot.out"
 grep -q "from package-test" "$scratch/robot.out"

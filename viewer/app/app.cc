@@ -241,7 +241,8 @@ std::unique_ptr<cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
       ->group(viewer);
   app.add_option("--snapshot", f.snapshot,
                  "Write the view as PNG once --snapshot-after clouds were shown and the current "
-                 "one has points (or at the end of the stream), then exit; works under Xvfb")
+                 "one has points (or at the end of the stream, of the last cloud with points), "
+                 "then exit; works under Xvfb")
       ->type_name("FILE.png")
       ->group(viewer);
   app.add_option("--snapshot-after", f.snapshot_after,

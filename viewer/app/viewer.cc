@@ -28,6 +28,12 @@ constexpr milliseconds kIdleFrame{16};
 // Without new clouds the overlay is refreshed this often (the rate falls, "paused" shows).
 constexpr milliseconds kOverlayPeriod{250};
 
+// "frame tsukuba_01800", or "sequence 9" for a frame without a name.
+std::string FrameName(const CloudMeta& meta) {
+  return meta.frame_id.empty() ? fmt::format("sequence {}", meta.sequence)
+                               : fmt::format("frame {}", meta.frame_id);
+}
+
 absl::Status WriteSnapshot(render::Renderer& renderer, const std::string& path) {
   absl::Status s = renderer.SaveScreenshot(path);
   if (!s.ok()) return absl::Status(s.code(), absl::StrCat("--snapshot ", path, ": ", s.message()));
@@ -66,11 +72,16 @@ void CloudMailbox::Put(Result& result) {
   if (!result.ok()) return;
   {
     std::unique_lock<std::mutex> lock(mu_);
-    if (wait_for_viewer_) taken_cv_.wait(lock, [this] { return !full_ || closed_; });
+    if (wait_for_viewer_ && full_ && !closed_) {
+      ++puts_held_;
+      held_cv_.notify_all();
+      taken_cv_.wait(lock, [this] { return !full_ || closed_; });
+    }
     if (closed_) return;
     if (full_) ++skipped_;
     std::swap(slot_, result.cloud);
     meta_.sequence = result.sequence;
+    meta_.frame_id = result.frame_id;
     meta_.draco_bytes = result.draco_bytes();
     meta_.latency_ms = std::chrono::duration<double, std::milli>(result.latency()).count();
     meta_.frames_dropped = result.frames_dropped;
@@ -109,6 +120,11 @@ std::uint64_t CloudMailbox::skipped() const {
   return skipped_;
 }
 
+bool CloudMailbox::WaitForPutsHeld(std::uint64_t count, milliseconds timeout) const {
+  std::unique_lock<std::mutex> lock(mu_);
+  return held_cv_.wait_for(lock, timeout, [&] { return puts_held_ >= count; });
+}
+
 std::string OverlayLine(double fps, double latency_ms, std::size_t points, std::size_t bytes,
                         std::uint64_t dropped, bool paused, bool ended) {
   std::string line = fmt::format("{:.1f} fps | {:.1f} ms | {} points | {:.1f} KB | dropped {}", fps,
@@ -134,8 +150,10 @@ absl::StatusOr<std::unique_ptr<render::Renderer>> OpenWindow(const ViewerOptions
 absl::Status RunLiveViewer(render::Renderer& renderer, Session& session, CloudMailbox& mailbox,
                            StreamStats& stats, const ViewerOptions& options,
                            const std::atomic<bool>& interrupted) {
-  PointCloud cloud, spare;
-  CloudMeta meta, spare_meta;
+  // `cloud` is on screen; `incoming` receives from the mailbox. For the snapshot, the last cloud
+  // with points before the one shown is kept too (buffers rotate, nothing is copied).
+  PointCloud cloud, incoming, last_with_points;
+  CloudMeta meta, incoming_meta, last_with_points_meta;
   std::uint64_t displayed = 0;
   bool view_set = false;
   bool ended = false;
@@ -150,9 +168,14 @@ absl::Status RunLiveViewer(render::Renderer& renderer, Session& session, CloudMa
     // Paused, clouds are still taken (into a spare buffer) and counted, so that the stream keeps
     // moving: a stalled stream would hit the server's idle timeout.
     const bool paused = renderer.paused();
-    const bool fresh =
-        mailbox.Take(paused ? &spare : &cloud, paused ? &spare_meta : &meta, kIdleFrame) && !paused;
+    const bool fresh = mailbox.Take(&incoming, &incoming_meta, kIdleFrame) && !paused;
     if (fresh) {
+      if (!cloud.empty()) {
+        std::swap(last_with_points, cloud);
+        std::swap(last_with_points_meta, meta);
+      }
+      std::swap(cloud, incoming);
+      std::swap(meta, incoming_meta);
       renderer.Upload(cloud.points.data(), cloud.size());
       // The first cloud with points frames the view; later ones keep the user's camera.
       if (!view_set && !cloud.empty()) {
@@ -180,7 +203,8 @@ absl::Status RunLiveViewer(render::Renderer& renderer, Session& session, CloudMa
     renderer.Draw();
 
     // An empty view makes a useless picture (two of New Tsukuba's ten frames lie wholly outside
-    // the paper's passthrough), so the snapshot waits for a cloud with points.
+    // the paper's passthrough, the last one among them), so the snapshot waits for a cloud with
+    // points, and when the stream ends on an empty one it shows the last cloud that had points.
     const bool snapshot_due = !options.snapshot_path.empty() &&
                               ((displayed >= options.snapshot_after && !cloud.empty()) || ended);
     if (snapshot_due) {
@@ -189,13 +213,23 @@ absl::Status RunLiveViewer(render::Renderer& renderer, Session& session, CloudMa
             absl::StrCat("--snapshot ", options.snapshot_path,
                          ": the stream ended without a single cloud to show"));
       }
-      if (displayed < options.snapshot_after || cloud.empty()) {
-        spdlog::warn("the stream ended after {} clouds{}: snapshot of the last one ({} points)",
-                     displayed,
-                     displayed < options.snapshot_after
-                         ? fmt::format(", before --snapshot-after {}", options.snapshot_after)
-                         : std::string(", none with points since --snapshot-after"),
-                     cloud.size());
+      if (displayed < options.snapshot_after) {
+        spdlog::warn("the stream ended after {} clouds, before --snapshot-after {}", displayed,
+                     options.snapshot_after);
+      }
+      if (cloud.empty() && !last_with_points.empty()) {
+        spdlog::warn("the last cloud ({}) was empty: the snapshot shows {} ({} points)",
+                     FrameName(meta), FrameName(last_with_points_meta), last_with_points.size());
+        renderer.Upload(last_with_points.points.data(), last_with_points.size());
+        // One short line, the news first: a second line would reach into the picture.
+        const CloudMeta& shown = last_with_points_meta;
+        renderer.SetOverlayText(fmt::format(
+            "last cloud empty, showing {} | {} points",
+            shown.frame_id.empty() ? fmt::format("sequence {}", shown.sequence) : shown.frame_id,
+            last_with_points.size()));
+        renderer.Draw();
+      } else if (cloud.empty()) {
+        spdlog::warn("every cloud of the stream was empty: the snapshot shows no points");
       }
       absl::Status s = WriteSnapshot(renderer, options.snapshot_path);
       session.Stop();

@@ -23,6 +23,7 @@ namespace cloudcast::client::app {
 // What the overlay shows about a cloud, beside its points.
 struct CloudMeta {
   std::uint64_t sequence = 0;
+  std::string frame_id;  // the source's name of the frame, e.g. "tsukuba_01800"
   std::size_t draco_bytes = 0;
   double latency_ms = 0;
   std::uint64_t frames_dropped = 0;
@@ -51,11 +52,16 @@ class CloudMailbox {
   void Close();
   bool has_new() const;
   std::uint64_t skipped() const;
+  // For tests, which must see the wait policy hold a Put instead of guessing with a sleep: waits
+  // until `count` Put calls in all have had to wait for the viewer, or `timeout` passes (false).
+  bool WaitForPutsHeld(std::uint64_t count, std::chrono::milliseconds timeout) const;
 
  private:
   const bool wait_for_viewer_;
   mutable std::mutex mu_;
   std::condition_variable taken_cv_, put_cv_;
+  mutable std::condition_variable held_cv_;
+  std::uint64_t puts_held_ = 0;
   PointCloud slot_;
   CloudMeta meta_;
   bool full_ = false;
@@ -66,7 +72,8 @@ class CloudMailbox {
 struct ViewerOptions {
   render::RendererOptions window;
   // Empty: no snapshot. Otherwise a PNG written once `snapshot_after` clouds were displayed and
-  // the one shown has points (or when the stream ends first), after which the viewer returns.
+  // the one shown has points (or when the stream ends first: then of the last cloud with points,
+  // the log and the overlay saying so), after which the viewer returns.
   std::string snapshot_path;
   std::uint64_t snapshot_after = 10;
   // Return when the stream has ended (otherwise the window stays open on the last cloud).

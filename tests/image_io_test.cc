@@ -1,0 +1,154 @@
+// image_io on its own: disparity and colour files of every depth and format, written here by hand
+// (support/image_files.h) so that every byte the decoder sees is known, New Tsukuba's RGBA colour,
+// and the errors of files that cannot be read.
+#include "cloudcast/io/image_io.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "cloudcast/core/image.h"
+#include "cloudcast/core/limits.h"
+#include "program_support.h"
+#include "support/image_files.h"
+#include "test_support.h"
+
+namespace cloudcast {
+namespace {
+
+using testing::Be16;
+using testing::Bytes;
+using testing::FloatTiff;
+using testing::Pfm;
+using testing::Png;
+using testing::PnmHeader;
+using testing::ReadText;
+using testing::Samples;
+using testing::WriteFile;
+
+using ImageIoTest = testing::ScratchDirTest;
+
+TEST_F(ImageIoTest, DisparityKeepsDepthAndValues) {
+  WriteFile(Path("d8.png"), Png(3, 2, 8, 0, Bytes({0, 1, 2, 100, 254, 255})));
+  WriteFile(Path("d16.png"), Png(3, 2, 16, 0, Be16({0, 1, 256, 2047, 40000, 65535})));
+  WriteFile(Path("d32.tif"), FloatTiff(3, 2, {0.0f, 0.5f, 1.25f, 100.0f, -3.0f, 1e6f}));
+  WriteFile(Path("d32.pfm"), Pfm(3, 2, {0.0f, 0.5f, 1.25f, 100.0f, -3.0f, 1e6f}));
+  WriteFile(Path("d16.pgm"), PnmHeader("P5", 3, 2, 65535) + Be16({0, 1, 256, 2047, 40000, 65535}));
+
+  auto d8 = LoadDisparity(Path("d8.png"));
+  ASSERT_TRUE(d8.ok()) << d8.status();
+  EXPECT_EQ(d8->encoding, DisparityEncoding::kU8);
+  EXPECT_EQ(d8->width, 3u);
+  EXPECT_EQ(d8->height, 2u);
+  EXPECT_EQ(d8->pixels, (std::vector<std::uint8_t>{0, 1, 2, 100, 254, 255}));
+
+  for (const char* name : {"d16.png", "d16.pgm"}) {
+    SCOPED_TRACE(name);
+    auto d16 = LoadDisparity(Path(name));
+    ASSERT_TRUE(d16.ok()) << d16.status();
+    EXPECT_EQ(d16->encoding, DisparityEncoding::kU16);
+    EXPECT_EQ(Samples<std::uint16_t>(d16->pixels),
+              (std::vector<std::uint16_t>{0, 1, 256, 2047, 40000, 65535}));
+  }
+  for (const char* name : {"d32.tif", "d32.pfm"}) {
+    SCOPED_TRACE(name);
+    auto d32 = LoadDisparity(Path(name));
+    ASSERT_TRUE(d32.ok()) << d32.status();
+    EXPECT_EQ(d32->encoding, DisparityEncoding::kF32);
+    EXPECT_EQ(Samples<float>(d32->pixels),
+              (std::vector<float>{0.0f, 0.5f, 1.25f, 100.0f, -3.0f, 1e6f}));
+    EXPECT_TRUE(ValidateView(d32->view(), Limits{}).ok());
+  }
+
+  // From bytes, as the server receives them.
+  auto d16 = LoadDisparity(Path("d16.png"));
+  ASSERT_TRUE(d16.ok()) << d16.status();
+  auto decoded = DecodeDisparity(ReadText(Path("d16.png")));
+  ASSERT_TRUE(decoded.ok()) << decoded.status();
+  EXPECT_EQ(decoded->pixels, d16->pixels);
+}
+
+TEST_F(ImageIoTest, ColourDropsAlphaAndNarrows16Bit) {
+  // RGBA with alpha 0, 136 and 255: the colour stays, alpha goes (New Tsukuba's PNGs are RGBA).
+  WriteFile(Path("rgba.png"),
+            Png(3, 1, 8, 6, Bytes({10, 20, 30, 0, 40, 50, 60, 136, 70, 80, 90, 255})));
+  auto rgba = LoadColor(Path("rgba.png"));
+  ASSERT_TRUE(rgba.ok()) << rgba.status();
+  EXPECT_EQ(rgba->encoding, ColorEncoding::kBGR8);
+  EXPECT_EQ(rgba->pixels, (std::vector<std::uint8_t>{30, 20, 10, 60, 50, 40, 90, 80, 70}));
+
+  WriteFile(Path("c16.png"), Png(2, 1, 16, 2, Be16({0, 257, 65535, 128, 32896, 1000})));
+  auto c16 = LoadColor(Path("c16.png"));
+  ASSERT_TRUE(c16.ok()) << c16.status();
+  EXPECT_EQ(c16->encoding, ColorEncoding::kBGR8);
+  // v / 257 rounded, in BGR order.
+  EXPECT_EQ(c16->pixels, (std::vector<std::uint8_t>{255, 1, 0, 4, 128, 0}));
+
+  WriteFile(Path("grey.png"), Png(2, 1, 8, 0, Bytes({7, 200})));
+  WriteFile(Path("grey.pgm"), PnmHeader("P5", 2, 1, 255) + Bytes({7, 200}));
+  for (const char* name : {"grey.png", "grey.pgm"}) {
+    SCOPED_TRACE(name);
+    auto grey = LoadColor(Path(name));
+    ASSERT_TRUE(grey.ok()) << grey.status();
+    EXPECT_EQ(grey->encoding, ColorEncoding::kMono8);
+    EXPECT_EQ(grey->pixels, (std::vector<std::uint8_t>{7, 200}));
+  }
+  // OpenCV expands grey + alpha PNGs to BGRA; the grey survives as equal channels.
+  WriteFile(Path("grey_alpha.png"), Png(2, 1, 8, 4, Bytes({7, 0, 200, 255})));
+  auto grey_alpha = LoadColor(Path("grey_alpha.png"));
+  ASSERT_TRUE(grey_alpha.ok()) << grey_alpha.status();
+  EXPECT_EQ(grey_alpha->pixels, (std::vector<std::uint8_t>{7, 7, 7, 200, 200, 200}));
+
+  auto decoded = DecodeColor(ReadText(Path("rgba.png")));
+  ASSERT_TRUE(decoded.ok()) << decoded.status();
+  EXPECT_EQ(decoded->pixels, rgba->pixels);
+}
+
+TEST_F(ImageIoTest, TsukubaColourIsRgbaAndLoadsAsBgr) {
+  CLOUDCAST_REQUIRE_TSUKUBA();
+  // Frame 00600 has alpha down to 0; its colour must survive.
+  auto c = LoadColor(testing::TsukubaColourPath("00600"));
+  ASSERT_TRUE(c.ok()) << c.status();
+  EXPECT_EQ(c->encoding, ColorEncoding::kBGR8);
+  EXPECT_EQ(c->width, 640u);
+  EXPECT_EQ(c->height, 480u);
+  auto d = LoadDisparity(testing::TsukubaDisparityPath("00600"));
+  ASSERT_TRUE(d.ok()) << d.status();
+  EXPECT_EQ(d->encoding, DisparityEncoding::kU8);
+  EXPECT_EQ(std::count(d->pixels.begin(), d->pixels.end(), 0), 447);  // README: 447 zeros
+}
+
+TEST_F(ImageIoTest, ErrorsNameTheFileAndTheReason) {
+  WriteFile(Path("c.png"), Png(2, 2, 8, 2, std::string(12, '\x09')));
+  WriteFile(Path("bad.png"), Png(2, 2, 8, 2, std::string(12, '\x09')).substr(0, 40));
+  WriteFile(Path("float.tif"), FloatTiff(1, 1, {1.0f}));
+
+  auto missing = LoadDisparity(Path("missing.png"));
+  EXPECT_EQ(missing.status().code(), absl::StatusCode::kNotFound);
+  EXPECT_NE(missing.status().message().find(Path("missing.png")), std::string::npos);
+
+  auto colour_as_disparity = LoadDisparity(Path("c.png"));
+  EXPECT_EQ(colour_as_disparity.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(colour_as_disparity.status().message().find("3 channels"), std::string::npos)
+      << colour_as_disparity.status();
+
+  auto float_colour = LoadColor(Path("float.tif"));
+  EXPECT_EQ(float_colour.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(float_colour.status().message().find("32-bit float"), std::string::npos)
+      << float_colour.status();
+
+  auto bad = LoadColor(Path("bad.png"));
+  EXPECT_EQ(bad.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(bad.status().message().find(Path("bad.png")), std::string::npos) << bad.status();
+
+  EXPECT_FALSE(DecodeColor("").ok());
+  EXPECT_FALSE(DecodeDisparity("not an image").ok());
+  EXPECT_NE(DecodeDisparity("not an image").status().message().find("disparity bytes"),
+            std::string::npos);
+}
+
+}  // namespace
+}  // namespace cloudcast

@@ -1,0 +1,233 @@
+// Ending calls and servers, end to end: a client cancelling mid-stream, draining (NOT_SERVING,
+// new calls refused), shutdown under load, and a start on an address already taken.
+//
+// Outcomes and orderings are asserted, never durations: a drained stream answers every frame it
+// accepted and then ends UNAVAILABLE; a stream that cannot be drained stays open until the end of
+// the grace period cuts it.
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <cstdint>
+#include <future>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "service.h"
+#include "support/server_support.h"
+#include "support/waiting.h"
+
+namespace cloudcast::server {
+namespace {
+
+using std::chrono::milliseconds;
+using std::chrono::seconds;
+
+// How the service ends a stream it drained (service.cc).
+constexpr const char* kDrained = "frames received before were answered";
+
+TEST_F(ServerTest, ClientCancelsMidStreamAndTheServerCarriesOn) {
+  {
+    grpc::ClientContext ctx;
+    SetDeadline(&ctx);
+    auto stream = stub_->Stream(&ctx);
+    ASSERT_TRUE(stream->Write(ConfigRequest(ConfigFor(Params{}, v1::DELIVERY_ALL))));
+    std::atomic<bool> stop{false};
+    std::thread writer([&] {
+      for (std::uint64_t i = 0; !stop.load(); ++i) {
+        if (!stream->Write(FrameRequest(MakeFrame(Frames()[i % Frames().size()], i)))) break;
+      }
+    });
+    v1::StreamReply reply;
+    int replies = 0;
+    while (replies < 3 && stream->Read(&reply)) ++replies;
+    EXPECT_EQ(replies, 3);
+    ctx.TryCancel();
+    stop.store(true);
+    writer.join();
+    while (stream->Read(&reply)) {
+    }
+    EXPECT_EQ(stream->Finish().error_code(), grpc::StatusCode::CANCELLED);
+  }
+  EXPECT_TRUE(
+      shared_server().service().WaitForStreams(std::chrono::steady_clock::now() + seconds(30)));
+  EXPECT_EQ(HealthStatus(testing::NewChannel(shared_server()), ""), 1);
+  const StreamResult after = RunStream(*stub_, {FrameRequest(MakeFrame(Frames()[1], 9))});
+  ASSERT_TRUE(after.status.ok());
+  ASSERT_EQ(after.replies.size(), 1u);
+  EXPECT_TRUE(CloudMatches(Reference(Frames()[1], Params{}), after.replies[0].cloud()));
+}
+
+TEST(ServerShutdownTest, DrainingGoesNotServingAndRefusesNewStreams) {
+  auto server = testing::StartTestServer();
+  ASSERT_NE(server, nullptr);
+  const auto channel = testing::NewChannel(*server);
+  auto stub = v1::CloudCast::NewStub(channel);
+  EXPECT_EQ(HealthStatus(channel, ""), 1);
+  server->StartDraining();
+  EXPECT_EQ(HealthStatus(channel, ""), 2);  // NOT_SERVING
+  EXPECT_EQ(HealthStatus(channel, "cloudcast.v1.CloudCast"), 2);
+  const StreamResult refused = RunStream(*stub, {FrameRequest(MakeFrame(Frames()[0], 1))});
+  EXPECT_EQ(refused.status.error_code(), grpc::StatusCode::UNAVAILABLE);
+  v1::ProcessRequest request;
+  *request.mutable_frame() = MakeFrame(Frames()[0], 1);
+  v1::CloudReply reply;
+  grpc::ClientContext ctx;
+  EXPECT_EQ(stub->Process(&ctx, request, &reply).error_code(), grpc::StatusCode::UNAVAILABLE);
+  // No call is open, so Shutdown has nothing to wait for: given a grace period of two minutes it
+  // returns without using it (the 60 s wait only turns a hang into a failure).
+  auto shutdown =
+      std::async(std::launch::async, [&] { server->Shutdown(std::chrono::minutes(2)); });
+  EXPECT_EQ(shutdown.wait_for(seconds(60)), std::future_status::ready)
+      << "Shutdown waited for its grace period with no call open";
+  shutdown.get();
+  EXPECT_EQ(server->service().active_streams(), 0);
+}
+
+TEST(ServerShutdownTest, ShutdownUnderLoadDrainsTheStreamsAndCutsOnlyTheStuckOne) {
+  auto server = testing::StartTestServer();
+  ASSERT_NE(server, nullptr);
+  const std::size_t n = Frames().size();
+
+  // First a lossless stream whose client writes and never reads. Its replies (large, through a
+  // 64 KB window) cannot be written, so once the server holds its limit of frames it stops
+  // reading the stream for good: the stream can never be drained.
+  auto stuck_stub = testing::NewStub(*server, FixedWindow());
+  grpc::ClientContext stuck_ctx;
+  SetDeadline(&stuck_ctx, seconds(60));
+  auto stuck = stuck_stub->Stream(&stuck_ctx);
+  std::atomic<bool> stuck_writes_ended{false};
+  std::thread stuck_writer([&] {
+    stuck->Write(ConfigRequest(ConfigFor(kUnfiltered, v1::DELIVERY_ALL)));
+    for (std::uint64_t i = 0; stuck->Write(FrameRequest(MakeFrame(Frames()[i % n], i))); ++i) {
+    }
+    stuck_writes_ended.store(true);
+  });
+  // The server announces no queue level: its high-water mark is polled, while the stuck stream is
+  // its only stream.
+  EXPECT_TRUE(testing::Eventually([&] {
+    return server->queued_frames_high_water() == server->options().max_queued_frames;
+  })) << "the stuck stream never filled its queue";
+
+  // Then four busy streams (latest and all) that read every reply.
+  constexpr int kBusy = 4;
+  struct Reply {
+    std::uint64_t sequence;
+    std::uint64_t frames_dropped;
+  };
+  struct Busy {
+    v1::DeliveryMode delivery;
+    std::vector<Reply> replies;
+    bool all_clouds = true;
+    grpc::Status status;
+  };
+  std::vector<Busy> busy(kBusy);
+  std::mutex mu;
+  std::condition_variable cv;
+  int answering = 0;
+  std::vector<std::thread> clients;
+  for (int s = 0; s < kBusy; ++s) {
+    busy[s].delivery = s % 2 ? v1::DELIVERY_ALL : v1::DELIVERY_LATEST;
+    clients.emplace_back([&, s] {
+      auto stub = testing::NewStub(*server);
+      grpc::ClientContext ctx;
+      SetDeadline(&ctx, seconds(60));
+      auto stream = stub->Stream(&ctx);
+      stream->Write(ConfigRequest(ConfigFor(Params{}, busy[s].delivery)));
+      std::thread writer([&] {
+        for (std::uint64_t i = 0; stream->Write(FrameRequest(MakeFrame(Frames()[i % n], i))); ++i) {
+        }
+      });
+      v1::StreamReply reply;
+      while (stream->Read(&reply)) {
+        busy[s].all_clouds = busy[s].all_clouds && reply.has_cloud();
+        busy[s].replies.push_back({reply.cloud().sequence(), reply.cloud().frames_dropped()});
+        if (busy[s].replies.size() == 1) {
+          std::lock_guard<std::mutex> lock(mu);
+          ++answering;
+          cv.notify_all();
+        }
+      }
+      writer.join();  // the call is over, so its writes fail
+      busy[s].status = stream->Finish();
+    });
+  }
+  {
+    std::unique_lock<std::mutex> lock(mu);
+    EXPECT_TRUE(cv.wait_for(lock, seconds(60), [&] { return answering == kBusy; }));
+  }
+
+  // Shutdown, step 1, under load: every stream stops reading and answers what it holds.
+  server->StartDraining();
+  for (auto& t : clients) t.join();
+  for (int s = 0; s < kBusy; ++s) {
+    SCOPED_TRACE("busy stream " + std::to_string(s));
+    const Busy& b = busy[s];
+    EXPECT_EQ(b.status.error_code(), grpc::StatusCode::UNAVAILABLE) << b.status.error_message();
+    EXPECT_NE(b.status.error_message().find(kDrained), std::string::npos)  // drained, not cut
+        << b.status.error_message();
+    if (b.replies.empty()) {  // no ASSERT: the stuck stream's thread must still be joined
+      ADD_FAILURE() << "no reply";
+      continue;
+    }
+    EXPECT_TRUE(b.all_clouds);
+    // Every frame the server accepted (a prefix of those sent) was answered before the end, or,
+    // in DELIVERY_LATEST, replaced and counted as dropped.
+    for (std::size_t i = 1; i < b.replies.size(); ++i) {
+      EXPECT_GT(b.replies[i].sequence, b.replies[i - 1].sequence);
+      EXPECT_GE(b.replies[i].frames_dropped, b.replies[i - 1].frames_dropped);
+    }
+    const Reply& last = b.replies.back();
+    EXPECT_EQ(b.replies.size() + last.frames_dropped, last.sequence + 1);
+    if (b.delivery == v1::DELIVERY_ALL) {
+      EXPECT_EQ(last.frames_dropped, 0u);
+    }
+  }
+  // Every busy stream has ended; the stuck one has not. (OnDone of the drained streams may run
+  // after their clients' Finish returned, and announces nothing: the count is polled.)
+  EXPECT_FALSE(stuck_writes_ended.load()) << "the stuck stream ended while draining";
+  EXPECT_TRUE(testing::Eventually([&] { return server->service().active_streams() == 1; }));
+
+  // Step 2: only the end of the grace period can close the stuck stream, and it does.
+  server->Shutdown(milliseconds(500));
+  EXPECT_EQ(server->service().active_streams(), 0);
+  stuck_writer.join();  // the call is over, so its writes fail
+  EXPECT_TRUE(stuck_writes_ended.load());
+  v1::StreamReply reply;
+  while (stuck->Read(&reply)) {
+  }
+  const grpc::Status stuck_status = stuck->Finish();
+  // Cut by gRPC at the deadline (gRPC 1.51 says UNAVAILABLE, "Cancelling all calls"), not
+  // drained by the service.
+  EXPECT_TRUE(stuck_status.error_code() == grpc::StatusCode::UNAVAILABLE ||
+              stuck_status.error_code() == grpc::StatusCode::CANCELLED)
+      << stuck_status.error_code() << " " << stuck_status.error_message();
+  EXPECT_EQ(stuck_status.error_message().find(kDrained), std::string::npos)
+      << stuck_status.error_message();
+  server.reset();  // the destructor after Shutdown is a no-op
+}
+
+TEST(ServerShutdownTest, StartFailsCleanlyOnABusyAddress) {
+  auto first = testing::StartTestServer();
+  ASSERT_NE(first, nullptr);
+  ServerOptions options = testing::TestServerOptions();
+  options.listen = first->address();
+  auto second = Server::Start(options);
+  EXPECT_EQ(second.status().code(), absl::StatusCode::kUnavailable) << second.status();
+  EXPECT_NE(second.status().message().find("--listen"), std::string::npos);
+  options = testing::TestServerOptions();
+  options.metrics_listen = "256.1.1.1:0";
+  auto third = Server::Start(options);
+  EXPECT_EQ(third.status().code(), absl::StatusCode::kUnavailable) << third.status();
+  EXPECT_NE(third.status().message().find("--metrics-listen"), std::string::npos);
+  options = testing::TestServerOptions();
+  options.max_queued_frames = 0;
+  EXPECT_EQ(Server::Start(options).status().code(), absl::StatusCode::kInvalidArgument);
+}
+
+}  // namespace
+}  // namespace cloudcast::server
