@@ -93,6 +93,7 @@ class ServerProcess {
     return exit_status_;
   }
   bool running() const { return pid_ > 0; }
+  pid_t pid() const { return pid_; }
 
   const std::string& address() const { return address_; }
   const std::string& instance() const { return instance_; }

@@ -139,7 +139,7 @@ TEST(ServerLimitsTest, IdleStreamIsEndedWithDeadlineExceeded) {
   EXPECT_TRUE(moving_answered_after) << "the moving stream did not outlive the silent one";
   EXPECT_TRUE(moving_status.ok()) << moving_status.error_message();
   EXPECT_EQ(server->metrics().streams_idle_timeout.Value(), 1.0);
-  EXPECT_TRUE(server->service().WaitForStreams(std::chrono::steady_clock::now() + seconds(30)));
+  EXPECT_TRUE(server->service().WaitForCalls(std::chrono::steady_clock::now() + seconds(30)));
 
   // A lossless stream whose client sends until the server stops reading and never reads a reply
   // holds its slot only for the timeout: nothing moves, so the server cancels it (a Finish would
@@ -158,7 +158,7 @@ TEST(ServerLimitsTest, IdleStreamIsEndedWithDeadlineExceeded) {
   // The client's writes fail once the call is cancelled (60 s only turns a hang into a failure).
   EXPECT_EQ(writes_failed.get_future().wait_for(seconds(60)), std::future_status::ready);
   writer.join();
-  EXPECT_TRUE(server->service().WaitForStreams(std::chrono::steady_clock::now() + seconds(30)));
+  EXPECT_TRUE(server->service().WaitForCalls(std::chrono::steady_clock::now() + seconds(30)));
   v1::StreamReply reply;
   while (stuck->Read(&reply)) {
   }

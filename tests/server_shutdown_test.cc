@@ -54,7 +54,7 @@ TEST_F(ServerTest, ClientCancelsMidStreamAndTheServerCarriesOn) {
     EXPECT_EQ(stream->Finish().error_code(), grpc::StatusCode::CANCELLED);
   }
   EXPECT_TRUE(
-      shared_server().service().WaitForStreams(std::chrono::steady_clock::now() + seconds(30)));
+      shared_server().service().WaitForCalls(std::chrono::steady_clock::now() + seconds(30)));
   EXPECT_EQ(HealthStatus(testing::NewChannel(shared_server()), ""), 1);
   const StreamResult after = RunStream(*stub_, {FrameRequest(MakeFrame(Frames()[1], 9))});
   ASSERT_TRUE(after.status.ok());

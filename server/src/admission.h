@@ -4,6 +4,7 @@
 // authentication, its tenant.
 #pragma once
 
+#include <atomic>
 #include <cstdint>
 #include <mutex>
 #include <string>
@@ -61,6 +62,28 @@ class Admission {
   mutable std::mutex mu_;
   Counts total_;
   std::unordered_map<std::string, Counts> clients_;
+};
+
+// The bytes of the frames the server holds (read and not yet processed), against a server-wide
+// budget: past it, new frames are refused (RESOURCE_EXHAUSTED) instead of memory growing.
+class MemoryBudget {
+ public:
+  explicit MemoryBudget(std::uint64_t limit) : limit_(limit) {}
+  // Takes `bytes`; false, taking nothing, when they do not fit.
+  bool TryTake(std::uint64_t bytes) {
+    std::uint64_t held = held_.load(std::memory_order_relaxed);
+    do {
+      if (held + bytes > limit_) return false;
+    } while (!held_.compare_exchange_weak(held, held + bytes, std::memory_order_relaxed));
+    return true;
+  }
+  void Give(std::uint64_t bytes) { held_.fetch_sub(bytes, std::memory_order_relaxed); }
+  std::uint64_t held() const { return held_.load(std::memory_order_relaxed); }
+  std::uint64_t limit() const { return limit_; }
+
+ private:
+  const std::uint64_t limit_;
+  std::atomic<std::uint64_t> held_{0};
 };
 
 // The client of a call: gRPC's peer string without its port ("ipv4:10.1.2.3:40123" ->

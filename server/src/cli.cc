@@ -18,6 +18,7 @@ ServerFlags::ServerFlags(CLI::App& app)
     : idle_timeout_seconds_(std::chrono::duration<double>(options_.idle_timeout).count()),
       first_message_timeout_seconds_(
           std::chrono::duration<double>(options_.first_message_timeout).count()),
+      memory_budget_mb_(options_.memory_budget_bytes >> 20),
       shutdown_grace_seconds_(std::chrono::duration<double>(options_.shutdown_grace).count()),
       delivery_(convert::Name(options_.defaults.delivery)) {
   app.option_defaults()->always_capture_default();
@@ -75,6 +76,15 @@ ServerFlags::ServerFlags(CLI::App& app)
                  "DEADLINE_EXCEEDED")
       ->check(CLI::Range(0.001, 86400.0))
       ->group("Limits");
+  app.add_option("--memory-budget-mb", memory_budget_mb_,
+                 "Megabytes of frames the server may hold at once (read, not yet processed); "
+                 "past it new frames get RESOURCE_EXHAUSTED")
+      ->check(CLI::Range(1, 1 << 24))
+      ->group("Limits");
+  app.add_option("--stream-window-bytes", o.stream_window_bytes,
+                 "gRPC receive window per stream: what the transport buffers beyond the frames "
+                 "a stream holds (fixed; no BDP growth)")
+      ->group("Limits");
   app.add_option("--first-message-timeout", first_message_timeout_seconds_,
                  "Seconds a new stream may take to send its first message before it is ended "
                  "with DEADLINE_EXCEEDED")
@@ -106,6 +116,7 @@ absl::StatusOr<ServerOptions> ServerFlags::Options() const {
   ServerOptions o = options_;
   o.idle_timeout = ToMillis(idle_timeout_seconds_);
   o.first_message_timeout = ToMillis(first_message_timeout_seconds_);
+  o.memory_budget_bytes = memory_budget_mb_ << 20;
   o.shutdown_grace = ToMillis(shutdown_grace_seconds_);
   o.max_connection_age = ToMillis(max_connection_age_seconds_);
   o.max_connection_age_grace = ToMillis(max_connection_age_grace_seconds_);

@@ -3,6 +3,7 @@
 // SIGINT / SIGTERM start a graceful shutdown: health checks go NOT_SERVING, new calls are refused,
 // frames in flight get --shutdown-grace seconds, then the process exits 0. A second signal exits
 // at once. Signals are taken by sigwait on a thread, never handled inside a signal handler.
+#include <malloc.h>
 #include <pthread.h>
 #include <signal.h>
 #include <spdlog/spdlog.h>
@@ -18,6 +19,11 @@
 #include "cloudcast/server/server.h"
 
 int main(int argc, char** argv) {
+  // Frames are megabytes each. glibc serves such blocks from mmap only below its dynamic
+  // threshold, which rises to 32 MB after the first large free: from then on frames come from the
+  // heap, whose freed pages stay in the process after a burst. A fixed threshold keeps every
+  // frame buffer on mmap, given back to the OS when it is freed (housekeeping trims the rest).
+  mallopt(M_MMAP_THRESHOLD, 256 * 1024);
   CLI::App app{
       "cloudcast-server: stereo frames (disparity + colour) in, filtered and Draco-compressed "
       "point clouds out, over gRPC (cloudcast.v1.CloudCast). Health checking and reflection are "

@@ -41,6 +41,13 @@ absl::Status ServerOptions::Validate() const {
         absl::StrCat("--max-queued-frames is ", max_queued_frames, "; it must be in [1, 1024]"));
   }
   if (shutdown_grace.count() < 0) return Invalid("--shutdown-grace must not be negative");
+  if (memory_budget_bytes < (std::uint64_t{1} << 20)) {
+    return Invalid("--memory-budget-mb must be at least 1");
+  }
+  if (stream_window_bytes < 65536 || stream_window_bytes > (1u << 30)) {
+    return Invalid(absl::StrCat("--stream-window-bytes is ", stream_window_bytes,
+                                "; it must be in [65536, 2^30]"));
+  }
   // gRPC takes both as int milliseconds.
   constexpr std::int64_t kMaxMs = std::numeric_limits<int>::max();
   if (max_connection_age.count() < 0 || max_connection_age.count() > kMaxMs) {

@@ -1,5 +1,7 @@
 #include "service.h"
 
+#include <malloc.h>
+
 #include <algorithm>
 #include <optional>
 #include <string>
@@ -120,7 +122,7 @@ class CloudCastService::StreamReactor final
       Release(job);
     } else {
       service_->metrics_->bytes_received.Increment(static_cast<double>(bytes));
-      Accept(job);
+      Accept(job, bytes);
     }
     Pump(lock);
   }
@@ -164,9 +166,8 @@ class CloudCastService::StreamReactor final
     if (finished_ || ending_ || broken_ || queue_.in_work() > 0) return;
     const ServerOptions& o = service_->options_;
     // A stream that has sent nothing at all gets a shorter time: it holds a slot for nothing.
-    const bool silent = !got_message_;
-    const auto timeout =
-        silent ? std::min(o.first_message_timeout, o.idle_timeout) : o.idle_timeout;
+    const bool silent = !got_message_ && o.first_message_timeout < o.idle_timeout;
+    const auto timeout = silent ? o.first_message_timeout : o.idle_timeout;
     if (now - last_activity_ < timeout) return;
     const double seconds = Seconds(timeout);
     spdlog::info("stream from {} {} for {} s: ending it", peer_, silent ? "sent nothing" : "idle",
@@ -202,6 +203,7 @@ class CloudCastService::StreamReactor final
     std::unique_ptr<v1::CloudReply> spare_cloud;
     std::shared_ptr<const StreamSettings> settings;
     Arrival arrival;
+    std::uint64_t charged = 0;  // bytes taken from the server's memory budget
   };
 
   // The calls decided under mu_, made by Pump after it is released.
@@ -281,6 +283,7 @@ class CloudCastService::StreamReactor final
   // Frees the request's pixels now (so a free slot costs no memory) and keeps the reply's cloud
   // buffer for the next frame.
   void Release(Job* job) {
+    Uncharge(job);
     job->in.Clear();
     job->out.Clear();
     job->request.Clear();
@@ -290,8 +293,13 @@ class CloudCastService::StreamReactor final
     free_.push_back(job);
   }
 
+  void Uncharge(Job* job) {
+    service_->memory_.Give(job->charged);
+    job->charged = 0;
+  }
+
   // A message arrived: a config takes effect at once; a frame or an error reply joins the queue.
-  void Accept(Job* job) {
+  void Accept(Job* job, std::size_t bytes) {
     switch (job->request.kind_case()) {
       case v1::StreamRequest::kConfig: {
         auto settings = convert::Resolve(job->request.config(), *service_->default_settings_);
@@ -307,6 +315,18 @@ class CloudCastService::StreamReactor final
         return;
       }
       case v1::StreamRequest::kFrame: {
+        if (!service_->memory_.TryTake(bytes)) {
+          const v1::Frame& f = job->request.frame();
+          const std::uint64_t sequence = f.sequence();
+          const std::string frame_id = f.frame_id();
+          job->request.Clear();
+          FillError(service_->MemoryExhausted(bytes), v1::ERROR_KIND_FRAME, sequence, frame_id,
+                    job->reply.mutable_error());
+          queue_.PushReply(job);
+          service_->NoteQueued(queue_.held());
+          return;
+        }
+        job->charged = bytes;
         job->settings = settings_;
         job->delivery = settings_->delivery;
         job->arrival = {last_activity_, UnixNanos()};
@@ -409,6 +429,7 @@ class CloudCastService::StreamReactor final
       // The pixels are no longer needed; free them before the reply waits for the writer.
       job->request.Clear();
     }
+    Uncharge(job);  // atomic: no lock needed
     {
       std::unique_lock<std::mutex> lock(mu_);
       last_activity_ = Clock::now();
@@ -456,6 +477,7 @@ class RejectedStream final : public grpc::ServerBidiReactor<grpc::ByteBuffer, gr
 
 CloudCastService::CloudCastService(const ServerOptions& options, Metrics* metrics)
     : options_(options),
+      memory_(options.memory_budget_bytes),
       admission_(Admission::Limits{options.max_streams, options.ResolvedMaxStreamsPerClient(),
                                    options.max_streams, options.ResolvedMaxProcessPerClient()}),
       default_settings_(std::make_shared<const StreamSettings>(options.StreamDefaults())),
@@ -497,8 +519,14 @@ grpc::ServerUnaryReactor* CloudCastService::Process(grpc::CallbackServerContext*
     v1::CloudReply reply;
     std::shared_ptr<const StreamSettings> settings;
     Admission::Ticket ticket;
+    MemoryBudget* memory = nullptr;
+    std::uint64_t charged = 0;
+    ~Call() {
+      if (memory != nullptr) memory->Give(charged);
+    }
   };
   auto call = std::make_shared<Call>();
+  call->memory = &memory_;
   const std::size_t bytes = request_bytes->Length();
   grpc::ByteBuffer copy(*request_bytes);  // shares the slices; the reader consumes the copy
   if (!Parse(&copy, &call->request)) {
@@ -507,6 +535,12 @@ grpc::ServerUnaryReactor* CloudCastService::Process(grpc::CallbackServerContext*
     return reactor;
   }
   metrics_->bytes_received.Increment(static_cast<double>(bytes));
+  if (!memory_.TryTake(bytes)) {
+    metrics_->FrameErrors(absl::StatusCode::kResourceExhausted).Increment();
+    reactor->Finish(ToGrpc(MemoryExhausted(bytes)));
+    return reactor;
+  }
+  call->charged = bytes;
   if (draining_.load()) {
     reactor->Finish(grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
     return reactor;
@@ -626,6 +660,13 @@ bool CloudCastService::WaitForCalls(Clock::time_point deadline) {
       lock, deadline, [this] { return streams_.empty() && active_process_calls_.load() == 0; });
 }
 
+absl::Status CloudCastService::MemoryExhausted(std::size_t bytes) const {
+  return absl::ResourceExhaustedError(absl::StrCat(
+      "the server's memory budget for frames in flight is in use (", memory_.held() >> 20, " of ",
+      memory_.limit() >> 20, " MB, --memory-budget-mb): this frame of ", bytes,
+      " bytes was not processed; send it again later"));
+}
+
 void CloudCastService::ProcessCallDone() {
   active_process_calls_.fetch_sub(1);
   // Taken so that a waiter cannot miss the wake-up between its check and its wait.
@@ -646,9 +687,11 @@ void CloudCastService::StopWorkers() {
 }
 
 void CloudCastService::Housekeeping() {
-  // Checks often enough that a stream ends within about a tenth of the timeout of going idle.
+  // Checks often enough that a stream ends within about a tenth of its timeout.
   const auto tick = std::clamp<std::chrono::milliseconds>(
-      options_.idle_timeout / 10, std::chrono::milliseconds(10), std::chrono::milliseconds(1000));
+      std::min(options_.idle_timeout, options_.first_message_timeout) / 10,
+      std::chrono::milliseconds(10), std::chrono::milliseconds(1000));
+  bool trimmed = true;
   std::unique_lock<std::mutex> lock(streams_mu_);
   while (!stop_housekeeping_) {
     streams_cv_.wait_for(lock, tick, [this] { return stop_housekeeping_; });
@@ -658,7 +701,12 @@ void CloudCastService::Housekeeping() {
       s->Ref();
       streams.push_back(s);
     }
+    const bool idle = streams.empty() && active_process_calls_.load() == 0;
     lock.unlock();
+    // Once a burst is over, give the allocator's free pages back to the OS (glibc keeps them in
+    // its arenas otherwise); once per idle spell, since it walks every arena.
+    if (idle && !trimmed) malloc_trim(0);
+    trimmed = idle;
     const Clock::time_point now = Clock::now();
     for (StreamReactor* s : streams) {
       s->CheckIdle(now);

@@ -76,11 +76,13 @@ class CloudCastService final : public CallbackBase {
 
   void NoteQueued(std::uint32_t held);
   void ProcessCallDone();
+  absl::Status MemoryExhausted(std::size_t bytes) const;
   void Register(StreamReactor* stream);
   void Unregister(StreamReactor* stream);
   void Housekeeping();
 
   const ServerOptions options_;
+  MemoryBudget memory_;
   Admission admission_;
   const std::shared_ptr<const StreamSettings> default_settings_;
   Metrics* const metrics_;

@@ -25,6 +25,7 @@ class ServerFlags {
   ServerOptions options_;
   double idle_timeout_seconds_;
   double first_message_timeout_seconds_;
+  std::uint64_t memory_budget_mb_;
   double shutdown_grace_seconds_;
   double max_connection_age_seconds_ = 0;
   double max_connection_age_grace_seconds_ = 0;

@@ -42,6 +42,14 @@ struct ServerOptions {
   std::chrono::milliseconds first_message_timeout{10'000};
   // Frames held per stream in DELIVERY_ALL mode (waiting + in work + replies not yet written).
   std::uint32_t max_queued_frames = 4;
+  // Bytes of frames the server may hold at once (read, not yet processed), over all calls; past
+  // it new frames get RESOURCE_EXHAUSTED instead of memory growing. The transport adds at most
+  // max_streams x stream_window_bytes.
+  std::uint64_t memory_budget_bytes = std::uint64_t{1} << 30;
+  // gRPC's receive window per stream: how much of the next frames the transport buffers beyond
+  // those the stream holds. Fixed (no BDP probing, which grows windows to tens of megabytes):
+  // with it a stream whose frames wait holds about max_queued_frames frames plus this.
+  std::uint32_t stream_window_bytes = 1u << 20;
   // On shutdown, how long frames in flight may take before their calls are cancelled.
   std::chrono::milliseconds shutdown_grace{5'000};
   // Connections older than this are told to go away (GOAWAY), so that long-lived clients spread
