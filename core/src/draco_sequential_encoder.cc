@@ -12,16 +12,30 @@
 #include <functional>
 #include <limits>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__,
               "the encoder stores multi-byte values as Draco's little-endian format has them");
+
+// How the encoder is organised (n points, all in per-thread scratch):
+//   1. ScanForDraco: the bounding box and colour range, as Draco finds them.
+//   2. ComputeSymbols: one pass computing both attributes' symbols (quantization, delta, wrap,
+//      zigzag) and what Draco's scheme choice needs: histograms and per-point bit lengths.
+//   3. PlanSymbols: per attribute, Draco's choice (tagged or raw) and its probability table.
+//   4. EncodeStreams: one backward pass writing both rANS streams (independent states, so each
+//      hides the other's latency) and the tagged scheme's values.
+// Draco 1.5.5 does the same work with an attribute object per value, a transform per attribute,
+// a 32-bit symbol buffer per stage and a division per rANS symbol.
 
 namespace cloudcast::internal {
 namespace {
 
 template <typename T>
 using Buffer = std::vector<T, DefaultInitAllocator<T>>;
+
+// The per-symbol steps must be inlined into their loops; GCC's heuristics give up on some.
+#define CLOUDCAST_INLINE inline __attribute__((always_inline))
 
 // Constants of Draco 1.5.5's format and coder, as its encoder uses them here.
 constexpr std::uint8_t kPredictionDifference = 0;  // PREDICTION_DIFFERENCE
@@ -31,9 +45,6 @@ constexpr std::uint8_t kSymbolCodingRaw = 1;       // SYMBOL_CODING_RAW
 constexpr int kMaxRawEncodingBitLength = 18;       // symbol_encoding.cc
 constexpr int kTagPrecisionBits = 12;              // RAnsSymbolEncoder<5>
 constexpr std::uint32_t kRansIoBase = 256;         // DRACO_ANS_IO_BASE
-// Draco's rANS state stays below 2^30 (l_rans_base * IO base at 20 precision bits), which the
-// division by reciprocal below relies on.
-constexpr int kStateBits = 30;
 
 void PutU8(std::string* out, std::uint8_t v) { out->push_back(static_cast<char>(v)); }
 
@@ -56,34 +67,183 @@ void PutVarint(std::string* out, std::uint64_t v) {
 int MostSignificantBit(std::uint32_t v) { return 31 ^ __builtin_clz(v); }  // v > 0
 
 void Store32(std::uint8_t* p, std::uint32_t v) { std::memcpy(p, &v, 4); }
-void Store64(std::uint8_t* p, std::uint64_t v) { std::memcpy(p, &v, 8); }
 
-// One symbol of the rANS coder: Draco's (probability, cumulative probability) and what replaces
-// its division by the probability. For a state x < 2^30 and probability p <= 2^20, with
-// l = ceil(log2 p), shift = 30 + l and mult = ceil(2^shift / p), (x * mult) >> shift equals x / p
-// exactly: the error mult * p - 2^shift is below p <= 2^l, so x times it stays below 2^shift.
+// ---------------------------------------------------------------------------------------------
+// Draco's rANS coder.
+
+// One symbol: Draco's probability p and cumulative probability, and what replaces its division
+// of the state x by p (x < 1024 * precision <= 2^30). For a divisor p, m = (2^k - 1) / p and
+// x + 1 <= 2^k, the integer part of (x + 1) * m / 2^k is x / p exactly: it equals
+// (x + 1) / p - (x + 1) * (1 + (2^k - 1) % p) / (p * 2^k), and the subtracted part is positive
+// and below 1 / p while (x + 1) * p < 2^k. With k = 64 that holds for every precision (the high
+// half of a 128-bit product); up to precisions of 2^14, k = 54 - bits keeps (x + 1) * m within
+// 64 bits and (x + 1) * p below 2^(10 + 2 bits) <= 2^k.
 struct RansSymbol {
-  std::uint32_t mult;
-  std::uint32_t shift;
-  std::uint32_t renorm_limit;  // the state must be below this before the symbol is added
-  std::uint32_t complement;    // precision - probability
+  // Draco renormalizes while x >= 1024 p (l_rans_base / precision * IO base * p), a byte at a
+  // time; limit[i] = 1024 p * 256^i (saturated: x < 2^30 never reaches those) count the bytes.
+  std::uint32_t limit[3];
+  std::uint32_t complement;  // precision - p
+  std::uint64_t reciprocal;  // (2^k - 1) / p, k = ReciprocalShift(precision bits)
   std::uint32_t cumulative;
+  std::uint32_t unused;
+};
+static_assert(sizeof(RansSymbol) == 32);
+
+constexpr int kSmallPrecisionMaxBits = 14;
+constexpr int ReciprocalShift(int precision_bits) {
+  return precision_bits <= kSmallPrecisionMaxBits ? 54 - precision_bits : 64;
+}
+
+// Up to 2^16, the state stays below 1024 * 2^16 = 2^26, and a third byte of renormalization
+// would need x >= 1024 p * 2^16 >= 2^26: two bytes at most.
+constexpr int kTwoByteRenormMaxPrecisionBits = 16;
+
+// (2^64 - 1) / p for precisions above 2^14, else (2^(54 - bits) - 1) / p; at precision 2^12
+// (the tags and most raw tables) from a table: a 64-bit division costs tens of cycles, and raw
+// tables have thousands of symbols.
+std::uint64_t Reciprocal(std::uint32_t p, int precision_bits) {
+  constexpr std::uint32_t kTabled = 1u << 12;
+  constexpr std::uint64_t kNumerator12 = (std::uint64_t{1} << ReciprocalShift(12)) - 1;
+  static const std::vector<std::uint64_t> table = [] {
+    std::vector<std::uint64_t> t(kTabled + 1);
+    for (std::uint32_t i = 1; i <= kTabled; ++i) t[i] = kNumerator12 / i;
+    return t;
+  }();
+  if (precision_bits == 12) return table[p];  // p <= 2^12
+  const int k = ReciprocalShift(precision_bits);
+  const std::uint64_t numerator = k == 64 ? ~std::uint64_t{0} : (std::uint64_t{1} << k) - 1;
+  return numerator / p;
+}
+
+// Draco's RAnsEncoder. Symbols are added last to first; each first renormalizes the state by
+// whole bytes, which come out in the order written. kPrecisionBits: the stream's, when it is at
+// most kSmallPrecisionMaxBits (the division then takes a 64-bit product and a fixed shift), or 0.
+template <int kPrecisionBits>
+class RansWriter {
+ public:
+  // `out` must hold 3 bytes per symbol plus 8.
+  RansWriter(int precision_bits, std::uint8_t* out)
+      : base_(4u << precision_bits), x_(base_), begin_(out), o_(out) {}
+
+  CLOUDCAST_INLINE void Put(const RansSymbol& c) {
+    // Draco's "while (x >= 1024 p) emit x's low byte, x >>= 8" without branches: it runs once
+    // per limit x reaches, and emits x's bytes in little-endian order.
+    Store32(o_, x_);
+    unsigned bytes =
+        static_cast<unsigned>(x_ >= c.limit[0]) + static_cast<unsigned>(x_ >= c.limit[1]);
+    if constexpr (kPrecisionBits == 0 || kPrecisionBits > kTwoByteRenormMaxPrecisionBits) {
+      bytes += static_cast<unsigned>(x_ >= c.limit[2]);
+    }
+    o_ += bytes;
+    // Then x = (x / p) * precision + x % p + cumulative on the renormalized x' = x / 256^bytes,
+    // that is x' + (x' / p) * (precision - p) + cumulative, where x' / p = (x / p) / 256^bytes:
+    // the division starts while the bytes are counted.
+    const unsigned shift = 8 * bytes;
+    std::uint32_t q;
+    if constexpr (kPrecisionBits != 0) {  // one shift, by at most 42 + 16
+      q = static_cast<std::uint32_t>((std::uint64_t{x_ + 1} * c.reciprocal) >>
+                                     (ReciprocalShift(kPrecisionBits) + shift));
+    } else {
+      q = static_cast<std::uint32_t>((static_cast<unsigned __int128>(x_ + 1) * c.reciprocal) >>
+                                     64) >>
+          shift;
+    }
+    x_ = (x_ >> shift) + q * c.complement + c.cumulative;
+  }
+
+  // Draco's write_end: the final state in 1..4 bytes. Returns the stream's size.
+  std::size_t Finish() {
+    const std::uint32_t state = x_ - base_;
+    if (state < (1u << 6)) {
+      *o_++ = static_cast<std::uint8_t>(state);
+    } else if (state < (1u << 14)) {
+      const std::uint32_t v = (1u << 14) + state;
+      *o_++ = static_cast<std::uint8_t>(v);
+      *o_++ = static_cast<std::uint8_t>(v >> 8);
+    } else if (state < (1u << 22)) {
+      const std::uint32_t v = (2u << 22) + state;
+      *o_++ = static_cast<std::uint8_t>(v);
+      *o_++ = static_cast<std::uint8_t>(v >> 8);
+      *o_++ = static_cast<std::uint8_t>(v >> 16);
+    } else {
+      Store32(o_, (3u << 30) + state);  // state < 2^30
+      o_ += 4;
+    }
+    return static_cast<std::size_t>(o_ - begin_);
+  }
+
+ private:
+  std::uint32_t base_;  // l_rans_base = 4 * precision
+  std::uint32_t x_;
+  std::uint8_t* begin_;
+  std::uint8_t* o_;
+};
+
+// ---------------------------------------------------------------------------------------------
+// Scratch, reused per thread.
+
+// Per attribute: its histogram, coder and streams.
+struct AttributeScratch {
+  std::vector<std::uint32_t> histogram;
+  std::vector<RansSymbol> coder;
+  Buffer<std::uint8_t> rans;         // the rANS bytes, as Draco writes them before their size
+  std::vector<std::uint8_t> values;  // the tagged scheme's values
+  std::string prefix;                // what precedes the rANS stream: method bytes and table
 };
 
 struct Scratch {
-  Buffer<std::uint32_t> symbols;     // one attribute's symbols, 3 per point (+1 for 4-lane stores)
-  Buffer<std::uint8_t> bit_lengths;  // per point, for the tagged scheme
-  std::vector<std::uint32_t> histogram;
+  AttributeScratch position, color;
+  // The symbols, in one of two layouts (see NarrowSymbols and WideSymbols).
+  Buffer<std::uint16_t> records;
+  Buffer<std::uint32_t> wide_positions;
+  Buffer<std::uint16_t> wide_colors;
+  // Per point: the bit length of its largest position symbol and, in the high byte, of its
+  // largest colour symbol: the tags of the tagged scheme.
+  Buffer<std::uint16_t> bit_lengths;
   std::vector<std::uint32_t> probabilities;
   std::vector<std::uint64_t> order;
-  std::vector<RansSymbol> coder;
-  Buffer<std::uint8_t> rans;
   // f * log2(f / N) per frequency f of the current ComputeShannonEntropy, memoized: most symbols
   // share a handful of small frequencies, and each log2 costs tens of cycles.
   std::vector<double> term;
   std::vector<std::uint32_t> term_stamp;
   std::uint32_t stamp = 0;
 };
+
+// Where the symbols are. Positions are kept x, y, z; colours B, G, R (the order of PCL's colour
+// word), so whoever reads a colour's components in Draco's order (R, G, B) reads them backwards.
+//
+// Narrow: one record of eight 16-bit lanes per point, x y z - B G R -, computed together with
+// 16-bit vector arithmetic: for wraps below 2^14 (every colour; positions up to 13 bits, and
+// wider ones whose values span less). The lanes hold 4 times the symbol: that is the offset of
+// its counter in the per-component histograms, and an eighth of its coder entry's.
+struct NarrowSymbols {
+  static constexpr bool kScaled = true;
+  const std::uint16_t* records;
+  std::uint32_t Position(std::size_t i, int k) const { return records[8 * i + k] >> 2; }
+  std::uint32_t Color(std::size_t i, int k) const { return records[8 * i + 4 + k] >> 2; }
+  std::uint32_t PositionScaled(std::size_t i, int k) const { return records[8 * i + k]; }
+  std::uint32_t ColorScaled(std::size_t i, int k) const { return records[8 * i + 4 + k]; }
+  static const RansSymbol& Entry(const RansSymbol* table, std::uint32_t scaled) {
+    return *reinterpret_cast<const RansSymbol*>(reinterpret_cast<const char*>(table) +
+                                                8 * std::size_t{scaled});
+  }
+};
+// Wide: positions in 32 bits, 3 per point; colours in 16, 3 per point.
+struct WideSymbols {
+  static constexpr bool kScaled = false;
+  const std::uint32_t* positions;
+  const std::uint16_t* colors;
+  std::uint32_t Position(std::size_t i, int k) const { return positions[3 * i + k]; }
+  std::uint32_t Color(std::size_t i, int k) const { return colors[3 * i + k]; }
+  std::uint32_t PositionScaled(std::size_t i, int k) const { return Position(i, k); }
+  std::uint32_t ColorScaled(std::size_t i, int k) const { return Color(i, k); }
+  static const RansSymbol& Entry(const RansSymbol* table, std::uint32_t symbol) {
+    return table[symbol];
+  }
+};
+
+// ---------------------------------------------------------------------------------------------
+// Draco's estimates and tables.
 
 constexpr std::uint32_t kMemoizedFrequencies = 1u << 12;
 
@@ -130,10 +290,10 @@ std::int64_t RansTableBits(std::int32_t max_value, int num_unique) {
 
 // Draco's RAnsSymbolEncoder::Create and EncodeTable: turns `count` frequencies into
 // probabilities summing to 2^precision_bits (with Draco's rounding and its fix-up passes), writes
-// the table to *out and fills s->coder. False where Draco's Create fails (it would then write a
+// the table to *out and fills *coder. False where Draco's Create fails (it would then write a
 // broken stream without saying so).
 bool BuildRansCoder(const std::uint32_t* freq, std::uint32_t count, int precision_bits, Scratch* s,
-                    std::string* out) {
+                    std::vector<RansSymbol>* coder, std::string* out) {
   const std::uint32_t precision = 1u << precision_bits;
   std::uint64_t total_freq = 0;
   std::uint32_t max_valid = 0;
@@ -180,16 +340,16 @@ bool BuildRansCoder(const std::uint32_t* freq, std::uint32_t count, int precisio
       const double act_rel_error_d = precision_d / static_cast<double>(total_prob);
       for (std::size_t k = 0; k < order.size(); ++k) {
         const auto id = static_cast<std::uint32_t>(order[k]);
-        if (prob[id] <= 1) {
+        const auto current = static_cast<std::int32_t>(prob[id]);
+        if (current <= 1) {
           if (k == 0) return false;
           break;
         }
         const auto new_prob =
-            static_cast<std::int32_t>(std::floor(act_rel_error_d * static_cast<double>(prob[id])));
-        auto fix = static_cast<std::int32_t>(prob[id] - static_cast<std::uint32_t>(new_prob));
+            static_cast<std::int32_t>(std::floor(act_rel_error_d * static_cast<double>(current)));
+        std::int32_t fix = current - new_prob;
         if (fix == 0) fix = 1;
-        if (fix >= static_cast<std::int32_t>(prob[id]))
-          fix = static_cast<std::int32_t>(prob[id]) - 1;
+        if (fix >= current) fix = current - 1;
         if (fix > error) fix = error;
         prob[id] -= static_cast<std::uint32_t>(fix);
         total_prob -= fix;
@@ -211,230 +371,71 @@ bool BuildRansCoder(const std::uint32_t* freq, std::uint32_t count, int precisio
       i += offset;
       continue;
     }
-    const int extra = p >= (1u << 14) ? 2 : p >= (1u << 6) ? 1 : 0;
     if (p >= (1u << 22)) return false;
+    const int extra = p >= (1u << 14) ? 2 : p >= (1u << 6) ? 1 : 0;
     PutU8(out, static_cast<std::uint8_t>((p << 2) | static_cast<std::uint32_t>(extra)));
     for (int b = 0; b < extra; ++b) PutU8(out, static_cast<std::uint8_t>(p >> (8 * (b + 1) - 2)));
   }
 
-  s->coder.resize(num_symbols);
+  coder->resize(num_symbols);
   std::uint32_t cumulative = 0;
   for (std::uint32_t i = 0; i < num_symbols; ++i) {
     const std::uint32_t p = prob[i];
-    RansSymbol& c = s->coder[i];
-    c = RansSymbol{0, 0, 0, 0, cumulative};
+    RansSymbol& c = (*coder)[i];
+    c = RansSymbol{};
+    c.cumulative = cumulative;
     cumulative += p;
-    if (p == 0) continue;                                      // never coded
-    const int l = p == 1 ? 0 : MostSignificantBit(p - 1) + 1;  // ceil(log2 p)
-    c.shift = static_cast<std::uint32_t>(kStateBits + l);
-    c.mult = static_cast<std::uint32_t>(((std::uint64_t{1} << c.shift) + p - 1) / p);
-    // Draco renormalizes while state >= l_rans_base / precision * IO base * p = 1024 p.
-    c.renorm_limit = 4 * kRansIoBase * p;
+    if (p == 0) continue;  // never coded
+    for (int b = 0; b < 3; ++b) {
+      const std::uint64_t limit = (std::uint64_t{4 * kRansIoBase} * p) << (8 * b);
+      c.limit[b] = static_cast<std::uint32_t>(std::min<std::uint64_t>(limit, 0xFFFFFFFFu));
+    }
     c.complement = precision - p;
+    c.reciprocal = Reciprocal(p, precision_bits);
   }
   return cumulative == precision;
 }
 
-// Draco's RAnsEncoder: symbols are added last to first, each renormalizing the state by whole
-// bytes first; the bytes come out in the order written. `symbol_at(k)` gives the k-th symbol
-// of the `count`; returns the bytes, then the final state, as Draco's write_end leaves them.
-template <typename SymbolAt>
-std::size_t RansEncode(std::size_t count, SymbolAt symbol_at, int precision_bits, Scratch* s) {
-  const std::uint32_t base = 4u << precision_bits;  // l_rans_base
-  // Each symbol emits at most 3 bytes (the state shrinks below 1024 p from below 1024 * 2^20),
-  // the end 4, and the stores below write 4 at a time.
-  if (s->rans.size() < 3 * count + 8) s->rans.resize(3 * count + 8);
-  std::uint8_t* const begin = s->rans.data();
-  std::uint8_t* o = begin;
-  std::uint32_t x = base;
-  const RansSymbol* const table = s->coder.data();
-  for (std::size_t k = count; k-- > 0;) {
-    const RansSymbol& c = table[symbol_at(k)];
-    // Draco's "while (x >= limit) emit x's low byte, x >>= 8", without branches: it runs once per
-    // power of 256 that limit * 256^i <= x, and emits x's bytes in little-endian order.
-    Store32(o, x);
-    const std::uint64_t x64 = x, limit = c.renorm_limit;
-    const unsigned bytes = static_cast<unsigned>(x64 >= limit) +
-                           static_cast<unsigned>(x64 >= (limit << 8)) +
-                           static_cast<unsigned>(x64 >= (limit << 16));
-    o += bytes;
-    x >>= 8 * bytes;
-    const auto q = static_cast<std::uint32_t>((std::uint64_t{x} * c.mult) >> c.shift);
-    x += q * c.complement + c.cumulative;
-  }
-  const std::uint32_t state = x - base;
-  if (state < (1u << 6)) {
-    *o++ = static_cast<std::uint8_t>(state);
-  } else if (state < (1u << 14)) {
-    const std::uint32_t v = (1u << 14) + state;
-    *o++ = static_cast<std::uint8_t>(v);
-    *o++ = static_cast<std::uint8_t>(v >> 8);
-  } else if (state < (1u << 22)) {
-    const std::uint32_t v = (2u << 22) + state;
-    *o++ = static_cast<std::uint8_t>(v);
-    *o++ = static_cast<std::uint8_t>(v >> 8);
-    *o++ = static_cast<std::uint8_t>(v >> 16);
-  } else {
-    Store32(o, (3u << 30) + state);  // state < 2^30
-    o += 4;
-  }
-  return static_cast<std::size_t>(o - begin);
-}
+// ---------------------------------------------------------------------------------------------
+// Symbols.
 
-// RAnsSymbolEncoder::EndEncoding: the byte count as a varint, then the bytes.
-void PutRansStream(std::size_t bytes, const Scratch& s, std::string* out) {
-  PutVarint(out, bytes);
-  out->append(reinterpret_cast<const char*>(s.rans.data()), bytes);
-}
-
-// Draco's EncodeSymbols for `n` points of 3 components each, with compression level 0 (speed
-// 10): it estimates the bits of its two schemes and takes the tagged one unless the raw one is
-// strictly cheaper and its values have at most 18 bits.
-//   tagged: per point, the bit length of its largest value is rANS-coded (precision 12), then
-//           every value follows in that many bits, LSB first;
-//   raw:    every value is rANS-coded over the histogram of all values.
-bool EncodeSymbols(const std::uint32_t* sym, std::size_t n, std::uint32_t ored, Scratch* s,
-                   std::string* out) {
-  const std::uint64_t num_values = 3 * std::uint64_t{n};
-  if (s->bit_lengths.size() < n) s->bit_lengths.resize(n);
-  std::uint8_t* const bl = s->bit_lengths.data();
-  std::uint32_t tag_freq[33] = {};
-  std::uint64_t total_bit_length = 0;
-  for (std::size_t i = 0; i < n; ++i) {
-    const std::uint32_t v = sym[3 * i] | sym[3 * i + 1] | sym[3 * i + 2];
-    const auto b = static_cast<std::uint8_t>(32 - __builtin_clz(v | 1));
-    bl[i] = b;
-    ++tag_freq[b];
-    total_bit_length += b;
-  }
-  int tag_unique = 0;
-  const std::int64_t tag_bits = ShannonEntropyBits(tag_freq, 32, n, &tag_unique, s);
-  const std::int64_t tagged_bits = static_cast<std::int64_t>(
-      static_cast<std::uint64_t>(tag_bits + RansTableBits(tag_unique, tag_unique)) +
-      total_bit_length * 3);
-
-  // The largest value has the bit length of the OR of all values.
-  const int max_value_bit_length = MostSignificantBit(std::max(1u, ored)) + 1;
-  bool raw = false;
-  std::uint32_t max_value = 0;
-  int raw_unique = 0;
-  if (max_value_bit_length <= kMaxRawEncodingBitLength) {
-    std::vector<std::uint32_t>& hist = s->histogram;
-    hist.assign(std::size_t{1} << max_value_bit_length, 0);
-    for (std::uint64_t i = 0; i < num_values; ++i) ++hist[sym[i]];
-    max_value = static_cast<std::uint32_t>(hist.size() - 1);
-    while (hist[max_value] == 0) --max_value;
-    const std::int64_t data_bits =
-        ShannonEntropyBits(hist.data(), max_value, num_values, &raw_unique, s);
-    const std::int64_t raw_bits =
-        RansTableBits(static_cast<std::int32_t>(max_value), raw_unique) + data_bits;
-    raw = !(tagged_bits < raw_bits);
-  }
-
-  if (!raw) {
-    PutU8(out, kSymbolCodingTagged);
-    if (tag_freq[32] != 0) return false;  // Draco's 32-entry table would overflow
-    if (!BuildRansCoder(tag_freq, 32, kTagPrecisionBits, s, out)) return false;
-    const std::size_t bytes = RansEncode(
-        n, [bl](std::size_t k) { return bl[k]; }, kTagPrecisionBits, s);
-    PutRansStream(bytes, *s, out);
-    // The values, in point order, each in its point's bit length.
-    const std::uint64_t value_bytes = (total_bit_length * 3 + 7) / 8;
-    const std::size_t at = out->size();
-    out->resize(at + value_bytes + 8);
-    auto* dst = reinterpret_cast<std::uint8_t*>(&(*out)[at]);
-    std::uint64_t acc = 0;
-    unsigned fill = 0;  // bits in acc, < 8 between values
-    for (std::size_t i = 0; i < n; ++i) {
-      const unsigned b = bl[i];
-      for (int c = 0; c < 3; ++c) {
-        acc |= std::uint64_t{sym[3 * i + c]} << fill;
-        fill += b;
-        Store64(dst, acc);
-        dst += fill >> 3;
-        acc >>= fill & ~7u;
-        fill &= 7;
-      }
-    }
-    out->resize(at + value_bytes);
-    return true;
-  }
-
-  PutU8(out, kSymbolCodingRaw);
-  const int symbol_bits =
-      raw_unique > 0 ? MostSignificantBit(static_cast<std::uint32_t>(raw_unique)) : 0;
-  int unique_bit_length = symbol_bits + 1;
-  if (unique_bit_length > kMaxRawEncodingBitLength) return false;  // Draco fails here too
-  // Compression level 0 (10 - speed) takes two bits off; Draco's precision is then
-  // max(12, min(20, 3 * bits / 2)).
-  unique_bit_length = std::clamp(unique_bit_length - 2, 1, kMaxRawEncodingBitLength);
-  PutU8(out, static_cast<std::uint8_t>(unique_bit_length));
-  const int precision_bits = std::clamp(3 * unique_bit_length / 2, 12, 20);
-  if (!BuildRansCoder(s->histogram.data(), max_value + 1, precision_bits, s, out)) return false;
-  const std::size_t bytes = RansEncode(
-      num_values, [sym](std::size_t k) { return sym[k]; }, precision_bits, s);
-  PutRansStream(bytes, *s, out);
-  return true;
-}
-
-// SequentialIntegerAttributeEncoder::EncodeValues for one attribute of `n` points whose symbols
-// (and their OR) are ready, with the wrap transform's bounds.
-bool EncodeAttributeValues(const std::uint32_t* sym, std::size_t n, std::uint32_t ored,
-                           std::int32_t wrap_min, std::int32_t wrap_max, bool entropy_coding,
-                           Scratch* s, std::string* out) {
-  PutU8(out, kPredictionDifference);
-  PutU8(out, kTransformWrap);
-  if (entropy_coding) {
-    PutU8(out, 1);
-    if (!EncodeSymbols(sym, n, ored, s, out)) return false;
-  } else {
-    // Stored: as many bytes per value as the largest needs.
-    const int bytes = 1 + (ored == 0 ? 0 : MostSignificantBit(ored)) / 8;
-    PutU8(out, 0);
-    PutU8(out, static_cast<std::uint8_t>(bytes));
-    const std::size_t values = 3 * n;
-    const std::size_t at = out->size();
-    out->resize(at + values * bytes + 4);
-    auto* dst = reinterpret_cast<std::uint8_t*>(&(*out)[at]);
-    for (std::size_t i = 0; i < values; ++i, dst += bytes) Store32(dst, sym[i]);
-    out->resize(at + values * bytes);
-  }
-  PutLe<std::int32_t>(out, wrap_min);
-  PutLe<std::int32_t>(out, wrap_max);
-  return true;
-}
-
-// Draco's wrap transform (PredictionSchemeWrapEncodingTransform) over the values of one attribute,
-// which all lie in [min, max]: a correction (value minus prediction) outside
+// Draco's wrap transform (PredictionSchemeWrapEncodingTransform) over the values of one
+// attribute, which all lie in [min, max]: a correction (value minus prediction) outside
 // [min_correction, max_correction] is moved by max_dif = max - min + 1 back into it. Then
 // ConvertSignedIntsToSymbols' zigzag: 2c for c >= 0, -2c - 1 below.
 struct Wrap {
-  __m128i min_correction, max_correction, max_dif;
+  std::int32_t min, max;
+  std::int32_t max_dif;
+  std::int32_t min_correction, max_correction;
+  __m128i min_correction4, max_correction4, max_dif4;
 
-  Wrap(std::int32_t min, std::int32_t max) {
-    const std::int32_t dif = 1 + (max - min);
-    std::int32_t max_corr = dif / 2;
-    const std::int32_t min_corr = -max_corr;
-    if ((dif & 1) == 0) max_corr -= 1;
-    min_correction = _mm_set1_epi32(min_corr);
-    max_correction = _mm_set1_epi32(max_corr);
-    max_dif = _mm_set1_epi32(dif);
+  Wrap(std::int32_t lo, std::int32_t hi) : min(lo), max(hi), max_dif(1 + (hi - lo)) {
+    max_correction = max_dif / 2;
+    min_correction = -max_correction;
+    if ((max_dif & 1) == 0) max_correction -= 1;
+    min_correction4 = _mm_set1_epi32(min_correction);
+    max_correction4 = _mm_set1_epi32(max_correction);
+    max_dif4 = _mm_set1_epi32(max_dif);
   }
 
   __m128i Symbols(__m128i value, __m128i predicted) const {
     __m128i c = _mm_sub_epi32(value, predicted);
-    const __m128i below = _mm_cmpgt_epi32(min_correction, c);
-    const __m128i above = _mm_cmpgt_epi32(c, max_correction);
-    c = _mm_add_epi32(c, _mm_and_si128(below, max_dif));
-    c = _mm_sub_epi32(c, _mm_and_si128(above, max_dif));
+    const __m128i below = _mm_cmpgt_epi32(min_correction4, c);
+    const __m128i above = _mm_cmpgt_epi32(c, max_correction4);
+    c = _mm_add_epi32(c, _mm_and_si128(below, max_dif4));
+    c = _mm_sub_epi32(c, _mm_and_si128(above, max_dif4));
     return _mm_xor_si128(_mm_slli_epi32(c, 1), _mm_srai_epi32(c, 31));
   }
-};
 
-// Draco predicts the first point from zero, clamped into the values' range.
-__m128i FirstPrediction(std::int32_t min, std::int32_t max) {
-  return _mm_set1_epi32(0 > max ? max : (0 < min ? min : 0));
-}
+  // Draco predicts the first point from zero, clamped into the values' range.
+  std::int32_t FirstPrediction() const { return 0 > max ? max : (0 < min ? min : 0); }
+
+  // A wrapped correction lies within max_dif / 2 of 0, so no symbol exceeds max_dif: a
+  // histogram needs max_dif + 1 entries. Below 2^14, the values, their differences and 4 times
+  // the symbols all fit 16-bit lanes (NarrowSymbols).
+  std::uint32_t HistogramSize() const { return static_cast<std::uint32_t>(max_dif) + 1; }
+  bool FitsNarrow() const { return max_dif < (1 << 14); }
+};
 
 std::uint32_t HorizontalOr3(__m128i v) {
   alignas(16) std::uint32_t lanes[4];
@@ -442,52 +443,429 @@ std::uint32_t HorizontalOr3(__m128i v) {
   return lanes[0] | lanes[1] | lanes[2];
 }
 
-// Position symbols: AttributeQuantizationTransform's q = floor((v - min) * (max_q / range) + 0.5)
-// in float, then delta and wrap. v - min >= 0, so floor is truncation (cvttps2dq), and the
-// largest q per axis is that of the axis maximum.
-std::uint32_t PositionSymbols(const Point* points, std::size_t n, const float lo[3], float inv,
-                              std::int32_t wrap_max, std::uint32_t* sym) {
-  const Wrap wrap(0, wrap_max);
-  const __m128 min4 = _mm_setr_ps(lo[0], lo[1], lo[2], 0.0f);
-  const __m128 inv4 = _mm_set1_ps(inv);
-  const __m128 half = _mm_set1_ps(0.5f);
-  __m128i predicted = FirstPrediction(0, wrap_max);
-  __m128i ored = _mm_setzero_si128();
-  for (std::size_t i = 0; i < n; ++i) {
-    const __m128 v = _mm_loadu_ps(&points[i].x);  // lane 3 (colour bits) is ignored
-    const __m128i q = _mm_cvttps_epi32(_mm_add_ps(_mm_mul_ps(_mm_sub_ps(v, min4), inv4), half));
-    const __m128i s = wrap.Symbols(q, predicted);
-    _mm_storeu_si128(reinterpret_cast<__m128i*>(sym + 3 * i), s);  // lane 3 overwritten next
-    ored = _mm_or_si128(ored, s);
-    predicted = q;
-  }
-  return HorizontalOr3(ored);
+// The bit length Draco tags a point with: that of its largest symbol, at least 1.
+inline std::uint32_t BitLength(std::uint32_t a, std::uint32_t b, std::uint32_t c) {
+  return static_cast<std::uint32_t>(MostSignificantBit(a | b | c | 1) + 1);
 }
 
-// Colour symbols: R, G, B (through `lut` if any), delta and wrap.
-std::uint32_t ColorSymbols(const Point* points, std::size_t n, const std::uint8_t* lut,
-                           std::int32_t wrap_min, std::int32_t wrap_max, std::uint32_t* sym) {
-  const Wrap wrap(wrap_min, wrap_max);
-  __m128i predicted = FirstPrediction(wrap_min, wrap_max);
-  __m128i ored = _mm_setzero_si128();
-  const __m128i zero = _mm_setzero_si128();
-  for (std::size_t i = 0; i < n; ++i) {
-    const std::uint32_t rgba = points[i].rgba;
-    __m128i v;
-    if (lut == nullptr) {
-      // 0xAARRGGBB: bytes B, G, R, A widened to lanes, then reordered to R, G, B.
-      const __m128i bytes = _mm_cvtsi32_si128(static_cast<int>(rgba));
-      const __m128i lanes = _mm_unpacklo_epi16(_mm_unpacklo_epi8(bytes, zero), zero);
-      v = _mm_shuffle_epi32(lanes, _MM_SHUFFLE(3, 0, 1, 2));
-    } else {
-      v = _mm_setr_epi32(lut[RedOf(rgba)], lut[GreenOf(rgba)], lut[BlueOf(rgba)], 0);
-    }
-    const __m128i s = wrap.Symbols(v, predicted);
-    _mm_storeu_si128(reinterpret_cast<__m128i*>(sym + 3 * i), s);
-    ored = _mm_or_si128(ored, s);
-    predicted = v;
+// What Draco's EncodeSymbols looks at to choose between its schemes, gathered with the symbols.
+struct SymbolStats {
+  int max_bit_length = 1;  // of the largest symbol (at least 1)
+  std::uint32_t tag_freq[33] = {};
+  std::uint64_t total_bit_length = 0;
+  bool histogram_ready = false;
+};
+
+struct PositionQuantizer {
+  __m128 min;  // lane 3: 0
+  __m128 inv;  // (2^bits - 1) / range
+};
+
+// Histograms count each component apart (entries 4 s + component, summed afterwards):
+// consecutive points often share symbols, and increments of one counter wait for each other.
+constexpr std::size_t kHistogramLanes = 4;
+
+// Tag counts and totals into the stats.
+void FinishTagStats(const std::uint32_t tag[33], SymbolStats* st) {
+  st->total_bit_length = 0;
+  for (int b = 1; b <= 32; ++b) {
+    st->tag_freq[b] = tag[b];
+    st->total_bit_length += std::uint64_t{tag[b]} * static_cast<std::uint64_t>(b);
+    if (tag[b] != 0) st->max_bit_length = b;
   }
-  return HorizontalOr3(ored);
+}
+
+// The symbols of both attributes in one pass over the points (and, with kStats, what the scheme
+// choice needs). Positions: AttributeQuantizationTransform's q = floor((v - min) * inv + 0.5)
+// in float (v - min >= 0, so floor is cvttps2dq's truncation). Colours: the colour word's bytes
+// (through `lut` when kLut). Both: delta from the previous point, wrap and zigzag, in 16-bit
+// lanes, all six values at once.
+template <bool kLut, bool kStats>
+void ComputeNarrowSymbols(const Point* points, std::size_t n, const PositionQuantizer& pq,
+                          const Wrap& wp, const Wrap& wc, const std::uint8_t* lut, Scratch* s,
+                          SymbolStats* ps, SymbolStats* cs) {
+  static_assert(kHistogramLanes == 4, "records hold 4 times the symbols");
+  std::uint16_t* const rec = s->records.data();
+  std::uint16_t* const bl = s->bit_lengths.data();
+  std::uint32_t* const phist = s->position.histogram.data();
+  std::uint32_t* const chist = s->color.histogram.data();
+  auto lanes = [](std::int32_t p, std::int32_t c) {
+    const auto p16 = static_cast<std::int16_t>(p), c16 = static_cast<std::int16_t>(c);
+    return _mm_setr_epi16(p16, p16, p16, 0, c16, c16, c16, 0);
+  };
+  // Lanes 3 and 7 (the colour bits as a float, alpha) are carried along and never read.
+  const __m128i min_correction = lanes(wp.min_correction, wc.min_correction);
+  const __m128i max_correction = lanes(wp.max_correction, wc.max_correction);
+  const __m128i max_dif = lanes(wp.max_dif, wc.max_dif);
+  __m128i prev = lanes(wp.FirstPrediction(), wc.FirstPrediction());
+  const __m128 half = _mm_set1_ps(0.5f);
+  const __m128i zero = _mm_setzero_si128();
+  __m128i ored = zero;  // without kStats: for the largest bit lengths
+  std::uint32_t ptag[33] = {}, ctag[33] = {};
+  for (std::size_t i = 0; i < n; ++i) {
+    const __m128 v = _mm_loadu_ps(&points[i].x);
+    const __m128i q = _mm_cvttps_epi32(_mm_add_ps(_mm_mul_ps(_mm_sub_ps(v, pq.min), pq.inv), half));
+    __m128i value;  // x y z - B G R -; positions below 2^15 survive the signed pack
+    if constexpr (kLut) {
+      const std::uint32_t rgba = points[i].rgba;
+      value = _mm_packs_epi32(
+          q, _mm_setr_epi32(lut[BlueOf(rgba)], lut[GreenOf(rgba)], lut[RedOf(rgba)], 0));
+    } else {
+      // Bytes 12..15 of the point (B, G, R, A) widen into lanes 4..7.
+      const __m128i color = _mm_unpackhi_epi8(_mm_castps_si128(v), zero);
+      value = _mm_castpd_si128(
+          _mm_move_sd(_mm_castsi128_pd(color), _mm_castsi128_pd(_mm_packs_epi32(q, q))));
+    }
+    __m128i c = _mm_sub_epi16(value, prev);
+    const __m128i below = _mm_cmpgt_epi16(min_correction, c);
+    const __m128i above = _mm_cmpgt_epi16(c, max_correction);
+    c = _mm_add_epi16(c, _mm_and_si128(below, max_dif));
+    c = _mm_sub_epi16(c, _mm_and_si128(above, max_dif));
+    const __m128i zigzag = _mm_xor_si128(_mm_slli_epi16(c, 1), _mm_srai_epi16(c, 15));
+    const __m128i scaled = _mm_slli_epi16(zigzag, 2);  // kHistogramLanes times the symbols
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(rec + 8 * i), scaled);
+    prev = value;
+    if constexpr (kStats) {
+      const std::uint16_t* r = rec + 8 * i;
+      const std::uint32_t p0 = r[0], p1 = r[1], p2 = r[2], c0 = r[4], c1 = r[5], c2 = r[6];
+      ++phist[p0];
+      ++phist[p1 + 1];
+      ++phist[p2 + 2];
+      ++chist[c0];
+      ++chist[c1 + 1];
+      ++chist[c2 + 2];
+      const std::uint32_t pb = BitLength(p0 >> 2, p1 >> 2, p2 >> 2);
+      const std::uint32_t cb = BitLength(c0 >> 2, c1 >> 2, c2 >> 2);
+      bl[i] = static_cast<std::uint16_t>(pb | (cb << 8));
+      ++ptag[pb];
+      ++ctag[cb];
+    } else {
+      ored = _mm_or_si128(ored, zigzag);  // symbols, unscaled
+    }
+  }
+  if constexpr (kStats) {
+    FinishTagStats(ptag, ps);
+    FinishTagStats(ctag, cs);
+  } else {
+    alignas(16) std::uint16_t o[8];
+    _mm_store_si128(reinterpret_cast<__m128i*>(o), ored);
+    ps->max_bit_length = static_cast<int>(BitLength(o[0], o[1], o[2]));
+    cs->max_bit_length = static_cast<int>(BitLength(o[4], o[5], o[6]));
+  }
+}
+
+// The same for wider position values, in 32-bit lanes (colours, always narrow, go along). With
+// kPositionHistogram the positions' histogram too (ranges up to 2^18, the raw scheme's limit).
+template <bool kLut, bool kStats, bool kPositionHistogram>
+void ComputeWideSymbols(const Point* points, std::size_t n, const PositionQuantizer& pq,
+                        const Wrap& wp, const Wrap& wc, const std::uint8_t* lut, Scratch* s,
+                        SymbolStats* ps, SymbolStats* cs) {
+  std::uint32_t* const psym = s->wide_positions.data();
+  std::uint16_t* const csym = s->wide_colors.data();
+  std::uint16_t* const bl = s->bit_lengths.data();
+  std::uint32_t* const phist = s->position.histogram.data();
+  std::uint32_t* const chist = s->color.histogram.data();
+  const __m128 half = _mm_set1_ps(0.5f);
+  const __m128i zero = _mm_setzero_si128();
+  __m128i pprev = _mm_set1_epi32(wp.FirstPrediction());
+  __m128i cprev = _mm_set1_epi32(wc.FirstPrediction());
+  __m128i por = zero, cor = zero;  // without kStats: for the largest bit lengths
+  std::uint32_t ptag[33] = {}, ctag[33] = {};
+  for (std::size_t i = 0; i < n; ++i) {
+    const __m128 v = _mm_loadu_ps(&points[i].x);
+    const __m128i q = _mm_cvttps_epi32(_mm_add_ps(_mm_mul_ps(_mm_sub_ps(v, pq.min), pq.inv), half));
+    __m128i c;
+    if constexpr (kLut) {
+      const std::uint32_t rgba = points[i].rgba;
+      c = _mm_setr_epi32(lut[BlueOf(rgba)], lut[GreenOf(rgba)], lut[RedOf(rgba)], 0);
+    } else {
+      c = _mm_unpackhi_epi16(_mm_unpackhi_epi8(_mm_castps_si128(v), zero), zero);
+    }
+    const __m128i sp = wp.Symbols(q, pprev);
+    const __m128i sc = wc.Symbols(c, cprev);
+    pprev = q;
+    cprev = c;
+    // 4-lane stores; lane 3 is overwritten by the next point (the buffers hold one extra).
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(psym + 3 * i), sp);
+    _mm_storel_epi64(reinterpret_cast<__m128i*>(csym + 3 * i), _mm_packs_epi32(sc, sc));
+    if constexpr (kStats) {
+      const std::uint32_t p0 = psym[3 * i], p1 = psym[3 * i + 1], p2 = psym[3 * i + 2];
+      const std::uint32_t c0 = csym[3 * i], c1 = csym[3 * i + 1], c2 = csym[3 * i + 2];
+      if constexpr (kPositionHistogram) {
+        ++phist[kHistogramLanes * p0];
+        ++phist[kHistogramLanes * p1 + 1];
+        ++phist[kHistogramLanes * p2 + 2];
+      }
+      ++chist[kHistogramLanes * c0];
+      ++chist[kHistogramLanes * c1 + 1];
+      ++chist[kHistogramLanes * c2 + 2];
+      const std::uint32_t pb = BitLength(p0, p1, p2), cb = BitLength(c0, c1, c2);
+      bl[i] = static_cast<std::uint16_t>(pb | (cb << 8));
+      ++ptag[pb];
+      ++ctag[cb];
+    } else {
+      por = _mm_or_si128(por, sp);
+      cor = _mm_or_si128(cor, sc);
+    }
+  }
+  if constexpr (kStats) {
+    FinishTagStats(ptag, ps);
+    FinishTagStats(ctag, cs);
+  } else {
+    ps->max_bit_length = static_cast<int>(BitLength(HorizontalOr3(por), 0, 0));
+    cs->max_bit_length = static_cast<int>(BitLength(HorizontalOr3(cor), 0, 0));
+  }
+  ps->histogram_ready = kPositionHistogram;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Draco's symbol coding.
+
+// How one attribute's symbols are coded.
+struct Coding {
+  bool raw = false;  // SYMBOL_CODING_RAW, else tagged
+  int precision_bits = kTagPrecisionBits;
+};
+
+// Draco's EncodeSymbols up to the symbols themselves, for `n` points of 3 components with
+// compression level 0 (speed 10): it estimates the bits of its two schemes and takes the
+// tagged one unless the raw one is strictly cheaper and its values have at most 18 bits.
+//   tagged: per point, the bit length of its largest value is rANS-coded (precision 12), then
+//           every value follows in that many bits, LSB first;
+//   raw:    every value is rANS-coded over the histogram of all values.
+// Writes the scheme, its parameters and the probability table to a->prefix and builds
+// a->coder. False where Draco would fail or write a broken stream.
+bool PlanSymbols(std::size_t n, const std::uint32_t* wide_symbols, SymbolStats* st,
+                 AttributeScratch* a, Scratch* s, Coding* coding) {
+  const std::uint64_t num_values = 3 * std::uint64_t{n};
+  int tag_unique = 0;
+  const std::int64_t tag_bits = ShannonEntropyBits(st->tag_freq, 32, n, &tag_unique, s);
+  const std::int64_t tagged_bits = static_cast<std::int64_t>(
+      static_cast<std::uint64_t>(tag_bits + RansTableBits(tag_unique, tag_unique)) +
+      st->total_bit_length * 3);
+  const int max_value_bit_length = st->max_bit_length;
+  std::uint32_t max_value = 0;
+  int raw_unique = 0;
+  coding->raw = false;
+  if (max_value_bit_length <= kMaxRawEncodingBitLength) {
+    std::vector<std::uint32_t>& hist = a->histogram;
+    if (!st->histogram_ready) {  // only positions, of ranges of 2^18 and more: wide symbols
+      hist.assign(std::size_t{1} << max_value_bit_length, 0);
+      for (std::uint64_t i = 0; i < num_values; ++i) ++hist[wide_symbols[i]];
+      st->histogram_ready = true;
+    }
+    max_value = std::min(static_cast<std::uint32_t>(hist.size()) - 1,
+                         (std::uint32_t{1} << max_value_bit_length) - 1);
+    while (hist[max_value] == 0) --max_value;
+    const std::int64_t data_bits =
+        ShannonEntropyBits(hist.data(), max_value, num_values, &raw_unique, s);
+    const std::int64_t raw_bits =
+        RansTableBits(static_cast<std::int32_t>(max_value), raw_unique) + data_bits;
+    coding->raw = !(tagged_bits < raw_bits);
+  }
+
+  std::string* prefix = &a->prefix;
+  prefix->clear();
+  PutU8(prefix, kPredictionDifference);
+  PutU8(prefix, kTransformWrap);
+  PutU8(prefix, 1);  // entropy coded
+  if (!coding->raw) {
+    PutU8(prefix, kSymbolCodingTagged);
+    if (st->tag_freq[32] != 0) return false;  // Draco's 32-entry table would overflow
+    coding->precision_bits = kTagPrecisionBits;
+    return BuildRansCoder(st->tag_freq, 32, kTagPrecisionBits, s, &a->coder, prefix);
+  }
+  PutU8(prefix, kSymbolCodingRaw);
+  const int symbol_bits =
+      raw_unique > 0 ? MostSignificantBit(static_cast<std::uint32_t>(raw_unique)) : 0;
+  int unique_bit_length = symbol_bits + 1;
+  if (unique_bit_length > kMaxRawEncodingBitLength) return false;  // Draco fails here too
+  // Compression level 0 (10 - speed) takes two bits off; Draco's precision is then
+  // max(12, min(20, 3 * bits / 2)).
+  unique_bit_length = std::clamp(unique_bit_length - 2, 1, kMaxRawEncodingBitLength);
+  PutU8(prefix, static_cast<std::uint8_t>(unique_bit_length));
+  coding->precision_bits = std::clamp(3 * unique_bit_length / 2, 12, 20);
+  return BuildRansCoder(a->histogram.data(), max_value + 1, coding->precision_bits, s, &a->coder,
+                        prefix);
+}
+
+// The tagged scheme's values: in point order, each point's three in its bit length, LSB first.
+// Written backwards, alongside the rANS streams, by OR-ing each point's bits in at their offset
+// (3 times the bit lengths before it) into a zeroed buffer of the size plus 8.
+class TaggedValueWriter {
+ public:
+  TaggedValueWriter(std::uint8_t* zeroed, std::uint64_t total_bits)
+      : base_(zeroed), offset_(total_bits) {}
+
+  // The same for 4 times the values (NarrowSymbols), at most 14 bits: shifted together.
+  CLOUDCAST_INLINE void PutScaled(std::uint32_t v0, std::uint32_t v1, std::uint32_t v2,
+                                  unsigned bits) {
+    offset_ -= 3 * bits;
+    Or((std::uint64_t{v0} | (std::uint64_t{v1} << bits) | (std::uint64_t{v2} << (2 * bits))) >> 2);
+  }
+
+  CLOUDCAST_INLINE void Put(std::uint32_t v0, std::uint32_t v1, std::uint32_t v2, unsigned bits) {
+    if (bits <= 19) {  // the three values and the offset's 7 bits fit in 64
+      offset_ -= 3 * bits;
+      Or(std::uint64_t{v0} | (std::uint64_t{v1} << bits) | (std::uint64_t{v2} << (2 * bits)));
+    } else {
+      offset_ -= bits;
+      Or(v2);
+      offset_ -= bits;
+      Or(v1);
+      offset_ -= bits;
+      Or(v0);
+    }
+  }
+
+ private:
+  CLOUDCAST_INLINE void Or(std::uint64_t v) {
+    std::uint8_t* const p = base_ + (offset_ >> 3);
+    std::uint64_t word;
+    std::memcpy(&word, p, 8);
+    word |= v << (offset_ & 7);
+    std::memcpy(p, &word, 8);
+  }
+
+  std::uint8_t* base_;
+  std::uint64_t offset_;
+};
+
+std::uint64_t TaggedValueBytes(const SymbolStats& st) { return (st.total_bit_length * 3 + 7) / 8; }
+
+// Both attributes' rANS streams (and tagged values) in one backward pass over the points. Raw
+// coding adds a point's three symbols (last component first), tagged coding its bit length.
+template <bool kPositionRaw, bool kColorRaw, int kPositionPrecision, int kColorPrecision,
+          typename Symbols>
+void EncodeStreams(const Symbols sym, std::size_t n, const Coding& pc, const Coding& cc,
+                   const SymbolStats& ps, const SymbolStats& cs, Scratch* s,
+                   std::size_t* position_bytes, std::size_t* color_bytes) {
+  AttributeScratch& pa = s->position;
+  AttributeScratch& ca = s->color;
+  // Each symbol emits at most 3 bytes (below 1024 * 2^20, the state shrinks by at most 2^24 to
+  // get below 1024 p), the end 4, and the stores write 4 at a time.
+  const std::size_t psize = (kPositionRaw ? 9 : 3) * n + 8, csize = (kColorRaw ? 9 : 3) * n + 8;
+  if (pa.rans.size() < psize) pa.rans.resize(psize);
+  if (ca.rans.size() < csize) ca.rans.resize(csize);
+  if constexpr (!kPositionRaw) pa.values.assign(TaggedValueBytes(ps) + 8, 0);
+  if constexpr (!kColorRaw) ca.values.assign(TaggedValueBytes(cs) + 8, 0);
+  RansWriter<kPositionPrecision> pw(pc.precision_bits, pa.rans.data());
+  RansWriter<kColorPrecision> cw(cc.precision_bits, ca.rans.data());
+  TaggedValueWriter pv(pa.values.data(), ps.total_bit_length * 3),
+      cv(ca.values.data(), cs.total_bit_length * 3);
+  const RansSymbol* const pt = pa.coder.data();
+  const RansSymbol* const ct = ca.coder.data();
+  const std::uint16_t* const bl = s->bit_lengths.data();
+  for (std::size_t i = n; i-- > 0;) {
+    const unsigned pbl = bl[i] & 0xFF, cbl = bl[i] >> 8;
+    if constexpr (kPositionRaw) {
+      pw.Put(Symbols::Entry(pt, sym.PositionScaled(i, 2)));
+      pw.Put(Symbols::Entry(pt, sym.PositionScaled(i, 1)));
+      pw.Put(Symbols::Entry(pt, sym.PositionScaled(i, 0)));
+    } else {
+      pw.Put(pt[pbl]);
+      if constexpr (Symbols::kScaled) {
+        pv.PutScaled(sym.PositionScaled(i, 0), sym.PositionScaled(i, 1), sym.PositionScaled(i, 2),
+                     pbl);
+      } else {
+        pv.Put(sym.Position(i, 0), sym.Position(i, 1), sym.Position(i, 2), pbl);
+      }
+    }
+    if constexpr (kColorRaw) {  // stored B, G, R: Draco's last component first
+      cw.Put(Symbols::Entry(ct, sym.ColorScaled(i, 0)));
+      cw.Put(Symbols::Entry(ct, sym.ColorScaled(i, 1)));
+      cw.Put(Symbols::Entry(ct, sym.ColorScaled(i, 2)));
+    } else {
+      cw.Put(ct[cbl]);
+      if constexpr (Symbols::kScaled) {
+        cv.PutScaled(sym.ColorScaled(i, 2), sym.ColorScaled(i, 1), sym.ColorScaled(i, 0), cbl);
+      } else {
+        cv.Put(sym.Color(i, 2), sym.Color(i, 1), sym.Color(i, 0), cbl);
+      }
+    }
+  }
+  *position_bytes = pw.Finish();
+  *color_bytes = cw.Finish();
+}
+
+// EncodeStreams for the codings at hand: tags have precision 2^12, raw streams 2^12 to 2^20.
+// Precisions of 12 to 14 bits get their own instances (their division is cheaper); raw streams
+// with precisions above are rare (more than 2^11 distinct symbols).
+template <bool kPositionRaw, bool kColorRaw, int kPositionPrecision, typename Symbols>
+void EncodeStreamsForColor(const Symbols sym, std::size_t n, const Coding& pc, const Coding& cc,
+                           const SymbolStats& ps, const SymbolStats& cs, Scratch* s,
+                           std::size_t* pbytes, std::size_t* cbytes) {
+  auto run = [&](auto precision) {
+    EncodeStreams<kPositionRaw, kColorRaw, kPositionPrecision, decltype(precision)::value>(
+        sym, n, pc, cc, ps, cs, s, pbytes, cbytes);
+  };
+  switch (cc.precision_bits) {
+    case 12:
+      return run(std::integral_constant<int, 12>{});
+    case 13:
+      if constexpr (kColorRaw) return run(std::integral_constant<int, 13>{});
+      break;
+    case 14:
+      if constexpr (kColorRaw) return run(std::integral_constant<int, 14>{});
+      break;
+  }
+  return run(std::integral_constant<int, 0>{});
+}
+
+template <bool kPositionRaw, bool kColorRaw, typename Symbols>
+void EncodeStreamsFor(const Symbols sym, std::size_t n, const Coding& pc, const Coding& cc,
+                      const SymbolStats& ps, const SymbolStats& cs, Scratch* s, std::size_t* pbytes,
+                      std::size_t* cbytes) {
+  auto run = [&](auto precision) {
+    EncodeStreamsForColor<kPositionRaw, kColorRaw, decltype(precision)::value>(
+        sym, n, pc, cc, ps, cs, s, pbytes, cbytes);
+  };
+  switch (pc.precision_bits) {
+    case 12:
+      return run(std::integral_constant<int, 12>{});
+    case 13:
+      if constexpr (kPositionRaw) return run(std::integral_constant<int, 13>{});
+      break;
+    case 14:
+      if constexpr (kPositionRaw) return run(std::integral_constant<int, 14>{});
+      break;
+  }
+  return run(std::integral_constant<int, 0>{});
+}
+
+template <typename Symbols>
+void EncodeStreamsFor(const Symbols sym, std::size_t n, const Coding& pc, const Coding& cc,
+                      const SymbolStats& ps, const SymbolStats& cs, Scratch* s, std::size_t* pbytes,
+                      std::size_t* cbytes) {
+  if (pc.raw) {
+    if (cc.raw) {
+      EncodeStreamsFor<true, true>(sym, n, pc, cc, ps, cs, s, pbytes, cbytes);
+    } else {
+      EncodeStreamsFor<true, false>(sym, n, pc, cc, ps, cs, s, pbytes, cbytes);
+    }
+  } else if (cc.raw) {
+    EncodeStreamsFor<false, true>(sym, n, pc, cc, ps, cs, s, pbytes, cbytes);
+  } else {
+    EncodeStreamsFor<false, false>(sym, n, pc, cc, ps, cs, s, pbytes, cbytes);
+  }
+}
+
+// Values without entropy coding: as many bytes per value as the largest needs, in Draco's
+// component order; `symbol(i, k)` is point i's k-th.
+template <typename SymbolAt>
+void PutStoredValues(SymbolAt symbol, std::size_t n, const SymbolStats& st, std::string* out) {
+  const int bytes = 1 + (st.max_bit_length - 1) / 8;
+  PutU8(out, kPredictionDifference);
+  PutU8(out, kTransformWrap);
+  PutU8(out, 0);  // not entropy coded
+  PutU8(out, static_cast<std::uint8_t>(bytes));
+  const std::size_t at = out->size();
+  out->resize(at + 3 * n * bytes + 4);
+  auto* dst = reinterpret_cast<std::uint8_t*>(&(*out)[at]);
+  for (std::size_t i = 0; i < n; ++i) {
+    for (int k = 0; k < 3; ++k, dst += bytes) Store32(dst, symbol(i, k));
+  }
+  out->resize(at + 3 * n * bytes);
 }
 
 void PutHeader(std::string* out, std::int32_t num_points) {
@@ -500,9 +878,193 @@ void PutHeader(std::string* out, std::int32_t num_points) {
   PutLe<std::int32_t>(out, num_points);
 }
 
+// Steps 2 to 4, with the narrow or the wide symbol layout.
+template <bool kNarrow>
+bool EncodeWith(const Point* points, std::size_t n, const DracoCloudExtent& extent,
+                const DracoSequentialOptions& options, const PositionQuantizer& pq, const Wrap& wp,
+                const Wrap& wc, float range, std::string* out) {
+  thread_local Scratch scratch;
+  Scratch* const s = &scratch;
+  AttributeScratch& pa = s->position;
+  AttributeScratch& ca = s->color;
+  if constexpr (kNarrow) {
+    if (s->records.size() < 8 * n) s->records.resize(8 * n);
+  } else {
+    if (s->wide_positions.size() < 3 * n + 1) s->wide_positions.resize(3 * n + 1);
+    if (s->wide_colors.size() < 3 * n + 1) s->wide_colors.resize(3 * n + 1);
+  }
+  if (s->bit_lengths.size() < n) s->bit_lengths.resize(n);
+
+  SymbolStats ps, cs;
+  const bool stats = options.entropy_coding;
+  // Histograms of up to 2^18 entries (the raw scheme's limit) are filled during the pass; for
+  // larger ranges the symbols' bit lengths tell first whether the raw scheme can apply at all.
+  const bool position_histogram = stats && wp.HistogramSize() <= (1u << kMaxRawEncodingBitLength);
+  pa.histogram.assign(position_histogram ? kHistogramLanes * wp.HistogramSize() : 0, 0);
+  ca.histogram.assign(stats ? kHistogramLanes * wc.HistogramSize() : 0, 0);
+  const std::uint8_t* lut = options.color_lut;
+  auto run = [&](auto lut_tag, auto stats_tag, auto histogram_tag) {
+    constexpr bool kLut = decltype(lut_tag)::value, kStats = decltype(stats_tag)::value;
+    if constexpr (kNarrow) {
+      ComputeNarrowSymbols<kLut, kStats>(points, n, pq, wp, wc, lut, s, &ps, &cs);
+    } else {
+      ComputeWideSymbols<kLut, kStats, decltype(histogram_tag)::value>(points, n, pq, wp, wc, lut,
+                                                                       s, &ps, &cs);
+    }
+  };
+  using T = std::true_type;
+  using F = std::false_type;
+  if (lut != nullptr) {
+    if (!stats) {
+      run(T{}, F{}, F{});
+    } else if (position_histogram) {
+      run(T{}, T{}, T{});
+    } else {
+      run(T{}, T{}, F{});
+    }
+  } else {
+    if (!stats) {
+      run(F{}, F{}, F{});
+    } else if (position_histogram) {
+      run(F{}, T{}, T{});
+    } else {
+      run(F{}, T{}, F{});
+    }
+  }
+  for (auto [a, st] : {std::pair{&pa, &ps}, std::pair{&ca, &cs}}) {
+    if (a->histogram.empty()) continue;
+    // Sum the per-component counts (the reads run ahead of the writes).
+    const std::size_t size = a->histogram.size() / kHistogramLanes;
+    std::uint32_t* h = a->histogram.data();
+    for (std::size_t v = 0; v < size; ++v) {
+      h[v] = h[kHistogramLanes * v] + h[kHistogramLanes * v + 1] + h[kHistogramLanes * v + 2];
+    }
+    a->histogram.resize(size);
+    st->histogram_ready = true;
+  }
+
+  out->clear();
+  PutHeader(out, static_cast<std::int32_t>(n));
+  // One attributes encoder (SequentialAttributeEncodersController) holding both attributes.
+  PutU8(out, 1);
+  PutVarint(out, 2);
+  const std::uint8_t descriptors[] = {
+      0, 9, 3, 0, 0,  // POSITION, DT_FLOAT32, 3 components, not normalized, unique id 0
+      2, 2, 3, 1, 1,  // COLOR, DT_UINT8, 3 components, normalized, unique id 1
+      2, 1,           // SEQUENTIAL_ATTRIBUTE_ENCODER_QUANTIZATION, _INTEGER
+  };
+  out->append(reinterpret_cast<const char*>(descriptors), sizeof descriptors);
+
+  using Symbols = std::conditional_t<kNarrow, NarrowSymbols, WideSymbols>;
+  Symbols sym;
+  if constexpr (kNarrow) {
+    sym = NarrowSymbols{s->records.data()};
+  } else {
+    sym = WideSymbols{s->wide_positions.data(), s->wide_colors.data()};
+  }
+  if (!stats) {
+    PutStoredValues([&](std::size_t i, int k) { return sym.Position(i, k); }, n, ps, out);
+    PutLe<std::int32_t>(out, wp.min);
+    PutLe<std::int32_t>(out, wp.max);
+    PutStoredValues([&](std::size_t i, int k) { return sym.Color(i, 2 - k); }, n, cs, out);
+    PutLe<std::int32_t>(out, wc.min);
+    PutLe<std::int32_t>(out, wc.max);
+  } else {
+    Coding pc, cc;
+    const std::uint32_t* wide = kNarrow ? nullptr : s->wide_positions.data();
+    if (!PlanSymbols(n, wide, &ps, &pa, s, &pc) || !PlanSymbols(n, nullptr, &cs, &ca, s, &cc)) {
+      return false;
+    }
+    std::size_t pbytes = 0, cbytes = 0;
+    EncodeStreamsFor(sym, n, pc, cc, ps, cs, s, &pbytes, &cbytes);
+    const struct {
+      const AttributeScratch* a;
+      const Coding* coding;
+      const SymbolStats* stats;
+      const Wrap* wrap;
+      std::size_t rans_bytes;
+    } attributes[] = {{&pa, &pc, &ps, &wp, pbytes}, {&ca, &cc, &cs, &wc, cbytes}};
+    for (const auto& at : attributes) {
+      out->append(at.a->prefix);
+      PutVarint(out, at.rans_bytes);  // RAnsSymbolEncoder::EndEncoding: the size, the bytes
+      out->append(reinterpret_cast<const char*>(at.a->rans.data()), at.rans_bytes);
+      if (!at.coding->raw) {
+        out->append(reinterpret_cast<const char*>(at.a->values.data()),
+                    TaggedValueBytes(*at.stats));
+      }
+      PutLe<std::int32_t>(out, at.wrap->min);
+      PutLe<std::int32_t>(out, at.wrap->max);
+    }
+  }
+
+  // The quantization parameters follow all values.
+  for (int c = 0; c < 3; ++c) PutLe<float>(out, extent.lo[c]);
+  PutLe<float>(out, range);
+  PutU8(out, static_cast<std::uint8_t>(options.position_bits));
+  return true;
+}
+
+// The common case of the scan: all points finite, no coordinate bound at +-0.0. It keeps the
+// bounds with minps(lo, v), which on equal values takes v: only +-0.0 tell equal floats apart,
+// so a bound at zero is left to the careful scan, which keeps Draco's first. Any NaN or
+// infinity turns v * 0 into NaN, and the sum of those with it.
+bool ScanCommonCase(const Point* points, std::size_t n, DracoCloudExtent* e) {
+  const float inf = std::numeric_limits<float>::infinity();
+  __m128 lo0 = _mm_set1_ps(inf), hi0 = _mm_set1_ps(-inf), lo1 = lo0, hi1 = hi0;
+  __m128 bad0 = _mm_setzero_ps(), bad1 = bad0;
+  const __m128 zero = _mm_setzero_ps();
+  __m128i clo0 = _mm_set1_epi8(-1), chi0 = _mm_setzero_si128(), clo1 = clo0, chi1 = chi0;
+  std::size_t i = 0;
+  for (; i + 2 <= n; i += 2) {  // two sets of bounds: twice the independent work per step
+    const __m128 a = _mm_loadu_ps(&points[i].x), b = _mm_loadu_ps(&points[i + 1].x);
+    lo0 = _mm_min_ps(lo0, a);
+    lo1 = _mm_min_ps(lo1, b);
+    hi0 = _mm_max_ps(hi0, a);
+    hi1 = _mm_max_ps(hi1, b);
+    bad0 = _mm_add_ps(bad0, _mm_mul_ps(a, zero));
+    bad1 = _mm_add_ps(bad1, _mm_mul_ps(b, zero));
+    clo0 = _mm_min_epu8(clo0, _mm_castps_si128(a));  // bytes 12..14 are B, G, R
+    clo1 = _mm_min_epu8(clo1, _mm_castps_si128(b));
+    chi0 = _mm_max_epu8(chi0, _mm_castps_si128(a));
+    chi1 = _mm_max_epu8(chi1, _mm_castps_si128(b));
+  }
+  if (i < n) {
+    const __m128 a = _mm_loadu_ps(&points[i].x);
+    lo0 = _mm_min_ps(lo0, a);
+    hi0 = _mm_max_ps(hi0, a);
+    bad0 = _mm_add_ps(bad0, _mm_mul_ps(a, zero));
+    clo0 = _mm_min_epu8(clo0, _mm_castps_si128(a));
+    chi0 = _mm_max_epu8(chi0, _mm_castps_si128(a));
+  }
+  const __m128 lo = _mm_min_ps(lo0, lo1), hi = _mm_max_ps(hi0, hi1);
+  const __m128 bad = _mm_add_ps(bad0, bad1);
+  // Lane 3 is the colour word seen as a float: ignored.
+  if ((_mm_movemask_ps(_mm_cmpunord_ps(bad, bad)) & 7) != 0) return false;
+  if ((_mm_movemask_ps(_mm_or_ps(_mm_cmpeq_ps(lo, zero), _mm_cmpeq_ps(hi, zero))) & 7) != 0) {
+    return false;
+  }
+  alignas(16) float l[4], h[4];
+  _mm_store_ps(l, lo);
+  _mm_store_ps(h, hi);
+  alignas(16) std::uint8_t cl[16], ch[16];
+  _mm_store_si128(reinterpret_cast<__m128i*>(cl), _mm_min_epu8(clo0, clo1));
+  _mm_store_si128(reinterpret_cast<__m128i*>(ch), _mm_max_epu8(chi0, chi1));
+  for (int c = 0; c < 3; ++c) {
+    e->lo[c] = l[c];
+    e->hi[c] = h[c];
+  }
+  e->color_lo = std::min({cl[12], cl[13], cl[14]});
+  e->color_hi = std::max({ch[12], ch[13], ch[14]});
+  e->finite = n;
+  return true;
+}
+
 }  // namespace
 
 DracoCloudExtent ScanForDraco(const Point* points, std::size_t n) {
+  DracoCloudExtent e;
+  if (n == 0 || ScanCommonCase(points, n, &e)) return e;
+  // Some point is not finite (an organized cloud's holes: skipped), or a bound is +-0.0.
   const float inf = std::numeric_limits<float>::infinity();
   __m128 lo = _mm_set1_ps(inf), hi = _mm_set1_ps(-inf);
   __m128i color_lo = _mm_set1_epi8(-1), color_hi = _mm_setzero_si128();
@@ -518,11 +1080,10 @@ DracoCloudExtent ScanForDraco(const Point* points, std::size_t n) {
     // (0.0 after -0.0) never replaces the first.
     lo = _mm_min_ps(v, lo);
     hi = _mm_max_ps(v, hi);
-    color_lo = _mm_min_epu8(color_lo, bits);  // bytes 12..14 are B, G, R
+    color_lo = _mm_min_epu8(color_lo, bits);
     color_hi = _mm_max_epu8(color_hi, bits);
     ++finite;
   }
-  DracoCloudExtent e;
   alignas(16) float l[4], h[4];
   _mm_store_ps(l, lo);
   _mm_store_ps(h, hi);
@@ -547,24 +1108,8 @@ bool EncodeDracoSequential(const Point* points, std::size_t n, const DracoCloudE
   }
   const int bits = options.position_bits;
   if (bits < 1 || bits > 30) return false;
-  thread_local Scratch scratch;
-  Scratch* s = &scratch;
-  if (s->symbols.size() < 3 * n + 1) s->symbols.resize(3 * n + 1);
-  std::uint32_t* const sym = s->symbols.data();
 
-  out->clear();
-  PutHeader(out, static_cast<std::int32_t>(n));
-  // One attributes encoder (SequentialAttributeEncodersController) holding both attributes.
-  PutU8(out, 1);
-  PutVarint(out, 2);
-  const std::uint8_t descriptors[] = {
-      0, 9, 3, 0, 0,  // POSITION, DT_FLOAT32, 3 components, not normalized, unique id 0
-      2, 2, 3, 1, 1,  // COLOR, DT_UINT8, 3 components, normalized, unique id 1
-      2, 1,           // SEQUENTIAL_ATTRIBUTE_ENCODER_QUANTIZATION, _INTEGER
-  };
-  out->append(reinterpret_cast<const char*>(descriptors), sizeof descriptors);
-
-  // Positions. The range is the largest side, computed as Draco computes it (1 for a point).
+  // Positions: the range is the largest side, computed as Draco computes it (1 for a point).
   float range = 0.0f;
   for (int c = 0; c < 3; ++c) {
     const float dif = extent.hi[c] - extent.lo[c];
@@ -576,27 +1121,21 @@ bool EncodeDracoSequential(const Point* points, std::size_t n, const DracoCloudE
   // A range below about 1e-30 overflows the scale: Draco's quantized values are then undefined
   // (float-to-int conversions of infinities), which we do not imitate.
   if (!std::isfinite(inv)) return false;
+  // The smallest value is 0 (the minimum's) and the largest that of an axis maximum: the float
+  // operations are monotonic.
   std::int32_t q_max = 0;
   for (int c = 0; c < 3; ++c) {
     q_max = std::max(q_max, static_cast<std::int32_t>((extent.hi[c] - extent.lo[c]) * inv + 0.5f));
   }
-  std::uint32_t ored = PositionSymbols(points, n, extent.lo, inv, q_max, sym);
-  if (!EncodeAttributeValues(sym, n, ored, 0, q_max, options.entropy_coding, s, out)) return false;
-
-  // Colours.
+  const Wrap wp(0, q_max);
+  const PositionQuantizer pq{_mm_setr_ps(extent.lo[0], extent.lo[1], extent.lo[2], 0.0f),
+                             _mm_set1_ps(inv)};
+  // Colours: the level table is non-decreasing, so it maps the extent's bounds to the values'.
   const std::uint8_t* lut = options.color_lut;
-  const std::int32_t c_min = lut ? lut[extent.color_lo] : extent.color_lo;
-  const std::int32_t c_max = lut ? lut[extent.color_hi] : extent.color_hi;
-  ored = ColorSymbols(points, n, lut, c_min, c_max, sym);
-  if (!EncodeAttributeValues(sym, n, ored, c_min, c_max, options.entropy_coding, s, out)) {
-    return false;
-  }
-
-  // The quantization parameters follow all values.
-  for (int c = 0; c < 3; ++c) PutLe<float>(out, extent.lo[c]);
-  PutLe<float>(out, range);
-  PutU8(out, static_cast<std::uint8_t>(bits));
-  return true;
+  const Wrap wc(lut ? lut[extent.color_lo] : extent.color_lo,
+                lut ? lut[extent.color_hi] : extent.color_hi);
+  if (wp.FitsNarrow()) return EncodeWith<true>(points, n, extent, options, pq, wp, wc, range, out);
+  return EncodeWith<false>(points, n, extent, options, pq, wp, wc, range, out);
 }
 
 void EncodeDracoEmpty(std::string* out) {
