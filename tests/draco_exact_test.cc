@@ -277,6 +277,39 @@ TEST(DracoExact, EveryPositionBits) {
   }
 }
 
+// The raw scheme's rANS precision follows the number of distinct symbols: 12, 13, 15, 16, 18, 19
+// or 20 bits (Draco's max(12, min(20, 3 * bits / 2)) never gives 14 or 17), each with its own
+// coder path. Walks along x in 17-bit steps of up to +-d quantization units give about 2d
+// distinct symbols, and the flat y and z make the raw scheme win.
+TEST(DracoExact, EveryRawPrecision) {
+  std::vector<int> seen;
+  for (int d : {50, 600, 1200, 2500, 6000, 12000, 20000}) {
+    std::mt19937 rng(static_cast<std::uint32_t>(d));
+    std::uniform_int_distribution<int> step(-d, d);
+    const int top = (1 << 17) - 1;
+    PointCloud cloud;
+    cloud.ResizeUnorganized(100000);
+    int x = top / 2;
+    for (Point& p : cloud.points) {
+      x += step(rng);
+      if (x < 0) x = -x;
+      if (x > top) x = 2 * top - x;
+      p = {static_cast<float>(x) / top, 0.25f, 0.5f,
+           0xFF000000u | static_cast<std::uint32_t>(rng() & 0xFFFFFF)};
+    }
+    cloud.points[0].x = 0.0f;
+    cloud.points[1].x = 1.0f;
+    std::string bytes;
+    ASSERT_TRUE(SameAsLibdraco(cloud, Options(17), &bytes)) << "d " << d;
+    // Bytes 32 and 33: the positions' scheme (1: raw) and its symbol bit length.
+    ASSERT_GT(bytes.size(), 34u);
+    ASSERT_EQ(bytes[32], 1) << "d " << d << ": not the raw scheme";
+    const int bits = static_cast<unsigned char>(bytes[33]);
+    seen.push_back(std::clamp(3 * bits / 2, 12, 20));
+  }
+  EXPECT_EQ(seen, (std::vector<int>{12, 13, 15, 16, 18, 19, 20}));
+}
+
 TEST(DracoExact, EveryColourBits) {
   const PointCloud cloud = UniformCloud(5000, 21);
   for (int color_bits = 1; color_bits <= 8; ++color_bits) {

@@ -1,7 +1,7 @@
 #include "draco_sequential_encoder.h"
 
-#if !defined(__SSE2__)
-#error "the Draco encoder uses SSE2, which every x86-64 CPU has"
+#if !defined(__SSE2__) || !defined(__x86_64__) || !defined(__GNUC__)
+#error "the Draco encoder is written for x86-64 (SSE2, which every such CPU has) with GCC or Clang"
 #endif
 #include <emmintrin.h>
 
@@ -73,18 +73,19 @@ void Store32(std::uint8_t* p, std::uint32_t v) { std::memcpy(p, &v, 4); }
 // Draco's rANS coder.
 
 // One symbol: Draco's probability p and cumulative probability, and what replaces its division
-// of the state x by p (x < 1024 * precision <= 2^30). For a divisor p, m = (2^k - 1) / p and
-// x + 1 <= 2^k, the integer part of (x + 1) * m / 2^k is x / p exactly: it equals
-// (x + 1) / p - (x + 1) * (1 + (2^k - 1) % p) / (p * 2^k), and the subtracted part is positive
-// and below 1 / p while (x + 1) * p < 2^k. With k = 64 that holds for every precision (the high
-// half of a 128-bit product); up to precisions of 2^14, k = 54 - bits keeps (x + 1) * m within
-// 64 bits and (x + 1) * p below 2^(10 + 2 bits) <= 2^k.
+// of the state x by p (x < 1024 * precision <= 2^30), exactly:
+//  - above precisions of 2^14: with m = (2^64 - 1) / p, x / p is the high half of (x + 1) * m,
+//    which is (x + 1) / p - (x + 1) * (1 + (2^64 - 1) % p) / (p * 2^64), the subtracted part
+//    positive and below 1 / p (as (x + 1) * p < 2^64);
+//  - up to 2^14 ("small"): with k = 54 - bits and m = ceil(2^k / p), x / p is (x * m) >> k: the
+//    excess m * p - 2^k is below p, so x times it stays below 2^(10 + 2 bits) <= 2^k; and x * m
+//    fits 64 bits (x < 2^(10 + bits) = 2^(64 - k), m <= 2^k for p = 1, 2^(k - 1) + 1 above).
 struct RansSymbol {
   // Draco renormalizes while x >= 1024 p (l_rans_base / precision * IO base * p), a byte at a
   // time; limit[i] = 1024 p * 256^i (saturated: x < 2^30 never reaches those) count the bytes.
   std::uint32_t limit[3];
   std::uint32_t complement;  // precision - p
-  std::uint64_t reciprocal;  // (2^k - 1) / p, k = ReciprocalShift(precision bits)
+  std::uint64_t reciprocal;  // m above
   std::uint32_t cumulative;
   std::uint32_t unused;
 };
@@ -99,26 +100,27 @@ constexpr int ReciprocalShift(int precision_bits) {
 // would need x >= 1024 p * 2^16 >= 2^26: two bytes at most.
 constexpr int kTwoByteRenormMaxPrecisionBits = 16;
 
-// (2^64 - 1) / p for precisions above 2^14, else (2^(54 - bits) - 1) / p; at precision 2^12
-// (the tags and most raw tables) from a table: a 64-bit division costs tens of cycles, and raw
-// tables have thousands of symbols.
+// RansSymbol's m for precision_bits: (2^64 - 1) / p, or ceil(2^k / p) = (2^k - 1) / p + 1 for
+// small precisions. Below 2^12 (all of the tags' and most probabilities of raw tables) from a
+// table of (2^64 - 1) / p, shifted: floor(floor(a / p) / 2^j) is floor(floor(a / 2^j) / p), and
+// (2^64 - 1) / 2^(64 - k) is 2^k - 1. A 64-bit division costs tens of cycles, and raw tables
+// have thousands of symbols.
 std::uint64_t Reciprocal(std::uint32_t p, int precision_bits) {
   constexpr std::uint32_t kTabled = 1u << 12;
-  constexpr std::uint64_t kNumerator12 = (std::uint64_t{1} << ReciprocalShift(12)) - 1;
   static const std::vector<std::uint64_t> table = [] {
-    std::vector<std::uint64_t> t(kTabled + 1);
-    for (std::uint32_t i = 1; i <= kTabled; ++i) t[i] = kNumerator12 / i;
+    std::vector<std::uint64_t> t(kTabled);
+    for (std::uint32_t i = 1; i < kTabled; ++i) t[i] = ~std::uint64_t{0} / i;
     return t;
   }();
-  if (precision_bits == 12) return table[p];  // p <= 2^12
   const int k = ReciprocalShift(precision_bits);
-  const std::uint64_t numerator = k == 64 ? ~std::uint64_t{0} : (std::uint64_t{1} << k) - 1;
-  return numerator / p;
+  if (k == 64) return p < kTabled ? table[p] : ~std::uint64_t{0} / p;
+  return (p < kTabled ? table[p] >> (64 - k) : ((std::uint64_t{1} << k) - 1) / p) + 1;
 }
 
 // Draco's RAnsEncoder. Symbols are added last to first; each first renormalizes the state by
-// whole bytes, which come out in the order written. kPrecisionBits: the stream's, when it is at
-// most kSmallPrecisionMaxBits (the division then takes a 64-bit product and a fixed shift), or 0.
+// whole bytes, which come out in the order written. kPrecisionBits: the stream's when it is at
+// most kSmallPrecisionMaxBits (the division then takes a 64-bit product and a fixed shift), 16
+// for 15 and 16 bits (two bytes of renormalization at most), or 0.
 template <int kPrecisionBits>
 class RansWriter {
  public:
@@ -127,6 +129,10 @@ class RansWriter {
       : base_(4u << precision_bits), x_(base_), begin_(out), o_(out) {}
 
   CLOUDCAST_INLINE void Put(const RansSymbol& c) {
+    if constexpr (kPrecisionBits != 0 && kPrecisionBits <= kSmallPrecisionMaxBits) {
+      PutSmallPrecision(c);
+      return;
+    }
     // Draco's "while (x >= 1024 p) emit x's low byte, x >>= 8" without branches: it runs once
     // per limit x reaches, and emits x's bytes in little-endian order.
     Store32(o_, x_);
@@ -140,16 +146,47 @@ class RansWriter {
     // that is x' + (x' / p) * (precision - p) + cumulative, where x' / p = (x / p) / 256^bytes:
     // the division starts while the bytes are counted.
     const unsigned shift = 8 * bytes;
-    std::uint32_t q;
-    if constexpr (kPrecisionBits != 0) {  // one shift, by at most 42 + 16
-      q = static_cast<std::uint32_t>((std::uint64_t{x_ + 1} * c.reciprocal) >>
-                                     (ReciprocalShift(kPrecisionBits) + shift));
-    } else {
-      q = static_cast<std::uint32_t>((static_cast<unsigned __int128>(x_ + 1) * c.reciprocal) >>
-                                     64) >>
-          shift;
-    }
-    x_ = (x_ >> shift) + q * c.complement + c.cumulative;
+    const auto q =
+        static_cast<std::uint32_t>((static_cast<unsigned __int128>(x_ + 1) * c.reciprocal) >> 64);
+    x_ = (x_ >> shift) + (q >> shift) * c.complement + c.cumulative;
+  }
+
+  // Put for precisions up to 2^14, by hand: the state's dependency chain is the encoder's
+  // bottleneck (one stream, three symbols a point), and GCC 12 lengthens it by computing the
+  // shift count from the comparisons (9% slower on Tsukuba 00001). Here the division's fixed shift
+  // k and the renormalization's 8 per byte make one count, selected by conditional moves; the
+  // renormalized state is (x << k) shifted by it too (x < 2^(10 + bits) = 2^(64 - k)). The same
+  // arithmetic as Put's, with the small precisions' m.
+  CLOUDCAST_INLINE void PutSmallPrecision(const RansSymbol& c) {
+    constexpr unsigned k = ReciprocalShift(kPrecisionBits);
+    std::uint64_t x = x_, q, renormalized;
+    std::uint8_t* o = o_;
+    const std::uint64_t k8 = k + 8, k16 = k + 16;
+    asm("movl %k[x], %[out]\n\t"  // Store32(o, x)
+        "movl %k[x], %k[q]\n\t"   // q = x * reciprocal
+        "imulq %[reciprocal], %q[q]\n\t"
+        "movl %k[x], %k[r]\n\t"  // r = x << k
+        "shlq %[k], %q[r]\n\t"
+        "movl %[k], %%ecx\n\t"  // count = k + 8 * bytes
+        "cmpl %[limit0], %k[x]\n\t"
+        "cmovael %k[k8], %%ecx\n\t"
+        "sbbq $-1, %[o]\n\t"  // o += x >= limit0
+        "cmpl %[limit1], %k[x]\n\t"
+        "cmovael %k[k16], %%ecx\n\t"
+        "sbbq $-1, %[o]\n\t"    // o += x >= limit1
+        "shrq %%cl, %q[q]\n\t"  // x' / p
+        "shrq %%cl, %q[r]\n\t"  // x'
+        "imull %[complement], %k[q]\n\t"
+        "addl %[cumulative], %k[r]\n\t"
+        "leal (%q[r], %q[q]), %k[x]"
+        : [x] "+r"(x), [o] "+r"(o), [q] "=&r"(q), [r] "=&r"(renormalized),
+          [out] "=m"(*reinterpret_cast<std::uint32_t*>(o_))
+        : [k] "i"(k), [k8] "r"(k8), [k16] "r"(k16), [limit0] "m"(c.limit[0]),
+          [limit1] "m"(c.limit[1]), [reciprocal] "m"(c.reciprocal), [complement] "m"(c.complement),
+          [cumulative] "m"(c.cumulative)
+        : "rcx", "cc");
+    x_ = static_cast<std::uint32_t>(x);
+    o_ = o;
   }
 
   // Draco's write_end: the final state in 1..4 bytes. Returns the stream's size.
@@ -185,7 +222,10 @@ class RansWriter {
 
 // Per attribute: its histogram, coder and streams.
 struct AttributeScratch {
+  // All zero between calls: each call clears what it used (HistogramCleaner), so that its cost
+  // follows the symbols' range, not the quantization's.
   std::vector<std::uint32_t> histogram;
+  std::size_t histogram_used = 0;
   std::vector<RansSymbol> coder;
   Buffer<std::uint8_t> rans;         // the rANS bytes, as Draco writes them before their size
   std::vector<std::uint8_t> values;  // the tagged scheme's values
@@ -248,6 +288,19 @@ struct WideSymbols {
 
 constexpr std::uint32_t kMemoizedFrequencies = 1u << 12;
 
+// The first index at or after i (below end) whose count is not zero, or end: tables of wide
+// quantizations are mostly zeros, skipped four at a time.
+std::uint32_t NextNonZero(const std::uint32_t* f, std::uint32_t i, std::uint32_t end) {
+  const __m128i zero = _mm_setzero_si128();
+  for (; i + 4 <= end; i += 4) {
+    const __m128i v = _mm_loadu_si128(reinterpret_cast<const __m128i*>(f + i));
+    const int zeros = _mm_movemask_epi8(_mm_cmpeq_epi32(v, zero));
+    if (zeros != 0xFFFF) return i + static_cast<std::uint32_t>(__builtin_ctz(~zeros)) / 4;
+  }
+  while (i < end && f[i] == 0) ++i;
+  return i;
+}
+
 // Draco's ComputeShannonEntropy over a histogram `freq` of symbols 0..max_value (inclusive) of
 // `count` values: the same double terms summed in the same order, so the same truncated result.
 std::int64_t ShannonEntropyBits(const std::uint32_t* freq, std::uint32_t max_value,
@@ -263,9 +316,9 @@ std::int64_t ShannonEntropyBits(const std::uint32_t* freq, std::uint32_t max_val
   const double count_d = static_cast<double>(count);
   double total_bits = 0;
   int num_unique = 0;
-  for (std::uint32_t i = 0; i <= max_value; ++i) {
+  for (std::uint32_t i = NextNonZero(freq, 0, max_value + 1); i <= max_value;
+       i = NextNonZero(freq, i + 1, max_value + 1)) {
     const std::uint32_t f = freq[i];
-    if (f == 0) continue;
     ++num_unique;
     double term;
     if (f < kMemoizedFrequencies && s->term_stamp[f] == s->stamp) {
@@ -298,17 +351,19 @@ bool BuildRansCoder(const std::uint32_t* freq, std::uint32_t count, int precisio
   const std::uint32_t precision = 1u << precision_bits;
   std::uint64_t total_freq = 0;
   std::uint32_t max_valid = 0;
-  for (std::uint32_t i = 0; i < count; ++i) {
+  for (std::uint32_t i = NextNonZero(freq, 0, count); i < count;
+       i = NextNonZero(freq, i + 1, count)) {
     total_freq += freq[i];
-    if (freq[i] > 0) max_valid = i;
+    max_valid = i;
   }
   const std::uint32_t num_symbols = max_valid + 1;
   std::vector<std::uint32_t>& prob = s->probabilities;
-  prob.resize(num_symbols);
+  prob.assign(num_symbols, 0);  // what Draco computes for a zero count, without its division
   const double total_freq_d = static_cast<double>(total_freq);
   const double precision_d = static_cast<double>(precision);
   int total_prob = 0;
-  for (std::uint32_t i = 0; i < num_symbols; ++i) {
+  for (std::uint32_t i = NextNonZero(freq, 0, num_symbols); i < num_symbols;
+       i = NextNonZero(freq, i + 1, num_symbols)) {
     const double p = static_cast<double>(freq[i]) / total_freq_d;
     auto rans_prob = static_cast<std::uint32_t>(p * precision_d + 0.5);
     if (rans_prob == 0 && freq[i] > 0) rans_prob = 1;
@@ -330,12 +385,14 @@ bool BuildRansCoder(const std::uint32_t* freq, std::uint32_t count, int precisio
     // smallest probability (and index) is never visited.
     std::vector<std::uint64_t>& order = s->order;
     order.clear();
-    for (std::uint32_t i = 0; i < num_symbols; ++i) {
-      if (prob[i] > 1) order.push_back((std::uint64_t{prob[i]} << 32) | i);
+    const std::uint32_t* const pr = prob.data();
+    for (std::uint32_t i = NextNonZero(pr, 0, num_symbols); i < num_symbols;
+         i = NextNonZero(pr, i + 1, num_symbols)) {
+      if (pr[i] > 1) order.push_back((std::uint64_t{pr[i]} << 32) | i);
     }
     std::sort(order.begin(), order.end(), std::greater<std::uint64_t>());
-    if (order.size() == num_symbols) order.pop_back();
-    if (order.empty()) return false;  // the most frequent symbol would be emptied
+    if (order.size() == num_symbols) order.pop_back();  // every probability above 1
+    if (order.empty()) return false;                    // the most frequent symbol would be emptied
     std::int32_t error = total_prob - static_cast<std::int32_t>(precision);
     while (error > 0) {
       const double act_rel_error_d = precision_d / static_cast<double>(total_prob);
@@ -366,8 +423,9 @@ bool BuildRansCoder(const std::uint32_t* freq, std::uint32_t count, int precisio
   for (std::uint32_t i = 0; i < num_symbols; ++i) {
     const std::uint32_t p = prob[i];
     if (p == 0) {
-      std::uint32_t offset = 0;
-      while (offset < 63 && prob[i + offset + 1] == 0) ++offset;  // the last symbol is non-zero
+      // The last symbol is non-zero; zero probabilities are exactly the zero counts.
+      const std::uint32_t offset =
+          std::min(NextNonZero(prob.data(), i + 1, num_symbols) - i - 1, 63u);
       PutU8(out, static_cast<std::uint8_t>((offset << 2) | 3));
       i += offset;
       continue;
@@ -380,13 +438,12 @@ bool BuildRansCoder(const std::uint32_t* freq, std::uint32_t count, int precisio
 
   coder->resize(num_symbols);
   std::uint32_t cumulative = 0;
-  for (std::uint32_t i = 0; i < num_symbols; ++i) {
-    const std::uint32_t p = prob[i];
+  for (std::uint32_t i = NextNonZero(prob.data(), 0, num_symbols); i < num_symbols;
+       i = NextNonZero(prob.data(), i + 1, num_symbols)) {
+    const std::uint32_t p = prob[i];  // zero ones are never coded: their entries are not read
     RansSymbol& c = (*coder)[i];
-    c = RansSymbol{};
     c.cumulative = cumulative;
     cumulative += p;
-    if (p == 0) continue;  // never coded
     for (int b = 0; b < 3; ++b) {
       const std::uint64_t limit = (std::uint64_t{4 * kRansIoBase} * p) << (8 * b);
       c.limit[b] = static_cast<std::uint32_t>(std::min<std::uint64_t>(limit, 0xFFFFFFFFu));
@@ -451,18 +508,24 @@ inline std::uint32_t BitLength(std::uint32_t a, std::uint32_t b, std::uint32_t c
 
 // BitLength of the symbols whose 4-fold OR is `scaled` (< 2^16), from a table: BSR takes 4
 // cycles of its unit per use on AMD's cores, and the narrow pass needs two per point.
+// [v]: the bit length for scaled values below 256; [256 + h]: for those with high byte h.
+constexpr std::array<std::uint8_t, 512> kScaledBitLengths = [] {
+  auto bit_length = [](std::uint32_t v) {  // of v / 4, at least 1
+    std::uint8_t b = 1;
+    for (v >>= 2; v > 1; v >>= 1) ++b;
+    return b;
+  };
+  std::array<std::uint8_t, 512> t{};
+  for (std::uint32_t v = 0; v < 256; ++v) {
+    t[v] = bit_length(v);
+    t[256 + v] = bit_length(v << 8);
+  }
+  return t;
+}();
+
 CLOUDCAST_INLINE std::uint32_t ScaledBitLength(std::size_t scaled) {
-  // [v]: the bit length for scaled values below 256; [256 + h]: for those with high byte h.
-  static const std::array<std::uint8_t, 512> kTable = [] {
-    std::array<std::uint8_t, 512> t{};
-    for (std::uint32_t v = 0; v < 256; ++v) {
-      t[v] = static_cast<std::uint8_t>(BitLength(v >> 2, 0, 0));
-      t[256 + v] = static_cast<std::uint8_t>(BitLength((v << 8) >> 2, 0, 0));
-    }
-    return t;
-  }();
   const std::size_t high = scaled >> 8;
-  return kTable[high != 0 ? 256 + high : scaled];
+  return kScaledBitLengths[high != 0 ? 256 + high : scaled];
 }
 
 // What Draco's EncodeSymbols looks at to choose between its schemes, gathered with the symbols.
@@ -471,6 +534,7 @@ struct SymbolStats {
   std::uint32_t tag_freq[33] = {};
   std::uint64_t total_bit_length = 0;
   bool histogram_ready = false;
+  std::size_t histogram_entries = 0;  // valid counts at the start of the attribute's histogram
 };
 
 struct PositionQuantizer {
@@ -600,6 +664,23 @@ void ComputeWideSymbols(const Point* points, std::size_t n, const PositionQuanti
   __m128i cprev = _mm_set1_epi32(wc.FirstPrediction());
   __m128i por = zero, cor = zero;  // without kStats: for the largest bit lengths
   std::uint32_t ptag[33] = {}, ctag[33] = {};
+  // As in ComputeNarrowSymbols: point i - 1's statistics while point i is computed.
+  auto gather = [&](std::size_t i) {
+    const std::uint32_t p0 = psym[3 * i], p1 = psym[3 * i + 1], p2 = psym[3 * i + 2];
+    const std::uint32_t c0 = csym[3 * i], c1 = csym[3 * i + 1], c2 = csym[3 * i + 2];
+    if constexpr (kPositionHistogram) {
+      ++phist[kHistogramLanes * p0];
+      ++phist[kHistogramLanes * p1 + 1];
+      ++phist[kHistogramLanes * p2 + 2];
+    }
+    ++chist[kHistogramLanes * c0];
+    ++chist[kHistogramLanes * c1 + 1];
+    ++chist[kHistogramLanes * c2 + 2];
+    const std::uint32_t pb = BitLength(p0, p1, p2), cb = BitLength(c0, c1, c2);
+    bl[i] = static_cast<std::uint16_t>(pb | (cb << 8));
+    ++ptag[pb];
+    ++ctag[cb];
+  };
   for (std::size_t i = 0; i < n; ++i) {
     const __m128 v = _mm_loadu_ps(&points[i].x);
     const __m128i q = _mm_cvttps_epi32(_mm_add_ps(_mm_mul_ps(_mm_sub_ps(v, pq.min), pq.inv), half));
@@ -618,25 +699,13 @@ void ComputeWideSymbols(const Point* points, std::size_t n, const PositionQuanti
     _mm_storeu_si128(reinterpret_cast<__m128i*>(psym + 3 * i), sp);
     _mm_storel_epi64(reinterpret_cast<__m128i*>(csym + 3 * i), _mm_packs_epi32(sc, sc));
     if constexpr (kStats) {
-      const std::uint32_t p0 = psym[3 * i], p1 = psym[3 * i + 1], p2 = psym[3 * i + 2];
-      const std::uint32_t c0 = csym[3 * i], c1 = csym[3 * i + 1], c2 = csym[3 * i + 2];
-      if constexpr (kPositionHistogram) {
-        ++phist[kHistogramLanes * p0];
-        ++phist[kHistogramLanes * p1 + 1];
-        ++phist[kHistogramLanes * p2 + 2];
-      }
-      ++chist[kHistogramLanes * c0];
-      ++chist[kHistogramLanes * c1 + 1];
-      ++chist[kHistogramLanes * c2 + 2];
-      const std::uint32_t pb = BitLength(p0, p1, p2), cb = BitLength(c0, c1, c2);
-      bl[i] = static_cast<std::uint16_t>(pb | (cb << 8));
-      ++ptag[pb];
-      ++ctag[cb];
+      if (i > 0) gather(i - 1);
     } else {
       por = _mm_or_si128(por, sp);
       cor = _mm_or_si128(cor, sc);
     }
   }
+  if constexpr (kStats) gather(n - 1);
   if constexpr (kStats) {
     FinishTagStats(ptag, ps);
     FinishTagStats(ctag, cs);
@@ -644,7 +713,6 @@ void ComputeWideSymbols(const Point* points, std::size_t n, const PositionQuanti
     ps->max_bit_length = static_cast<int>(BitLength(HorizontalOr3(por), 0, 0));
     cs->max_bit_length = static_cast<int>(BitLength(HorizontalOr3(cor), 0, 0));
   }
-  ps->histogram_ready = kPositionHistogram;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -679,12 +747,15 @@ bool PlanSymbols(std::size_t n, const std::uint32_t* wide_symbols, SymbolStats* 
   if (max_value_bit_length <= kMaxRawEncodingBitLength) {
     std::vector<std::uint32_t>& hist = a->histogram;
     if (!st->histogram_ready) {  // only positions, of ranges of 2^18 and more: wide symbols
-      hist.assign(std::size_t{1} << max_value_bit_length, 0);
+      const std::size_t entries = std::size_t{1} << max_value_bit_length;
+      if (hist.size() < entries) hist.resize(entries);
+      a->histogram_used = std::max(a->histogram_used, entries);
       for (std::uint64_t i = 0; i < num_values; ++i) ++hist[wide_symbols[i]];
       st->histogram_ready = true;
+      st->histogram_entries = entries;
     }
-    max_value = std::min(static_cast<std::uint32_t>(hist.size()) - 1,
-                         (std::uint32_t{1} << max_value_bit_length) - 1);
+    max_value = static_cast<std::uint32_t>(std::min<std::size_t>(
+        st->histogram_entries - 1, (std::size_t{1} << max_value_bit_length) - 1));
     while (hist[max_value] == 0) --max_value;
     const std::int64_t data_bits =
         ShannonEntropyBits(hist.data(), max_value, num_values, &raw_unique, s);
@@ -818,8 +889,8 @@ void EncodeStreams(const Symbols sym, std::size_t n, const Coding& pc, const Cod
 }
 
 // EncodeStreams for the codings at hand: tags have precision 2^12, raw streams 2^12 to 2^20.
-// Precisions of 12 to 14 bits get their own instances (their division is cheaper); raw streams
-// with precisions above are rare (more than 2^11 distinct symbols).
+// Precisions of 12 to 14 bits get their own instances (their division is cheaper), 15 and 16
+// one (fewer renormalization bytes); above, raw streams have more than 2^15 distinct symbols.
 template <bool kPositionRaw, bool kColorRaw, int kPositionPrecision, typename Symbols>
 void EncodeStreamsForColor(const Symbols sym, std::size_t n, const Coding& pc, const Coding& cc,
                            const SymbolStats& ps, const SymbolStats& cs, Scratch* s,
@@ -836,6 +907,10 @@ void EncodeStreamsForColor(const Symbols sym, std::size_t n, const Coding& pc, c
       break;
     case 14:
       if constexpr (kColorRaw) return run(std::integral_constant<int, 14>{});
+      break;
+    case 15:
+    case 16:
+      if constexpr (kColorRaw) return run(std::integral_constant<int, 16>{});
       break;
   }
   return run(std::integral_constant<int, 0>{});
@@ -857,6 +932,10 @@ void EncodeStreamsFor(const Symbols sym, std::size_t n, const Coding& pc, const 
       break;
     case 14:
       if constexpr (kPositionRaw) return run(std::integral_constant<int, 14>{});
+      break;
+    case 15:
+    case 16:
+      if constexpr (kPositionRaw) return run(std::integral_constant<int, 16>{});
       break;
   }
   return run(std::integral_constant<int, 0>{});
@@ -929,8 +1008,21 @@ bool EncodeWith(const Point* points, std::size_t n, const DracoCloudExtent& exte
   // Histograms of up to 2^18 entries (the raw scheme's limit) are filled during the pass; for
   // larger ranges the symbols' bit lengths tell first whether the raw scheme can apply at all.
   const bool position_histogram = stats && wp.HistogramSize() <= (1u << kMaxRawEncodingBitLength);
-  pa.histogram.assign(position_histogram ? kHistogramLanes * wp.HistogramSize() : 0, 0);
-  ca.histogram.assign(stats ? kHistogramLanes * wc.HistogramSize() : 0, 0);
+  // The histograms are zero on entry; whatever this call counts in is cleared when it returns.
+  struct HistogramCleaner {
+    AttributeScratch* a[2];
+    ~HistogramCleaner() {
+      for (AttributeScratch* x : a) {
+        std::fill_n(x->histogram.begin(), x->histogram_used, 0u);
+        x->histogram_used = 0;
+      }
+    }
+  } cleaner{{&pa, &ca}};
+  auto prepare = [](AttributeScratch* a, std::size_t entries) {
+    if (a->histogram.size() < entries) a->histogram.resize(entries);
+  };
+  if (position_histogram) prepare(&pa, kHistogramLanes * wp.HistogramSize());
+  if (stats) prepare(&ca, kHistogramLanes * wc.HistogramSize());
   const std::uint8_t* lut = options.color_lut;
   auto run = [&](auto lut_tag, auto stats_tag, auto histogram_tag) {
     constexpr bool kLut = decltype(lut_tag)::value, kStats = decltype(stats_tag)::value;
@@ -960,16 +1052,37 @@ bool EncodeWith(const Point* points, std::size_t n, const DracoCloudExtent& exte
       run(F{}, T{}, F{});
     }
   }
-  for (auto [a, st] : {std::pair{&pa, &ps}, std::pair{&ca, &cs}}) {
-    if (a->histogram.empty()) continue;
-    // Sum the per-component counts (the reads run ahead of the writes).
-    const std::size_t size = a->histogram.size() / kHistogramLanes;
+  const std::pair<AttributeScratch*, SymbolStats*> counted[] = {
+      {position_histogram ? &pa : nullptr, &ps}, {stats ? &ca : nullptr, &cs}};
+  for (auto [a, st] : counted) {
+    if (a == nullptr) continue;
+    // Sum the per-component counts of the symbols there are (below 2^max_bit_length; the reads
+    // run ahead of the writes).
+    const Wrap& wrap = a == &pa ? wp : wc;
+    const std::size_t entries =
+        std::min<std::size_t>(wrap.HistogramSize(), std::size_t{1} << st->max_bit_length);
     std::uint32_t* h = a->histogram.data();
-    for (std::size_t v = 0; v < size; ++v) {
+    std::size_t v = 0;
+    for (; v + 4 <= entries; v += 4) {  // four groups of four at a time (lane 3 stays 0)
+      __m128i g0 = _mm_loadu_si128(reinterpret_cast<const __m128i*>(h + 4 * v));
+      __m128i g1 = _mm_loadu_si128(reinterpret_cast<const __m128i*>(h + 4 * v + 4));
+      __m128i g2 = _mm_loadu_si128(reinterpret_cast<const __m128i*>(h + 4 * v + 8));
+      __m128i g3 = _mm_loadu_si128(reinterpret_cast<const __m128i*>(h + 4 * v + 12));
+      const __m128i t0 = _mm_unpacklo_epi32(g0, g1), t1 = _mm_unpackhi_epi32(g0, g1);
+      const __m128i t2 = _mm_unpacklo_epi32(g2, g3), t3 = _mm_unpackhi_epi32(g2, g3);
+      g0 = _mm_unpacklo_epi64(t0, t2);  // lane 0 of each group
+      g1 = _mm_unpackhi_epi64(t0, t2);
+      g2 = _mm_unpacklo_epi64(t1, t3);
+      g3 = _mm_unpackhi_epi64(t1, t3);
+      const __m128i sum = _mm_add_epi32(_mm_add_epi32(g0, g1), _mm_add_epi32(g2, g3));
+      _mm_storeu_si128(reinterpret_cast<__m128i*>(h + v), sum);  // on groups already read
+    }
+    for (; v < entries; ++v) {
       h[v] = h[kHistogramLanes * v] + h[kHistogramLanes * v + 1] + h[kHistogramLanes * v + 2];
     }
-    a->histogram.resize(size);
+    a->histogram_used = kHistogramLanes * entries;
     st->histogram_ready = true;
+    st->histogram_entries = entries;
   }
 
   out->clear();
