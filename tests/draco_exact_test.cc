@@ -7,6 +7,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -14,6 +15,7 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <new>
 #include <random>
 #include <sstream>
 #include <string>
@@ -28,6 +30,19 @@
 #include "cloudcast/core/tsukuba.h"
 #include "program_support.h"
 #include "test_support.h"
+
+// Every allocation of the test program is counted, to check that a warm encoder allocates
+// nothing.
+namespace {
+std::atomic<long> g_allocations{0};
+}  // namespace
+void* operator new(std::size_t size) {
+  g_allocations.fetch_add(1, std::memory_order_relaxed);
+  if (void* p = std::malloc(size == 0 ? 1 : size)) return p;
+  throw std::bad_alloc();
+}
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t) noexcept { std::free(p); }
 
 namespace cloudcast {
 namespace {
@@ -222,6 +237,25 @@ TEST(DracoExactPath, EmptyAndAllNaNCloudsRunOurs) {
     EXPECT_TRUE(SameAsLibdraco(cloud, Options(10)));
     EXPECT_TRUE(SameAsLibdraco(cloud, Options(10, 8, 0.0075f)));
   }
+}
+
+TEST(DracoExactPath, WarmEncoderAllocatesNothing) {
+  const PointCloud big = UniformCloud(30000, 50, 8.0f), small = SyntheticChainCloud(1);
+  PointCloud with_holes = UniformCloud(5000, 51);
+  for (std::size_t i = 0; i < with_holes.size(); i += 5) with_holes.points[i].z = kNaN;
+  const PointCloud& holes = with_holes;
+  std::string bytes;
+  DracoOptions options = Options(10, 8, 0.0075f);
+  for (const PointCloud* c : {&big, &small, &holes}) {  // warm-up: scratch and output grow
+    ASSERT_TRUE(EncodeDraco(*c, options, &bytes).ok());
+  }
+  const long before = g_allocations.load();
+  for (int i = 0; i < 3; ++i) {
+    for (const PointCloud* c : {&small, &big, &holes, &small}) {
+      ASSERT_TRUE(EncodeDraco(*c, options, &bytes).ok());
+    }
+  }
+  EXPECT_EQ(g_allocations.load() - before, 0);
 }
 
 // ---------------------------------------------------------------------------------------------
