@@ -21,13 +21,16 @@ static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__,
 
 // How the encoder is organised (n points, all in per-thread scratch):
 //   1. ScanForDraco: the bounding box and colour range, as Draco finds them.
-//   2. ComputeSymbols: one pass computing both attributes' symbols (quantization, delta, wrap,
-//      zigzag) and what Draco's scheme choice needs: histograms and per-point bit lengths.
+//   2. ComputeNarrowSymbols (or ComputeWideSymbols for wide position ranges): one pass computing
+//      both attributes' symbols (quantization, delta, wrap, zigzag) and what Draco's scheme
+//      choice needs: histograms and per-point bit lengths.
 //   3. PlanSymbols: per attribute, Draco's choice (tagged or raw) and its probability table.
-//   4. EncodeStreams: one backward pass writing both rANS streams (independent states, so each
-//      hides the other's latency) and the tagged scheme's values.
-// Draco 1.5.5 does the same work with an attribute object per value, a transform per attribute,
-// a 32-bit symbol buffer per stage and a division per rANS symbol.
+//   4. EncodeStreams: one backward pass writing both rANS streams and the tagged scheme's
+//      values. The position stream's state (three symbols a point) is the critical path of the
+//      whole encoder; everything else overlaps it.
+// Draco 1.5.5 does the same work in separate passes over temporary buffers, with a virtual call
+// per attribute value, a symbol table of the quantization's whole range and a division per rANS
+// symbol.
 
 namespace cloudcast::internal {
 namespace {
@@ -986,13 +989,18 @@ void PutHeader(std::string* out, std::int32_t num_points) {
   PutLe<std::int32_t>(out, num_points);
 }
 
+// One per thread: it keeps the largest cloud's capacity, so a warm encoder allocates nothing.
+Scratch& ThreadScratch() {
+  thread_local Scratch scratch;
+  return scratch;
+}
+
 // Steps 2 to 4, with the narrow or the wide symbol layout.
 template <bool kNarrow>
 bool EncodeWith(const Point* points, std::size_t n, const DracoCloudExtent& extent,
                 const DracoSequentialOptions& options, const PositionQuantizer& pq, const Wrap& wp,
                 const Wrap& wc, float range, std::string* out) {
-  thread_local Scratch scratch;
-  Scratch* const s = &scratch;
+  Scratch* const s = &ThreadScratch();
   AttributeScratch& pa = s->position;
   AttributeScratch& ca = s->color;
   if constexpr (kNarrow) {
