@@ -339,10 +339,11 @@ std::int64_t ShannonEntropyBits(const std::uint32_t* freq, std::uint32_t max_val
   return static_cast<std::int64_t>(-total_bits);
 }
 
-// Draco's ApproximateRAnsFrequencyTableBits.
+// Draco's ApproximateRAnsFrequencyTableBits, in its int arithmetic.
 std::int64_t RansTableBits(std::int32_t max_value, int num_unique) {
-  const std::int64_t zero_bits = 8 * (num_unique + (max_value - num_unique) / 64);
-  return 8 * num_unique + zero_bits;
+  const auto zero_bits =
+      static_cast<std::int64_t>(8 * (num_unique + (max_value - num_unique) / 64));
+  return static_cast<std::int64_t>(8 * num_unique) + zero_bits;
 }
 
 // Draco's RAnsSymbolEncoder::Create and EncodeTable: turns `count` frequencies into
@@ -368,7 +369,9 @@ bool BuildRansCoder(const std::uint32_t* freq, std::uint32_t count, int precisio
   for (std::uint32_t i = NextNonZero(freq, 0, num_symbols); i < num_symbols;
        i = NextNonZero(freq, i + 1, num_symbols)) {
     const double p = static_cast<double>(freq[i]) / total_freq_d;
-    auto rans_prob = static_cast<std::uint32_t>(p * precision_d + 0.5);
+    // Draco's rounding (truncation of + 0.5), not lround's.
+    auto rans_prob = static_cast<std::uint32_t>(p * precision_d + 0.5);  // NOLINT
+
     if (rans_prob == 0 && freq[i] > 0) rans_prob = 1;
     prob[i] = rans_prob;
     total_prob += static_cast<int>(rans_prob);
@@ -448,7 +451,7 @@ bool BuildRansCoder(const std::uint32_t* freq, std::uint32_t count, int precisio
     c.cumulative = cumulative;
     cumulative += p;
     for (int b = 0; b < 3; ++b) {
-      const std::uint64_t limit = (std::uint64_t{4 * kRansIoBase} * p) << (8 * b);
+      const std::uint64_t limit = (std::uint64_t{4} * kRansIoBase * p) << (8 * b);
       c.limit[b] = static_cast<std::uint32_t>(std::min<std::uint64_t>(limit, 0xFFFFFFFFu));
     }
     c.complement = precision - p;
@@ -1272,7 +1275,7 @@ bool EncodeDracoSequential(const Point* points, std::size_t n, const DracoCloudE
   // (float-to-int conversions of infinities), which we do not imitate.
   if (!std::isfinite(inv)) return false;
   // The smallest value is 0 (the minimum's) and the largest that of an axis maximum: the float
-  // operations are monotonic.
+  // operations are monotonic. (Truncation is Draco's floor here: the values are positive.)
   std::int32_t q_max = 0;
   for (int c = 0; c < 3; ++c) {
     q_max = std::max(q_max, static_cast<std::int32_t>((extent.hi[c] - extent.lo[c]) * inv + 0.5f));
