@@ -28,6 +28,7 @@
 #include "draco/core/encoder_buffer.h"
 #include "draco/mesh/mesh.h"
 #include "draco/point_cloud/point_cloud.h"
+#include "draco_sequential_encoder.h"
 
 namespace cloudcast {
 namespace {
@@ -100,6 +101,115 @@ std::array<std::uint8_t, 256> ColorLevels(int bits) {
     lut[c] = static_cast<std::uint8_t>((level * 255 + top / 2) / top);
   }
   return lut;
+}
+
+// Colour level tables for 1..8 bits (index = bits).
+const std::array<std::uint8_t, 256>& ColorLut(int bits) {
+  static const std::array<std::array<std::uint8_t, 256>, 9> kLevels = [] {
+    std::array<std::array<std::uint8_t, 256>, 9> t{};
+    for (int b = 1; b <= 8; ++b) t[b] = ColorLevels(b);
+    return t;
+  }();
+  return kLevels[bits];
+}
+
+// The bits to quantize a cloud of finite points with this bounding box at: the requested ones,
+// raised as max_position_error needs. Also gives the largest side and |coordinate|.
+absl::Status ChoosePositionBits(const float lo[3], const float hi[3], const DracoOptions& options,
+                                int* bits, float* range, float* max_abs) {
+  // The same float arithmetic as Draco's ComputeParameters, so `range` is bit-identical to the
+  // one it quantizes with.
+  *range = 0.0f;
+  *max_abs = 0.0f;
+  for (int c = 0; c < 3; ++c) {
+    *range = std::max(*range, hi[c] - lo[c]);
+    *max_abs = std::max({*max_abs, std::fabs(lo[c]), std::fabs(hi[c])});
+  }
+  if (!std::isfinite(*range)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("draco: the cloud's extent overflows a float (", *range, ")"));
+  }
+  *bits = options.position_bits;
+  if (options.max_position_error > 0.0f) {
+    const double limit = options.max_position_error;
+    int needed = 1;
+    while (needed <= kMaxPositionBits && QuantizationErrorBound(*range, *max_abs, needed) > limit) {
+      ++needed;
+    }
+    if (needed > kMaxPositionBits) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("draco.max_position_error ", options.max_position_error, " needs more than ",
+                       kMaxPositionBits, " position bits for this cloud (largest side ", *range,
+                       ", largest |coordinate| ", *max_abs, ")"));
+    }
+    *bits = std::max(*bits, needed);
+  }
+  return absl::OkStatus();
+}
+
+void FillInfo(int bits, float range, float max_abs, std::size_t bytes, DracoEncoder encoder,
+              DracoEncodeInfo* info) {
+  if (info == nullptr) return;
+  info->position_bits = bits;
+  // Rounded up, so that the float never understates the bound.
+  const double bound = QuantizationErrorBound(range, max_abs, bits);
+  float reported = static_cast<float>(bound);
+  if (reported < bound) reported = std::nextafter(reported, std::numeric_limits<float>::max());
+  info->position_error_bound = reported;
+  info->bytes = bytes;
+  info->encoder = encoder;
+}
+
+// Speed 10 above this many bits: Draco's entropy coding is switched off (see EncodeDraco).
+bool EntropyCoded(int bits) { return bits <= kMaxEntropyCodedBits; }
+
+// Our encoder (draco_sequential_encoder.h), for sequential coding. Sets *done unless the cloud
+// needs libdraco after all; the bytes are libdraco's either way.
+absl::Status EncodeWithCloudcast(const PointCloud& cloud, const DracoOptions& options,
+                                 std::string* out, DracoEncodeInfo* info, bool* done) {
+  *done = false;
+  const Point* points = cloud.points.data();
+  const internal::DracoCloudExtent extent = internal::ScanForDraco(points, cloud.size());
+  if (extent.finite != cloud.size()) {
+    thread_local PointVector finite;  // organized clouds: holes dropped, order kept
+    finite.resize(extent.finite);
+    std::size_t n = 0;
+    for (const Point& p : cloud.points) {
+      if (std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z)) finite[n++] = p;
+    }
+    points = finite.data();
+  }
+  if (extent.finite == 0) {
+    internal::EncodeDracoEmpty(out);
+    if (info != nullptr) {
+      *info = {options.position_bits, 0.0f, out->size(), DracoEncoder::kCloudcast};
+    }
+    *done = true;
+    return absl::OkStatus();
+  }
+  int bits = 0;
+  float range = 0.0f, max_abs = 0.0f;
+  if (absl::Status s = ChoosePositionBits(extent.lo, extent.hi, options, &bits, &range, &max_abs);
+      !s.ok()) {
+    *done = true;
+    return s;
+  }
+  internal::DracoSequentialOptions sequential;
+  sequential.position_bits = bits;
+  sequential.entropy_coding = EntropyCoded(bits);
+  sequential.color_lut = options.color_bits < 8 ? ColorLut(options.color_bits).data() : nullptr;
+  try {
+    if (!internal::EncodeDracoSequential(points, extent.finite, extent, sequential, out)) {
+      return absl::OkStatus();  // libdraco's turn
+    }
+  } catch (const std::bad_alloc&) {
+    *done = true;
+    return absl::ResourceExhaustedError(absl::StrCat("draco: out of memory encoding ",
+                                                     extent.finite, " points at ", bits, " bits"));
+  }
+  FillInfo(bits, range, max_abs, out->size(), DracoEncoder::kCloudcast, info);
+  *done = true;
+  return absl::OkStatus();
 }
 
 // Draco 1.5.5 crashes when quantizing an attribute with no values (ComputeParameters reads
@@ -330,6 +440,12 @@ absl::Status EncodeDraco(const PointCloud& cloud, const DracoOptions& options, s
         absl::StrCat("draco: ", cloud.size(), " points exceed Draco's 2^31 - 1 limit"));
   }
 
+  if (std::max(options.encode_speed, options.decode_speed) == 10 && !options.force_libdraco) {
+    bool done = false;
+    const absl::Status s = EncodeWithCloudcast(cloud, options, out, info, &done);
+    if (done) return s;
+  }
+
   thread_local EncodeScratch scratch;
   draco::PointAttribute* position = scratch.cloud.attribute(scratch.position_id);
   draco::PointAttribute* color = scratch.cloud.attribute(scratch.color_id);
@@ -339,12 +455,7 @@ absl::Status EncodeDraco(const PointCloud& cloud, const DracoOptions& options, s
 
   // One pass: drop non-finite points, pack xyz and RGB for Draco, track the bounding box.
   const bool reduce_color = options.color_bits < 8;
-  static const std::array<std::array<std::uint8_t, 256>, 9> kLevels = [] {
-    std::array<std::array<std::uint8_t, 256>, 9> t{};
-    for (int b = 1; b <= 8; ++b) t[b] = ColorLevels(b);
-    return t;
-  }();
-  const std::array<std::uint8_t, 256>& lut = kLevels[options.color_bits];
+  const std::array<std::uint8_t, 256>& lut = ColorLut(options.color_bits);
   auto* xyz = reinterpret_cast<float*>(position->GetAddress(draco::AttributeValueIndex(0)));
   std::uint8_t* rgb = color->GetAddress(draco::AttributeValueIndex(0));
   float lo[3] = {std::numeric_limits<float>::infinity(), std::numeric_limits<float>::infinity(),
@@ -387,38 +498,16 @@ absl::Status EncodeDraco(const PointCloud& cloud, const DracoOptions& options, s
   }
   scratch.cloud.set_num_points(static_cast<draco::PointIndex::ValueType>(n));
 
-  // The same float arithmetic as Draco's ComputeParameters, so `range` is bit-identical to the
-  // one it quantizes with.
-  float range = 0.0f;
-  float max_abs = 0.0f;
-  for (int c = 0; c < 3; ++c) {
-    range = std::max(range, hi[c] - lo[c]);
-    max_abs = std::max({max_abs, std::fabs(lo[c]), std::fabs(hi[c])});
-  }
-  if (!std::isfinite(range)) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("draco: the cloud's extent overflows a float (", range, ")"));
-  }
-  int bits = options.position_bits;
-  if (options.max_position_error > 0.0f) {
-    const double limit = options.max_position_error;
-    int needed = 1;
-    while (needed <= kMaxPositionBits && QuantizationErrorBound(range, max_abs, needed) > limit) {
-      ++needed;
-    }
-    if (needed > kMaxPositionBits) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("draco.max_position_error ", options.max_position_error, " needs more than ",
-                       kMaxPositionBits, " position bits for this cloud (largest side ", range,
-                       ", largest |coordinate| ", max_abs, ")"));
-    }
-    bits = std::max(bits, needed);
+  int bits = 0;
+  float range = 0.0f, max_abs = 0.0f;
+  if (absl::Status s = ChoosePositionBits(lo, hi, options, &bits, &range, &max_abs); !s.ok()) {
+    return s;
   }
 
   draco::ExpertEncoder encoder(scratch.cloud);
   encoder.SetAttributeQuantization(scratch.position_id, bits);
   encoder.SetSpeedOptions(options.encode_speed, options.decode_speed);
-  if (bits > kMaxEntropyCodedBits && std::max(options.encode_speed, options.decode_speed) == 10) {
+  if (!EntropyCoded(bits) && std::max(options.encode_speed, options.decode_speed) == 10) {
     // Draco's sequential coder (speed 10) builds a symbol table of 4 * 2^bits bytes: 64 MB and
     // 0.1 s at 24 bits, 4 GB and 15 s at 30 (measured on 20,000 points). Above 20 bits its
     // entropy coding saves little (10.5 vs 12 bytes per point at 20, nothing at 24), so the
@@ -438,15 +527,7 @@ absl::Status EncodeDraco(const PointCloud& cloud, const DracoOptions& options, s
         absl::StrCat("draco: out of memory encoding ", n, " points at ", bits, " bits"));
   }
   out->assign(buffer.data(), buffer.size());
-  if (info != nullptr) {
-    info->position_bits = bits;
-    // Rounded up, so that the float never understates the bound.
-    const double bound = QuantizationErrorBound(range, max_abs, bits);
-    float reported = static_cast<float>(bound);
-    if (reported < bound) reported = std::nextafter(reported, std::numeric_limits<float>::max());
-    info->position_error_bound = reported;
-    info->bytes = out->size();
-  }
+  FillInfo(bits, range, max_abs, out->size(), DracoEncoder::kLibdraco, info);
   return absl::OkStatus();
 }
 

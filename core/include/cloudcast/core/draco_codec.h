@@ -10,6 +10,12 @@
 
 namespace cloudcast {
 
+// Which encoder wrote a Draco file. Where both apply they write the same bytes.
+enum class DracoEncoder {
+  kLibdraco,   // libdraco 1.5.5's ExpertEncoder
+  kCloudcast,  // ours, for sequential coding (speed 10): libdraco's bytes, several times faster
+};
+
 struct DracoOptions {
   // Position quantization bits (1..30). The codec raises them when needed to keep the error
   // under `max_position_error`. 10 by measurement (cloudcast-bench's Draco table, README): the
@@ -29,6 +35,10 @@ struct DracoOptions {
   // If > 0: the largest allowed distance, per coordinate, between a point and its decoded
   // position. The pipeline sets it to a quarter of the voxel leaf.
   float max_position_error = 0.0f;
+  // EncodeDraco uses its own encoder where it covers the options (speed 10, i.e. the larger of
+  // the two speeds is 10; any bits) and libdraco elsewhere. true always uses libdraco, so that
+  // tests and benchmarks can compare the two on the same input.
+  bool force_libdraco = false;
 
   // Errors name the member under `field` (e.g. "draco.position_bits").
   absl::Status Validate(std::string_view field = "draco") const;
@@ -39,6 +49,7 @@ struct DracoEncodeInfo {
   int position_bits = 0;           // the bits actually used
   float position_error_bound = 0;  // max per-coordinate error those bits allow on this cloud
   std::size_t bytes = 0;
+  DracoEncoder encoder = DracoEncoder::kLibdraco;  // which one wrote the bytes
 };
 
 // Encodes the finite points of `cloud` (NaN points are dropped). An empty cloud encodes too.
