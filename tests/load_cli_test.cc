@@ -14,6 +14,7 @@
 
 #include "cloudcast/load/null_server.h"
 #include "program_support.h"
+#include "support/waiting.h"
 
 extern char** environ;
 
@@ -104,10 +105,9 @@ TEST_F(LoadCliTest, SigtermEndsTheRunAndStillWritesTheReport) {
   const std::string exec_command = "exec " + command;
   argv[2] = exec_command.c_str();
   ASSERT_EQ(posix_spawn(&pid, "/bin/sh", nullptr, nullptr, const_cast<char**>(argv), environ), 0);
-  // Once progress lines show frames flowing (bounded: 30 s).
-  for (int i = 0; i < 300 && ReadText(err).find("frames/s") == std::string::npos; ++i) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(100));
-  }
+  // Once progress lines show frames flowing: the child's stderr announces nothing to wait on.
+  EXPECT_TRUE(cloudcast::testing::Eventually(
+      [&] { return ReadText(err).find("frames/s") != std::string::npos; }));
   ASSERT_EQ(kill(pid, SIGTERM), 0);
   int status = 0;
   ASSERT_EQ(waitpid(pid, &status, 0), pid);
