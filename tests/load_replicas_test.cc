@@ -185,6 +185,7 @@ void ExpectAllBusyBeforeTheLoss(const LoadReplicasTest::Outcome& out, std::uint6
   EXPECT_LT(out.sent_at_loss, frames);
   EXPECT_EQ(out.report["loadBalancing"]["policy"], "round_robin");
   EXPECT_EQ(out.report["loadBalancing"]["replicasAtStart"].size(), 3u);
+  EXPECT_EQ(out.report["loadBalancing"]["addressesAnsweringAtStart"], 3);
   for (const auto& [name, r] : out.report["replicas"].items()) {
     EXPECT_GE(r["streamsAtStart"].get<int>(), 1) << name;
   }

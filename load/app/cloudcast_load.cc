@@ -417,16 +417,16 @@ int main(int argc, char** argv) {
   if (!at_start.empty() && !f.quiet) {
     std::string names;
     for (const std::string& n : at_start) names += (names.empty() ? "" : ", ") + n;
-    std::fprintf(stderr, "cloudcast-load: %s; replicas answering: %zu (%s)\n",
-                 (*fleet)->lb_policy().c_str(), at_start.size(), names.c_str());
+    std::fprintf(stderr, "cloudcast-load: %s; replicas answering: %d (%s)\n",
+                 (*fleet)->lb_policy().c_str(), (*fleet)->replicas_answering(), names.c_str());
   }
   const int listed = load::ListedAddresses(f.server);
   if (listed > 0 && (*fleet)->lb_policy() == "round_robin" &&
-      static_cast<int>(at_start.size()) < listed) {
+      (*fleet)->replicas_answering() < listed) {
     std::fprintf(stderr,
-                 "cloudcast-load: warning: %zu of the %d addresses answered within "
+                 "cloudcast-load: warning: %d of the %d addresses answered within "
                  "--connect-timeout; streams go to those\n",
-                 at_start.size(), listed);
+                 (*fleet)->replicas_answering(), listed);
   }
   std::uint64_t errors = 0, drops = 0;
   const load::FleetResult result = (*fleet)->Run([&](const load::SecondStats& s) {

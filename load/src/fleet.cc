@@ -647,32 +647,36 @@ absl::StatusOr<std::unique_ptr<Fleet>> Fleet::Connect(const FleetOptions& o,
 void Fleet::WarmUp(std::chrono::system_clock::time_point deadline) {
   const int listed = ListedAddresses(options_.server);
   const auto settle_until = std::chrono::system_clock::now() + std::chrono::milliseconds(200);
-  std::set<std::string> all;
+  std::set<std::string> instances;
   for (const auto& channel : channels_) {
     auto stub = v1::CloudCast::NewStub(channel);
-    std::set<std::string> seen;
+    // Replicas are told apart by the address that answered (two may share an instance name,
+    // the host name by default).
+    std::set<std::string> peers;
     int calls_since_new = 0;
     for (int call = 0; call < 10000; ++call) {
       const auto now = std::chrono::system_clock::now();
       const bool complete =
-          listed > 0 ? static_cast<int>(seen.size()) >= listed
-                     : now >= settle_until && calls_since_new >= 3 * std::max<int>(1, seen.size());
+          listed > 0 ? static_cast<int>(peers.size()) >= listed
+                     : now >= settle_until && calls_since_new >= 3 * std::max<int>(1, peers.size());
       if (complete || now >= deadline) break;
       grpc::ClientContext context;
       context.set_deadline(std::min(deadline, now + std::chrono::seconds(1)));
       v1::ServerInfo info;
-      if (stub->GetInfo(&context, v1::GetInfoRequest(), &info).ok() &&
-          seen.insert(info.instance()).second) {
-        calls_since_new = 0;
-      } else {
-        ++calls_since_new;
-        // Nothing new: give the other replicas' connections a moment.
-        if (calls_since_new % 8 == 0) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+      if (stub->GetInfo(&context, v1::GetInfoRequest(), &info).ok()) {
+        instances.insert(info.instance());
+        if (peers.insert(context.peer()).second) {
+          calls_since_new = 0;
+          continue;
+        }
       }
+      ++calls_since_new;
+      // Nothing new: give the other replicas' connections a moment.
+      if (calls_since_new % 8 == 0) std::this_thread::sleep_for(std::chrono::milliseconds(5));
     }
-    all.insert(seen.begin(), seen.end());
+    replicas_answering_ = std::max<int>(replicas_answering_, peers.size());
   }
-  replicas_at_start_.assign(all.begin(), all.end());
+  replicas_at_start_.assign(instances.begin(), instances.end());
 }
 
 std::string DefaultLbPolicy(const std::string& target) {

@@ -87,6 +87,7 @@ Report MakeReport(Fleet& fleet, const FleetResult& result, const std::string& fr
   r.resilient = o.resilient;
   r.reconnect_timeout_s = o.reconnect_timeout.count() / 1e9;
   r.replicas_at_start = fleet.replicas_at_start();
+  r.addresses_answering = fleet.replicas_answering();
   r.streams_detail = fleet.streams();
   for (const auto& [name, n] : r.per_instance) r.replicas[name].frames = n;
   for (const StreamStats& s : r.streams_detail) {
@@ -114,11 +115,12 @@ std::string FormatTable(const Report& r) {
       t.sent, t.answered, t.frame_errors, t.lost, t.unsent, t.drops, t.server_dropped);
   out += fmt::format("  late sends {} (previous write not done {}, generator behind {})\n",
                      t.late(), t.late_flow_control, t.late_scheduler);
-  out += fmt::format(
-      "  balancing {}{}\n", r.lb_policy,
-      r.replicas_at_start.empty()
-          ? std::string()
-          : fmt::format(", {} replicas answering at the start", r.replicas_at_start.size()));
+  out +=
+      fmt::format("  balancing {}{}\n", r.lb_policy,
+                  r.replicas_at_start.empty()
+                      ? std::string()
+                      : fmt::format(", {} addresses answering at the start ({})",
+                                    r.addresses_answering, fmt::join(r.replicas_at_start, ", ")));
   if (r.resilient) {
     out += fmt::format(
         "  resilient: resent {}  duplicates {}  reconnects {} of {} attempts (ms p50 {:.1f}, max "
@@ -249,7 +251,9 @@ nlohmann::json GhzJson(const Report& r) {
         {"streams", rep.streams}, {"streamsAtStart", rep.streams_at_start}, {"frames", rep.frames}};
   }
   j["replicas"] = replicas;
-  j["loadBalancing"] = {{"policy", r.lb_policy}, {"replicasAtStart", r.replicas_at_start}};
+  j["loadBalancing"] = {{"policy", r.lb_policy},
+                        {"replicasAtStart", r.replicas_at_start},
+                        {"addressesAnsweringAtStart", r.addresses_answering}};
   j["resilience"] = {{"enabled", r.resilient},
                      {"reconnectTimeoutSeconds", r.reconnect_timeout_s},
                      {"reconnects", t.reconnects},

@@ -130,10 +130,12 @@ class Fleet {
   const FleetOptions& options() const { return options_; }
   // After Run: each stream's account, in stream order.
   std::vector<StreamStats> streams() const;
-  // The load-balancing policy the channels use, and the replicas (GetInfo's instance) that
+  // The load-balancing policy the channels use, and the replicas (GetInfo's instance names) that
   // answered on them before the streams opened.
   const std::string& lb_policy() const { return lb_policy_; }
   const std::vector<std::string>& replicas_at_start() const { return replicas_at_start_; }
+  // The most addresses that answered on one channel then (0 without round_robin).
+  int replicas_answering() const { return replicas_answering_; }
 
   class Driver;  // one per stream (fleet.cc)
 
@@ -154,6 +156,7 @@ class Fleet {
   std::vector<std::unique_ptr<Driver>> drivers_;
   std::string lb_policy_;
   std::vector<std::string> replicas_at_start_;
+  int replicas_answering_ = 0;
 
   std::atomic<bool> stop_{false};
   std::mutex mu_;

@@ -33,6 +33,7 @@ struct Report {
   bool resilient = false;
   double reconnect_timeout_s = 0;
   std::vector<std::string> replicas_at_start;  // answered GetInfo before the streams opened
+  int addresses_answering = 0;                 // distinct addresses that answered then
   std::vector<StreamStats> streams_detail;
   struct Replica {
     int streams = 0;           // streams that one of its calls answered
