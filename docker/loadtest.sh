@@ -100,26 +100,10 @@ trap cleanup EXIT
 trap 'exit 130' INT TERM
 
 # --- images -------------------------------------------------------------------------------------
-step "base image"
-"$here/base-image.sh"
-if [ "$full" = 1 ]; then
-  step "runtime image from source (docker/Containerfile)"
-  podman build --network host --format docker -f "$here/Containerfile" -t localhost/cloudcast:latest \
-    "$repo" >"$run/build-runtime.log" 2>&1 || { tail -30 "$run/build-runtime.log" >&2; exit 1; }
-else
-  step "runtime image from $bin_dir (docker/Containerfile.prebuilt)"
-  ctx=$run/context
-  mkdir -p "$ctx/bin"
-  for p in cloudcast-server cloudcast-load cloudcast-null-server; do
-    [ -x "$bin_dir/$p" ] || { echo "loadtest.sh: $bin_dir/$p is missing: build first" >&2; exit 1; }
-    cp "$bin_dir/$p" "$ctx/bin/"
-  done
-  "$here/runtime-deps.sh" "$ctx"/bin/* >"$ctx/runtime-packages.txt"
-  cp "$here/runtime-setup.sh" "$here/serve.sh" "$here/healthcheck.sh" "$ctx/"
-  podman build --network host --format docker -f "$here/Containerfile.prebuilt" \
-    -t localhost/cloudcast:latest "$ctx" >"$run/build-runtime.log" 2>&1 ||
-    { tail -30 "$run/build-runtime.log" >&2; exit 1; }
-fi
+step "runtime image ($([ "$full" = 1 ] && echo "from source" || echo "from $bin_dir"))"
+image_args=(--bin-dir "$bin_dir" --log "$run/build-runtime.log")
+[ "$full" = 1 ] && image_args=(--full-build --log "$run/build-runtime.log")
+"$here/runtime-image.sh" "${image_args[@]}"
 step "load balancer and Prometheus images"
 for target in haproxy prometheus; do
   podman build --network host --format docker -f "$here/Containerfile.tools" --target "$target" \

@@ -50,6 +50,9 @@ TEST_F(LoadCliTest, BadFlagsExitTwoNamingTheFlag) {
       {{"--synthetic", "0x10"}, "--synthetic"},
       {{"--json", "/nonexistent/dir/r.json"}, "--json"},
       {{"--tsukuba", "/nonexistent"}, "--tsukuba"},
+      {{"--lb", "random"}, "--lb"},
+      {{"--reconnect-timeout", "3"}, "--resilient"},
+      {{"--resilient", "--reconnect-timeout", "0"}, "--reconnect-timeout"},
   };
   for (const auto& [args, flag] : cases) {
     std::vector<std::string> full = {"--server", null_->address(), "--synthetic", "64x48"};
@@ -91,6 +94,16 @@ TEST_F(LoadCliTest, BoundedByFramesWritesTableAndJson) {
   EXPECT_EQ(j["frames"]["answered"], 30);
   EXPECT_EQ(j["endReason"], "normal");
   EXPECT_EQ(j["options"]["concurrency"], 3);
+  // One account per stream, and the balancing a single address gets.
+  ASSERT_EQ(j["streams"].size(), 3u);
+  for (const json& s : j["streams"]) {
+    EXPECT_EQ(s["sent"], 10) << s;
+    EXPECT_EQ(s["answered"], 10) << s;
+    EXPECT_EQ(s["replicas"], json::array({"null"})) << s;
+  }
+  EXPECT_EQ(j["loadBalancing"]["policy"], "pick_first");
+  EXPECT_EQ(j["resilience"]["enabled"], false);
+  EXPECT_EQ(j["replicas"]["null"]["streams"], 3);
 }
 
 TEST_F(LoadCliTest, SigtermEndsTheRunAndStillWritesTheReport) {

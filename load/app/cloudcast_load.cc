@@ -43,6 +43,9 @@ struct Flags {
   double connect_timeout_s = 5;
   bool probe = false;
   std::string probe_service = "cloudcast.v1.CloudCast";
+  std::string lb;
+  bool resilient = false;
+  double reconnect_timeout_s = 30;
   int streams = 1;
   int connections = 0;
   double fps = 30;
@@ -94,6 +97,26 @@ std::unique_ptr<cloudcast::cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
                "when SERVING, 1 otherwise (a container HEALTHCHECK)")
       ->group(target);
   app.add_option("--probe-service", f.probe_service, "The health service name --probe asks for")
+      ->capture_default_str()
+      ->group(target);
+  app.add_option("--lb", f.lb,
+                 "gRPC load balancing over the target's addresses: round_robin (with health "
+                 "checking: a draining replica gets no new streams) or pick_first. Default: "
+                 "round_robin for a dns:/// target or a list of addresses (ipv4:a:p,b:p), else "
+                 "pick_first")
+      ->check(CLI::IsMember({"round_robin", "pick_first"}))
+      ->group(target);
+  app.add_flag("--resilient", f.resilient,
+               "A stream whose call ends with UNAVAILABLE (replica killed, drained, GOAWAY) opens "
+               "a new one, sends its config again and, with --lossless, every frame sent and not "
+               "answered (latency still counts from the intended time); answers count once per "
+               "frame")
+      ->group(target);
+  app.add_option("--reconnect-timeout", f.reconnect_timeout_s,
+                 "With --resilient: seconds without a working call before a stream gives up and "
+                 "reports its unanswered frames lost")
+      ->check(NumberCheck("a number of seconds in (0, 600]",
+                          [](double v) { return v > 0 && v <= 600; }))
       ->capture_default_str()
       ->group(target);
 
@@ -286,6 +309,9 @@ int main(int argc, char** argv) {
   if (ramp && f.fps == 0)
     return usage("--schedule " + f.schedule + " needs an open loop (--fps > 0)");
   if (f.fps == 0 && app.count("--load-start")) return usage("--load-start needs --fps > 0");
+  if (app.count("--reconnect-timeout") && !f.resilient) {
+    return usage("--reconnect-timeout needs --resilient");
+  }
   if (f.fps > 0 && app.count("--in-flight")) {
     return usage("--in-flight is for the closed loop (--fps 0); open loop sends on schedule");
   }
@@ -321,6 +347,10 @@ int main(int argc, char** argv) {
   o.drain_timeout = std::chrono::nanoseconds(static_cast<std::int64_t>(f.drain_timeout_s * 1e9));
   o.seed = f.seed;
   o.scheduler_threads = f.scheduler_threads;
+  o.lb_policy = f.lb;
+  o.resilient = f.resilient;
+  o.reconnect_timeout =
+      std::chrono::nanoseconds(static_cast<std::int64_t>(f.reconnect_timeout_s * 1e9));
   std::string schedule_text =
       "closed loop, " + std::to_string(f.in_flight) + " in flight per stream";
   if (!o.closed_loop) {
@@ -383,6 +413,21 @@ int main(int argc, char** argv) {
                  f.streams, f.server.c_str(), schedule_text.c_str(), store->description().c_str(),
                  prepare_s);
   }
+  const auto& at_start = (*fleet)->replicas_at_start();
+  if (!at_start.empty() && !f.quiet) {
+    std::string names;
+    for (const std::string& n : at_start) names += (names.empty() ? "" : ", ") + n;
+    std::fprintf(stderr, "cloudcast-load: %s; replicas answering: %d (%s)\n",
+                 (*fleet)->lb_policy().c_str(), (*fleet)->replicas_answering(), names.c_str());
+  }
+  const int listed = load::ListedAddresses(f.server);
+  if (listed > 0 && (*fleet)->lb_policy() == "round_robin" &&
+      (*fleet)->replicas_answering() < listed) {
+    std::fprintf(stderr,
+                 "cloudcast-load: warning: %d of the %d addresses answered within "
+                 "--connect-timeout; streams go to those\n",
+                 (*fleet)->replicas_answering(), listed);
+  }
   std::uint64_t errors = 0, drops = 0;
   const load::FleetResult result = (*fleet)->Run([&](const load::SecondStats& s) {
     errors += s.errors;
@@ -412,6 +457,9 @@ int main(int argc, char** argv) {
       {"frames-source", store->description()},
       {"seed", f.seed},
       {"config", o.config.ShortDebugString()},
+      {"lb", (*fleet)->lb_policy()},
+      {"resilient", f.resilient},
+      {"reconnect-timeout", o.reconnect_timeout.count()},
   };
   const load::Report report =
       load::MakeReport(**fleet, result, store->description(), schedule_text, options);

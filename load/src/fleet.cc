@@ -10,9 +10,11 @@
 #include <optional>
 #include <queue>
 #include <random>
+#include <set>
 #include <thread>
 
 #include "absl/status/status.h"
+#include "cloudcast/v1/cloudcast.grpc.pb.h"
 
 namespace cloudcast::load {
 namespace {
@@ -61,75 +63,131 @@ const char* CodeName(int code) {
   return code >= 0 && code <= 16 ? kNames[code] : "UNKNOWN";
 }
 
-// One Stream call. Writes start from the scheduler threads (Due) and from the reactor's own
-// callbacks (the next queued frame when a write completes); a hold keeps the call alive until
-// no more writes can start. One write at a time, as gRPC requires.
-class Fleet::Driver : public grpc::ClientBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer> {
+// One robot's stream: a sequence of gRPC calls (one, unless resilient), each a callback reactor
+// (Call). Writes start from the scheduler threads (Due), from the calls' own callbacks (the next
+// queued frame when a write completes) and from Run's timers (a reconnect after a backoff). A
+// hold keeps each call alive until no more writes can start on it; one write at a time per call,
+// as gRPC requires. Everything below is guarded by the stream's mu_.
+class Fleet::Driver {
  public:
   struct Context {
     const FrameStore* store;
     Recorder* recorder;
+    Fleet* fleet;
     bool closed_loop;
     int in_flight;
     bool lossless;
+    bool resilient;
+    std::int64_t reconnect_timeout_ns;
     std::int64_t t0_steady_ns;  // time zero of the schedule, steady clock
     std::int64_t t0_unix_ns;    // the same instant, Unix time (capture_time_unix_ns)
-    std::function<void()> on_done;
   };
 
   Driver(int index, std::uint64_t frame_limit, const grpc::ByteBuffer* config)
-      : index_(index), frame_limit_(frame_limit), config_(config) {}
+      : index_(index), frame_limit_(frame_limit), config_(config) {
+    stats_.index = index;
+  }
 
   void Start(grpc::GenericStub* stub, const Context* context) {
     ctx_ = context;
-    stub->PrepareBidiStreamingCall(&call_context_, kStreamMethod, grpc::StubOptions(), this);
-    AddHold();  // released when no more writes can start (ReleaseHold)
-    StartRead(&read_buf_);
+    stub_ = stub;
     {
       std::lock_guard<std::mutex> lock(mu_);
-      started_ = true;
-      TryWriteLocked();
+      opening_ = true;
     }
-    StartCall();
+    OpenCall(/*after_failure=*/false);
   }
 
   // The scheduler: the next frame is due at `intended` (steady clock, ns).
   void Due(std::int64_t intended, bool scheduler_late) {
-    bool release = false;
+    Call* release = nullptr;
     {
       std::lock_guard<std::mutex> lock(mu_);
-      if (broken_ || no_more_) {
+      if (ended_ || no_more_ || (call_ != nullptr && call_->broken && !ctx_->resilient)) {
         ctx_->recorder->Unsent(1);
+        ++stats_.unsent;
         return;
       }
-      pending_.push_back({next_seq_++, intended, 0, 0});
-      if (write_in_flight_) {
-        ctx_->recorder->Late(/*flow_control=*/true);
+      pending_.push_back({next_seq_++, intended, 0, 0, false});
+      if (call_ == nullptr || call_->write_in_flight) {
+        ctx_->recorder->Late(/*flow_control=*/true);  // the previous write (or call) is not done
       } else if (scheduler_late) {
         ctx_->recorder->Late(/*flow_control=*/false);
       }
-      release = TryWriteLocked();
+      release = TryWriteLocked(call_);
     }
-    if (release) ReleaseHold();
+    if (release != nullptr) release->RemoveHold();
   }
 
-  // No more frames will be due. `discard`: frames still queued are not sent (a stop).
+  // No more frames will be due. `discard`: frames still queued are not sent (a stop); frames
+  // queued for a resend were sent once, so they still go and are awaited.
   void NoMoreFrames(bool discard) {
-    bool release = false;
+    Call* release = nullptr;
     {
       std::lock_guard<std::mutex> lock(mu_);
       if (no_more_) return;
       no_more_ = true;
-      if (discard && !pending_.empty()) {
-        ctx_->recorder->Unsent(pending_.size());
-        pending_.clear();
+      if (discard) {
+        const auto first_new = std::find_if(pending_.begin(), pending_.end(),
+                                            [](const Frame& f) { return !f.resend; });
+        const auto unsent = static_cast<std::uint64_t>(pending_.end() - first_new);
+        if (unsent > 0) {
+          ctx_->recorder->Unsent(unsent);
+          stats_.unsent += unsent;
+          pending_.erase(first_new, pending_.end());
+        }
       }
-      release = TryWriteLocked();
+      release = TryWriteLocked(call_);
     }
-    if (release) ReleaseHold();
+    if (release != nullptr) release->RemoveHold();
   }
 
-  void Cancel() { call_context_.TryCancel(); }
+  // The drain timeout: the current call is cancelled (its OnDone reports what it held); a stream
+  // waiting to reconnect ends at once.
+  void Cancel() {
+    Call* cancel = nullptr;
+    bool ended_now = false;
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      if (ended_) return;
+      cancelled_ = true;
+      if (call_ != nullptr) {
+        cancel = call_;
+      } else if (!opening_) {
+        EndLocked(grpc::Status(grpc::StatusCode::CANCELLED, "cancelled at the drain timeout"));
+        ended_now = true;
+      }
+    }
+    if (cancel != nullptr) cancel->context.TryCancel();
+    if (ended_now) ctx_->fleet->StreamEnded();
+  }
+
+  // Run's loop, at or after a time this stream asked for: a reconnect whose backoff is over, or
+  // the give-up deadline of a stream that has not found a working call.
+  void OnTimer(std::int64_t now) {
+    Call* cancel = nullptr;
+    bool open = false, ended_now = false;
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      if (ended_ || failing_since_ == 0) return;
+      if (now - failing_since_ >= ctx_->reconnect_timeout_ns) {
+        if (call_ != nullptr) {
+          giving_up_ = true;  // its OnDone gives up
+          cancel = call_;
+        } else if (!opening_) {
+          GiveUpLocked();
+          ended_now = true;
+        }
+      } else if (retry_at_ != 0 && now >= retry_at_ && call_ == nullptr && !opening_) {
+        retry_at_ = 0;
+        opening_ = true;
+        open = true;
+      }
+    }
+    if (cancel != nullptr) cancel->context.TryCancel();
+    if (open) OpenCall(/*after_failure=*/true);
+    if (ended_now) ctx_->fleet->StreamEnded();
+  }
 
   std::uint64_t sent() {
     std::lock_guard<std::mutex> lock(mu_);
@@ -139,67 +197,9 @@ class Fleet::Driver : public grpc::ClientBidiReactor<grpc::ByteBuffer, grpc::Byt
     std::lock_guard<std::mutex> lock(mu_);
     return last_send_ns_;
   }
-
-  void OnWriteDone(bool ok) override {
-    bool release = false;
-    {
-      std::lock_guard<std::mutex> lock(mu_);
-      write_in_flight_ = false;
-      if (!ok) broken_ = true;  // the call is ending; OnDone tells how
-      release = TryWriteLocked();
-    }
-    if (release) ReleaseHold();
-  }
-
-  void OnReadDone(bool ok) override {
-    if (!ok) {
-      bool release = false;
-      {
-        std::lock_guard<std::mutex> lock(mu_);
-        broken_ = true;
-        release = TryWriteLocked();
-      }
-      if (release) ReleaseHold();
-      return;
-    }
-    const std::int64_t now = Ns(Clock::now());
-    v1::StreamReply reply;
-    const std::size_t bytes = read_buf_.Length();
-    {
-      grpc::ProtoBufferReader reader(&read_buf_);
-      if (!reply.ParseFromZeroCopyStream(&reader)) reply.Clear();
-    }
-    read_buf_.Clear();
-    bool release = false;
-    {
-      std::lock_guard<std::mutex> lock(mu_);
-      Match(reply, now, bytes);
-      release = TryWriteLocked();  // closed loop: the answer frees a slot
-    }
-    StartRead(&read_buf_);
-    if (release) ReleaseHold();
-  }
-
-  void OnDone(const grpc::Status& status) override {
-    std::function<void()> notify;
-    {
-      std::lock_guard<std::mutex> lock(mu_);
-      const std::string code = CodeName(status.error_code());
-      ctx_->recorder->CallStatus(code);
-      if (status.ok() && !ctx_->lossless) {
-        // DELIVERY_LATEST: a clean end with frames unanswered means the server skipped them.
-        ctx_->recorder->Dropped(in_flight_.size());
-      } else {
-        ctx_->recorder->Lost(in_flight_.size(), code, status.error_message());
-      }
-      in_flight_.clear();
-      if (!pending_.empty()) ctx_->recorder->Unsent(pending_.size());
-      pending_.clear();
-      ctx_->recorder->StreamEnded(server_dropped_);
-      done_ = true;
-      notify = ctx_->on_done;
-    }
-    notify();
+  StreamStats stats() {
+    std::lock_guard<std::mutex> lock(mu_);
+    return stats_;
   }
 
  private:
@@ -207,66 +207,296 @@ class Fleet::Driver : public grpc::ClientBidiReactor<grpc::ByteBuffer, grpc::Byt
     std::uint64_t seq;
     std::int64_t intended, actual;
     std::size_t bytes;
+    bool resend;  // sent on an earlier call, unanswered: goes again
   };
 
-  // Starts the next write if the slot is free, or half-closes when nothing is left to write.
-  // Returns whether the caller must release the hold (done outside the lock).
-  bool TryWriteLocked() {
-    if (!started_ || write_in_flight_ || hold_released_) return false;
-    if (broken_) {
-      hold_released_ = true;
-      return true;
+  // One gRPC call of the stream. Its fields are guarded by the driver's mu_; the driver owns it
+  // until the driver itself goes (a call ends a few times per stream at most).
+  class Call : public grpc::ClientBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer> {
+   public:
+    explicit Call(Driver* driver) : driver_(driver) {}
+    void OnWriteDone(bool ok) override { driver_->WriteDone(this, ok); }
+    void OnReadDone(bool ok) override { driver_->ReadDone(this, ok); }
+    void OnDone(const grpc::Status& status) override { driver_->CallDone(this, status); }
+
+    grpc::ClientContext context;
+    grpc::ByteBuffer write_buf, read_buf;
+    bool started = false;
+    bool after_failure = false;  // opened to replace a failed call
+    bool config_sent = false;
+    bool wrote_once = false;  // a write completed: the call is on a replica
+    bool write_in_flight = false;
+    bool broken = false;  // a read or write failed: the call is ending
+    std::int64_t broken_at = 0;
+    bool hold_released = false;
+    bool answered = false;
+    std::uint64_t server_dropped = 0;
+
+   private:
+    Driver* const driver_;
+  };
+
+  // Opens a call (the first, or one replacing a failed call) and starts its reads and writes.
+  // The caller set opening_.
+  void OpenCall(bool after_failure) {
+    auto owned = std::make_unique<Call>(this);
+    Call* c = owned.get();
+    c->after_failure = after_failure;
+    // A replacement waits for a ready replica rather than failing on a channel that has just
+    // lost one; the give-up deadline bounds the wait.
+    if (after_failure) c->context.set_wait_for_ready(true);
+    stub_->PrepareBidiStreamingCall(&c->context, kStreamMethod, grpc::StubOptions(), c);
+    c->AddHold();  // released when no more writes can start (TryWriteLocked)
+    c->StartRead(&c->read_buf);
+    bool cancel = false;
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      calls_.push_back(std::move(owned));
+      call_ = c;
+      opening_ = false;
+      c->started = true;
+      ++stats_.calls;
+      if (after_failure) {
+        ++stats_.reconnect_attempts;
+        ctx_->recorder->ReconnectAttempt();
+      }
+      cancel = cancelled_ || giving_up_;
+      TryWriteLocked(c);  // the config (and frames) queue until StartCall
     }
-    if (config_ != nullptr && !config_sent_) {
-      config_sent_ = true;
-      write_in_flight_ = true;
-      write_buf_ = *config_;
-      StartWrite(&write_buf_);
-      return false;
+    c->StartCall();
+    if (cancel) c->context.TryCancel();
+  }
+
+  // Starts the next write on `c` if it is the current call and its slot is free, or half-closes
+  // when nothing is left to write. Returns the call whose hold the caller must release (outside
+  // the lock), or nullptr.
+  Call* TryWriteLocked(Call* c) {
+    if (c == nullptr || !c->started || c->write_in_flight || c->hold_released) return nullptr;
+    if (c->broken) {
+      c->hold_released = true;
+      return c;
+    }
+    if (config_ != nullptr && !c->config_sent) {
+      c->config_sent = true;
+      c->write_in_flight = true;
+      c->write_buf = *config_;
+      c->StartWrite(&c->write_buf);
+      return nullptr;
     }
     if (pending_.empty() && ctx_->closed_loop && !no_more_ && sent_ < frame_limit_ &&
         static_cast<int>(in_flight_.size()) < ctx_->in_flight) {
       // Closed loop: the frame is intended now; there is no schedule to fall behind.
-      pending_.push_back({next_seq_++, Ns(Clock::now()), 0, 0});
+      pending_.push_back({next_seq_++, Ns(Clock::now()), 0, 0, false});
     }
     if (!pending_.empty()) {
       Frame f = pending_.front();
       pending_.pop_front();
       f.actual = Ns(Clock::now());
+      // The same bytes as the first send: a new 20-byte header before the shared image slice.
       const std::size_t frame_index = static_cast<std::size_t>(index_) + f.seq - 1;
-      write_buf_ = ctx_->store->Request(frame_index, f.seq,
-                                        ctx_->t0_unix_ns + (f.intended - ctx_->t0_steady_ns));
-      f.bytes = write_buf_.Length();
+      c->write_buf = ctx_->store->Request(frame_index, f.seq,
+                                          ctx_->t0_unix_ns + (f.intended - ctx_->t0_steady_ns));
+      f.bytes = c->write_buf.Length();
+      if (f.resend) {
+        ++stats_.resent;
+        ctx_->recorder->Resent(f.bytes);
+      } else {
+        ++sent_;
+        ++stats_.sent;
+        ctx_->recorder->Sent(f.bytes);
+      }
       in_flight_.push_back(f);
-      ++sent_;
       last_send_ns_ = f.actual;
-      ctx_->recorder->Sent(f.bytes);
       if (ctx_->closed_loop && sent_ >= frame_limit_) no_more_ = true;
-      write_in_flight_ = true;
-      StartWrite(&write_buf_);
-      return false;
+      c->write_in_flight = true;
+      c->StartWrite(&c->write_buf);
+      return nullptr;
     }
     if (no_more_) {
-      hold_released_ = true;
-      StartWritesDone();
-      return true;
+      c->hold_released = true;
+      c->StartWritesDone();
+      return c;
     }
-    return false;
+    return nullptr;
   }
 
-  void ReleaseHold() { RemoveHold(); }
+  void MarkBrokenLocked(Call* c) {
+    if (c->broken) return;
+    c->broken = true;
+    c->broken_at = Ns(Clock::now());
+  }
 
-  void Match(const v1::StreamReply& reply, std::int64_t now, std::size_t bytes) {
+  void WriteDone(Call* c, bool ok) {
+    Call* release = nullptr;
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      c->write_in_flight = false;
+      if (ok) {
+        if (!c->wrote_once && c->after_failure && in_flight_.empty() && pending_.empty()) {
+          // Nothing awaits an answer: the new call being on a replica is the reconnect.
+          ReconnectedLocked();
+        }
+        c->wrote_once = true;
+      } else {
+        MarkBrokenLocked(c);  // the call is ending; OnDone tells how
+      }
+      release = TryWriteLocked(c);
+    }
+    if (release != nullptr) release->RemoveHold();
+  }
+
+  void ReadDone(Call* c, bool ok) {
+    if (!ok) {
+      Call* release = nullptr;
+      {
+        std::lock_guard<std::mutex> lock(mu_);
+        MarkBrokenLocked(c);
+        release = TryWriteLocked(c);
+      }
+      if (release != nullptr) release->RemoveHold();
+      return;
+    }
+    const std::int64_t now = Ns(Clock::now());
+    v1::StreamReply reply;
+    const std::size_t bytes = c->read_buf.Length();
+    {
+      grpc::ProtoBufferReader reader(&c->read_buf);
+      if (!reply.ParseFromZeroCopyStream(&reader)) reply.Clear();
+    }
+    c->read_buf.Clear();
+    Call* release = nullptr;
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      Match(c, reply, now, bytes);
+      release = TryWriteLocked(c);  // closed loop: the answer frees a slot
+    }
+    c->StartRead(&c->read_buf);
+    if (release != nullptr) release->RemoveHold();
+  }
+
+  void CallDone(Call* c, const grpc::Status& status) {
+    bool open = false, ended_now = false;
+    std::optional<Clock::time_point> wake;
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      const std::string code = CodeName(status.error_code());
+      ctx_->recorder->CallStatus(code);
+      if (ended_) return;  // a call the stream no longer waited for
+      stats_.end_status = code;
+      server_dropped_before_ += c->server_dropped;
+      if (call_ == c) call_ = nullptr;
+      const bool has_work = !in_flight_.empty() || !pending_.empty() || !no_more_;
+      if (giving_up_) {
+        GiveUpLocked();
+        ended_now = true;
+      } else if (ctx_->resilient && status.error_code() == grpc::StatusCode::UNAVAILABLE &&
+                 !cancelled_ && has_work) {
+        const std::int64_t now = Ns(Clock::now());
+        if (failing_since_ == 0) failing_since_ = c->broken_at != 0 ? c->broken_at : now;
+        cause_ = status.error_message();
+        if (now - failing_since_ >= ctx_->reconnect_timeout_ns) {
+          GiveUpLocked();
+          ended_now = true;
+        } else {
+          RequeueUnansweredLocked();
+          // The first attempt goes at once; a replacement that failed too backs off (20 ms,
+          // doubling, at most 1 s), so a replica refusing calls is not hammered.
+          ++attempts_;
+          if (attempts_ == 1) {
+            opening_ = true;
+            open = true;
+          } else {
+            const std::int64_t backoff =
+                std::min<std::int64_t>(20'000'000LL << std::min(attempts_ - 2, 6), 1'000'000'000);
+            retry_at_ = now + backoff;
+            wake = Clock::time_point(std::chrono::nanoseconds(retry_at_));
+          }
+          // Run's loop checks the give-up deadline too (a replacement may wait for a replica).
+          ctx_->fleet->WakeAt(index_, Clock::time_point(std::chrono::nanoseconds(
+                                          failing_since_ + ctx_->reconnect_timeout_ns)));
+        }
+      } else {
+        EndLocked(status);
+        ended_now = true;
+      }
+    }
+    if (wake) ctx_->fleet->WakeAt(index_, *wake);
+    if (open) OpenCall(/*after_failure=*/true);
+    if (ended_now) ctx_->fleet->StreamEnded();
+  }
+
+  // The frames the lost call left unanswered: in DELIVERY_ALL they go again first, in order, on
+  // the next call; in DELIVERY_LATEST they count as dropped (the server would have skipped
+  // them for newer ones anyway).
+  void RequeueUnansweredLocked() {
+    if (ctx_->lossless) {
+      for (auto it = in_flight_.rbegin(); it != in_flight_.rend(); ++it) {
+        Frame f = *it;
+        f.resend = true;
+        pending_.push_front(f);
+      }
+    } else if (!in_flight_.empty()) {
+      ctx_->recorder->Dropped(in_flight_.size());
+      stats_.dropped += in_flight_.size();
+    }
+    in_flight_.clear();
+  }
+
+  void ReconnectedLocked() {
+    if (failing_since_ == 0) return;
+    stats_.reconnect_ns.push_back(Ns(Clock::now()) - failing_since_);
+    ctx_->recorder->Reconnected();
+    failing_since_ = 0;
+    attempts_ = 0;
+  }
+
+  // The stream is over: frames it still holds are accounted for as the final status says.
+  void EndLocked(const grpc::Status& status) {
+    const std::string code = CodeName(status.error_code());
+    std::uint64_t unanswered = in_flight_.size();
+    for (const Frame& f : pending_) unanswered += f.resend ? 1 : 0;
+    const std::uint64_t unsent = pending_.size() - (unanswered - in_flight_.size());
+    if (status.ok() && !ctx_->lossless) {
+      // DELIVERY_LATEST: a clean end with frames unanswered means the server skipped them.
+      ctx_->recorder->Dropped(unanswered);
+      stats_.dropped += unanswered;
+    } else {
+      ctx_->recorder->Lost(unanswered, code, status.error_message());
+      stats_.lost += unanswered;
+    }
+    if (unsent > 0) {
+      ctx_->recorder->Unsent(unsent);
+      stats_.unsent += unsent;
+    }
+    in_flight_.clear();
+    pending_.clear();
+    ctx_->recorder->StreamEnded(server_dropped_before_);
+    ended_ = true;
+  }
+
+  // reconnect_timeout passed without a working call: every frame sent and unanswered is
+  // reported lost, saying so.
+  void GiveUpLocked() {
+    stats_.gave_up = true;
+    stats_.end_status = "UNAVAILABLE";  // the stream's end, whatever the last call's was
+    ctx_->recorder->GaveUp();
+    EndLocked(grpc::Status(
+        grpc::StatusCode::UNAVAILABLE,
+        fmt::format("gave up: no working call within --reconnect-timeout {:g} s (last: {})",
+                    ctx_->reconnect_timeout_ns / 1e9, cause_.empty() ? "none" : cause_)));
+  }
+
+  void Match(Call* c, const v1::StreamReply& reply, std::int64_t now, std::size_t bytes) {
     std::uint64_t seq = 0;
     std::string instance;
     if (reply.has_cloud()) {
       seq = reply.cloud().sequence();
       instance = reply.cloud().server_instance();
-      server_dropped_ = reply.cloud().frames_dropped();
+      c->server_dropped = reply.cloud().frames_dropped();
     } else if (reply.has_error()) {
       seq = reply.error().sequence();
       instance = reply.error().server_instance();
-      server_dropped_ = reply.error().frames_dropped();
+      c->server_dropped = reply.error().frames_dropped();
       if (reply.error().kind() == v1::ERROR_KIND_CONFIG ||
           reply.error().kind() == v1::ERROR_KIND_REQUEST) {
         ctx_->recorder->FrameError(CodeName(reply.error().code()),
@@ -277,22 +507,39 @@ class Fleet::Driver : public grpc::ClientBidiReactor<grpc::ByteBuffer, grpc::Byt
       ctx_->recorder->FrameError("INTERNAL", "a reply with neither cloud nor error", instance);
       return;
     }
+    if (!c->answered) {
+      c->answered = true;
+      stats_.replicas.push_back(instance.empty() ? "(unnamed)" : instance);
+    }
+    // Exactly once: a sequence answered before (on an earlier call) is not counted again.
+    if (seq <= last_answered_seq_) {
+      ++stats_.duplicates;
+      ctx_->recorder->Duplicate();
+      return;
+    }
     // Replies come in order: frames before this one that got none were skipped by the server.
     std::uint64_t skipped = 0;
     while (!in_flight_.empty() && in_flight_.front().seq < seq) {
       in_flight_.pop_front();
       ++skipped;
     }
-    if (skipped) ctx_->recorder->Dropped(skipped);
+    if (skipped) {
+      ctx_->recorder->Dropped(skipped);
+      stats_.dropped += skipped;
+    }
     if (in_flight_.empty() || in_flight_.front().seq != seq) {
       ctx_->recorder->FrameError("INTERNAL", "a reply to a frame not in flight", instance);
       return;
     }
     const Frame f = in_flight_.front();
     in_flight_.pop_front();
+    last_answered_seq_ = seq;
+    ReconnectedLocked();
     if (reply.has_cloud()) {
+      ++stats_.answered;
       ctx_->recorder->Answered(now - f.intended, now - f.actual, instance, bytes);
     } else {
+      ++stats_.frame_errors;
       ctx_->recorder->FrameError(CodeName(reply.error().code()), reply.error().message(), instance);
     }
   }
@@ -301,23 +548,30 @@ class Fleet::Driver : public grpc::ClientBidiReactor<grpc::ByteBuffer, grpc::Byt
   const std::uint64_t frame_limit_;
   const grpc::ByteBuffer* config_;
   const Context* ctx_ = nullptr;
-  grpc::ClientContext call_context_;
-  grpc::ByteBuffer write_buf_, read_buf_;
+  grpc::GenericStub* stub_ = nullptr;
 
   std::mutex mu_;
-  bool started_ = false;
-  bool config_sent_ = false;
-  bool write_in_flight_ = false;
+  std::vector<std::unique_ptr<Call>> calls_;
+  Call* call_ = nullptr;  // the current call; nullptr between a failed call and its replacement
+  bool opening_ = false;  // a call is being opened (OpenCall has not taken the lock yet)
   bool no_more_ = false;
-  bool broken_ = false;
-  bool hold_released_ = false;
-  bool done_ = false;
+  bool cancelled_ = false;
+  bool giving_up_ = false;
+  bool ended_ = false;
   std::uint64_t next_seq_ = 1;
   std::uint64_t sent_ = 0;
+  std::uint64_t last_answered_seq_ = 0;
   std::int64_t last_send_ns_ = 0;
-  std::uint64_t server_dropped_ = 0;
-  std::deque<Frame> pending_;    // due, not yet written
-  std::deque<Frame> in_flight_;  // written, not yet answered
+  std::uint64_t server_dropped_before_ = 0;  // frames_dropped of the calls that ended
+  // Resilience: when the calls started failing (0: they are not), the attempts since, the time
+  // of the next attempt after a backoff (0: none), and how the last call ended.
+  std::int64_t failing_since_ = 0;
+  int attempts_ = 0;
+  std::int64_t retry_at_ = 0;
+  std::string cause_;
+  std::deque<Frame> pending_;    // due (or to be sent again), not yet written
+  std::deque<Frame> in_flight_;  // written on the current call, not yet answered
+  StreamStats stats_;
 };
 
 // ---------------------------------------------------------------------------------------------
@@ -341,7 +595,16 @@ absl::StatusOr<std::unique_ptr<Fleet>> Fleet::Connect(const FleetOptions& o,
   if (store == nullptr || store->size() == 0) {
     return absl::InvalidArgumentError("no frames to send");
   }
+  std::string lb = o.lb_policy.empty() ? DefaultLbPolicy(o.server) : o.lb_policy;
+  if (lb != "round_robin" && lb != "pick_first") {
+    return absl::InvalidArgumentError(
+        fmt::format("--lb must be round_robin or pick_first, got '{}'", o.lb_policy));
+  }
+  if (o.resilient && o.reconnect_timeout.count() <= 0) {
+    return absl::InvalidArgumentError("--reconnect-timeout must be positive");
+  }
   std::unique_ptr<Fleet> fleet(new Fleet(o, store));
+  fleet->lb_policy_ = lb;
   const int channels = o.connections == 0 ? o.streams : std::min(o.connections, o.streams);
   const auto deadline = std::chrono::system_clock::now() + o.connect_timeout;
   for (int c = 0; c < channels; ++c) {
@@ -351,15 +614,95 @@ absl::StatusOr<std::unique_ptr<Fleet>> Fleet::Connect(const FleetOptions& o,
     // A distinct argument per channel keeps gRPC from sharing one connection among them.
     args.SetInt("cloudcast.load.channel", c);
     args.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);
+    // As the client library: a lost replica is retried within seconds, not gRPC's 2 minutes.
+    args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, 5000);
+    if (lb == "round_robin") {
+      // Health checking makes round_robin pass over replicas that are draining (NOT_SERVING).
+      args.SetServiceConfigJSON(
+          R"({"loadBalancingConfig": [{"round_robin": {}}],)"
+          R"( "healthCheckConfig": {"serviceName": "cloudcast.v1.CloudCast"}})");
+      // A DNS TXT record must not replace the policy asked for.
+      args.SetInt(GRPC_ARG_SERVICE_CONFIG_DISABLE_RESOLUTION, 1);
+    }
     auto channel = grpc::CreateCustomChannel(o.server, grpc::InsecureChannelCredentials(), args);
-    if (!channel->WaitForConnected(deadline)) {
+    channel->GetState(/*try_to_connect=*/true);  // every channel connects meanwhile
+    fleet->channels_.push_back(std::move(channel));
+  }
+  for (int c = 0; c < channels; ++c) {
+    if (!fleet->channels_[c]->WaitForConnected(deadline)) {
       return absl::UnavailableError(fmt::format(
           "--server {}: not reachable within --connect-timeout {:g} s (channel {} of {})", o.server,
           o.connect_timeout.count() / 1e9, c + 1, channels));
     }
-    fleet->channels_.push_back(std::move(channel));
   }
+  if (lb == "round_robin") fleet->WarmUp(deadline);
   return fleet;
+}
+
+// round_robin reports a channel ready once one replica is; the others are still connecting (and
+// passing their health checks). Streams opened then would all land on the first. So before any
+// stream opens, each channel is asked GetInfo (answered by the replica round_robin picks) until
+// every address of an ipv4:/ipv6: list has answered, or, when the resolver decides the addresses
+// (dns:///), until no new replica has answered for a moment; bounded by --connect-timeout.
+void Fleet::WarmUp(std::chrono::system_clock::time_point deadline) {
+  const int listed = ListedAddresses(options_.server);
+  const auto settle_until = std::chrono::system_clock::now() + std::chrono::milliseconds(200);
+  std::set<std::string> instances;
+  for (const auto& channel : channels_) {
+    auto stub = v1::CloudCast::NewStub(channel);
+    // Replicas are told apart by the address that answered (two may share an instance name,
+    // the host name by default).
+    std::set<std::string> peers;
+    int calls_since_new = 0;
+    for (int call = 0; call < 10000; ++call) {
+      const auto now = std::chrono::system_clock::now();
+      const bool complete =
+          listed > 0 ? static_cast<int>(peers.size()) >= listed
+                     : now >= settle_until && calls_since_new >= 3 * std::max<int>(1, peers.size());
+      if (complete || now >= deadline) break;
+      grpc::ClientContext context;
+      context.set_deadline(std::min(deadline, now + std::chrono::seconds(1)));
+      v1::ServerInfo info;
+      if (stub->GetInfo(&context, v1::GetInfoRequest(), &info).ok()) {
+        instances.insert(info.instance());
+        if (peers.insert(context.peer()).second) {
+          calls_since_new = 0;
+          continue;
+        }
+      }
+      ++calls_since_new;
+      // Nothing new: give the other replicas' connections a moment.
+      if (calls_since_new % 8 == 0) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+    replicas_answering_ = std::max<int>(replicas_answering_, peers.size());
+  }
+  replicas_at_start_.assign(instances.begin(), instances.end());
+}
+
+std::string DefaultLbPolicy(const std::string& target) {
+  if (target.rfind("dns:///", 0) == 0) return "round_robin";
+  return ListedAddresses(target) > 1 ? "round_robin" : "pick_first";
+}
+
+int ListedAddresses(const std::string& target) {
+  for (const char* scheme : {"ipv4:", "ipv6:"}) {
+    if (target.rfind(scheme, 0) == 0) {
+      return 1 + static_cast<int>(std::count(target.begin(), target.end(), ','));
+    }
+  }
+  return 0;
+}
+
+std::vector<StreamStats> Fleet::streams() const {
+  std::vector<StreamStats> out;
+  for (const auto& d : drivers_) out.push_back(d->stats());
+  return out;
+}
+
+void Fleet::WakeAt(int driver, Clock::time_point when) {
+  std::lock_guard<std::mutex> lock(mu_);
+  timers_.push({when, driver});
+  cv_.notify_all();
 }
 
 void Fleet::Stop() {
@@ -456,12 +799,15 @@ FleetResult Fleet::Run(const std::function<void(const SecondStats&)>& on_second)
   Driver::Context ctx{
       store_,
       &recorder_,
+      this,
       o.closed_loop,
       o.in_flight,
       lossless,
+      o.resilient,
+      o.reconnect_timeout.count(),
       Ns(t0),
-      std::chrono::duration_cast<std::chrono::nanoseconds>(result.start.time_since_epoch()).count(),
-      [this] { StreamEnded(); }};
+      std::chrono::duration_cast<std::chrono::nanoseconds>(result.start.time_since_epoch())
+          .count()};
   for (int s = 0; s < n; ++s) {
     drivers_[s]->Start(stubs[static_cast<std::size_t>(s) % stubs.size()].get(), &ctx);
   }
@@ -489,11 +835,23 @@ FleetResult Fleet::Run(const std::function<void(const SecondStats&)>& on_second)
   bool cancelled = false;
   std::unique_lock<std::mutex> lock(mu_);
   while (ended_ < n) {
-    const Clock::time_point wake = sending_over && !cancelled
-                                       ? std::min(next_second, sending_over_at + o.drain_timeout)
-                                       : next_second;
+    Clock::time_point wake = sending_over && !cancelled
+                                 ? std::min(next_second, sending_over_at + o.drain_timeout)
+                                 : next_second;
+    if (!timers_.empty()) wake = std::min(wake, timers_.top().first);
     cv_.wait_until(lock, wake);
     const Clock::time_point now = Clock::now();
+    // Drivers' timers that are due (reconnects after a backoff, give-up deadlines).
+    std::vector<int> due;
+    while (!timers_.empty() && timers_.top().first <= now) {
+      due.push_back(timers_.top().second);
+      timers_.pop();
+    }
+    if (!due.empty()) {
+      lock.unlock();
+      for (int d : due) drivers_[d]->OnTimer(Ns(now));
+      lock.lock();
+    }
     if (stop_.load() && reason != EndReason::kCancel) reason = EndReason::kCancel;
     if (!sending_over) {
       const bool duration_over = o.duration.count() > 0 && now - t0 >= o.duration;

@@ -229,6 +229,15 @@ std::string Html(const Report& r) {
   page += Row("dropped (DELIVERY_LATEST)", std::to_string(t.drops));
   page += Row("late sends", fmt::format("{} (previous write not done {}, generator behind {})",
                                         t.late(), t.late_flow_control, t.late_scheduler));
+  page += Row("balancing", r.lb_policy);
+  if (r.resilient) {
+    page += Row("resent / duplicates", fmt::format("{} / {}", t.resent, t.duplicates));
+    page += Row("reconnects (of attempts)",
+                fmt::format("{} ({}), p50 {:.1f} ms, max {:.1f} ms", t.reconnects,
+                            t.reconnect_attempts, PercentileOf(r.reconnect_ns, 50) / 1e6,
+                            (r.reconnect_ns.empty() ? 0 : r.reconnect_ns.back()) / 1e6));
+    page += Row("streams given up", std::to_string(t.streams_given_up));
+  }
   page += "</table>\n<table id=\"latency\">\n<tr><th>ms</th>";
   for (double p : ReportPercentiles()) page += fmt::format("<th>p{:g}</th>", p);
   page += "<th>max</th><th>mean</th></tr>\n";
@@ -242,13 +251,16 @@ std::string Html(const Report& r) {
         fmt::format("<td>{:.2f}</td><td>{:.2f}</td></tr>\n", row->max() / 1e6, row->mean() / 1e6);
   }
   page += "</table>\n";
-  if (!r.per_instance.empty()) {
-    page += "<table id=\"replicas\">\n<tr><th>replica</th><th>frames</th><th>share</th></tr>\n";
+  if (!r.replicas.empty()) {
+    page +=
+        "<table id=\"replicas\">\n<tr><th>replica</th><th>streams</th><th>at start</th>"
+        "<th>frames</th><th>share</th></tr>\n";
     std::uint64_t sum = 0;
-    for (const auto& [name, n] : r.per_instance) sum += n;
-    for (const auto& [name, n] : r.per_instance) {
-      page += fmt::format("<tr><th>{}</th><td>{}</td><td>{:.1f}%</td></tr>\n", Escape(name), n,
-                          sum ? 100.0 * n / sum : 0.0);
+    for (const auto& [name, rep] : r.replicas) sum += rep.frames;
+    for (const auto& [name, rep] : r.replicas) {
+      page += fmt::format("<tr><th>{}</th><td>{}</td><td>{}</td><td>{}</td><td>{:.1f}%</td></tr>\n",
+                          Escape(name), rep.streams, rep.streams_at_start, rep.frames,
+                          sum ? 100.0 * rep.frames / sum : 0.0);
     }
     page += "</table>\n";
   }
@@ -272,6 +284,32 @@ std::string Html(const Report& r) {
   page += LineChart("throughput-chart", "Throughput", "frames/s", x, {fps, sent});
   page += "<h2>Distribution</h2>\n";
   page += HistogramChart(r.latency);
+  // Per stream, bounded: a page stays readable with thousands of streams (the JSON has them all).
+  constexpr std::size_t kMaxRows = 200;
+  if (!r.streams_detail.empty()) {
+    page += fmt::format("<h2>Streams{}</h2>\n<table id=\"streams\">\n",
+                        r.streams_detail.size() > kMaxRows
+                            ? fmt::format(" (first {} of {})", kMaxRows, r.streams_detail.size())
+                            : "");
+    page +=
+        "<tr><th>stream</th><th>sent</th><th>answered</th><th>resent</th><th>lost</th>"
+        "<th>errors</th><th>dropped</th><th>reconnects</th><th>reconnect ms</th>"
+        "<th>replicas</th></tr>\n";
+    for (std::size_t i = 0; i < r.streams_detail.size() && i < kMaxRows; ++i) {
+      const StreamStats& s = r.streams_detail[i];
+      std::string ms, path;
+      for (std::int64_t v : s.reconnect_ns)
+        ms += fmt::format("{}{:.0f}", ms.empty() ? "" : " ", v / 1e6);
+      for (const std::string& name : s.replicas) path += (path.empty() ? "" : " > ") + name;
+      page += fmt::format(
+          "<tr><th>{}</th><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td>"
+          "<td>{}/{}</td><td>{}</td><td>{}{}</td></tr>\n",
+          s.index, s.sent, s.answered, s.resent, s.lost, s.frame_errors, s.dropped,
+          s.reconnect_ns.size(), s.reconnect_attempts, ms.empty() ? "-" : ms, Escape(path),
+          s.gave_up ? " (gave up)" : "");
+    }
+    page += "</table>\n";
+  }
   if (!r.errors.empty()) {
     page += "<h2>Errors</h2>\n<table id=\"errors\">\n";
     for (const auto& [message, n] : r.errors) page += Row(message, std::to_string(n));

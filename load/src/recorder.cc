@@ -71,6 +71,34 @@ void Recorder::CallStatus(const std::string& code) {
   ++call_status_[code];
 }
 
+void Recorder::Resent(std::size_t bytes) {
+  std::lock_guard<std::mutex> lock(mu_);
+  ++totals_.resent;
+  ++interval_.resent;
+  totals_.bytes_sent += bytes;
+}
+
+void Recorder::Duplicate() {
+  std::lock_guard<std::mutex> lock(mu_);
+  ++totals_.duplicates;
+}
+
+void Recorder::ReconnectAttempt() {
+  std::lock_guard<std::mutex> lock(mu_);
+  ++totals_.reconnect_attempts;
+}
+
+void Recorder::Reconnected() {
+  std::lock_guard<std::mutex> lock(mu_);
+  ++totals_.reconnects;
+  ++interval_.reconnects;
+}
+
+void Recorder::GaveUp() {
+  std::lock_guard<std::mutex> lock(mu_);
+  ++totals_.streams_given_up;
+}
+
 SecondStats Recorder::CloseInterval(double t_end_s, int open_streams) {
   std::lock_guard<std::mutex> lock(mu_);
   SecondStats s = interval_;

@@ -3,12 +3,27 @@
 #include <spdlog/fmt/fmt.h>
 
 #include <algorithm>
+#include <cmath>
 #include <ctime>
+#include <set>
 
 namespace cloudcast::load {
 namespace {
 
 double Ms(std::int64_t ns) { return ns / 1e6; }
+
+// "replica-1 > replica-3": the replicas that answered a stream's calls, in order.
+std::string Path(const std::vector<std::string>& replicas) {
+  std::string out;
+  for (const std::string& r : replicas) out += (out.empty() ? "" : " > ") + r;
+  return out.empty() ? "-" : out;
+}
+
+std::string Millis(const std::vector<std::int64_t>& ns) {
+  std::string out;
+  for (std::int64_t v : ns) out += fmt::format("{}{:.0f}", out.empty() ? "" : " ", v / 1e6);
+  return out.empty() ? "-" : out;
+}
 
 std::string Rfc3339(std::chrono::system_clock::time_point t) {
   const std::time_t secs = std::chrono::system_clock::to_time_t(t);
@@ -34,6 +49,13 @@ nlohmann::json Percentiles(const Histogram& h) {
 }
 
 }  // namespace
+
+std::int64_t PercentileOf(const std::vector<std::int64_t>& sorted, double p) {
+  if (sorted.empty()) return 0;
+  const double rank = std::ceil(p / 100 * static_cast<double>(sorted.size()));
+  const std::size_t i = static_cast<std::size_t>(std::clamp(rank, 1.0, 1.0 * sorted.size())) - 1;
+  return sorted[i];
+}
 
 const std::vector<double>& ReportPercentiles() {
   static const std::vector<double> k = {50, 90, 99, 99.9};
@@ -61,6 +83,20 @@ Report MakeReport(Fleet& fleet, const FleetResult& result, const std::string& fr
   r.errors = rec.errors();
   r.call_status = rec.call_status();
   r.series = rec.series();
+  r.lb_policy = fleet.lb_policy();
+  r.resilient = o.resilient;
+  r.reconnect_timeout_s = o.reconnect_timeout.count() / 1e9;
+  r.replicas_at_start = fleet.replicas_at_start();
+  r.addresses_answering = fleet.replicas_answering();
+  r.streams_detail = fleet.streams();
+  for (const auto& [name, n] : r.per_instance) r.replicas[name].frames = n;
+  for (const StreamStats& s : r.streams_detail) {
+    std::set<std::string> on(s.replicas.begin(), s.replicas.end());
+    for (const std::string& name : on) ++r.replicas[name].streams;
+    if (!s.replicas.empty()) ++r.replicas[s.replicas.front()].streams_at_start;
+    r.reconnect_ns.insert(r.reconnect_ns.end(), s.reconnect_ns.begin(), s.reconnect_ns.end());
+  }
+  std::sort(r.reconnect_ns.begin(), r.reconnect_ns.end());
   return r;
 }
 
@@ -79,6 +115,21 @@ std::string FormatTable(const Report& r) {
       t.sent, t.answered, t.frame_errors, t.lost, t.unsent, t.drops, t.server_dropped);
   out += fmt::format("  late sends {} (previous write not done {}, generator behind {})\n",
                      t.late(), t.late_flow_control, t.late_scheduler);
+  out +=
+      fmt::format("  balancing {}{}\n", r.lb_policy,
+                  r.replicas_at_start.empty()
+                      ? std::string()
+                      : fmt::format(", {} addresses answering at the start ({})",
+                                    r.addresses_answering, fmt::join(r.replicas_at_start, ", ")));
+  if (r.resilient) {
+    out += fmt::format(
+        "  resilient: resent {}  duplicates {}  reconnects {} of {} attempts (ms p50 {:.1f}, max "
+        "{:.1f})  streams given up {} (--reconnect-timeout {:g} s)\n",
+        t.resent, t.duplicates, t.reconnects, t.reconnect_attempts,
+        Ms(PercentileOf(r.reconnect_ns, 50)),
+        Ms(r.reconnect_ns.empty() ? 0 : r.reconnect_ns.back()), t.streams_given_up,
+        r.reconnect_timeout_s);
+  }
   out += fmt::format("  throughput {:.1f} frames/s answered, {:.1f} MB/s up, {:.2f} MB/s down\n",
                      r.answered_fps(),
                      r.result.elapsed_s > 0 ? t.bytes_sent / 1e6 / r.result.elapsed_s : 0.0,
@@ -91,12 +142,37 @@ std::string FormatTable(const Report& r) {
   };
   row("latency (intended)", r.latency);
   row("service time", r.service);
-  if (!r.per_instance.empty()) {
-    out += "\n  frames per replica (server_instance):\n";
+  if (!r.replicas.empty()) {
+    out += "\n  per replica (server_instance)   streams  at start     frames   share\n";
     std::uint64_t sum = 0;
-    for (const auto& [name, n] : r.per_instance) sum += n;
-    for (const auto& [name, n] : r.per_instance) {
-      out += fmt::format("    {:<30} {:>9} {:>6.1f}%\n", name, n, sum ? 100.0 * n / sum : 0.0);
+    for (const auto& [name, rep] : r.replicas) sum += rep.frames;
+    for (const auto& [name, rep] : r.replicas) {
+      out += fmt::format("    {:<28} {:>8} {:>9} {:>10} {:>6.1f}%\n", name, rep.streams,
+                         rep.streams_at_start, rep.frames, sum ? 100.0 * rep.frames / sum : 0.0);
+    }
+  }
+  // Per stream: all of them for a small fleet; for a large one, those that reconnected.
+  constexpr std::size_t kAllStreamsUpTo = 64, kMaxRows = 64;
+  std::vector<const StreamStats*> rows;
+  for (const StreamStats& s : r.streams_detail) {
+    if (r.streams_detail.size() <= kAllStreamsUpTo || s.reconnect_attempts > 0 || s.gave_up) {
+      if (rows.size() < kMaxRows) rows.push_back(&s);
+    }
+  }
+  if (!rows.empty()) {
+    out += fmt::format("\n  per stream{}:\n",
+                       r.streams_detail.size() <= kAllStreamsUpTo
+                           ? ""
+                           : fmt::format(" (those that reconnected, at most {})", kMaxRows));
+    out +=
+        "    stream    sent  answered  resent  lost  errors  dropped  reconnects  reconnect ms"
+        "  replicas\n";
+    for (const StreamStats* s : rows) {
+      out +=
+          fmt::format("    {:>6} {:>7} {:>9} {:>7} {:>5} {:>7} {:>8} {:>7}/{:<3}  {:<12}  {}{}\n",
+                      s->index, s->sent, s->answered, s->resent, s->lost, s->frame_errors,
+                      s->dropped, s->reconnect_ns.size(), s->reconnect_attempts,
+                      Millis(s->reconnect_ns), Path(s->replicas), s->gave_up ? "  (gave up)" : "");
     }
   }
   if (!r.errors.empty()) {
@@ -160,6 +236,8 @@ nlohmann::json GhzJson(const Report& r) {
                  {"unsent", t.unsent},
                  {"dropped", t.drops},
                  {"serverReportedDropped", t.server_dropped},
+                 {"resent", t.resent},
+                 {"duplicates", t.duplicates},
                  {"bytesSent", t.bytes_sent},
                  {"bytesReceived", t.bytes_received}};
   j["drops"] = t.drops;
@@ -167,6 +245,48 @@ nlohmann::json GhzJson(const Report& r) {
                     {"previousWriteNotDone", t.late_flow_control},
                     {"generatorBehind", t.late_scheduler}};
   j["framesPerReplica"] = r.per_instance;
+  json replicas = json::object();
+  for (const auto& [name, rep] : r.replicas) {
+    replicas[name] = {
+        {"streams", rep.streams}, {"streamsAtStart", rep.streams_at_start}, {"frames", rep.frames}};
+  }
+  j["replicas"] = replicas;
+  j["loadBalancing"] = {{"policy", r.lb_policy},
+                        {"replicasAtStart", r.replicas_at_start},
+                        {"addressesAnsweringAtStart", r.addresses_answering}};
+  j["resilience"] = {{"enabled", r.resilient},
+                     {"reconnectTimeoutSeconds", r.reconnect_timeout_s},
+                     {"reconnects", t.reconnects},
+                     {"reconnectAttempts", t.reconnect_attempts},
+                     {"resent", t.resent},
+                     {"duplicates", t.duplicates},
+                     {"streamsGivenUp", t.streams_given_up},
+                     {"reconnectTime",
+                      {{"count", r.reconnect_ns.size()},
+                       {"p50", PercentileOf(r.reconnect_ns, 50)},
+                       {"p90", PercentileOf(r.reconnect_ns, 90)},
+                       {"max", r.reconnect_ns.empty() ? 0 : r.reconnect_ns.back()},
+                       {"unit", "ns"}}}};
+  json streams = json::array();
+  for (const StreamStats& s : r.streams_detail) {
+    streams.push_back({{"stream", s.index},
+                       {"sent", s.sent},
+                       {"answered", s.answered},
+                       {"frameErrors", s.frame_errors},
+                       {"resent", s.resent},
+                       {"lost", s.lost},
+                       {"dropped", s.dropped},
+                       {"unsent", s.unsent},
+                       {"duplicates", s.duplicates},
+                       {"calls", s.calls},
+                       {"reconnects", s.reconnect_ns.size()},
+                       {"reconnectAttempts", s.reconnect_attempts},
+                       {"reconnectNs", s.reconnect_ns},
+                       {"replicas", s.replicas},
+                       {"endStatus", s.end_status},
+                       {"gaveUp", s.gave_up}});
+  }
+  j["streams"] = streams;
   j["callStatusDistribution"] = r.call_status;
   j["sendingSeconds"] = r.result.sending_s;
   json series = json::array();
@@ -179,6 +299,8 @@ nlohmann::json GhzJson(const Report& r) {
                       {"errors", s.errors},
                       {"drops", s.drops},
                       {"late", s.late},
+                      {"resent", s.resent},
+                      {"reconnects", s.reconnects},
                       {"openStreams", s.open_streams},
                       {"p50", s.p50},
                       {"p90", s.p90},
@@ -192,10 +314,14 @@ nlohmann::json GhzJson(const Report& r) {
 }
 
 std::string ProgressLine(const SecondStats& s, std::uint64_t errors, std::uint64_t drops) {
-  return fmt::format(
+  std::string line = fmt::format(
       "{:7.1f} s  {:7.1f} frames/s  p50 {:7.2f} ms  p99 {:7.2f} ms  errors {}  drops {}  late {}  "
       "open streams {}",
       s.t_end_s, s.fps(), Ms(s.p50), Ms(s.p99), errors, drops, s.late, s.open_streams);
+  if (s.reconnects > 0 || s.resent > 0) {
+    line += fmt::format("  reconnects {}  resent {}", s.reconnects, s.resent);
+  }
+  return line;
 }
 
 }  // namespace cloudcast::load

@@ -7,6 +7,13 @@
 // stream's queue and goes the moment the write slot frees, never rescheduled (a late send).
 // Every answer's latency counts from the intended time, so a slow server cannot hide its stalls
 // by slowing the sender (coordinated omission).
+//
+// Resilient streams (FleetOptions::resilient): a stream is a sequence of calls. When a call ends
+// with UNAVAILABLE (a replica killed, drained, or sending GOAWAY), the stream opens a new one (the
+// channel's round_robin picks a live replica), sends its StreamConfig again and, in DELIVERY_ALL,
+// every frame that was sent and not answered, with its intended time unchanged: latency keeps
+// counting from it. Answers are counted once per sequence. After `reconnect_timeout` without a
+// working call the stream gives up and reports every unanswered frame lost.
 #pragma once
 
 #include <atomic>
@@ -16,6 +23,7 @@
 #include <functional>
 #include <memory>
 #include <mutex>
+#include <queue>
 #include <string>
 #include <vector>
 
@@ -52,6 +60,41 @@ struct FleetOptions {
   // The first message of every stream; delivery tells how frames missing at the end count.
   v1::StreamConfig config;
   bool send_config = true;
+  // How calls are spread over the addresses the target resolves to: "round_robin" (with
+  // client-side health checking of cloudcast.v1.CloudCast, so a draining replica gets no new
+  // calls), "pick_first", or "" for DefaultLbPolicy(server).
+  std::string lb_policy;
+  bool resilient = false;
+  std::chrono::nanoseconds reconnect_timeout = std::chrono::seconds(30);
+};
+
+// round_robin for a target that names several addresses ("ipv4:a:p,b:p", "ipv6:...") or asks
+// the DNS resolver for all of them ("dns:///name:port"), else pick_first (gRPC's default).
+std::string DefaultLbPolicy(const std::string& target);
+
+// The addresses an "ipv4:" / "ipv6:" target lists; 0 for any other target (the resolver decides).
+int ListedAddresses(const std::string& target);
+
+// One stream's account, for the per-stream report. Every frame sent ends in exactly one of
+// answered, frame_errors, dropped or lost.
+struct StreamStats {
+  int index = 0;
+  std::uint64_t sent = 0;          // distinct frames sent (a resend is not counted again)
+  std::uint64_t answered = 0;      // clouds
+  std::uint64_t frame_errors = 0;  // FrameError replies
+  std::uint64_t resent = 0;        // frames written again on a new call (DELIVERY_ALL)
+  std::uint64_t lost = 0;          // sent, never answered, reported lost
+  std::uint64_t dropped = 0;       // skipped (DELIVERY_LATEST)
+  std::uint64_t unsent = 0;        // due, never sent
+  std::uint64_t duplicates = 0;    // answers to a sequence already answered (ignored)
+  int calls = 0;                   // gRPC calls the stream used
+  int reconnect_attempts = 0;      // calls opened after a failure
+  // Reconnects that worked: from the failure to the first answer on the new call (or, when no
+  // frame awaited an answer, to the new call's first write), ns.
+  std::vector<std::int64_t> reconnect_ns;
+  std::vector<std::string> replicas;  // the replica of each call that answered, in order
+  std::string end_status;             // the last call's status code
+  bool gave_up = false;               // reconnect_timeout passed without a working call
 };
 
 enum class EndReason { kNormal, kTimeout, kCancel };
@@ -85,6 +128,14 @@ class Fleet {
 
   Recorder& recorder() { return recorder_; }
   const FleetOptions& options() const { return options_; }
+  // After Run: each stream's account, in stream order.
+  std::vector<StreamStats> streams() const;
+  // The load-balancing policy the channels use, and the replicas (GetInfo's instance names) that
+  // answered on them before the streams opened.
+  const std::string& lb_policy() const { return lb_policy_; }
+  const std::vector<std::string>& replicas_at_start() const { return replicas_at_start_; }
+  // The most addresses that answered on one channel then (0 without round_robin).
+  int replicas_answering() const { return replicas_answering_; }
 
   class Driver;  // one per stream (fleet.cc)
 
@@ -92,14 +143,20 @@ class Fleet {
   Fleet(const FleetOptions& options, const FrameStore* store);
   void Schedule(int shard, const load::Schedule& schedule,
                 std::chrono::steady_clock::time_point t0);
+  void WarmUp(std::chrono::system_clock::time_point deadline);
   void StreamEnded();
   int OpenStreams() const;
+  // A driver's timer (reconnect backoff, give-up deadline): Run's loop calls its OnTimer then.
+  void WakeAt(int driver, std::chrono::steady_clock::time_point when);
 
   const FleetOptions options_;
   const FrameStore* store_;
   Recorder recorder_;
   std::vector<std::shared_ptr<grpc::Channel>> channels_;
   std::vector<std::unique_ptr<Driver>> drivers_;
+  std::string lb_policy_;
+  std::vector<std::string> replicas_at_start_;
+  int replicas_answering_ = 0;
 
   std::atomic<bool> stop_{false};
   std::mutex mu_;
@@ -107,6 +164,9 @@ class Fleet {
   int ended_ = 0;
   int schedulers_running_ = 0;
   bool ran_ = false;
+  // Drivers' timers, earliest first (under mu_).
+  using Timer = std::pair<std::chrono::steady_clock::time_point, int>;
+  std::priority_queue<Timer, std::vector<Timer>, std::greater<Timer>> timers_;
 };
 
 // The name of a gRPC status code as gRPC spells it ("OK", "UNAVAILABLE", ...).

@@ -28,6 +28,8 @@ struct SecondStats {
   std::uint64_t errors = 0;    // frame errors and frames lost with their call
   std::uint64_t drops = 0;     // frames the server skipped (DELIVERY_LATEST)
   std::uint64_t late = 0;      // sends that went after their intended time
+  std::uint64_t resent = 0;    // frames written again on a new call
+  std::uint64_t reconnects = 0;
   int open_streams = 0;
   // Latency from the intended time and service time of the frames answered in it, ns.
   std::int64_t p50 = 0, p90 = 0, p99 = 0, max = 0;
@@ -45,7 +47,13 @@ struct Totals {
   std::uint64_t server_dropped = 0;     // sum over streams of the last frames_dropped reported
   std::uint64_t late_flow_control = 0;  // the stream's previous write had not completed
   std::uint64_t late_scheduler = 0;     // the generator itself was over 1 ms behind
-  std::uint64_t bytes_sent = 0, bytes_received = 0;
+  std::uint64_t bytes_sent = 0, bytes_received = 0;  // resends included
+  // Resilient streams.
+  std::uint64_t resent = 0;              // frames written again on a new call
+  std::uint64_t duplicates = 0;          // answers to a sequence already answered (ignored)
+  std::uint64_t reconnects = 0;          // reconnects that worked
+  std::uint64_t reconnect_attempts = 0;  // calls opened after a failure
+  std::uint64_t streams_given_up = 0;    // streams that found no working call in time
   std::uint64_t late() const { return late_flow_control + late_scheduler; }
 };
 
@@ -67,6 +75,14 @@ class Recorder {
   void Lost(std::uint64_t frames, const std::string& code, const std::string& message);
   void Unsent(std::uint64_t frames);
   void CallStatus(const std::string& code);
+  // Resilient streams: a frame written again on a new call; an answer to a sequence already
+  // answered; a call opened after a failure; a reconnect that worked (its time is in the
+  // stream's StreamStats); a stream that gave up.
+  void Resent(std::size_t bytes);
+  void Duplicate();
+  void ReconnectAttempt();
+  void Reconnected();
+  void GaveUp();
 
   // Closes the interval ending at `t_end_s` (seconds since the start) and starts the next.
   SecondStats CloseInterval(double t_end_s, int open_streams);

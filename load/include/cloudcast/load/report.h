@@ -28,6 +28,20 @@ struct Report {
   Histogram latency, service;
   std::map<std::string, std::uint64_t> per_instance, status_codes, errors, call_status;
   std::vector<SecondStats> series;
+  // Resilience and spread: the channels' policy, each stream's account, and per replica.
+  std::string lb_policy;
+  bool resilient = false;
+  double reconnect_timeout_s = 0;
+  std::vector<std::string> replicas_at_start;  // answered GetInfo before the streams opened
+  int addresses_answering = 0;                 // distinct addresses that answered then
+  std::vector<StreamStats> streams_detail;
+  struct Replica {
+    int streams = 0;           // streams that one of its calls answered
+    int streams_at_start = 0;  // streams whose first call it answered
+    std::uint64_t frames = 0;  // replies (clouds and frame errors) it sent
+  };
+  std::map<std::string, Replica> replicas;
+  std::vector<std::int64_t> reconnect_ns;  // every stream's reconnect times, sorted
 
   double answered_fps() const {
     return result.elapsed_s > 0 ? totals.answered / result.elapsed_s : 0;
@@ -37,6 +51,9 @@ struct Report {
 // Gathers the figures of a finished run.
 Report MakeReport(Fleet& fleet, const FleetResult& result, const std::string& frames,
                   const std::string& schedule, nlohmann::json options);
+
+// The p-th percentile (0-100, nearest rank) of sorted values; 0 when empty.
+std::int64_t PercentileOf(const std::vector<std::int64_t>& sorted, double p);
 
 // The percentiles every rendering shows.
 const std::vector<double>& ReportPercentiles();  // 50, 90, 99, 99.9
