@@ -8,7 +8,9 @@
 //               libspng, JPEG colour.
 #include <lz4.h>
 #include <spng.h>
+#define ZSTD_STATIC_LINKING_ONLY  // ZSTD_c_literalCompressionMode, for one candidate
 #include <time.h>
+#include <zstd.h>
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
@@ -211,6 +213,42 @@ std::vector<Candidate> Candidates() {
             }));
       }
     }
+  }
+
+  // zstd with uncompressed literals (no Huffman stage): faster to decode, larger.
+  for (int level : {1, -1}) {
+    auto cctx = std::shared_ptr<ZSTD_CCtx>(ZSTD_createCCtx(), ZSTD_freeCCtx);
+    auto dctx = std::shared_ptr<ZSTD_DCtx>(ZSTD_createDCtx(), ZSTD_freeDCtx);
+    auto buf = std::make_shared<std::vector<std::uint8_t>>();
+    c.push_back(Row(
+        "zstd" + std::to_string(level) + "-up-rawlit", "literals stored, not Huffman-coded",
+        [=](const Frame& f, Encoded* e) {
+          auto one = [&](const void* data, const PlaneLayout& l, std::string* out) {
+            buf->resize(l.bytes());
+            ApplyPredictor(Predictor::kUp, l, data, l.width * l.bpp, buf->data());
+            ZSTD_CCtx_reset(cctx.get(), ZSTD_reset_session_and_parameters);
+            ZSTD_CCtx_setParameter(cctx.get(), ZSTD_c_compressionLevel, level);
+            ZSTD_CCtx_setParameter(cctx.get(), ZSTD_c_literalCompressionMode, ZSTD_ps_disable);
+            out->resize(ZSTD_compressBound(l.bytes()));
+            out->resize(
+                ZSTD_compress2(cctx.get(), out->data(), out->size(), buf->data(), l.bytes()));
+          };
+          one(f.disparity.pixels.data(), LayoutOf(f.disparity.view()), &e->disparity);
+          one(f.colour.pixels.data(), LayoutOf(f.colour.view()), &e->colour);
+        },
+        [=](const Frame& f, const Encoded& e, bool check) {
+          auto one = [&](const std::string& in, const PlaneLayout& l,
+                         const std::vector<std::uint8_t>& want) {
+            buf->resize(l.bytes());
+            const std::size_t n =
+                ZSTD_decompressDCtx(dctx.get(), buf->data(), l.bytes(), in.data(), in.size());
+            if (n != l.bytes()) return false;
+            UndoPredictor(Predictor::kUp, l, buf->data());
+            return !check || *buf == want;
+          };
+          return one(e.disparity, LayoutOf(f.disparity.view()), f.disparity.pixels) &&
+                 one(e.colour, LayoutOf(f.colour.view()), f.colour.pixels);
+        }));
   }
 
   // lz4 (fast mode) on the up-predicted planes.
