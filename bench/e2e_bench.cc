@@ -1,7 +1,8 @@
 // cloudcast-e2e-bench: the whole service over loopback. It starts `cloudcast-server` as a child
 // process, streams New Tsukuba frames (or synthetic ones) through 1, 2 and 4 concurrent streams,
-// raw and PNG-encoded, and reports frames per second, latency percentiles and the server's CPU
-// per frame, split into the share inside the core pipeline + Draco and the share outside them.
+// raw, zstd-compressed (the compressed uplink) and PNG-encoded, and reports frames per second,
+// latency percentiles and the server's CPU per frame, split into the share inside the core
+// pipeline + Draco and the share outside them.
 //
 // Two runs per case:
 //   throughput  every stream sends as fast as the server answers (delivery "all", a window of
@@ -39,6 +40,7 @@
 #include "cloudcast/datasets/synthetic.h"
 #include "cloudcast/datasets/tsukuba.h"
 #include "cloudcast/io/image_io.h"
+#include "cloudcast/proto/convert.h"
 #include "cloudcast/testing/metrics_scrape.h"
 
 namespace cloudcast::bench {
@@ -51,7 +53,15 @@ struct Frame {
   OwnedDisparity disparity;
   OwnedColor colour;
   std::string disparity_png, colour_png;
+  // The compressed uplink (row deltas + zstd, the client library's default), compressed once.
+  v1::CompressedDisparity disparity_zstd;
+  v1::CompressedColor colour_zstd;
 };
+
+enum class Uplink { kRaw, kPng, kZstd };
+const char* Name(Uplink u) {
+  return u == Uplink::kPng ? "png" : u == Uplink::kZstd ? "zstd" : "raw";
+}
 
 int FreePort() {
   const int fd = socket(AF_INET, SOCK_STREAM, 0);
@@ -156,10 +166,10 @@ struct CaseResult {
 
 // One case: `streams` streams for `seconds`, either as fast as possible with `window` frames in
 // flight per stream (paced_fps == 0) or at paced_fps each.
-CaseResult RunCase(const ServerProcess& server, const std::vector<Frame>& frames, bool png,
+CaseResult RunCase(const ServerProcess& server, const std::vector<Frame>& frames, Uplink uplink,
                    int streams, double seconds, int window, double paced_fps) {
   CaseResult r;
-  r.encoding = png ? "png" : "raw";
+  r.encoding = Name(uplink);
   r.mode = paced_fps > 0 ? "paced " + std::to_string(static_cast<int>(paced_fps)) + " fps"
                          : "throughput";
   r.streams = streams;
@@ -233,8 +243,11 @@ CaseResult RunCase(const ServerProcess& server, const std::vector<Frame>& frames
         ++st.in_flight;
       }
       absl::Status sent =
-          png ? st.stream->Send(cc::EncodedImage{f.disparity_png}, cc::EncodedImage{f.colour_png})
-              : st.stream->Send(f.disparity.view(), f.colour.view());
+          uplink == Uplink::kPng
+              ? st.stream->Send(cc::EncodedImage{f.disparity_png}, cc::EncodedImage{f.colour_png})
+          : uplink == Uplink::kZstd ? st.stream->Send(cc::PrecompressedDisparity{&f.disparity_zstd},
+                                                      cc::PrecompressedColor{&f.colour_zstd})
+                                    : st.stream->Send(f.disparity.view(), f.colour.view());
       if (!sent.ok()) {
         std::cerr << "send: " << sent << "\n";
         break;
@@ -284,7 +297,7 @@ std::vector<Frame> LoadFrames(const std::string& dir) {
   std::vector<Frame> frames;
   if (auto loaded = tsukuba::LoadAll(dir); loaded.ok()) {
     for (tsukuba::Frame& t : *loaded) {
-      frames.push_back(Frame{std::move(t.disparity), std::move(t.colour), {}, {}});
+      frames.push_back(Frame{std::move(t.disparity), std::move(t.colour), {}, {}, {}, {}});
     }
   }
   if (frames.empty()) {
@@ -311,6 +324,9 @@ std::vector<Frame> LoadFrames(const std::string& dir) {
               f.colour.pixels.data());
     cv::imencode(".png", c, buf, {cv::IMWRITE_PNG_COMPRESSION, 1});
     f.colour_png.assign(buf.begin(), buf.end());
+    (void)convert::ToProto(f.disparity.view(), convert::Compression{}, "disparity",
+                           &f.disparity_zstd);
+    (void)convert::ToProto(f.colour.view(), convert::Compression{}, "colour", &f.colour_zstd);
   }
   return frames;
 }
@@ -318,9 +334,9 @@ std::vector<Frame> LoadFrames(const std::string& dir) {
 int Main(int argc, char** argv) {
   CLI::App app{
       "cloudcast-e2e-bench: the gRPC service end to end over loopback. Starts cloudcast-server,\n"
-      "streams frames through 1, 2 and 4 concurrent streams (raw and PNG), and prints frames/s,\n"
-      "latency p50/p90/p99 (send to reply) and the server's CPU per frame, inside the core\n"
-      "pipeline + Draco and outside them."};
+      "streams frames through 1, 2 and 4 concurrent streams (raw, zstd, PNG), and prints\n"
+      "frames/s, latency p50/p90/p99 (send to reply) and the server's CPU per frame, inside\n"
+      "the core pipeline + Draco and outside them."};
   std::string data_dir = tsukuba::DefaultDir();
   std::string server_bin =
       (std::filesystem::read_symlink("/proc/self/exe").parent_path() / "cloudcast-server").string();
@@ -336,8 +352,9 @@ int Main(int argc, char** argv) {
       ->check(CLI::Range(0.5, 600.0))
       ->capture_default_str();
   app.add_option("--streams", stream_counts, "concurrent stream counts")->capture_default_str();
-  app.add_option("--encodings", encodings, "raw and/or png")
-      ->check(CLI::IsMember({"raw", "png"}))
+  app.add_option("--encodings,--encoding", encodings,
+                 "raw, zstd (the compressed uplink, compressed once up front) and/or png")
+      ->check(CLI::IsMember({"raw", "zstd", "png"}))
       ->capture_default_str();
   app.add_option("--window", window, "frames in flight per stream in the throughput runs")
       ->check(CLI::Range(1, 64))
@@ -356,13 +373,15 @@ int Main(int argc, char** argv) {
     return 1;
   }
   const std::vector<Frame> frames = LoadFrames(data_dir);
-  std::size_t raw_bytes = 0, png_bytes = 0;
+  std::size_t raw_bytes = 0, png_bytes = 0, zstd_bytes = 0;
   for (const Frame& f : frames) {
     raw_bytes += f.disparity.pixels.size() + f.colour.pixels.size();
     png_bytes += f.disparity_png.size() + f.colour_png.size();
+    zstd_bytes += f.disparity_zstd.payload().size() + f.colour_zstd.payload().size();
   }
   std::cout << frames.size() << " frames of " << frames[0].disparity.width << "x"
             << frames[0].disparity.height << ": " << raw_bytes / frames.size() / 1024 << " KB raw, "
+            << zstd_bytes / frames.size() / 1024 << " KB as zstd, "
             << png_bytes / frames.size() / 1024 << " KB as PNG per frame\n";
   ServerProcess server(server_bin, threads);
   // Wait for the server to answer.
@@ -386,10 +405,12 @@ int Main(int argc, char** argv) {
   std::cout << line;
   for (const std::string& enc : encodings) {
     for (int n : stream_counts) {
-      std::vector<CaseResult> cases = {
-          RunCase(server, frames, enc == "png", n, seconds, window, 0)};
+      const Uplink uplink = enc == "png"    ? Uplink::kPng
+                            : enc == "zstd" ? Uplink::kZstd
+                                            : Uplink::kRaw;
+      std::vector<CaseResult> cases = {RunCase(server, frames, uplink, n, seconds, window, 0)};
       if (paced_fps > 0) {
-        cases.push_back(RunCase(server, frames, enc == "png", n, seconds, window, paced_fps));
+        cases.push_back(RunCase(server, frames, uplink, n, seconds, window, paced_fps));
       }
       for (const CaseResult& r : cases) {
         std::snprintf(line, sizeof line,
@@ -405,7 +426,7 @@ int Main(int argc, char** argv) {
   }
   std::cout << "\nsrv CPU ms: server process CPU (user + system) per answered frame; core+Draco: "
                "the part inside Pipeline::Run and EncodeDraco (thread CPU time); outside: the "
-               "rest (gRPC, protobuf, PNG decoding, scheduling).\n";
+               "rest (gRPC, protobuf, PNG / zstd decoding, scheduling).\n";
   if (!json_path.empty()) {
     nlohmann::json j = nlohmann::json::array();
     for (const CaseResult& r : results) j.push_back(r.ToJson());

@@ -120,6 +120,7 @@ struct Stream::Impl {
   bool write_failed = false;  // the current call refused a write; the reader learns why
   std::uint64_t next_sequence = 0;
   std::atomic<std::uint64_t> frames_sent{0};
+  std::atomic<std::uint64_t> image_bytes_sent{0};
 
   // Frames sent and not answered yet, in send order, and request buffers to reuse. Replies come
   // in send order; frames the server skipped (DELIVERY_LATEST) are passed over when a later
@@ -207,6 +208,7 @@ struct Stream::Impl {
       ReturnSpare(std::move(request));
       return s;
     }
+    const std::uint64_t image_bytes = internal::ImageBytes(*frame);
     const std::uint64_t sequence = meta.sequence.value_or(next_sequence);
     internal::FillMeta(meta, sequence, frame);
     v1::StreamRequest* to_write = request.get();
@@ -225,6 +227,7 @@ struct Stream::Impl {
     if (write_failed && !options.resilient) return Ended();
     // A resilient stream sends the frame again on its next call (or reports it lost).
     frames_sent.fetch_add(1, std::memory_order_relaxed);
+    image_bytes_sent.fetch_add(image_bytes, std::memory_order_relaxed);
     return absl::OkStatus();
   }
 
@@ -505,6 +508,10 @@ absl::Status Stream::CloseSend() { return impl_->CloseSend(); }
 absl::Status Stream::Finish() { return impl_->Finish(); }
 
 void Stream::Cancel() { impl_->Cancel(); }
+
+std::uint64_t Stream::image_bytes_sent() const {
+  return impl_->image_bytes_sent.load(std::memory_order_relaxed);
+}
 
 std::uint64_t Stream::frames_sent() const {
   return impl_->frames_sent.load(std::memory_order_relaxed);

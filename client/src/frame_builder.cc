@@ -15,6 +15,16 @@ std::int64_t UnixNanosNow() {
       .count();
 }
 
+DisparityInput CompressRaw(const DisparityInput& input, const convert::Compression& compression) {
+  if (const auto* view = std::get_if<DisparityView>(&input)) return Compressed(*view, compression);
+  return input;
+}
+
+ColorInput CompressRaw(const ColorInput& input, const convert::Compression& compression) {
+  if (const auto* view = std::get_if<ColorView>(&input)) return Compressed(*view, compression);
+  return input;
+}
+
 namespace internal {
 namespace {
 
@@ -32,6 +42,15 @@ absl::Status FillImages(const DisparityInput& disparity, const ColorInput& colou
   v1::DisparityImage* d = frame->mutable_disparity();
   if (const auto* view = std::get_if<DisparityView>(&disparity)) {
     if (absl::Status s = convert::ToProto(*view, "disparity", d->mutable_raw()); !s.ok()) return s;
+  } else if (const auto* c = std::get_if<CompressedDisparityView>(&disparity)) {
+    if (absl::Status s =
+            convert::ToProto(c->view, c->compression, "disparity", d->mutable_compressed());
+        !s.ok()) {
+      return s;
+    }
+  } else if (const auto* p = std::get_if<PrecompressedDisparity>(&disparity)) {
+    if (p->message == nullptr) return absl::InvalidArgumentError("disparity message is null");
+    *d->mutable_compressed() = *p->message;
   } else {
     const auto& encoded = std::get<EncodedImage>(disparity);
     if (absl::Status s = CheckEncoded(encoded, "disparity"); !s.ok()) return s;
@@ -42,6 +61,14 @@ absl::Status FillImages(const DisparityInput& disparity, const ColorInput& colou
   if (const auto* view = std::get_if<ColorView>(&colour)) {
     return convert::ToProto(*view, "colour", c->mutable_raw());
   }
+  if (const auto* cv = std::get_if<CompressedColorView>(&colour)) {
+    return convert::ToProto(cv->view, cv->compression, "colour", c->mutable_compressed());
+  }
+  if (const auto* p = std::get_if<PrecompressedColor>(&colour)) {
+    if (p->message == nullptr) return absl::InvalidArgumentError("colour message is null");
+    *c->mutable_compressed() = *p->message;
+    return absl::OkStatus();
+  }
   if (const auto* view = std::get_if<BgraView>(&colour)) {
     return convert::BgraToProto(view->data, view->size_bytes, view->width, view->height,
                                 view->stride_bytes, "colour", c->mutable_raw());
@@ -50,6 +77,13 @@ absl::Status FillImages(const DisparityInput& disparity, const ColorInput& colou
   if (absl::Status s = CheckEncoded(encoded, "colour"); !s.ok()) return s;
   c->set_encoded(encoded.bytes.data(), encoded.bytes.size());
   return absl::OkStatus();
+}
+
+std::uint64_t ImageBytes(const v1::Frame& frame) {
+  const v1::DisparityImage& d = frame.disparity();
+  const v1::ColorImage& c = frame.colour();
+  return d.raw().pixels().size() + d.encoded().size() + d.compressed().payload().size() +
+         c.raw().pixels().size() + c.encoded().size() + c.compressed().payload().size();
 }
 
 void FillMeta(const FrameMeta& meta, std::uint64_t sequence, v1::Frame* frame) {

@@ -1,11 +1,10 @@
 #include "cloudcast/client/opencv.h"
 
 #include <cstddef>
-#include <string>
-#include <vector>
-
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <string>
+#include <vector>
 
 #include "absl/strings/str_cat.h"
 
@@ -42,9 +41,15 @@ absl::StatusOr<DisparityInput> DisparityFromMat(const cv::Mat& disparity) {
   if (absl::Status s = CheckShape(disparity, "disparity"); !s.ok()) return s;
   DisparityView view;
   switch (disparity.type()) {
-    case CV_8UC1: view.encoding = DisparityEncoding::kU8; break;
-    case CV_16UC1: view.encoding = DisparityEncoding::kU16; break;
-    case CV_32FC1: view.encoding = DisparityEncoding::kF32; break;
+    case CV_8UC1:
+      view.encoding = DisparityEncoding::kU8;
+      break;
+    case CV_16UC1:
+      view.encoding = DisparityEncoding::kU16;
+      break;
+    case CV_32FC1:
+      view.encoding = DisparityEncoding::kF32;
+      break;
     case CV_16SC1:
       return absl::InvalidArgumentError(
           "disparity Mat is CV_16S (signed, e.g. StereoSGBM's 16 x disparity with negative "
@@ -88,6 +93,15 @@ absl::Status SendMats(Stream& stream, const cv::Mat& disparity, const cv::Mat& c
   absl::StatusOr<ColorInput> c = ColorFromMat(colour);
   if (!c.ok()) return c.status();
   return stream.Send(*d, *c, meta);
+}
+
+absl::Status SendMats(Stream& stream, const cv::Mat& disparity, const cv::Mat& colour,
+                      const FrameMeta& meta, const convert::Compression& compression) {
+  absl::StatusOr<DisparityInput> d = DisparityFromMat(disparity);
+  if (!d.ok()) return d.status();
+  absl::StatusOr<ColorInput> c = ColorFromMat(colour);
+  if (!c.ok()) return c.status();
+  return stream.Send(CompressRaw(*d, compression), CompressRaw(*c, compression), meta);
 }
 
 absl::StatusOr<Result> ProcessMats(Client& client, const cv::Mat& disparity, const cv::Mat& colour,

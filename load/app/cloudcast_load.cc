@@ -224,9 +224,9 @@ std::unique_ptr<cloudcast::cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
       ->capture_default_str()
       ->group(frames);
   app.add_option("--encoding", f.encoding,
-                 "How images travel: raw pixels; png (lossless); jpeg (colour JPEG, disparity "
-                 "PNG)")
-      ->check(CLI::IsMember({"raw", "png", "jpeg"}))
+                 "How images travel: raw pixels; zstd (lossless: row deltas + zstd, cheap for "
+                 "the server); png (lossless); jpeg (colour JPEG, disparity PNG)")
+      ->check(CLI::IsMember({"raw", "zstd", "png", "jpeg"}))
       ->capture_default_str()
       ->group(frames);
   app.add_option("--jpeg-quality", f.jpeg_quality, "JPEG quality with --encoding jpeg")

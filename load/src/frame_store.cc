@@ -72,6 +72,20 @@ absl::StatusOr<v1::Frame> MakeFrame(const DisparityView& disparity, const ColorV
                                     const std::string& frame_id, const FrameSourceOptions& o) {
   v1::Frame frame;
   frame.set_frame_id(frame_id);
+  if (o.uplink == Uplink::kZstd) {
+    const convert::Compression z;
+    if (auto s = convert::ToProto(disparity, z, "disparity",
+                                  frame.mutable_disparity()->mutable_compressed());
+        !s.ok()) {
+      return s;
+    }
+    if (auto s =
+            convert::ToProto(colour, z, "colour", frame.mutable_colour()->mutable_compressed());
+        !s.ok()) {
+      return s;
+    }
+    return frame;
+  }
   const bool encode_disparity =
       o.uplink != Uplink::kRaw && disparity.encoding != DisparityEncoding::kF32;
   if (encode_disparity) {
@@ -147,6 +161,8 @@ bool ParseUplink(const std::string& name, Uplink* out) {
     *out = Uplink::kPng;
   else if (name == "jpeg")
     *out = Uplink::kJpeg;
+  else if (name == "zstd")
+    *out = Uplink::kZstd;
   else
     return false;
   return true;
@@ -160,6 +176,8 @@ const char* Name(Uplink uplink) {
       return "png";
     case Uplink::kJpeg:
       return "jpeg";
+    case Uplink::kZstd:
+      return "zstd";
   }
   return "raw";
 }

@@ -503,6 +503,121 @@ absl::Status ViewRaw(const v1::RawColor& raw, std::string_view field, const Limi
 
 // ---------------------------------------------------------------------------------------------
 
+absl::Status FromProto(v1::Compression compression, std::string_view field, Predictor* out) {
+  switch (compression) {
+    case v1::COMPRESSION_ZSTD:
+      *out = Predictor::kNone;
+      return absl::OkStatus();
+    case v1::COMPRESSION_ZSTD_DELTA_ROWS:
+      *out = Predictor::kUp;
+      return absl::OkStatus();
+    case v1::COMPRESSION_ZSTD_DELTA_LEFT:
+      *out = Predictor::kLeft;
+      return absl::OkStatus();
+    default:
+      return absl::InvalidArgumentError(
+          absl::StrCat(S(field), " is ", EnumName(&v1::Compression_Name, compression),
+                       "; it must be one of COMPRESSION_ZSTD, COMPRESSION_ZSTD_DELTA_ROWS, "
+                       "COMPRESSION_ZSTD_DELTA_LEFT"));
+  }
+}
+
+const std::vector<v1::Compression>& AcceptedCompressions() {
+  static const std::vector<v1::Compression> accepted = {
+      v1::COMPRESSION_ZSTD, v1::COMPRESSION_ZSTD_DELTA_ROWS, v1::COMPRESSION_ZSTD_DELTA_LEFT};
+  return accepted;
+}
+
+namespace {
+
+PlaneCompressor* ThreadCompressor() {
+  thread_local PlaneCompressor compressor;
+  return &compressor;
+}
+
+template <typename View, typename Compressed>
+absl::Status CompressAny(const View& view, const Compression& compression, std::string_view field,
+                         Compressed* out, PlaneCompressor* compressor) {
+  Predictor predictor;
+  if (auto s = FromProto(compression.codec, Path(field, "compression"), &predictor); !s.ok()) {
+    return s;
+  }
+  if (compressor == nullptr) compressor = ThreadCompressor();
+  if (auto s =
+          compressor->Compress(view, predictor, compression.level, field, out->mutable_payload());
+      !s.ok()) {
+    return s;
+  }
+  out->set_encoding(ToProto(view.encoding));
+  out->set_width(view.width);
+  out->set_height(view.height);
+  out->set_compression(compression.codec);
+  return absl::OkStatus();
+}
+
+template <typename Compressed, typename Encoding, typename View>
+absl::Status DecodeAny(const Compressed& c, std::string_view field, const Limits& limits,
+                       Encoding encoding, const std::string& encoding_name,
+                       PlaneDecompressor* decompressor, View* view) {
+  Predictor predictor;
+  if (auto s = FromProto(c.compression(), Path(field, "compression"), &predictor); !s.ok()) {
+    return s;
+  }
+  if (auto s = check::ImageSize(field, c.width(), c.height(), limits); !s.ok()) return s;
+  const PlaneLayout layout = LayoutOf(encoding, c.width(), c.height());
+  const std::uint8_t* pixels = nullptr;
+  if (auto s = decompressor->Decompress(
+          c.payload(), layout, predictor, Path(field, "payload"),
+          absl::StrCat(c.width(), "x", c.height(), " ", encoding_name), &pixels);
+      !s.ok()) {
+    return s;
+  }
+  view->data = pixels;
+  view->size_bytes = layout.bytes();
+  view->width = c.width();
+  view->height = c.height();
+  view->stride_bytes = std::size_t{c.width()} * layout.bpp;
+  view->encoding = encoding;
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+absl::Status ToProto(const DisparityView& view, const Compression& compression,
+                     std::string_view field, v1::CompressedDisparity* out,
+                     PlaneCompressor* compressor) {
+  return CompressAny(view, compression, field, out, compressor);
+}
+
+absl::Status ToProto(const ColorView& view, const Compression& compression, std::string_view field,
+                     v1::CompressedColor* out, PlaneCompressor* compressor) {
+  return CompressAny(view, compression, field, out, compressor);
+}
+
+absl::Status DecodeCompressed(const v1::CompressedDisparity& compressed, std::string_view field,
+                              const Limits& limits, PlaneDecompressor* decompressor,
+                              DisparityView* view) {
+  DisparityEncoding encoding;
+  if (auto s = FromProto(compressed.encoding(), Path(field, "encoding"), &encoding); !s.ok()) {
+    return s;
+  }
+  return DecodeAny(compressed, field, limits, encoding,
+                   v1::DisparityEncoding_Name(compressed.encoding()), decompressor, view);
+}
+
+absl::Status DecodeCompressed(const v1::CompressedColor& compressed, std::string_view field,
+                              const Limits& limits, PlaneDecompressor* decompressor,
+                              ColorView* view) {
+  ColorEncoding encoding;
+  if (auto s = FromProto(compressed.encoding(), Path(field, "encoding"), &encoding); !s.ok()) {
+    return s;
+  }
+  return DecodeAny(compressed, field, limits, encoding,
+                   v1::ColorEncoding_Name(compressed.encoding()), decompressor, view);
+}
+
+// ---------------------------------------------------------------------------------------------
+
 void FillError(const absl::Status& status, v1::ErrorKind kind, std::uint64_t sequence,
                const std::string& frame_id, v1::FrameError* error) {
   error->set_sequence(sequence);

@@ -52,9 +52,18 @@ absl::Status PrepareFrameImages(const v1::Frame& frame, const Limits& limits,
       }
       out->decoded = true;
       break;
+    case v1::DisparityImage::kCompressed:
+      if (auto s = convert::DecodeCompressed(frame.disparity().compressed(),
+                                             "frame.disparity.compressed", limits,
+                                             &scratch->disparity_codec, &out->disparity);
+          !s.ok()) {
+        return s;
+      }
+      out->decoded = true;
+      break;
     default:
       return absl::InvalidArgumentError(
-          "frame.disparity is missing: set frame.disparity.raw or frame.disparity.encoded");
+          "frame.disparity is missing: set frame.disparity.raw, .compressed or .encoded");
   }
   switch (frame.colour().data_case()) {
     case v1::ColorImage::kRaw:
@@ -73,9 +82,17 @@ absl::Status PrepareFrameImages(const v1::Frame& frame, const Limits& limits,
       }
       out->decoded = true;
       break;
+    case v1::ColorImage::kCompressed:
+      if (auto s = convert::DecodeCompressed(frame.colour().compressed(), "frame.colour.compressed",
+                                             limits, &scratch->colour_codec, &out->colour);
+          !s.ok()) {
+        return s;
+      }
+      out->decoded = true;
+      break;
     default:
       return absl::InvalidArgumentError(
-          "frame.colour is missing: set frame.colour.raw or frame.colour.encoded");
+          "frame.colour is missing: set frame.colour.raw, .compressed or .encoded");
   }
   return CheckSameSize(out->disparity, "frame.disparity", out->colour, "frame.colour");
 }

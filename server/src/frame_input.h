@@ -4,6 +4,7 @@
 #include <cstdint>
 
 #include "absl/status/status.h"
+#include "cloudcast/core/frame_codec.h"
 #include "cloudcast/core/image.h"
 #include "cloudcast/core/limits.h"
 #include "cloudcast/io/image_io.h"
@@ -15,18 +16,24 @@ namespace cloudcast::server {
 struct FrameImages {
   DisparityView disparity;
   ColorView colour;
-  bool decoded = false;  // at least one image came encoded (PNG, JPEG, ...) and was decoded
+  // at least one image came encoded (PNG, JPEG, ...) or compressed, and was decoded
+  bool decoded = false;
 };
 
 // Decoded pixels, kept by a worker from frame to frame.
 struct DecodeScratch {
   OwnedDisparity disparity;
   OwnedColor colour;
+  // Compressed images: buffers that grow to the largest frame seen and are then reused.
+  PlaneDecompressor disparity_codec;
+  PlaneDecompressor colour_codec;
 };
 
 // Fills `out` from `frame`. Raw images are viewed in place, without a copy: the views point into
 // `frame`'s bytes, which must outlive them (convert::ViewRaw). Encoded images are decoded into
-// `scratch` once their header's size has been checked (CheckEncodedImage).
+// `scratch` once their header's size has been checked (CheckEncodedImage); compressed images are
+// decompressed into `scratch` once their size and payload header have been checked
+// (convert::DecodeCompressed).
 //
 // Errors name the field by its proto path under "frame." and the limit it broke:
 // RESOURCE_EXHAUSTED for an image over `limits`, INVALID_ARGUMENT for anything malformed.

@@ -208,9 +208,10 @@ std::unique_ptr<cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
                "skips stale frames to stay real-time")
       ->group(streaming);
   app.add_option("--encoding", f.encoding,
-                 "How images travel: raw pixels; png (lossless); jpeg (colour JPEG, disparity "
-                 "still lossless) for a thin uplink")
-      ->check(CLI::IsMember({"raw", "png", "jpeg"}))
+                 "How images travel: raw pixels; zstd (lossless: row deltas + zstd, about a "
+                 "third of raw and cheap for the server); png (lossless); jpeg (colour JPEG, "
+                 "disparity still lossless) for a thin uplink")
+      ->check(CLI::IsMember({"raw", "zstd", "png", "jpeg"}))
       ->capture_default_str()
       ->group(streaming);
   app.add_option("--jpeg-quality", f.jpeg_quality, "JPEG quality with --encoding jpeg")

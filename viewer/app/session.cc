@@ -38,6 +38,8 @@ bool ParseImageEncoding(const std::string& name, ImageEncoding* out) {
     *out = ImageEncoding::kPng;
   else if (name == "jpeg")
     *out = ImageEncoding::kJpeg;
+  else if (name == "zstd")
+    *out = ImageEncoding::kZstd;
   else
     return false;
   return true;
@@ -51,6 +53,8 @@ const char* Name(ImageEncoding encoding) {
       return "png";
     case ImageEncoding::kJpeg:
       return "jpeg";
+    case ImageEncoding::kZstd:
+      return "zstd";
   }
   return "?";
 }
@@ -205,6 +209,10 @@ void Session::SendLoop() {
     if (options_.encoding == ImageEncoding::kRaw) {
       bytes = RawBytes(frame.disparity, frame.colour);
       status = SendMats(*stream_, frame.disparity, frame.colour, meta);
+    } else if (options_.encoding == ImageEncoding::kZstd) {
+      const std::uint64_t before = stream_->image_bytes_sent();
+      status = SendMats(*stream_, frame.disparity, frame.colour, meta, convert::Compression{});
+      bytes = stream_->image_bytes_sent() - before;
     } else {
       // PNG has no float samples; TIFF keeps them exactly.
       absl::StatusOr<std::string> d = frame.disparity.depth() == CV_32F

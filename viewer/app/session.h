@@ -27,6 +27,7 @@ enum class ImageEncoding {
   kRaw,   // pixels as they are (the fastest on loopback and fast links)
   kPng,   // both images as PNG (lossless; float disparities go as TIFF)
   kJpeg,  // colour as JPEG, disparity lossless as with kPng: the thinnest uplink
+  kZstd,  // both images compressed losslessly (row deltas + zstd): cheap on both sides
 };
 bool ParseImageEncoding(const std::string& name, ImageEncoding* out);
 const char* Name(ImageEncoding encoding);

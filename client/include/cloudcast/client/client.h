@@ -74,6 +74,9 @@ class Stream {
 
   // Frames written so far (each once, however often a resilient stream sent it again).
   std::uint64_t frames_sent() const;
+  // Image bytes of those frames as they went out: raw pixels, compressed payloads or encoded
+  // files (what the uplink carried, without the protocol's few bytes of framing).
+  std::uint64_t image_bytes_sent() const;
   // Resilient streams (StreamOptions::resilient): new calls opened after a lost one, and frames
   // sent again on them.
   int reconnects() const;

@@ -1,6 +1,6 @@
 // What a client sends: a disparity map and a colour image of the same size, as raw pixels in
-// memory (core views, not copied until Send) or as encoded image files, plus the frame's
-// metadata. OpenCV users: see opencv.h for cv::Mat adapters.
+// memory (core views, not copied until Send), raw pixels to compress losslessly, or encoded image
+// files, plus the frame's metadata. OpenCV users: see opencv.h for cv::Mat adapters.
 #pragma once
 
 #include <cstddef>
@@ -11,6 +11,7 @@
 #include <variant>
 
 #include "cloudcast/core/image.h"
+#include "cloudcast/proto/convert.h"
 
 namespace cloudcast::client {
 
@@ -32,8 +33,49 @@ struct BgraView {
   std::size_t stride_bytes = 0;  // distance between row starts, >= width x 4
 };
 
-using DisparityInput = std::variant<DisparityView, EncodedImage>;
-using ColorInput = std::variant<ColorView, BgraView, EncodedImage>;
+// Raw pixels that Send compresses losslessly on the way out (the protocol's CompressedDisparity /
+// CompressedColor: a row predictor, then zstd). On camera images it sends about a third of the
+// raw bytes for a few milliseconds of client CPU, and the server decodes it in about a millisecond,
+// several times cheaper than PNG on both sides (README, cloudcast-uplink-bench). The view is
+// read during Send only. `compression` picks the predictor and zstd level; the default is the
+// one the uplink table chose. BGRA has no protocol encoding: compress BGR (or RGBA) pixels.
+struct CompressedDisparityView {
+  DisparityView view;
+  convert::Compression compression;
+};
+struct CompressedColorView {
+  ColorView view;
+  convert::Compression compression;
+};
+inline CompressedDisparityView Compressed(const DisparityView& view,
+                                          const convert::Compression& compression = {}) {
+  return {view, compression};
+}
+inline CompressedColorView Compressed(const ColorView& view,
+                                      const convert::Compression& compression = {}) {
+  return {view, compression};
+}
+
+// Pixels compressed earlier (convert::ToProto into the protocol message, e.g. on the camera's
+// own thread, or once for a recorded sequence): sent as they are, the payload copied into the
+// request. Viewed, not owned: keep the message alive until Send / Process returns.
+struct PrecompressedDisparity {
+  const v1::CompressedDisparity* message = nullptr;
+};
+struct PrecompressedColor {
+  const v1::CompressedColor* message = nullptr;
+};
+
+using DisparityInput =
+    std::variant<DisparityView, EncodedImage, CompressedDisparityView, PrecompressedDisparity>;
+using ColorInput =
+    std::variant<ColorView, BgraView, EncodedImage, CompressedColorView, PrecompressedColor>;
+
+// `input` with its raw view, if it holds one, to be compressed; other kinds as they are (a
+// BgraView stays raw: the protocol has no BGRA encoding to compress it as).
+DisparityInput CompressRaw(const DisparityInput& input,
+                           const convert::Compression& compression = {});
+ColorInput CompressRaw(const ColorInput& input, const convert::Compression& compression = {});
 
 // A frame's metadata, echoed by the server in its reply.
 struct FrameMeta {

@@ -25,6 +25,10 @@ absl::StatusOr<ColorInput> ColorFromMat(const cv::Mat& colour);
 // Stream::Send / Client::Process with Mats: the adapters above, then the call.
 absl::Status SendMats(Stream& stream, const cv::Mat& disparity, const cv::Mat& colour,
                       const FrameMeta& meta = {});
+// The same, with the raw pixels compressed losslessly by Send (CompressRaw in frame.h; a CV_8UC4
+// colour Mat still goes raw, as BGR).
+absl::Status SendMats(Stream& stream, const cv::Mat& disparity, const cv::Mat& colour,
+                      const FrameMeta& meta, const convert::Compression& compression);
 absl::StatusOr<Result> ProcessMats(Client& client, const cv::Mat& disparity, const cv::Mat& colour,
                                    const StreamConfig& config = {}, const FrameMeta& meta = {});
 

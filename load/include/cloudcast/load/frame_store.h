@@ -21,7 +21,8 @@
 
 namespace cloudcast::load {
 
-enum class Uplink { kRaw, kPng, kJpeg };
+// kZstd: both images compressed losslessly (row deltas + zstd), float disparities included.
+enum class Uplink { kRaw, kPng, kJpeg, kZstd };
 bool ParseUplink(const std::string& name, Uplink* out);
 const char* Name(Uplink uplink);
 

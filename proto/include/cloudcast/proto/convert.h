@@ -11,10 +11,12 @@
 #include <cstdint>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "cloudcast/core/filters.h"
+#include "cloudcast/core/frame_codec.h"
 #include "cloudcast/core/image.h"
 #include "cloudcast/core/limits.h"
 #include "cloudcast/core/pipeline.h"
@@ -104,6 +106,38 @@ absl::Status ViewRaw(const v1::RawDisparity& raw, std::string_view field, const 
                      DisparityView* view);
 absl::Status ViewRaw(const v1::RawColor& raw, std::string_view field, const Limits& limits,
                      ColorView* view);
+
+// Compressed raw images (CompressedDisparity / CompressedColor): see the proto for the format.
+
+// How a client compresses a raw view.
+struct Compression {
+  v1::Compression codec = v1::COMPRESSION_ZSTD_DELTA_ROWS;  // the default, by the uplink table
+  int level = kDefaultCompressionLevel;                     // zstd's level
+};
+// The predictor of a compression; INVALID_ARGUMENT naming `field` for an unknown one.
+absl::Status FromProto(v1::Compression compression, std::string_view field, Predictor* out);
+// Every compression the server accepts, for GetInfo.
+const std::vector<v1::Compression>& AcceptedCompressions();
+
+// Compresses a view into `out` (its payload buffer keeps its capacity). The view is checked for
+// memory safety only, naming it under `field`. `compressor` null: one kept per thread.
+absl::Status ToProto(const DisparityView& view, const Compression& compression,
+                     std::string_view field, v1::CompressedDisparity* out,
+                     PlaneCompressor* compressor = nullptr);
+absl::Status ToProto(const ColorView& view, const Compression& compression, std::string_view field,
+                     v1::CompressedColor* out, PlaneCompressor* compressor = nullptr);
+
+// Decompresses into `decompressor`'s buffer and views it (packed rows, valid until its next
+// use). Every header field is checked first, then the payload against the size they give, before
+// anything is allocated (PlaneDecompressor::Decompress). Errors name the field under `field`
+// (e.g. "frame.disparity.compressed.payload ..."): INVALID_ARGUMENT when malformed (unknown
+// enums, zero size, a payload that is not exactly the image), RESOURCE_EXHAUSTED over a limit.
+absl::Status DecodeCompressed(const v1::CompressedDisparity& compressed, std::string_view field,
+                              const Limits& limits, PlaneDecompressor* decompressor,
+                              DisparityView* view);
+absl::Status DecodeCompressed(const v1::CompressedColor& compressed, std::string_view field,
+                              const Limits& limits, PlaneDecompressor* decompressor,
+                              ColorView* view);
 
 // ---------------------------------------------------------------------------------------------
 // Errors.
