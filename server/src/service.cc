@@ -693,6 +693,7 @@ void CloudCastService::Housekeeping() {
       std::min(options_.idle_timeout, options_.first_message_timeout) / 10,
       std::chrono::milliseconds(10), std::chrono::milliseconds(1000));
   bool trimmed = true;
+  std::size_t free_at_trim = 0;
   std::unique_lock<std::mutex> lock(streams_mu_);
   while (!stop_housekeeping_) {
     streams_cv_.wait_for(lock, tick, [this] { return stop_housekeeping_; });
@@ -704,9 +705,19 @@ void CloudCastService::Housekeeping() {
     }
     const bool idle = streams.empty() && active_process_calls_.load() == 0;
     lock.unlock();
-    // Once a burst is over, give the allocator's free pages back to the OS (glibc keeps them in
-    // its arenas otherwise); once per idle spell, since it walks every arena.
-    if (idle && !trimmed) malloc_trim(0);
+    // Once a burst is over, give the allocator's free pages back to the OS: frame buffers stay
+    // on the heap (main.cc), and glibc keeps freed pages in its arenas. Idle is no call open, but
+    // a departed stream's buffers may still be freed after that (its connection's transport
+    // buffers go with the connection), so while idle it trims again whenever the arenas' free
+    // bytes have grown by a megabyte since the last trim. Trimming does not shrink that figure
+    // (the pages stay on the free lists, only unmapped), so an idle server trims once and rests.
+    if (idle) {
+      const std::size_t free_bytes = mallinfo2().fordblks;
+      if (!trimmed || free_bytes > free_at_trim + (std::size_t{1} << 20)) {
+        malloc_trim(0);
+        free_at_trim = free_bytes;
+      }
+    }
     trimmed = idle;
     const Clock::time_point now = Clock::now();
     for (StreamReactor* s : streams) {
