@@ -11,6 +11,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <optional>
 #include <string>
@@ -38,21 +39,25 @@ inline int FreeLoopbackPort() {
   return port;
 }
 
-// One cloudcast-server process. Its output goes to `log_path`.
+// One cloudcast-server process. Its output goes to `log_path`. Without a --metrics-listen among
+// `extra_args` it serves no metrics. `prefix` runs it through another program that execs it in
+// place (e.g. `ip netns exec NS`), so the pid is still the server's.
 class ServerProcess {
  public:
   ServerProcess(const std::string& address, const std::string& instance,
-                const std::vector<std::string>& extra_args, const std::string& log_path)
+                const std::vector<std::string>& extra_args, const std::string& log_path,
+                const std::vector<std::string>& prefix = {})
       : address_(address), instance_(instance), log_path_(log_path) {
-    std::vector<std::string> args = {BinDir() + "/cloudcast-server",
-                                     "--listen",
-                                     address,
-                                     "--metrics-listen",
-                                     "",
-                                     "--instance",
-                                     instance,
-                                     "--log-level",
-                                     "warn"};
+    std::vector<std::string> args = prefix;
+    for (const std::string& a : {BinDir() + "/cloudcast-server", std::string("--listen"), address,
+                                 std::string("--instance"), instance, std::string("--log-level"),
+                                 std::string("warn")}) {
+      args.push_back(a);
+    }
+    if (std::find(extra_args.begin(), extra_args.end(), "--metrics-listen") == extra_args.end()) {
+      args.push_back("--metrics-listen");
+      args.push_back("");
+    }
     args.insert(args.end(), extra_args.begin(), extra_args.end());
     pid_ = fork();
     if (pid_ == 0) {

@@ -20,6 +20,7 @@
 #include "cloudcast/client/client.h"
 #include "cloudcast/datasets/synthetic.h"
 #include "replica_support.h"
+#include "support/waiting.h"
 
 namespace cloudcast {
 namespace {
@@ -85,13 +86,14 @@ class ReplicasTest : public testing::ScratchDirTest {
     EXPECT_TRUE(client.ok()) << client.status();
     if (!client.ok()) return nullptr;
     // Connect returns once one replica is ready; round_robin spreads over the ready ones, so
-    // wait (bounded) until GetInfo has been answered by every replica.
+    // wait until GetInfo has been answered by every replica. A subchannel's readiness announces
+    // nothing the client library exposes, hence Eventually; a loaded machine may take seconds.
     std::set<std::string> seen;
-    for (int i = 0; i < 200 && seen.size() < replicas_.size(); ++i) {
+    EXPECT_TRUE(testing::Eventually([&] {
       auto info = (*client)->GetInfo();
       if (info.ok()) seen.insert(info->instance());
-    }
-    EXPECT_EQ(seen.size(), replicas_.size()) << "not every replica answered GetInfo";
+      return seen.size() == replicas_.size();
+    })) << "only " << seen.size() << " of " << replicas_.size() << " replicas answered GetInfo";
     return *std::move(client);
   }
 

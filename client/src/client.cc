@@ -36,6 +36,14 @@ absl::Status FromGrpc(const grpc::Status& status, const std::string& what) {
                       absl::StrCat(what, ": ", status.error_message()));
 }
 
+// How a resilient stream knows its call was lost rather than refused: UNAVAILABLE (the replica
+// was killed, drained, sent GOAWAY, or cannot be reached), or CANCELLED when the stream itself
+// did not cancel it (a server that stops while a call is opening cancels that call).
+bool EndedByTheServerSide(const absl::Status& ended) {
+  return ended.code() == absl::StatusCode::kUnavailable ||
+         ended.code() == absl::StatusCode::kCancelled;
+}
+
 const char* StateName(grpc_connectivity_state state) {
   switch (state) {
     case GRPC_CHANNEL_IDLE:
@@ -380,7 +388,7 @@ struct Stream::Impl {
         std::lock_guard<std::mutex> c(call_mu);
         is_cancelled = cancelled;
       }
-      if (options.resilient && ended.code() == absl::StatusCode::kUnavailable && !is_cancelled) {
+      if (options.resilient && !is_cancelled && EndedByTheServerSide(ended)) {
         ::cloudcast::client::Reconnect event;
         if (Reconnect(ended, &event)) {
           writers.unlock();

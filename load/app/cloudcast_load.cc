@@ -22,6 +22,7 @@
 #include "cloudcast/core/limits.h"
 #include "cloudcast/load/fleet.h"
 #include "cloudcast/load/frame_store.h"
+#include "cloudcast/load/memory_watch.h"
 #include "cloudcast/load/probe.h"
 #include "cloudcast/load/report.h"
 #include "cloudcast/proto/convert.h"
@@ -34,6 +35,7 @@ namespace load = cloudcast::load;
 
 constexpr int kExitFailure = 1;
 constexpr int kExitUsage = 2;
+constexpr int kExitSoakFailed = 3;
 // Hard bounds on a run, whatever the flags say.
 constexpr double kMaxDurationS = 3600;
 constexpr double kMaxFrames = 1e8;
@@ -63,6 +65,12 @@ struct Flags {
   std::string encoding = "raw";
   int jpeg_quality = 90;
   bool lossless = false;
+  // Server memory and the soak
+  std::string watch_memory;
+  double memory_interval_s = 5;
+  bool soak = false;
+  double soak_warmup_s = 15;
+  double soak_max_growth_mb = 64;
   // Output
   std::string json, html;
   double progress_s = 1;
@@ -107,7 +115,8 @@ std::unique_ptr<cloudcast::cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
       ->check(CLI::IsMember({"round_robin", "pick_first"}))
       ->group(target);
   app.add_flag("--resilient", f.resilient,
-               "A stream whose call ends with UNAVAILABLE (replica killed, drained, GOAWAY) opens "
+               "A stream whose call ends with UNAVAILABLE (replica killed, drained, GOAWAY) or an "
+               "unasked-for CANCELLED (a server stopping as the call opened) opens "
                "a new one, sends its config again and, with --lossless, every frame sent and not "
                "answered (latency still counts from the intended time); answers count once per "
                "frame")
@@ -242,6 +251,36 @@ std::unique_ptr<cloudcast::cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
   auto stage_flags = std::make_unique<cloudcast::cli::StageFlags>(
       app, cloudcast::cli::StageFlags::Groups{stages, stages, stages});
 
+  const std::string soak = "Server memory and soak";
+  app.add_option("--watch-memory", f.watch_memory,
+                 "Sample the server's resident memory from its Prometheus endpoint "
+                 "(cloudcast_process_resident_memory_bytes) every --memory-interval seconds, "
+                 "into the report")
+      ->type_name("URL")
+      ->group(soak);
+  app.add_option("--memory-interval", f.memory_interval_s, "Seconds between memory samples")
+      ->check(NumberCheck("a number of seconds in [0.1, 600]",
+                          [](double v) { return v >= 0.1 && v <= 600; }))
+      ->capture_default_str()
+      ->group(soak);
+  app.add_flag("--soak", f.soak,
+               "Judge the run as a soak (needs --watch-memory): exit 3 when any frame is lost, "
+               "unsent or answered with an error (with --lossless: when any frame is not "
+               "answered), or when the memory after --soak-warmup rises more than "
+               "--soak-max-growth-mb above its value at the end of the warm-up")
+      ->group(soak);
+  app.add_option("--soak-warmup", f.soak_warmup_s,
+                 "Seconds of warm-up: memory growth counts from the last sample before this")
+      ->check(NumberCheck("a number of seconds in [0, 3600]",
+                          [](double v) { return v >= 0 && v <= 3600; }))
+      ->capture_default_str()
+      ->group(soak);
+  app.add_option("--soak-max-growth-mb", f.soak_max_growth_mb,
+                 "Allowed rise of the server's memory after the warm-up, MB")
+      ->check(NumberCheck("a number of MB in [0, 1e6]", [](double v) { return v >= 0 && v <= 1e6; }))
+      ->capture_default_str()
+      ->group(soak);
+
   const std::string output = "Output";
   app.add_option("--json", f.json, "Write the report in ghz's JSON shape (plus per-frame fields)")
       ->type_name("FILE")
@@ -311,6 +350,22 @@ int main(int argc, char** argv) {
   if (f.fps == 0 && app.count("--load-start")) return usage("--load-start needs --fps > 0");
   if (app.count("--reconnect-timeout") && !f.resilient) {
     return usage("--reconnect-timeout needs --resilient");
+  }
+  if (f.soak && f.watch_memory.empty()) {
+    return usage("--soak needs --watch-memory URL (the server's /metrics, e.g. "
+                 "http://127.0.0.1:9464/metrics)");
+  }
+  for (const char* flag : {"--memory-interval", "--soak-warmup", "--soak-max-growth-mb"}) {
+    const bool needs_soak = std::string(flag) != "--memory-interval";
+    if (app.count(flag) && (needs_soak ? !f.soak : f.watch_memory.empty())) {
+      return usage(std::string(flag) + (needs_soak ? " needs --soak" : " needs --watch-memory"));
+    }
+  }
+  if (!f.watch_memory.empty()) {
+    // Checked before the run, so a wrong URL is a usage error and not a failed soak.
+    if (auto rss = load::MemoryWatch::Scrape(f.watch_memory); !rss.ok()) {
+      return usage("--watch-memory " + std::string(rss.status().message()));
+    }
   }
   if (f.fps > 0 && app.count("--in-flight")) {
     return usage("--in-flight is for the closed loop (--fps 0); open loop sends on schedule");
@@ -428,12 +483,19 @@ int main(int argc, char** argv) {
                  "--connect-timeout; streams go to those\n",
                  (*fleet)->replicas_answering(), listed);
   }
+  std::unique_ptr<load::MemoryWatch> memory;
+  if (!f.watch_memory.empty()) {
+    memory = std::make_unique<load::MemoryWatch>(
+        f.watch_memory,
+        std::chrono::milliseconds(static_cast<std::int64_t>(f.memory_interval_s * 1000)));
+  }
   std::uint64_t errors = 0, drops = 0;
   const load::FleetResult result = (*fleet)->Run([&](const load::SecondStats& s) {
     errors += s.errors;
     drops += s.drops;
     if (progress) std::fprintf(stderr, "%s\n", load::ProgressLine(s, errors, drops).c_str());
   });
+  if (memory) memory->Stop();
 
   nlohmann::json options = {
       {"call", "cloudcast.v1.CloudCast.Stream"},
@@ -461,8 +523,19 @@ int main(int argc, char** argv) {
       {"resilient", f.resilient},
       {"reconnect-timeout", o.reconnect_timeout.count()},
   };
-  const load::Report report =
+  load::Report report =
       load::MakeReport(**fleet, result, store->description(), schedule_text, options);
+  if (memory) {
+    report.memory_url = f.watch_memory;
+    report.memory = memory->samples();
+  }
+  if (f.soak) {
+    report.soak = true;
+    report.soak_bounds.warmup_s = f.soak_warmup_s;
+    report.soak_bounds.max_growth_bytes = f.soak_max_growth_mb * 1e6;
+    report.soak_bounds.lossless = f.lossless;
+    report.soak_verdict = load::JudgeSoak(report.memory, report.totals, report.soak_bounds);
+  }
   std::cout << load::FormatTable(report) << std::flush;
   int code = 0;
   if (!f.json.empty()) {
@@ -482,5 +555,6 @@ int main(int argc, char** argv) {
     }
   }
   g_fleet.store(nullptr);
+  if (code == 0 && f.soak && !report.soak_verdict.passed) code = kExitSoakFailed;
   return code;
 }

@@ -389,8 +389,10 @@ class Fleet::Driver {
       if (giving_up_) {
         GiveUpLocked();
         ended_now = true;
-      } else if (ctx_->resilient && status.error_code() == grpc::StatusCode::UNAVAILABLE &&
-                 !cancelled_ && has_work) {
+      } else if (ctx_->resilient && !cancelled_ && has_work &&
+                 (status.error_code() == grpc::StatusCode::UNAVAILABLE ||
+                  // a server stopping while this call was opening cancels it
+                  status.error_code() == grpc::StatusCode::CANCELLED)) {
         const std::int64_t now = Ns(Clock::now());
         if (failing_since_ == 0) failing_since_ = c->broken_at != 0 ? c->broken_at : now;
         cause_ = status.error_message();

@@ -78,7 +78,8 @@ struct StreamOptions {
 
   // Resilience. false (the default): a lost connection ends the stream (Finish says why). true:
   // when the call ends with UNAVAILABLE (the replica was killed, drained on shutdown, or sent
-  // GOAWAY), the stream opens a new call (on another replica when the channel has one, see
+  // GOAWAY), or with CANCELLED that the stream did not ask for (a server stopping while the call
+  // was opening), the stream opens a new call (on another replica when the channel has one, see
   // ClientOptions::load_balancing) and sends its StreamConfig again. With DELIVERY_ALL it also
   // sends again every frame that was sent but not answered, in order, so each frame is answered
   // exactly once; with DELIVERY_LATEST those frames count as dropped. Send blocks while a new

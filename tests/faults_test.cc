@@ -1,0 +1,361 @@
+// Faults, each against real cloudcast-server processes, and what a client sees:
+//   - clients that vanish mid-frame (cloudcast-load processes killed while they send 1280x960
+//     frames): the server ends their streams, keeps serving, and a new robot gets every frame;
+//   - the network stalls for seconds and recovers (the server in a network namespace the test
+//     makes, behind a veth pair; every packet dropped for 3 s): DELIVERY_ALL loses nothing, the
+//     stream only waits;
+//   - the server gets SIGKILL or SIGTERM under load and is started again on its port: a
+//     resilient DELIVERY_ALL stream reconnects, sends again what was not answered, and every
+//     frame is answered exactly once (nothing acknowledged is lost).
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <cstdio>
+#include <cstdlib>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "cloudcast/client/client.h"
+#include "cloudcast/datasets/synthetic.h"
+#include "cloudcast/testing/metrics_scrape.h"
+#include "replica_support.h"
+#include "support/waiting.h"
+
+extern char** environ;
+
+namespace cloudcast {
+namespace {
+
+namespace cc = cloudcast::client;
+using std::chrono::milliseconds;
+using testing::ServerProcess;
+
+const std::vector<SyntheticFrame>& Frames() {
+  static const std::vector<SyntheticFrame> frames = [] {
+    std::vector<SyntheticFrame> f;
+    for (int i = 0; i < 3; ++i) {
+      SyntheticOptions o;
+      o.width = 160;
+      o.height = 120;
+      o.frame = static_cast<std::uint64_t>(i);
+      f.push_back(*SyntheticScene::Default().Render(o));
+    }
+    return f;
+  }();
+  return frames;
+}
+
+// A DELIVERY_ALL robot and what it got back, sequence by sequence.
+struct Robot {
+  std::unique_ptr<cc::Stream> stream;
+  std::mutex mu;
+  std::condition_variable cv;
+  std::map<std::uint64_t, int> answers;  // sequence -> times answered
+  std::map<std::uint64_t, std::chrono::steady_clock::time_point> sent_at, answered_at;
+  std::vector<std::string> errors;
+  std::vector<cc::Reconnect> reconnects;
+  absl::Status final_status;
+
+  std::size_t answered() {
+    std::lock_guard<std::mutex> lock(mu);
+    return answers.size();
+  }
+  bool WaitForAnswers(std::size_t n) {
+    std::unique_lock<std::mutex> lock(mu);
+    return cv.wait_for(lock, std::chrono::seconds(60), [&] { return answers.size() >= n; });
+  }
+  // The longest time from a send to its answer, ms.
+  double MaxLatencyMs() {
+    std::lock_guard<std::mutex> lock(mu);
+    double worst = 0;
+    for (const auto& [seq, t] : answered_at) {
+      worst = std::max(worst, std::chrono::duration<double, std::milli>(t - sent_at[seq]).count());
+    }
+    return worst;
+  }
+};
+
+std::unique_ptr<Robot> OpenRobot(cc::Client& client, bool resilient) {
+  auto robot = std::make_unique<Robot>();
+  Robot* r = robot.get();
+  cc::StreamConfig config;
+  config.set_delivery(v1::DELIVERY_ALL);
+  cc::StreamOptions options;
+  options.resilient = resilient;
+  options.reconnect_timeout = milliseconds(30000);
+  options.on_result = [r](cc::Result&& result) {
+    std::lock_guard<std::mutex> lock(r->mu);
+    if (!result.ok()) {
+      r->errors.push_back(std::string(result.status.message()));
+    } else {
+      ++r->answers[result.sequence];
+      r->answered_at.emplace(result.sequence, std::chrono::steady_clock::now());
+    }
+    r->cv.notify_all();
+  };
+  options.on_reconnect = [r](const cc::Reconnect& event) {
+    std::lock_guard<std::mutex> lock(r->mu);
+    r->reconnects.push_back(event);
+  };
+  auto stream = client.OpenStream(config, options);
+  EXPECT_TRUE(stream.ok()) << stream.status();
+  if (stream.ok()) robot->stream = *std::move(stream);
+  return robot;
+}
+
+// Sends `frames` frames at `fps` (a camera's pace), then finishes the stream.
+void Drive(Robot* robot, int frames, double fps) {
+  const auto start = testing::SteadyClock::now();
+  for (int i = 0; i < frames; ++i) {
+    testing::PauseUntil(start + std::chrono::duration_cast<testing::SteadyClock::duration>(
+                                    std::chrono::duration<double>(i / fps)));
+    const SyntheticFrame& f = Frames()[static_cast<std::size_t>(i) % Frames().size()];
+    cc::FrameMeta meta;
+    meta.sequence = static_cast<std::uint64_t>(i);
+    {
+      std::lock_guard<std::mutex> lock(robot->mu);
+      robot->sent_at[static_cast<std::uint64_t>(i)] = std::chrono::steady_clock::now();
+    }
+    if (!robot->stream->Send(f.disparity_view(), f.colour_view(), meta).ok()) break;
+  }
+  robot->final_status = robot->stream->Finish();
+}
+
+// Every frame answered exactly once, no frame error, the stream ended OK.
+void ExpectEveryFrameOnce(Robot& r, int frames) {
+  std::lock_guard<std::mutex> lock(r.mu);
+  EXPECT_TRUE(r.final_status.ok()) << r.final_status;
+  EXPECT_TRUE(r.errors.empty()) << r.errors.front();
+  ASSERT_EQ(r.answers.size(), static_cast<std::size_t>(frames));
+  for (const auto& [sequence, times] : r.answers) EXPECT_EQ(times, 1) << "frame " << sequence;
+}
+
+std::unique_ptr<cc::Client> Connect(const std::string& target) {
+  cc::ClientOptions options;
+  options.decode_clouds = false;
+  options.connect_timeout = milliseconds(20000);
+  auto client = cc::Client::Connect(target, options);
+  EXPECT_TRUE(client.ok()) << client.status();
+  return client.ok() ? *std::move(client) : nullptr;
+}
+
+// A program run in the background; killed (SIGKILL) and reaped when it goes out of scope.
+class Child {
+ public:
+  explicit Child(const std::vector<std::string>& args) {
+    std::vector<char*> argv;
+    for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+    argv.push_back(nullptr);
+    posix_spawn_file_actions_t actions;
+    posix_spawn_file_actions_init(&actions);
+    posix_spawn_file_actions_addopen(&actions, 1, "/dev/null", O_WRONLY, 0);
+    posix_spawn_file_actions_addopen(&actions, 2, "/dev/null", O_WRONLY, 0);
+    if (posix_spawn(&pid_, argv[0], &actions, nullptr, argv.data(), environ) != 0) pid_ = 0;
+    posix_spawn_file_actions_destroy(&actions);
+  }
+  ~Child() { Kill(); }
+  void Kill() {
+    if (pid_ <= 0) return;
+    kill(pid_, SIGKILL);
+    waitpid(pid_, nullptr, 0);
+    pid_ = 0;
+  }
+  bool started() const { return pid_ > 0; }
+
+ private:
+  pid_t pid_ = 0;
+};
+
+// Clients vanish mid-frame: cloudcast-load processes sending 1280x960 frames (1.2 MB raw, many
+// HTTP/2 frames each) are killed while frames are on the wire. Their TCP connections close (or
+// reset) with a message half read. The server ends those streams, frees them, and carries on.
+TEST(FaultsTest, ClientsVanishingMidFrameLeaveNoStreamAndOthersCarryOn) {
+  const std::string dir = ::testing::TempDir();
+  const int port = testing::FreeLoopbackPort(), metrics = testing::FreeLoopbackPort();
+  ServerProcess server("127.0.0.1:" + std::to_string(port), "faults",
+                       {"--metrics-listen", "127.0.0.1:" + std::to_string(metrics)},
+                       dir + "/vanish_server.log");
+  ASSERT_TRUE(server.WaitUntilServing());
+  auto metric = [&](const std::string& name) {
+    return server::MetricValue(server::ScrapeMetrics(metrics), name);
+  };
+  constexpr int kRounds = 4;
+  for (int round = 0; round < kRounds; ++round) {
+    const double received_before = metric("cloudcast_bytes_received_total");
+    Child load({testing::BinDir() + "/cloudcast-load", "--server", server.address(),
+                "--synthetic", "1280x960", "--synthetic-frames", "2", "--streams", "3", "--fps",
+                "200", "--lossless", "--duration", "60", "--quiet"});
+    ASSERT_TRUE(load.started());
+    // Once its frames are arriving (a server counter: nothing announces it).
+    ASSERT_TRUE(testing::Eventually([&] {
+      return metric("cloudcast_active_streams") >= 3 &&
+             metric("cloudcast_bytes_received_total") > received_before + 4e6;
+    })) << server.log();
+    load.Kill();
+    // The server notices the vanished connections and ends their streams.
+    EXPECT_TRUE(testing::Eventually([&] { return metric("cloudcast_active_streams") == 0; }))
+        << "round " << round << ": " << metric("cloudcast_active_streams") << " streams left";
+  }
+  std::printf("%d rounds of 3 streams killed mid-frame: %.0f frames processed, %.0f MB read\n",
+              kRounds, metric("cloudcast_frames_processed_total"),
+              metric("cloudcast_bytes_received_total") / 1e6);
+  EXPECT_TRUE(server.running());
+  // A new robot is served in full.
+  auto client = Connect(server.address());
+  ASSERT_NE(client, nullptr);
+  auto robot = OpenRobot(*client, false);
+  ASSERT_NE(robot->stream, nullptr);
+  Drive(robot.get(), 30, 100);
+  ExpectEveryFrameOnce(*robot, 30);
+}
+
+// A network namespace with one end of a veth pair, made by the test and removed after. The
+// server runs inside it; the test talks to it across the pair.
+class Namespace {
+ public:
+  Namespace() {
+    const int tag = static_cast<int>(getpid() % 200) + 20;
+    name_ = "ccfault" + std::to_string(getpid());
+    host_if_ = "ccf" + std::to_string(getpid()) + "h";
+    ns_if_ = "ccf" + std::to_string(getpid()) + "n";
+    host_ip_ = "10.213." + std::to_string(tag) + ".1";
+    ns_ip_ = "10.213." + std::to_string(tag) + ".2";
+    ok_ = Run("ip netns add " + name_) && Run("ip link add " + host_if_ + " type veth peer name " +
+                                              ns_if_ + " netns " + name_) &&
+          Run("ip addr add " + host_ip_ + "/30 dev " + host_if_) &&
+          Run("ip link set " + host_if_ + " up") &&
+          Run(Exec("ip addr add " + ns_ip_ + "/30 dev " + ns_if_)) &&
+          Run(Exec("ip link set " + ns_if_ + " up")) && Run(Exec("ip link set lo up"));
+  }
+  ~Namespace() {
+    Run("ip link del " + host_if_ + " 2>/dev/null");
+    Run("ip netns del " + name_ + " 2>/dev/null");
+  }
+  bool ok() const { return ok_; }
+  std::string Exec(const std::string& command) const {
+    return "ip netns exec " + name_ + " " + command;
+  }
+  std::vector<std::string> Prefix() const { return {"/usr/sbin/ip", "netns", "exec", name_}; }
+  const std::string& ns_ip() const { return ns_ip_; }
+  const std::string& ns_if() const { return ns_if_; }
+
+  // Every packet in and out of the namespace dropped, or let through again: netem's "loss 100%"
+  // where the kernel has netem, else the same with iptables inside the namespace.
+  bool Stall(bool on) {
+    if (netem_ || (on && Run(Exec("tc qdisc add dev " + ns_if_ + " root netem loss 100%") +
+                             " 2>/dev/null"))) {
+      netem_ = on;
+      return on || Run(Exec("tc qdisc del dev " + ns_if_ + " root"));
+    }
+    const std::string op = on ? "-I" : "-D";
+    return Run(Exec("iptables " + op + " INPUT -i " + ns_if_ + " -j DROP")) &&
+           Run(Exec("iptables " + op + " OUTPUT -o " + ns_if_ + " -j DROP"));
+  }
+  const char* how() const { return netem_ ? "tc netem loss 100%" : "iptables DROP"; }
+
+  static bool Run(const std::string& command) { return std::system(command.c_str()) == 0; }
+
+ private:
+  std::string name_, host_if_, ns_if_, host_ip_, ns_ip_;
+  bool ok_ = false, netem_ = false;
+};
+
+// The network stalls for 3 s mid-stream (no packet passes either way), then recovers. TCP
+// retransmits; the DELIVERY_ALL stream waits and then every frame is answered, on the same call.
+TEST(FaultsTest, NetworkStallOfSecondsThenRecoveryLosesNothing) {
+  if (geteuid() != 0 || !Namespace::Run("command -v ip >/dev/null && ip netns list >/dev/null")) {
+    GTEST_SKIP() << "needs root and iproute2 to make a network namespace";
+  }
+  Namespace ns;
+  if (!ns.ok()) GTEST_SKIP() << "could not make a network namespace with a veth pair here";
+  const std::string address = ns.ns_ip() + ":50051";
+  ServerProcess server(address, "stalled", {}, ::testing::TempDir() + "/stall_server.log",
+                       ns.Prefix());
+  ASSERT_TRUE(server.WaitUntilServing()) << server.log();
+  auto client = Connect(address);
+  ASSERT_NE(client, nullptr);
+  auto robot = OpenRobot(*client, false);
+  ASSERT_NE(robot->stream, nullptr);
+  constexpr int kFrames = 240;  // 8 s at 30 fps
+  std::thread driver(Drive, robot.get(), kFrames, 30.0);
+  ASSERT_TRUE(robot->WaitForAnswers(45));
+  ASSERT_TRUE(ns.Stall(true));
+  const std::size_t at_stall = robot->answered();
+  testing::PauseFor(std::chrono::seconds(3));  // the fault's length: a clock, not a wait
+  const std::size_t during = robot->answered() - at_stall;
+  ASSERT_TRUE(ns.Stall(false));
+  driver.join();
+  std::printf("network stalled 3 s (%s) at frame %zu: %zu answers during the stall, then all %zu "
+              "answered; worst send-to-answer %.0f ms, reconnects %zu\n",
+              ns.how(), at_stall, during, robot->answered(), robot->MaxLatencyMs(),
+              robot->reconnects.size());
+  EXPECT_LE(during, 2u);  // nothing passes while stalled (an answer already on the wire may)
+  ExpectEveryFrameOnce(*robot, kFrames);
+  EXPECT_TRUE(robot->reconnects.empty());
+}
+
+// The server is killed (SIGKILL) or stopped (SIGTERM, which drains) under load, then started again
+// on the same port, as a supervisor or Kubernetes would. A resilient DELIVERY_ALL stream sees
+// UNAVAILABLE, reconnects once the server is back, sends again every frame not answered, and
+// every frame is answered exactly once.
+class ServerStopTest : public ::testing::TestWithParam<int> {};
+
+TEST_P(ServerStopTest, ResilientStreamLosesNothingAcrossAServerRestart) {
+  const int signal_number = GetParam();
+  const std::string dir = ::testing::TempDir();
+  const int port = testing::FreeLoopbackPort();
+  const std::string address = "127.0.0.1:" + std::to_string(port);
+  auto server = std::make_unique<ServerProcess>(address, "first", std::vector<std::string>{},
+                                                dir + "/restart_first.log");
+  ASSERT_TRUE(server->WaitUntilServing());
+  auto client = Connect(address);
+  ASSERT_NE(client, nullptr);
+  auto robot = OpenRobot(*client, true);
+  ASSERT_NE(robot->stream, nullptr);
+  constexpr int kFrames = 300;
+  std::thread driver(Drive, robot.get(), kFrames, 60.0);
+  ASSERT_TRUE(robot->WaitForAnswers(60));
+  server->Signal(signal_number);
+  const std::optional<int> status = server->Wait();
+  const std::size_t at_stop = robot->answered();
+  server = std::make_unique<ServerProcess>(address, "second", std::vector<std::string>{},
+                                           dir + "/restart_second.log");
+  ASSERT_TRUE(server->WaitUntilServing());
+  driver.join();
+  std::string took;
+  for (const cc::Reconnect& e : robot->reconnects) {
+    took += std::to_string(e.took.count()) + " ";
+    std::printf("  reconnect %d: cause %s, took %lld ms\n", e.attempt, e.cause.ToString().c_str(),
+                static_cast<long long>(e.took.count()));
+  }
+  std::printf("  stream ended: %s\n", robot->final_status.ToString().c_str());
+  std::printf("SIG%s under load at %zu answers, restarted: %zu reconnects (%sms), %lu frames "
+              "sent again, %zu of %d answered\n",
+              sigabbrev_np(signal_number), at_stop, robot->reconnects.size(), took.c_str(),
+              static_cast<unsigned long>(robot->stream->frames_resent()), robot->answered(),
+              kFrames);
+  ExpectEveryFrameOnce(*robot, kFrames);
+  ASSERT_GE(robot->reconnects.size(), 1u);
+  EXPECT_EQ(robot->reconnects.front().cause.code(), absl::StatusCode::kUnavailable)
+      << robot->reconnects.front().cause;
+  if (signal_number == SIGTERM) EXPECT_EQ(status, std::optional<int>(0));
+}
+
+INSTANTIATE_TEST_SUITE_P(Signals, ServerStopTest, ::testing::Values(SIGKILL, SIGTERM),
+                         [](const ::testing::TestParamInfo<int>& info) {
+                           return std::string(sigabbrev_np(info.param));
+                         });
+
+}  // namespace
+}  // namespace cloudcast
