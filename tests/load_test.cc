@@ -10,6 +10,7 @@
 #include "cloudcast/load/fleet.h"
 #include "cloudcast/load/frame_store.h"
 #include "cloudcast/load/histogram.h"
+#include "cloudcast/load/memory_watch.h"
 #include "cloudcast/load/null_server.h"
 #include "cloudcast/load/report.h"
 #include "cloudcast/load/schedule.h"
@@ -335,6 +336,74 @@ TEST_F(FleetTest, UnreachableServerIsAClearError) {
   auto fleet = Fleet::Connect(o, &store);
   ASSERT_FALSE(fleet.ok());
   EXPECT_NE(fleet.status().message().find("--server 127.0.0.1:1"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace cloudcast::load
+
+namespace cloudcast::load {
+namespace {
+
+TEST(MemoryWatchTest, MetricValueReadsTheUnlabelledSampleOnly) {
+  const std::string text =
+      "# HELP cloudcast_process_resident_memory_bytes x\n"
+      "cloudcast_process_resident_memory_bytes_total 5\n"
+      "cloudcast_process_resident_memory_bytes{a=\"b\"} 7\n"
+      "cloudcast_process_resident_memory_bytes 1.25e+08\n";
+  EXPECT_EQ(MetricValue(text, "cloudcast_process_resident_memory_bytes").value(), 1.25e8);
+  EXPECT_EQ(MetricValue(text, "missing").status().code(), absl::StatusCode::kNotFound);
+  EXPECT_FALSE(MetricValue("m nan\n", "m").ok());
+}
+
+TEST(MemoryWatchTest, ScrapesARealServersMemory) {
+  server::ServerOptions options;
+  options.listen = "127.0.0.1:0";
+  options.metrics_listen = "127.0.0.1:0";
+  auto server = server::Server::Start(options).value();
+  const std::string url =
+      "http://127.0.0.1:" + std::to_string(server->metrics_port()) + "/metrics";
+  const std::uint64_t rss = MemoryWatch::Scrape(url).value();
+  EXPECT_GT(rss, 1u << 20);  // a process with gRPC loaded holds megabytes
+  MemoryWatch watch(url, std::chrono::milliseconds(100));
+  watch.Stop();
+  const std::vector<MemorySample> samples = watch.samples();
+  ASSERT_GE(samples.size(), 2u);  // one at the start, one at the stop
+  for (const MemorySample& s : samples) EXPECT_GT(s.rss_bytes, 0u) << s.error;
+  EXPECT_FALSE(MemoryWatch::Scrape("http://127.0.0.1:1/metrics").ok());
+}
+
+TEST(MemoryWatchTest, SoakFailsOnLossOrGrowthAfterTheWarmUp) {
+  auto at = [](double t, double mb) {
+    MemorySample s;
+    s.t_s = t;
+    s.rss_bytes = static_cast<std::uint64_t>(mb * 1e6);
+    return s;
+  };
+  Totals clean;
+  clean.sent = clean.answered = 100;
+  SoakBounds bounds;
+  bounds.warmup_s = 10;
+  bounds.max_growth_bytes = 20e6;
+  // Growth during the warm-up does not count; after it, up to the bound passes.
+  SoakVerdict v = JudgeSoak({at(0, 50), at(5, 150), at(10, 160), at(15, 170), at(20, 179)},
+                            clean, bounds);
+  EXPECT_TRUE(v.passed) << (v.failures.empty() ? "" : v.failures.front());
+  EXPECT_EQ(v.baseline_bytes, 160'000'000u);
+  EXPECT_EQ(v.peak_bytes, 179'000'000u);
+  v = JudgeSoak({at(0, 50), at(10, 160), at(15, 181)}, clean, bounds);
+  ASSERT_FALSE(v.passed);
+  EXPECT_NE(v.failures.front().find("grew 21.0 MB"), std::string::npos) << v.failures.front();
+  // A lost frame fails it, and so does a DELIVERY_ALL frame left unanswered.
+  Totals lost = clean;
+  lost.lost = 1;
+  EXPECT_FALSE(JudgeSoak({at(0, 50), at(15, 50)}, lost, bounds).passed);
+  Totals unanswered = clean;
+  unanswered.answered = 99;
+  EXPECT_FALSE(JudgeSoak({at(0, 50), at(15, 50)}, unanswered, bounds).passed);
+  bounds.lossless = false;  // DELIVERY_LATEST skips stale frames
+  EXPECT_TRUE(JudgeSoak({at(0, 50), at(15, 50)}, unanswered, bounds).passed);
+  // No sample after the warm-up is no verdict.
+  EXPECT_FALSE(JudgeSoak({at(0, 50)}, clean, bounds).passed);
 }
 
 }  // namespace

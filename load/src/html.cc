@@ -282,6 +282,30 @@ std::string Html(const Report& r) {
   page += LineChart("latency-chart", "Latency from the intended send time, per second", "ms", x,
                     {p50, p90, p99});
   page += LineChart("throughput-chart", "Throughput", "frames/s", x, {fps, sent});
+  if (!r.memory.empty()) {
+    std::vector<double> mx;
+    Line rss{"RSS", "#b279a2", {}};
+    for (const MemorySample& m : r.memory) {
+      if (m.rss_bytes == 0) continue;
+      mx.push_back(m.t_s);
+      rss.y.push_back(m.rss_bytes / 1e6);
+    }
+    page += LineChart("memory-chart", "Server memory (resident, " + Escape(r.memory_url) + ")",
+                      "MB", mx, {rss});
+  }
+  if (r.soak) {
+    const SoakVerdict& v = r.soak_verdict;
+    page += fmt::format("<p id=\"soak\">Soak <b>{}</b>: after the {:g} s warm-up memory {:.1f} "
+                        "&rarr; peak {:.1f} MB (bound +{:.1f} MB).</p>\n",
+                        v.passed ? "passed" : "FAILED", r.soak_bounds.warmup_s,
+                        v.baseline_bytes / 1e6, v.peak_bytes / 1e6,
+                        r.soak_bounds.max_growth_bytes / 1e6);
+    if (!v.failures.empty()) {
+      page += "<ul>\n";
+      for (const std::string& f : v.failures) page += "<li>" + Escape(f) + "</li>\n";
+      page += "</ul>\n";
+    }
+  }
   page += "<h2>Distribution</h2>\n";
   page += HistogramChart(r.latency);
   // Per stream, bounded: a page stays readable with thousands of streams (the JSON has them all).

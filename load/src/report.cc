@@ -182,6 +182,25 @@ std::string FormatTable(const Report& r) {
   out += "  calls:";
   for (const auto& [code, n] : r.call_status) out += fmt::format(" {} {}", code, n);
   out += "\n";
+  if (!r.memory.empty()) {
+    out += fmt::format("\n  server memory (RSS, {}):\n       s        MB\n", r.memory_url);
+    for (const MemorySample& m : r.memory) {
+      if (m.rss_bytes == 0) {
+        out += fmt::format("    {:5.0f}   failed: {}\n", m.t_s, m.error);
+      } else {
+        out += fmt::format("    {:5.0f}  {:8.1f}\n", m.t_s, m.rss_bytes / 1e6);
+      }
+    }
+  }
+  if (r.soak) {
+    const SoakVerdict& v = r.soak_verdict;
+    out += fmt::format(
+        "\n  soak {}: after the {:g} s warm-up memory {:.1f} -> peak {:.1f} MB (bound +{:.1f} "
+        "MB); {} of {} frames answered\n",
+        v.passed ? "PASSED" : "FAILED", r.soak_bounds.warmup_s, v.baseline_bytes / 1e6,
+        v.peak_bytes / 1e6, r.soak_bounds.max_growth_bytes / 1e6, t.answered, t.sent);
+    for (const std::string& f : v.failures) out += "    " + f + "\n";
+  }
   return out;
 }
 
@@ -310,6 +329,23 @@ nlohmann::json GhzJson(const Report& r) {
                       {"serviceP99", s.service_p99}});
   }
   j["timeSeries"] = series;
+  if (!r.memory.empty()) {
+    json memory = json::array();
+    for (const MemorySample& m : r.memory) {
+      json sample = {{"t", m.t_s}, {"rssBytes", m.rss_bytes}};
+      if (!m.error.empty()) sample["error"] = m.error;
+      memory.push_back(sample);
+    }
+    j["serverMemory"] = {{"url", r.memory_url}, {"samples", memory}};
+  }
+  if (r.soak) {
+    j["soak"] = {{"passed", r.soak_verdict.passed},
+                 {"warmupSeconds", r.soak_bounds.warmup_s},
+                 {"maxGrowthBytes", r.soak_bounds.max_growth_bytes},
+                 {"baselineBytes", r.soak_verdict.baseline_bytes},
+                 {"peakBytes", r.soak_verdict.peak_bytes},
+                 {"failures", r.soak_verdict.failures}};
+  }
   return j;
 }
 

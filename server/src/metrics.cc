@@ -1,7 +1,10 @@
 #include "metrics.h"
 
 #include <sys/resource.h>
+#include <unistd.h>
 
+#include <cstdint>
+#include <fstream>
 #include <string>
 #include <vector>
 
@@ -30,22 +33,36 @@ prometheus::Histogram& StageHistogram(prometheus::Family<prometheus::Histogram>&
   return family.Add({{"stage", stage}}, LatencyBuckets());
 }
 
-// The process' user + system CPU time, read when scraped (prometheus-cpp has no process
-// collector of its own).
-class ProcessCpuCollectable : public prometheus::Collectable {
+// The process' user + system CPU time and its resident memory, read when scraped
+// (prometheus-cpp has no process collector of its own). A soak watches the memory for growth.
+class ProcessCollectable : public prometheus::Collectable {
  public:
   std::vector<prometheus::MetricFamily> Collect() const override {
     rusage usage{};
     getrusage(RUSAGE_SELF, &usage);
     auto seconds = [](const timeval& t) { return t.tv_sec + t.tv_usec * 1e-6; };
-    prometheus::MetricFamily family;
-    family.name = "cloudcast_process_cpu_seconds_total";
-    family.help = "User and system CPU time of the whole server process";
-    family.type = prometheus::MetricType::Counter;
-    prometheus::ClientMetric metric;
-    metric.counter.value = seconds(usage.ru_utime) + seconds(usage.ru_stime);
-    family.metric.push_back(metric);
-    return {family};
+    std::vector<prometheus::MetricFamily> families(2);
+    families[0].name = "cloudcast_process_cpu_seconds_total";
+    families[0].help = "User and system CPU time of the whole server process";
+    families[0].type = prometheus::MetricType::Counter;
+    prometheus::ClientMetric cpu;
+    cpu.counter.value = seconds(usage.ru_utime) + seconds(usage.ru_stime);
+    families[0].metric.push_back(cpu);
+    families[1].name = "cloudcast_process_resident_memory_bytes";
+    families[1].help = "Resident memory of the server process (/proc/self/statm)";
+    families[1].type = prometheus::MetricType::Gauge;
+    prometheus::ClientMetric rss;
+    rss.gauge.value = static_cast<double>(ResidentBytes());
+    families[1].metric.push_back(rss);
+    return families;
+  }
+
+ private:
+  static std::uint64_t ResidentBytes() {
+    std::ifstream statm("/proc/self/statm");
+    std::uint64_t size_pages = 0, resident_pages = 0;
+    statm >> size_pages >> resident_pages;
+    return resident_pages * static_cast<std::uint64_t>(sysconf(_SC_PAGESIZE));
   }
 };
 
@@ -53,7 +70,7 @@ class ProcessCpuCollectable : public prometheus::Collectable {
 
 Metrics::Metrics()
     : registry_(std::make_shared<prometheus::Registry>()),
-      process_cpu_(std::make_shared<ProcessCpuCollectable>()),
+      process_(std::make_shared<ProcessCollectable>()),
       frame_errors_family_(prometheus::BuildCounter()
                                .Name("cloudcast_frame_errors_total")
                                .Help("Frames and configs answered with a FrameError (or a Process "
@@ -114,7 +131,7 @@ prometheus::Counter& Metrics::FrameErrors(absl::StatusCode code) {
 
 std::string Metrics::Serialize() const {
   std::vector<prometheus::MetricFamily> families = registry_->Collect();
-  for (auto& f : process_cpu_->Collect()) families.push_back(std::move(f));
+  for (auto& f : process_->Collect()) families.push_back(std::move(f));
   return prometheus::TextSerializer().Serialize(families);
 }
 

@@ -30,7 +30,7 @@ class Metrics {
 
  private:
   std::shared_ptr<prometheus::Registry> registry_;
-  std::shared_ptr<prometheus::Collectable> process_cpu_;
+  std::shared_ptr<prometheus::Collectable> process_;  // CPU time and resident memory
   prometheus::Family<prometheus::Counter>& frame_errors_family_;
 
  public:

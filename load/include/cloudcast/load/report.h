@@ -10,6 +10,7 @@
 
 #include "cloudcast/load/fleet.h"
 #include "cloudcast/load/histogram.h"
+#include "cloudcast/load/memory_watch.h"
 #include "cloudcast/load/recorder.h"
 
 namespace cloudcast::load {
@@ -42,6 +43,12 @@ struct Report {
   };
   std::map<std::string, Replica> replicas;
   std::vector<std::int64_t> reconnect_ns;  // every stream's reconnect times, sorted
+  // The server's memory (--watch-memory) and, for a soak (--soak), its verdict.
+  std::string memory_url;
+  std::vector<MemorySample> memory;
+  bool soak = false;
+  SoakBounds soak_bounds;
+  SoakVerdict soak_verdict;
 
   double answered_fps() const {
     return result.elapsed_s > 0 ? totals.answered / result.elapsed_s : 0;
