@@ -110,17 +110,24 @@ decltype(auto) DispatchEncodings(DisparityEncoding d, ColorEncoding c, F&& f) {
   auto with_colour = [&](auto sample_tag) -> decltype(auto) {
     using S = decltype(sample_tag);
     switch (c) {
-      case ColorEncoding::kBGR8: return f.template operator()<S, ColorEncoding::kBGR8>();
-      case ColorEncoding::kRGB8: return f.template operator()<S, ColorEncoding::kRGB8>();
-      case ColorEncoding::kRGBA8: return f.template operator()<S, ColorEncoding::kRGBA8>();
-      case ColorEncoding::kMono8: break;
+      case ColorEncoding::kBGR8:
+        return f.template operator()<S, ColorEncoding::kBGR8>();
+      case ColorEncoding::kRGB8:
+        return f.template operator()<S, ColorEncoding::kRGB8>();
+      case ColorEncoding::kRGBA8:
+        return f.template operator()<S, ColorEncoding::kRGBA8>();
+      case ColorEncoding::kMono8:
+        break;
     }
     return f.template operator()<S, ColorEncoding::kMono8>();
   };
   switch (d) {
-    case DisparityEncoding::kU8: return with_colour(std::uint8_t{});
-    case DisparityEncoding::kU16: return with_colour(std::uint16_t{});
-    case DisparityEncoding::kF32: break;
+    case DisparityEncoding::kU8:
+      return with_colour(std::uint8_t{});
+    case DisparityEncoding::kU16:
+      return with_colour(std::uint16_t{});
+    case DisparityEncoding::kF32:
+      break;
   }
   return with_colour(float{});
 }
@@ -161,6 +168,14 @@ class VoxelAccumulator {
   absl::Status Run(const Point* points, std::size_t n, const VoxelGridParams& params,
                    PointVector* out, const Bounds* bounds = nullptr);
 
+ public:
+  // Sums of one or more points: (x, y), (z, count) in double, colour (b, g, r, a) in 32 bits.
+  struct Sums {
+    __m128d xy;
+    __m128d zn;
+    __m128i bgra;
+  };
+
  private:
   struct Voxel {
     // Sums in double: exact for float inputs, so the centroid does not depend on the order of
@@ -187,6 +202,8 @@ class VoxelAccumulator {
   };
   Cursor MakeCursor();
   void Grow(Cursor* cursor);
+  template <bool kWide>
+  static void AddSums(Cursor& c, std::uint64_t key, const Sums& s);
   template <bool kWide>
   static void AddPoint(Cursor& c, std::uint64_t key, __m128 xyz, __m128i bgra32);
   void Emit(std::uint32_t min_points, PointVector* out) const;

@@ -23,7 +23,7 @@ struct SimdKeys {
   int shift_y, shift_z;
 
   std::uint64_t operator()(__m128 v) const {
-    const __m128 t = _mm_mul_ps(v, inv);  // lane 3: colour bits * 0, cleared by the caller
+    const __m128 t = _mm_mul_ps(v, inv);    // lane 3: colour bits * 0, cleared by the caller
     const __m128i i = _mm_cvttps_epi32(t);  // truncates toward zero ...
     // ... and subtracting 1 where truncation rounded up makes it floor.
     const __m128i floor = _mm_add_epi32(i, _mm_castps_si128(_mm_cmplt_ps(t, _mm_cvtepi32_ps(i))));
@@ -117,7 +117,7 @@ inline __m128i WidenColour(std::uint32_t rgba) {
 }
 
 template <bool kWide>
-inline void VoxelAccumulator::AddPoint(Cursor& c, std::uint64_t key, __m128 v, __m128i bgra32) {
+inline void VoxelAccumulator::AddSums(Cursor& c, std::uint64_t key, const Sums& s) {
   std::uint64_t h = (key * kHashMultiplier) >> c.shift;
   std::uint64_t found;  // voxel + 1, or 0 for an empty slot
   bool match;
@@ -145,11 +145,26 @@ inline void VoxelAccumulator::AddPoint(Cursor& c, std::uint64_t key, __m128 v, _
   Voxel& voxel = c.voxels[index];
   const __m128i keep = _mm_set1_epi64x(-static_cast<std::int64_t>(match));
   const __m128d keep_d = _mm_castsi128_pd(keep);
-  voxel.sum_xy = _mm_add_pd(_mm_and_pd(voxel.sum_xy, keep_d), _mm_cvtps_pd(v));
-  // (z, 1): the count rides along with z.
+  voxel.sum_xy = _mm_add_pd(_mm_and_pd(voxel.sum_xy, keep_d), s.xy);
+  voxel.sum_z_n = _mm_add_pd(_mm_and_pd(voxel.sum_z_n, keep_d), s.zn);
+  voxel.sum_bgra = _mm_add_epi32(_mm_and_si128(voxel.sum_bgra, keep), s.bgra);
+}
+
+// One point as sums: (x, y) and (z, 1) in double (the count rides along with z), colour as is.
+inline VoxelAccumulator::Sums OnePoint(__m128 v, __m128i bgra32) {
   const __m128 z1 = _mm_unpacklo_ps(_mm_movehl_ps(v, v), _mm_set1_ps(1.0f));
-  voxel.sum_z_n = _mm_add_pd(_mm_and_pd(voxel.sum_z_n, keep_d), _mm_cvtps_pd(z1));
-  voxel.sum_bgra = _mm_add_epi32(_mm_and_si128(voxel.sum_bgra, keep), bgra32);
+  return {_mm_cvtps_pd(v), _mm_cvtps_pd(z1), bgra32};
+}
+inline void AddTo(VoxelAccumulator::Sums& s, __m128 v, __m128i bgra32) {
+  const VoxelAccumulator::Sums one = OnePoint(v, bgra32);
+  s.xy = _mm_add_pd(s.xy, one.xy);
+  s.zn = _mm_add_pd(s.zn, one.zn);
+  s.bgra = _mm_add_epi32(s.bgra, one.bgra);
+}
+
+template <bool kWide>
+inline void VoxelAccumulator::AddPoint(Cursor& c, std::uint64_t key, __m128 v, __m128i bgra32) {
+  AddSums<kWide>(c, key, OnePoint(v, bgra32));
 }
 
 template <typename KeyPolicy>
@@ -192,28 +207,61 @@ void VoxelAccumulator::AccumulateFiniteNarrow(const Point* points, std::size_t n
   const __m128i zero = _mm_setzero_si128();
   Cursor c = MakeCursor();
   std::size_t i = 0;
-  for (; i + 4 <= n; i += 4) {
-    const __m128 p0 = _mm_loadu_ps(&points[i].x), p1 = _mm_loadu_ps(&points[i + 1].x);
-    const __m128 p2 = _mm_loadu_ps(&points[i + 2].x), p3 = _mm_loadu_ps(&points[i + 3].x);
-    // Transpose to the x, y, z and colour of the four points.
+  // Consecutive points (neighbouring pixels) often share a voxel: a run of them is summed in
+  // registers and added to its voxel once, with one hash look-up.
+  std::uint64_t run_key = ~std::uint64_t{0};  // no 32-bit key
+  Sums run{_mm_setzero_pd(), _mm_setzero_pd(), _mm_setzero_si128()};
+  auto add = [&](std::uint32_t k, __m128 v, __m128i bgra) {
+    if (k == run_key) {
+      AddTo(run, v, bgra);
+    } else {
+      if (run_key != ~std::uint64_t{0}) AddSums<false>(c, run_key, run);
+      run_key = k;
+      run = OnePoint(v, bgra);
+    }
+  };
+  auto block_keys = [&](std::size_t at) {
+    const __m128 p0 = _mm_loadu_ps(&points[at].x), p1 = _mm_loadu_ps(&points[at + 1].x);
+    const __m128 p2 = _mm_loadu_ps(&points[at + 2].x), p3 = _mm_loadu_ps(&points[at + 3].x);
+    // Transpose to the x, y and z of the four points.
     const __m128 t0 = _mm_unpacklo_ps(p0, p1), t1 = _mm_unpacklo_ps(p2, p3);
     const __m128 t2 = _mm_unpackhi_ps(p0, p1), t3 = _mm_unpackhi_ps(p2, p3);
     const __m128 x = _mm_movelh_ps(t0, t1), y = _mm_movehl_ps(t1, t0);
     const __m128 z = _mm_movelh_ps(t2, t3);
+    return _mm_or_si128(relative(x, inv_x, corner_x),
+                        _mm_or_si128(_mm_sll_epi32(relative(y, inv_y, corner_y), shift_y),
+                                     _mm_sll_epi32(relative(z, inv_z, corner_z), shift_z)));
+  };
+  // The keys of the points kLookahead blocks ahead are made early and their table slots
+  // prefetched: a new voxel's slot is a random line of the table, whose miss would stall.
+  constexpr std::size_t kLookahead = 8, kRing = 16;  // kRing: a power of two > kLookahead
+  alignas(16) std::uint32_t ring[kRing][4];
+  const std::size_t blocks = n / 4;
+  auto prepare = [&](std::size_t b) {
+    std::uint32_t* k = ring[b & (kRing - 1)];
+    _mm_store_si128(reinterpret_cast<__m128i*>(k), block_keys(4 * b));
+    for (int j = 0; j < 4; ++j) {
+      const std::uint64_t h = (std::uint64_t{k[j]} * kHashMultiplier) >> c.shift;
+      _mm_prefetch(reinterpret_cast<const char*>(c.table + h), _MM_HINT_T0);
+    }
+  };
+  for (std::size_t b = 0; b < kLookahead && b < blocks; ++b) prepare(b);
+  for (std::size_t b = 0; b < blocks; ++b, i += 4) {
+    if (b + kLookahead < blocks) prepare(b + kLookahead);
+    const std::uint32_t* key = ring[b & (kRing - 1)];
+    const __m128 p0 = _mm_loadu_ps(&points[i].x), p1 = _mm_loadu_ps(&points[i + 1].x);
+    const __m128 p2 = _mm_loadu_ps(&points[i + 2].x), p3 = _mm_loadu_ps(&points[i + 3].x);
+    const __m128 t2 = _mm_unpackhi_ps(p0, p1), t3 = _mm_unpackhi_ps(p2, p3);
     const __m128i colour = _mm_castps_si128(_mm_movehl_ps(t3, t2));
-    alignas(16) std::uint32_t key[4];
-    _mm_store_si128(reinterpret_cast<__m128i*>(key),
-                    _mm_or_si128(relative(x, inv_x, corner_x),
-                                 _mm_or_si128(_mm_sll_epi32(relative(y, inv_y, corner_y), shift_y),
-                                              _mm_sll_epi32(relative(z, inv_z, corner_z), shift_z))));
     const __m128i c16lo = _mm_unpacklo_epi8(colour, zero), c16hi = _mm_unpackhi_epi8(colour, zero);
-    AddPoint<false>(c, key[0], _mm_and_ps(p0, xyz_mask), _mm_unpacklo_epi16(c16lo, zero));
-    AddPoint<false>(c, key[1], _mm_and_ps(p1, xyz_mask), _mm_unpackhi_epi16(c16lo, zero));
-    AddPoint<false>(c, key[2], _mm_and_ps(p2, xyz_mask), _mm_unpacklo_epi16(c16hi, zero));
-    AddPoint<false>(c, key[3], _mm_and_ps(p3, xyz_mask), _mm_unpackhi_epi16(c16hi, zero));
+    add(key[0], _mm_and_ps(p0, xyz_mask), _mm_unpacklo_epi16(c16lo, zero));
+    add(key[1], _mm_and_ps(p1, xyz_mask), _mm_unpackhi_epi16(c16lo, zero));
+    add(key[2], _mm_and_ps(p2, xyz_mask), _mm_unpacklo_epi16(c16hi, zero));
+    add(key[3], _mm_and_ps(p3, xyz_mask), _mm_unpackhi_epi16(c16hi, zero));
     // Checked every four points: the table has room for four more beyond half full.
     if (c.count >= c.grow_at) Grow(&c);
   }
+  if (run_key != ~std::uint64_t{0}) AddSums<false>(c, run_key, run);
   voxel_count_ = c.count;
   Accumulate(points + i, n - i, keys);
 }
@@ -304,9 +352,9 @@ absl::Status VoxelAccumulator::Run(const Point* points, std::size_t n,
   }
   const int total_bits = bits[0] + bits[1] + bits[2];
   if (total_bits > 64) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "voxel grid: the cloud spans 2^", bits[0], " x 2^", bits[1], " x 2^", bits[2],
-        " voxels, more than 64-bit keys hold; use a larger voxel.leaf"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("voxel grid: the cloud spans 2^", bits[0], " x 2^", bits[1], " x 2^", bits[2],
+                     " voxels, more than 64-bit keys hold; use a larger voxel.leaf"));
   }
   wide_ = total_bits > 32 || !int32_indices;
 
@@ -330,10 +378,8 @@ absl::Status VoxelAccumulator::Run(const Point* points, std::size_t n,
       Accumulate(points, n, keys);
     }
   } else {
-    WideKeys keys{{inv[0], inv[1], inv[2]},
-                  {corner[0], corner[1], corner[2]},
-                  bits[0],
-                  bits[0] + bits[1]};
+    WideKeys keys{
+        {inv[0], inv[1], inv[2]}, {corner[0], corner[1], corner[2]}, bits[0], bits[0] + bits[1]};
     Accumulate(points, n, keys);
   }
   recent_voxels_[clouds_++ % 8] = voxel_count_;
