@@ -1,5 +1,8 @@
 #include "cloudcast/core/pipeline.h"
 
+#include <algorithm>
+#include <cmath>
+#include <cstring>
 #include <limits>
 #include <type_traits>
 #include <utility>
@@ -23,8 +26,9 @@ using internal::VoxelAccumulator;
 
 // Where the points that pass go: a buffer sized for the worst case (left uninitialised), with
 // their bounding box when the voxel grid needs it. A point arrives as (x, y, z, 0) plus colour.
-template <bool kTrackBounds>
+template <bool kTrack>
 struct PointSink {
+  static constexpr bool kTrackBounds = kTrack;
   Point* out;
   std::size_t count = 0;
   internal::Bounds bounds;
@@ -46,7 +50,8 @@ inline __m128 PixelPoint(const DepthConstants& c, std::uint32_t u, float yc, flo
 // x and y finite (z is known to be).
 inline bool XyFinite(__m128 p) {
   const float big = std::numeric_limits<float>::max();
-  const __m128 ok = _mm_and_ps(_mm_cmple_ps(_mm_set1_ps(-big), p), _mm_cmple_ps(p, _mm_set1_ps(big)));
+  const __m128 ok =
+      _mm_and_ps(_mm_cmple_ps(_mm_set1_ps(-big), p), _mm_cmple_ps(p, _mm_set1_ps(big)));
   return (_mm_movemask_ps(ok) & 3) == 3;
 }
 
@@ -68,6 +73,10 @@ struct ScanPlan {
   std::uint32_t valid_lo = 1, valid_hi = 0;
   std::uint32_t holes[4] = {0, 0, 0, 0};
   int hole_count = 0;
+  bool pass_exact = false;  // every value in [pass_lo, pass_hi] passes: no flag look-up needed
+  float z_max = 0;          // the largest z that passes
+  // Some passing pixel's x or y may overflow to infinity (set per frame by the caller).
+  bool x_y_may_overflow = true;
 
   static ScanPlan From(const std::uint8_t* flags, std::size_t n) {
     ScanPlan plan;
@@ -82,8 +91,15 @@ struct ScanPlan {
         vhi = static_cast<std::int64_t>(d);
       }
     }
-    if (plo >= 0) plan.pass_lo = static_cast<std::uint32_t>(plo), plan.pass_hi = static_cast<std::uint32_t>(phi);
-    if (vlo >= 0) plan.valid_lo = static_cast<std::uint32_t>(vlo), plan.valid_hi = static_cast<std::uint32_t>(vhi);
+    if (plo >= 0)
+      plan.pass_lo = static_cast<std::uint32_t>(plo),
+      plan.pass_hi = static_cast<std::uint32_t>(phi);
+    if (vlo >= 0)
+      plan.valid_lo = static_cast<std::uint32_t>(vlo),
+      plan.valid_hi = static_cast<std::uint32_t>(vhi);
+    plan.pass_exact = true;
+    for (std::int64_t d = plo; plo >= 0 && d <= phi; ++d)
+      plan.pass_exact &= (flags[d] & kPasses) != 0;
     plan.simd = true;
     for (std::int64_t d = vlo; vlo >= 0 && d <= vhi; ++d) {
       if (flags[d] & kValid) continue;
@@ -97,38 +113,90 @@ struct ScanPlan {
   }
 };
 
-// Lanes of `d` within [lo, hi] (unsigned), as all-ones lanes.
+// Four floats, 16-byte aligned: an SSE register in a table.
+struct alignas(16) Float4 {
+  float f[4];
+};
+
+// Lanes of 16 bytes of samples within [lo, hi] (unsigned), as all-ones lanes; the constants are
+// made once per frame.
 template <typename Sample>
-inline __m128i InRange(__m128i d, std::uint32_t lo, std::uint32_t hi) {
+struct RangeTest {
+  __m128i lo, span;
+  RangeTest(std::uint32_t l, std::uint32_t h) {
+    if constexpr (sizeof(Sample) == 1) {
+      lo = _mm_set1_epi8(static_cast<char>(l));
+      span = _mm_set1_epi8(static_cast<char>(h - l));
+    } else {
+      // No unsigned 16-bit compare in SSE2: flip the sign bit and compare signed.
+      lo = _mm_set1_epi16(static_cast<short>(l));
+      span = _mm_set1_epi16(static_cast<short>((h - l) ^ 0x8000));
+    }
+  }
+  __m128i operator()(__m128i d) const {
+    if constexpr (sizeof(Sample) == 1) {
+      return _mm_cmpeq_epi8(_mm_max_epu8(_mm_sub_epi8(d, lo), span), span);
+    } else {
+      const __m128i x =
+          _mm_xor_si128(_mm_sub_epi16(d, lo), _mm_set1_epi16(static_cast<short>(0x8000)));
+      return _mm_xor_si128(_mm_cmpgt_epi16(x, span), _mm_set1_epi32(-1));
+    }
+  }
+};
+template <typename Sample>
+inline __m128i Equal(__m128i d, __m128i value) {
   if constexpr (sizeof(Sample) == 1) {
-    const __m128i span = _mm_set1_epi8(static_cast<char>(hi - lo));
-    const __m128i x = _mm_sub_epi8(d, _mm_set1_epi8(static_cast<char>(lo)));
-    return _mm_cmpeq_epi8(_mm_max_epu8(x, span), span);
+    return _mm_cmpeq_epi8(d, value);
   } else {
-    // No unsigned 16-bit compare in SSE2: flip the sign bit and compare signed.
-    const __m128i flip = _mm_set1_epi16(static_cast<short>(0x8000));
-    const __m128i x = _mm_xor_si128(_mm_sub_epi16(d, _mm_set1_epi16(static_cast<short>(lo))), flip);
-    const __m128i span = _mm_set1_epi16(static_cast<short>((hi - lo) ^ 0x8000));
-    return _mm_xor_si128(_mm_cmpgt_epi16(x, span), _mm_set1_epi32(-1));
+    return _mm_cmpeq_epi16(d, value);
   }
 }
 template <typename Sample>
-inline __m128i Equal(__m128i d, std::uint32_t value) {
+inline __m128i Splat(std::uint32_t value) {
   if constexpr (sizeof(Sample) == 1) {
-    return _mm_cmpeq_epi8(d, _mm_set1_epi8(static_cast<char>(value)));
+    return _mm_set1_epi8(static_cast<char>(value));
   } else {
-    return _mm_cmpeq_epi16(d, _mm_set1_epi16(static_cast<short>(value)));
+    return _mm_set1_epi16(static_cast<short>(value));
   }
+}
+// One bit per sample of a lane mask.
+template <typename Sample>
+inline unsigned LaneBits(__m128i m) {
+  if constexpr (sizeof(Sample) == 1) {
+    return static_cast<unsigned>(_mm_movemask_epi8(m));
+  } else {
+    return static_cast<unsigned>(_mm_movemask_epi8(_mm_packs_epi16(m, _mm_setzero_si128())));
+  }
+}
+
+// The colour of pixel u as PCL packs it, from one 4-byte load (the byte after a 3-byte pixel is
+// ignored): the caller makes sure that byte is inside the buffer.
+template <ColorEncoding C>
+inline std::uint32_t PackPixelWide(const std::uint8_t* row, std::uint32_t u) {
+  std::uint32_t w;
+  if constexpr (C == ColorEncoding::kMono8) {
+    return (std::uint32_t{row[u]} * 0x010101u) | 0xFF000000u;
+  } else {
+    std::memcpy(&w, row + static_cast<std::size_t>(u) * (C == ColorEncoding::kRGBA8 ? 4 : 3), 4);
+  }
+  if constexpr (C == ColorEncoding::kBGR8) return w | 0xFF000000u;  // bytes b, g, r: in place
+  return (__builtin_bswap32(w) >> 8) | 0xFF000000u;                 // bytes r, g, b: reversed
 }
 
 // 8/16-bit disparities with the passthrough on z (or off): z, validity and the passthrough
 // decision all depend on the raw value only, so they come from tables. Sixteen bytes of pixels
 // are tested at once against the range of passing values, and valid pixels are counted with the
 // same registers; only blocks holding a passing pixel are looked at one pixel at a time.
+//
+// A passing pixel costs about twenty instructions: (u - cx, 0, 0, 0) comes from a per-column
+// table and (z, z, z, z) from a per-value one (8-bit samples), so the point is two loads, an or
+// and PCL's two products; its colour one load. The sink's state lives in locals, which the
+// stores of points cannot alias.
 template <typename Sample, ColorEncoding C, typename Sink>
-void RunTableKernel(const DepthConstants& c, const float* zt, const std::uint8_t* flags,
-                    const ScanPlan& plan, const DisparityView& disparity, const ColorView& colour,
-                    Sink* sink, Tally* tally) {
+void RunTableKernel(const DepthConstants& c, const float* zt, const Float4* z4,
+                    const Float4* column, const std::uint8_t* flags, const ScanPlan& plan,
+                    const DisparityView& disparity, const ColorView& colour, Sink* sink,
+                    Tally* tally) {
   const std::uint32_t w = disparity.width;
   const std::uint32_t h = disparity.height;
   constexpr std::uint32_t kLanes = 16 / sizeof(Sample);
@@ -138,38 +206,69 @@ void RunTableKernel(const DepthConstants& c, const float* zt, const std::uint8_t
   const __m128i zero = _mm_setzero_si128();
   const bool any_pass = plan.pass_lo <= plan.pass_hi;
   const bool any_valid = plan.valid_lo <= plan.valid_hi;
-  auto pixel = [&](std::uint32_t u, const std::uint8_t* crow, float yc, Sample d) {
-    const __m128 p = PixelPoint(c, u, yc, zt[d]);
-    if (!XyFinite(p)) {
-      --valid;  // z finite but x or y overflowed: not a finite point
-      return;
-    }
-    ++passed;
-    sink->Add(p, internal::PackPixel<C>(crow, u));
-  };
+  const bool simd = plan.simd;
+  const bool pass_exact = plan.pass_exact;
+  const bool check_finite = plan.x_y_may_overflow;
+  const int hole_count = plan.hole_count;
+  const RangeTest<Sample> valid_range(plan.valid_lo, plan.valid_hi);
+  const RangeTest<Sample> pass_range(plan.pass_lo, plan.pass_hi);
+  __m128i hole[4];
+  for (int k = 0; k < 4; ++k) hole[k] = Splat<Sample>(plan.holes[k]);
+  const __m128 scale = _mm_setr_ps(c.inv_fx, c.inv_fy, 1.0f, 0.0f);
+  Point* out = sink->out;
+  std::size_t count = sink->count;
+  internal::Bounds bounds = sink->bounds;
+  const std::uint8_t* colour_end =
+      static_cast<const std::uint8_t*>(colour.data) + colour.size_bytes;
   for (std::uint32_t v = 0; v < h; ++v) {
     const std::uint8_t* drow = disparity.row(v);
     const std::uint8_t* crow = colour.row(v);
-    const float yc = static_cast<float>(v) - c.cy;
+    // (0, yc, 1, 0): or-ed with (u - cx, 0, 0, 0), times (z, z, z, z), times (1/fx, 1/fy, 1, 0)
+    // gives PCL's ((u - cx) * z) * (1/fx), ((v - cy) * z) * (1/fy), z * 1 * 1 == z, and 0.
+    const __m128 row_part = _mm_setr_ps(0.0f, static_cast<float>(v) - c.cy, 1.0f, 0.0f);
+    // Pixels whose colour can be read with one 4-byte load (all but maybe the very last one).
+    const std::uint32_t wide_end =
+        C == ColorEncoding::kBGR8 || C == ColorEncoding::kRGB8
+            ? static_cast<std::uint32_t>(
+                  std::min<std::size_t>(w, (static_cast<std::size_t>(colour_end - crow) - 1) / 3))
+            : w;
+    auto pixel = [&](std::uint32_t u, Sample d) {
+      __m128 zz;
+      if constexpr (sizeof(Sample) == 1) {
+        zz = _mm_load_ps(z4[d].f);
+      } else {
+        zz = _mm_set1_ps(zt[d]);
+      }
+      const __m128 p =
+          _mm_mul_ps(_mm_mul_ps(_mm_or_ps(_mm_load_ps(column[u].f), row_part), zz), scale);
+      if (check_finite && !XyFinite(p)) {
+        --valid;  // z finite but x or y overflowed: not a finite point
+        return;
+      }
+      ++passed;
+      const std::uint32_t rgba =
+          u < wide_end ? PackPixelWide<C>(crow, u) : internal::PackPixel<C>(crow, u);
+      Point& q = out[count++];
+      _mm_storeu_ps(&q.x, p);
+      q.rgba = rgba;
+      if constexpr (Sink::kTrackBounds) bounds.Add(p);
+    };
     std::uint32_t u = 0;
-    if (plan.simd) {
+    if (simd) {
       for (; u + kLanes <= w; u += kLanes) {
-        const __m128i d = _mm_loadu_si128(reinterpret_cast<const __m128i*>(drow + u * sizeof(Sample)));
+        const __m128i d =
+            _mm_loadu_si128(reinterpret_cast<const __m128i*>(drow + u * sizeof(Sample)));
         if (any_valid) {
-          in_valid_range = _mm_add_epi64(
-              in_valid_range, _mm_sad_epu8(InRange<Sample>(d, plan.valid_lo, plan.valid_hi), zero));
-          for (int k = 0; k < plan.hole_count; ++k) {
-            in_holes = _mm_add_epi64(in_holes, _mm_sad_epu8(Equal<Sample>(d, plan.holes[k]), zero));
+          in_valid_range = _mm_add_epi64(in_valid_range, _mm_sad_epu8(valid_range(d), zero));
+          for (int k = 0; k < hole_count; ++k) {
+            in_holes = _mm_add_epi64(in_holes, _mm_sad_epu8(Equal<Sample>(d, hole[k]), zero));
           }
         }
         if (!any_pass) continue;
-        unsigned mask = static_cast<unsigned>(
-            _mm_movemask_epi8(InRange<Sample>(d, plan.pass_lo, plan.pass_hi)));
-        while (mask != 0) {
-          const std::uint32_t j = static_cast<std::uint32_t>(__builtin_ctz(mask)) / sizeof(Sample);
-          mask &= ~((sizeof(Sample) == 1 ? 1u : 3u) << (j * sizeof(Sample)));
+        for (unsigned mask = LaneBits<Sample>(pass_range(d)); mask != 0; mask &= mask - 1) {
+          const auto j = static_cast<std::uint32_t>(__builtin_ctz(mask));
           const Sample s = internal::LoadSample<Sample>(drow, u + j);
-          if (flags[s] & kPasses) pixel(u + j, crow, yc, s);
+          if (pass_exact || (flags[s] & kPasses)) pixel(u + j, s);
         }
       }
     }
@@ -177,9 +276,11 @@ void RunTableKernel(const DepthConstants& c, const float* zt, const std::uint8_t
       const Sample d = internal::LoadSample<Sample>(drow, u);
       const std::uint8_t f = flags[d];
       valid += f & kValid;
-      if (f & kPasses) pixel(u, crow, yc, d);
+      if (f & kPasses) pixel(u, d);
     }
   }
+  sink->count = count;
+  if constexpr (Sink::kTrackBounds) sink->bounds = bounds;
   alignas(16) std::uint64_t sums[2], holes[2];
   _mm_store_si128(reinterpret_cast<__m128i*>(sums), in_valid_range);
   _mm_store_si128(reinterpret_cast<__m128i*>(holes), in_holes);
@@ -235,11 +336,39 @@ struct Pipeline::Impl {
   PointVector passed;
 
   ScanPlan plan;
+  // (z, z, z, z) per 8-bit value, made with the flags; (u - cx, 0, 0, 0) per column.
+  std::vector<Float4> z4;
+  std::vector<Float4> column;
+  std::uint32_t column_width = 0;
+  float column_cx = 0;
+
+  const Float4* Columns(std::uint32_t w, float cx) {
+    if (column_width == w && column_cx == cx && !column.empty()) return column.data();
+    column.resize(w);
+    for (std::uint32_t u = 0; u < w; ++u) {
+      column[u] = Float4{{static_cast<float>(u) - cx, 0.0f, 0.0f, 0.0f}};
+    }
+    column_width = w;
+    column_cx = cx;
+    return column.data();
+  }
+
+  // Whether a pixel that passes may have an x or y beyond float's range: z is at most
+  // plan.z_max, and |u - cx|, |v - cy| are largest at the frame's edges.
+  bool XyMayOverflow(const DepthConstants& c, std::uint32_t w, std::uint32_t h) const {
+    const double du = std::max(std::fabs(0.0 - c.cx), std::fabs(w - 1.0 - c.cx));
+    const double dv = std::max(std::fabs(0.0 - c.cy), std::fabs(h - 1.0 - c.cy));
+    const double z = plan.z_max;
+    // Float rounding adds a few parts in 10^7 to each product: far inside the margin.
+    constexpr double kSafe = 1e37;
+    return !(du * z * std::fabs(c.inv_fx) < kSafe && dv * z * std::fabs(c.inv_fy) < kSafe);
+  }
 
   const std::uint8_t* PassFlags(const DepthConstants& c, const PassThroughParams& pt, int bits) {
-    if (flags_bits == bits && flags_constants.SameAs(c) && flags_passthrough.enabled == pt.enabled &&
-        flags_passthrough.axis == pt.axis && flags_passthrough.min == pt.min &&
-        flags_passthrough.max == pt.max && flags_passthrough.negative == pt.negative) {
+    if (flags_bits == bits && flags_constants.SameAs(c) &&
+        flags_passthrough.enabled == pt.enabled && flags_passthrough.axis == pt.axis &&
+        flags_passthrough.min == pt.min && flags_passthrough.max == pt.max &&
+        flags_passthrough.negative == pt.negative) {
       return flags.data();
     }
     const std::size_t n = std::size_t{1} << bits;
@@ -254,6 +383,15 @@ struct Pipeline::Impl {
     flags_constants = c;
     flags_passthrough = pt;
     plan = ScanPlan::From(flags.data(), n);
+    plan.z_max = 0;
+    for (std::size_t d = 0; d < n; ++d) {
+      if (flags[d] & kPasses) plan.z_max = std::max(plan.z_max, table.z[d]);
+    }
+    if (bits == 8) {
+      z4.resize(n);
+      for (std::size_t d = 0; d < n; ++d)
+        z4[d] = Float4{{table.z[d], table.z[d], table.z[d], table.z[d]}};
+    }
     return flags.data();
   }
 
@@ -276,11 +414,12 @@ struct Pipeline::Impl {
         impl->table.Prepare(c, kBits);
         if (!passthrough.enabled || passthrough.axis == Axis::kZ) {
           const std::uint8_t* flags = impl->PassFlags(c, passthrough, kBits);
-          RunTableKernel<Sample, C>(c, impl->table.z.data(), flags, impl->plan, disparity,
-                                    colour, sink, tally);
+          impl->plan.x_y_may_overflow = impl->XyMayOverflow(c, disparity.width, disparity.height);
+          RunTableKernel<Sample, C>(c, impl->table.z.data(), impl->z4.data(),
+                                    impl->Columns(disparity.width, c.cx), flags, impl->plan,
+                                    disparity, colour, sink, tally);
         } else {
-          RunGenericKernel<Sample, C>(c, &impl->table, passthrough, disparity, colour, sink,
-                                      tally);
+          RunGenericKernel<Sample, C>(c, &impl->table, passthrough, disparity, colour, sink, tally);
         }
       }
     }
