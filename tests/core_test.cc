@@ -17,6 +17,7 @@ namespace {
 
 using testing::CloudsIdentical;
 using testing::CloudsMatch;
+using testing::CloudsMatchInOrder;
 using testing::MakeFrame;
 using testing::RandomFrame;
 using testing::SetSample;
@@ -296,6 +297,30 @@ TEST(VoxelGrid, CentroidAndTruncatedMeanColour) {
   EXPECT_EQ(out.size(), 1u);
 }
 
+TEST(VoxelGrid, KeyOrderIsPclOrder) {
+  // Voxels (x, y, z indices) first met as (0, 0, 0), (1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, 0, -1),
+  // (-1, 1, 0); PCL's order is by z, then y, then x.
+  const PointCloud in = CloudOf({{0.01f, 0.01f, 0.01f, PackRgba(1, 1, 1)},
+                                 {0.04f, 0.01f, 0.01f, PackRgba(2, 2, 2)},
+                                 {-0.01f, 0.01f, 0.01f, PackRgba(3, 3, 3)},
+                                 {0.01f, 0.04f, 0.01f, PackRgba(4, 4, 4)},
+                                 {0.02f, 0.02f, 0.02f, PackRgba(1, 1, 1)},
+                                 {0.01f, 0.01f, -0.01f, PackRgba(5, 5, 5)},
+                                 {-0.02f, 0.05f, 0.02f, PackRgba(6, 6, 6)}});
+  VoxelGrid grid;
+  PointCloud out;
+  VoxelGridParams p;
+  p.key_order = true;
+  ASSERT_TRUE(grid.Filter(in, p, &out).ok());
+  std::vector<int> reds;
+  for (const Point& q : out.points) reds.push_back(RedOf(q.rgba));
+  EXPECT_THAT(reds, ::testing::ElementsAre(5, 3, 1, 2, 6, 4));
+  p.min_points_per_voxel = 2;  // only voxel (0, 0, 0) keeps its point
+  ASSERT_TRUE(grid.Filter(in, p, &out).ok());
+  ASSERT_EQ(out.size(), 1u);
+  EXPECT_EQ(RedOf(out.points[0].rgba), 1);
+}
+
 TEST(VoxelGrid, MatchesBruteForceOnRandomCloudsIncludingWideKeys) {
   std::mt19937 rng(7);
   std::uniform_real_distribution<float> coord(-50.0f, 50.0f);
@@ -319,6 +344,11 @@ TEST(VoxelGrid, MatchesBruteForceOnRandomCloudsIncludingWideKeys) {
     PointCloud out;
     ASSERT_TRUE(grid.Filter(in, p, &out).ok()) << grid.Filter(in, p, &out);
     EXPECT_TRUE(CloudsMatch(testing::BruteForceVoxelGrid(in, p), out, 1e-5, 0)) << "leaf " << leaf;
+    p.key_order = true;  // 32- and 64-bit keys alike come out in (z, y, x) index order
+    ASSERT_TRUE(grid.Filter(in, p, &out).ok());
+    EXPECT_TRUE(
+        CloudsMatchInOrder(testing::BruteForceVoxelGrid(in, p, /*pcl_order=*/true), out, 1e-5, 0))
+        << "leaf " << leaf << ", key order";
   }
 }
 
@@ -360,6 +390,10 @@ TEST(Pipeline, FusedEqualsStagedForAllEncodings) {
           ASSERT_TRUE(grid.Filter(passed, o.voxel, &staged).ok());
           // Same points in the same order: both walk the image in raster order.
           EXPECT_TRUE(CloudsIdentical(staged, fused));
+          o.voxel.key_order = true;  // and both sort the same voxels the same way
+          ASSERT_TRUE(grid.Filter(passed, o.voxel, &staged).ok());
+          ASSERT_TRUE(pipeline.Run(o, f.disparity, f.colour, &fused).ok());
+          EXPECT_TRUE(CloudsIdentical(staged, fused)) << "key order";
         } else {
           EXPECT_TRUE(CloudsIdentical(passed, fused));
         }

@@ -100,8 +100,10 @@ inline TestFrame RandomFrame(std::mt19937& rng, std::uint32_t w, std::uint32_t h
 }
 
 // Voxel grid by the definition: std::map of float-computed floor(v * (1/leaf)) indices, double
-// sums. Independent of the hashing and key packing under test.
-inline PointCloud BruteForceVoxelGrid(const PointCloud& in, const VoxelGridParams& p) {
+// sums. Independent of the hashing and key packing under test. Voxels come out ordered by their
+// (x, y, z) indices, or with `pcl_order` by (z, y, x), which is PCL's order.
+inline PointCloud BruteForceVoxelGrid(const PointCloud& in, const VoxelGridParams& p,
+                                      bool pcl_order = false) {
   struct Sum {
     double x = 0, y = 0, z = 0;
     std::uint64_t n = 0, r = 0, g = 0, b = 0, a = 0;
@@ -113,7 +115,8 @@ inline PointCloud BruteForceVoxelGrid(const PointCloud& in, const VoxelGridParam
     auto idx = [&](float v, float i) {
       return static_cast<std::int64_t>(std::floor(static_cast<double>(v * i)));
     };
-    Sum& s = voxels[{idx(q.x, inv[0]), idx(q.y, inv[1]), idx(q.z, inv[2])}];
+    const std::int64_t ix = idx(q.x, inv[0]), iy = idx(q.y, inv[1]), iz = idx(q.z, inv[2]);
+    Sum& s = pcl_order ? voxels[{iz, iy, ix}] : voxels[{ix, iy, iz}];
     s.x += q.x;
     s.y += q.y;
     s.z += q.z;
@@ -208,6 +211,36 @@ inline ::testing::AssertionResult CloudsMatch(const PointCloud& reference, const
              << q.rgba;
     }
     used[best] = true;
+  }
+  return ::testing::AssertionSuccess();
+}
+
+// CloudsMatch's criterion point by point in order: the same number of points, and point i of
+// ours within rel_tol of the norm of the reference's point i, colour channels within colour_tol.
+inline ::testing::AssertionResult CloudsMatchInOrder(const PointCloud& reference,
+                                                     const PointCloud& ours, double rel_tol = 1e-5,
+                                                     int colour_tol = 1) {
+  if (reference.size() != ours.size()) {
+    return ::testing::AssertionFailure()
+           << "point counts differ: reference " << reference.size() << ", ours " << ours.size();
+  }
+  auto channel_diff = [](std::uint8_t a, std::uint8_t b) { return std::abs(int(a) - int(b)); };
+  for (std::size_t i = 0; i < reference.size(); ++i) {
+    const Point& p = reference.points[i];
+    const Point& q = ours.points[i];
+    const double norm = std::sqrt(double(p.x) * p.x + double(p.y) * p.y + double(p.z) * p.z);
+    const double d = std::sqrt((double(p.x) - q.x) * (double(p.x) - q.x) +
+                               (double(p.y) - q.y) * (double(p.y) - q.y) +
+                               (double(p.z) - q.z) * (double(p.z) - q.z));
+    if (!(d <= rel_tol * std::max(norm, 1e-12)) ||
+        channel_diff(RedOf(p.rgba), RedOf(q.rgba)) > colour_tol ||
+        channel_diff(GreenOf(p.rgba), GreenOf(q.rgba)) > colour_tol ||
+        channel_diff(BlueOf(p.rgba), BlueOf(q.rgba)) > colour_tol) {
+      return ::testing::AssertionFailure()
+             << "point " << i << " differs: reference (" << p.x << ", " << p.y << ", " << p.z
+             << ", " << std::hex << p.rgba << std::dec << "), ours (" << q.x << ", " << q.y << ", "
+             << q.z << ", " << std::hex << q.rgba << std::dec << ")";
+    }
   }
   return ::testing::AssertionSuccess();
 }

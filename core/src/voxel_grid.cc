@@ -266,7 +266,73 @@ void VoxelAccumulator::AccumulateFiniteNarrow(const Point* points, std::size_t n
   Accumulate(points + i, n - i, keys);
 }
 
-void VoxelAccumulator::Emit(std::uint32_t min_points, PointVector* out) const {
+const std::uint64_t* VoxelAccumulator::KeyOrder() {
+  if (wide_) {  // 64-bit keys (rare): a comparison sort of (key, voxel) pairs
+    std::vector<std::pair<std::uint64_t, std::uint64_t>> pairs;
+    pairs.reserve(voxel_count_);
+    for (std::size_t i = 0; i + 1 < table_.size(); i += 2) {
+      if (table_[i + 1] != 0) pairs.emplace_back(table_[i], table_[i + 1] - 1);
+    }
+    std::sort(pairs.begin(), pairs.end());
+    sort_a_.resize(voxel_count_);
+    for (std::size_t i = 0; i < pairs.size(); ++i) sort_a_[i] = pairs[i].second;
+    return sort_a_.data();
+  }
+  // 32-bit keys: the table's entries (key << 32 | voxel + 1) sorted as numbers. Least
+  // significant digit first, over the bits the keys use, in as few passes of at most 11 bits
+  // (2048 buckets: few enough for the scattered stores to stay in cache) as those bits need.
+  switch ((key_bits_ + 10) / 11) {
+    case 0:
+    case 1:
+      return RadixSortTable<1>();
+    case 2:
+      return RadixSortTable<2>();
+    default:
+      return RadixSortTable<3>();
+  }
+}
+
+template <int kPasses>
+const std::uint64_t* VoxelAccumulator::RadixSortTable() {
+  const std::size_t m = voxel_count_;
+  sort_a_.resize(m);
+  sort_b_.resize(m);
+  const int digit = std::max(1, (key_bits_ + kPasses - 1) / kPasses);
+  const std::uint64_t digit_mask = (std::uint64_t{1} << digit) - 1;
+  const std::size_t buckets = std::size_t{1} << digit;
+  std::uint32_t* const counts = sort_counts_;
+  std::fill(counts, counts + kPasses * buckets, 0u);
+  for (const std::uint64_t e : table_) {
+    if ((e & 0xFFFFFFFFu) == 0) continue;
+    for (int p = 0; p < kPasses; ++p)
+      ++counts[p * buckets + ((e >> (32 + p * digit)) & digit_mask)];
+  }
+  for (int p = 0; p < kPasses; ++p) {  // counts become each bucket's first position
+    std::uint32_t* offset = counts + p * buckets;
+    std::uint32_t sum = 0;
+    for (std::size_t d = 0; d < buckets; ++d) {
+      const std::uint32_t k = offset[d];
+      offset[d] = sum;
+      sum += k;
+    }
+  }
+  // The first pass reads the table itself; the others the previous pass's output.
+  std::uint64_t* from = sort_a_.data();
+  std::uint64_t* to = sort_b_.data();
+  for (const std::uint64_t e : table_) {
+    if ((e & 0xFFFFFFFFu) != 0) from[counts[(e >> 32) & digit_mask]++] = e - 1;
+  }
+  for (int p = 1; p < kPasses; ++p) {
+    std::uint32_t* offset = counts + p * buckets;
+    const int shift = 32 + p * digit;
+    for (std::size_t i = 0; i < m; ++i) to[offset[(from[i] >> shift) & digit_mask]++] = from[i];
+    std::swap(from, to);
+  }
+  return from;
+}
+
+void VoxelAccumulator::Emit(std::uint32_t min_points, const std::uint64_t* order,
+                            PointVector* out) const {
   const std::size_t first = out->size();
   out->resize(first + voxel_count_);  // not initialised (PointVector)
   Point* o = out->data() + first;
@@ -275,35 +341,44 @@ void VoxelAccumulator::Emit(std::uint32_t min_points, PointVector* out) const {
   // results that should be whole numbers over their rounding, and is far smaller than the gap
   // (>= 1/n >= 2^-24) between a fraction and the next integer.
   constexpr double kNudge = 1.0 + 1.0 / (1ull << 40);
-  for (std::size_t i = 0; i < voxel_count_; ++i) {
-    const Voxel& v = voxels_[i];
+  // Locals: the stores of points could alias the members, which would be reloaded per voxel.
+  const Voxel* const voxels = voxels_.data();
+  const std::size_t count = voxel_count_;
+  for (std::size_t i = 0; i < count; ++i) {
+    // In key order the voxels are read in a random order: fetch them a few ahead.
+    if (order != nullptr && i + 8 < count) {
+      _mm_prefetch(reinterpret_cast<const char*>(&voxels[order[i + 8] & 0xFFFFFFFFu]), _MM_HINT_T0);
+    }
+    const Voxel& v = voxels[order != nullptr ? order[i] & 0xFFFFFFFFu : i];
     const double n = _mm_cvtsd_f64(_mm_unpackhi_pd(v.sum_z_n, v.sum_z_n));
     if (n < min_points) continue;
     const __m128d inv = _mm_set1_pd(1.0 / n);
     const __m128d xy = _mm_mul_pd(v.sum_xy, inv);
     const __m128d zn = _mm_mul_pd(v.sum_z_n, inv);
-    Point& p = *o++;
-    _mm_storel_pi(reinterpret_cast<__m64*>(&p.x), _mm_cvtpd_ps(xy));
-    p.z = static_cast<float>(_mm_cvtsd_f64(zn));
-    std::uint32_t channel[4];
+    std::uint32_t rgba;
     if (n < (1 << 23)) {  // sums < 2^31: exact as signed 32-bit
       const __m128d scale = _mm_set1_pd((1.0 / n) * kNudge);
-      const __m128i lo = _mm_cvttpd_epi32(_mm_mul_pd(_mm_cvtepi32_pd(v.sum_bgra), scale));
-      const __m128i hi = _mm_cvttpd_epi32(
+      const __m128i bg = _mm_cvttpd_epi32(_mm_mul_pd(_mm_cvtepi32_pd(v.sum_bgra), scale));
+      const __m128i ra = _mm_cvttpd_epi32(
           _mm_mul_pd(_mm_cvtepi32_pd(_mm_unpackhi_epi64(v.sum_bgra, v.sum_bgra)), scale));
-      alignas(16) std::uint32_t q[8];
-      _mm_store_si128(reinterpret_cast<__m128i*>(q), lo);
-      _mm_store_si128(reinterpret_cast<__m128i*>(q + 4), hi);
-      channel[0] = q[0], channel[1] = q[1], channel[2] = q[4], channel[3] = q[5];
+      // (b, g, r, a), each 0..255, narrowed to bytes in that order: PCL's packing.
+      const __m128i bgra = _mm_packs_epi32(_mm_unpacklo_epi64(bg, ra), _mm_setzero_si128());
+      rgba = static_cast<std::uint32_t>(
+          _mm_cvtsi128_si32(_mm_packus_epi16(bgra, _mm_setzero_si128())));
     } else {
       alignas(16) std::uint32_t sums[4];
       _mm_store_si128(reinterpret_cast<__m128i*>(sums), v.sum_bgra);
-      const auto count = static_cast<std::uint32_t>(n);
-      for (int c = 0; c < 4; ++c) channel[c] = sums[c] / count;
+      const auto points = static_cast<std::uint32_t>(n);
+      rgba = PackRgba(
+          static_cast<std::uint8_t>(sums[2] / points), static_cast<std::uint8_t>(sums[1] / points),
+          static_cast<std::uint8_t>(sums[0] / points), static_cast<std::uint8_t>(sums[3] / points));
     }
-    // PCL: the centroid of the points, and the truncated mean of each colour channel.
-    p.rgba = PackRgba(static_cast<std::uint8_t>(channel[2]), static_cast<std::uint8_t>(channel[1]),
-                      static_cast<std::uint8_t>(channel[0]), static_cast<std::uint8_t>(channel[3]));
+    // PCL: the centroid of the points, and the truncated mean of each colour channel. One
+    // 16-byte store: (x, y) and (z, colour).
+    const __m128 z_rgba = _mm_unpacklo_ps(
+        _mm_cvtpd_ps(zn), _mm_castsi128_ps(_mm_cvtsi32_si128(static_cast<int>(rgba))));
+    _mm_storeu_ps(&o->x, _mm_movelh_ps(_mm_cvtpd_ps(xy), z_rgba));
+    ++o;
   }
   out->resize(static_cast<std::size_t>(o - out->data()));
 }
@@ -357,6 +432,7 @@ absl::Status VoxelAccumulator::Run(const Point* points, std::size_t n,
                      " voxels, more than 64-bit keys hold; use a larger voxel.leaf"));
   }
   wide_ = total_bits > 32 || !int32_indices;
+  key_bits_ = total_bits;
 
   // Every finite point may be a voxel of its own: room for all, left uninitialised.
   if (voxels_.size() < n) voxels_.resize(n);
@@ -383,7 +459,7 @@ absl::Status VoxelAccumulator::Run(const Point* points, std::size_t n,
     Accumulate(points, n, keys);
   }
   recent_voxels_[clouds_++ % 8] = voxel_count_;
-  Emit(params.min_points_per_voxel, out);
+  Emit(params.min_points_per_voxel, params.key_order ? KeyOrder() : nullptr, out);
   return absl::OkStatus();
 }
 
