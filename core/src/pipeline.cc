@@ -200,7 +200,7 @@ void RunTableKernel(const DepthConstants& c, const float* zt, const Float4* z4,
   const std::uint32_t w = disparity.width;
   const std::uint32_t h = disparity.height;
   constexpr std::uint32_t kLanes = 16 / sizeof(Sample);
-  std::uint64_t valid = 0, passed = 0;
+  std::uint64_t valid = 0;
   // Valid-pixel counts as sums of 0xFF bytes (psadbw), divided out at the end.
   __m128i in_valid_range = _mm_setzero_si128(), in_holes = _mm_setzero_si128();
   const __m128i zero = _mm_setzero_si128();
@@ -215,18 +215,22 @@ void RunTableKernel(const DepthConstants& c, const float* zt, const Float4* z4,
   __m128i hole[4];
   for (int k = 0; k < 4; ++k) hole[k] = Splat<Sample>(plan.holes[k]);
   const __m128 scale = _mm_setr_ps(c.inv_fx, c.inv_fy, 1.0f, 0.0f);
-  Point* out = sink->out;
-  std::size_t count = sink->count;
+  Point* const first = sink->out + sink->count;
+  Point* o = first;
   internal::Bounds bounds = sink->bounds;
   const std::uint8_t* colour_end =
       static_cast<const std::uint8_t*>(colour.data) + colour.size_bytes;
-  for (std::uint32_t v = 0; v < h; ++v) {
+  // kFast: a row where no test is needed per passing pixel: every value in the passing range
+  // passes, no x or y can overflow, and the byte after each pixel's colour is in the buffer (all
+  // rows but the last: the next row follows).
+  auto scan_row = [&](std::uint32_t v, auto fast) {
+    constexpr bool kFast = decltype(fast)::value;
     const std::uint8_t* drow = disparity.row(v);
     const std::uint8_t* crow = colour.row(v);
     // (0, yc, 1, 0): or-ed with (u - cx, 0, 0, 0), times (z, z, z, z), times (1/fx, 1/fy, 1, 0)
     // gives PCL's ((u - cx) * z) * (1/fx), ((v - cy) * z) * (1/fy), z * 1 * 1 == z, and 0.
     const __m128 row_part = _mm_setr_ps(0.0f, static_cast<float>(v) - c.cy, 1.0f, 0.0f);
-    // Pixels whose colour can be read with one 4-byte load (all but maybe the very last one).
+    // Pixels whose colour can be read with one 4-byte load.
     const std::uint32_t wide_end =
         C == ColorEncoding::kBGR8 || C == ColorEncoding::kRGB8
             ? static_cast<std::uint32_t>(
@@ -241,16 +245,15 @@ void RunTableKernel(const DepthConstants& c, const float* zt, const Float4* z4,
       }
       const __m128 p =
           _mm_mul_ps(_mm_mul_ps(_mm_or_ps(_mm_load_ps(column[u].f), row_part), zz), scale);
-      if (check_finite && !XyFinite(p)) {
+      if (!kFast && check_finite && !XyFinite(p)) {
         --valid;  // z finite but x or y overflowed: not a finite point
         return;
       }
-      ++passed;
       const std::uint32_t rgba =
-          u < wide_end ? PackPixelWide<C>(crow, u) : internal::PackPixel<C>(crow, u);
-      Point& q = out[count++];
-      _mm_storeu_ps(&q.x, p);
-      q.rgba = rgba;
+          kFast || u < wide_end ? PackPixelWide<C>(crow, u) : internal::PackPixel<C>(crow, u);
+      _mm_storeu_ps(&o->x, p);
+      o->rgba = rgba;
+      ++o;
       if constexpr (Sink::kTrackBounds) bounds.Add(p);
     };
     std::uint32_t u = 0;
@@ -268,7 +271,7 @@ void RunTableKernel(const DepthConstants& c, const float* zt, const Float4* z4,
         for (unsigned mask = LaneBits<Sample>(pass_range(d)); mask != 0; mask &= mask - 1) {
           const auto j = static_cast<std::uint32_t>(__builtin_ctz(mask));
           const Sample s = internal::LoadSample<Sample>(drow, u + j);
-          if (pass_exact || (flags[s] & kPasses)) pixel(u + j, s);
+          if (kFast || pass_exact || (flags[s] & kPasses)) pixel(u + j, s);
         }
       }
     }
@@ -278,8 +281,17 @@ void RunTableKernel(const DepthConstants& c, const float* zt, const Float4* z4,
       valid += f & kValid;
       if (f & kPasses) pixel(u, d);
     }
+  };
+  const bool fast = pass_exact && !check_finite;
+  for (std::uint32_t v = 0; v < h; ++v) {
+    if (fast && v + 1 < h) {
+      scan_row(v, std::true_type{});
+    } else {
+      scan_row(v, std::false_type{});
+    }
   }
-  sink->count = count;
+  const auto passed = static_cast<std::uint64_t>(o - first);
+  sink->count += passed;
   if constexpr (Sink::kTrackBounds) sink->bounds = bounds;
   alignas(16) std::uint64_t sums[2], holes[2];
   _mm_store_si128(reinterpret_cast<__m128i*>(sums), in_valid_range);
