@@ -201,7 +201,7 @@ void RunTableKernel(const DepthConstants& c, const float* zt, const Float4* z4,
   const std::uint32_t h = disparity.height;
   constexpr std::uint32_t kLanes = 16 / sizeof(Sample);
   std::uint64_t valid = 0;
-  // Valid-pixel counts as sums of 0xFF bytes (psadbw), divided out at the end.
+  // Valid-pixel counts as byte counts (psadbw), divided out at the end.
   __m128i in_valid_range = _mm_setzero_si128(), in_holes = _mm_setzero_si128();
   const __m128i zero = _mm_setzero_si128();
   const bool any_pass = plan.pass_lo <= plan.pass_hi;
@@ -256,23 +256,53 @@ void RunTableKernel(const DepthConstants& c, const float* zt, const Float4* z4,
       ++o;
       if constexpr (Sink::kTrackBounds) bounds.Add(p);
     };
+    // The passing pixels of one vector of samples.
+    auto visit = [&](std::uint32_t at, __m128i pass) {
+      for (unsigned mask = LaneBits<Sample>(pass); mask != 0; mask &= mask - 1) {
+        const auto j = static_cast<std::uint32_t>(__builtin_ctz(mask));
+        const Sample s = internal::LoadSample<Sample>(drow, at + j);
+        if (kFast || pass_exact || (flags[s] & kPasses)) pixel(at + j, s);
+      }
+    };
     std::uint32_t u = 0;
     if (simd) {
-      for (; u + kLanes <= w; u += kLanes) {
-        const __m128i d =
-            _mm_loadu_si128(reinterpret_cast<const __m128i*>(drow + u * sizeof(Sample)));
-        if (any_valid) {
-          in_valid_range = _mm_add_epi64(in_valid_range, _mm_sad_epu8(valid_range(d), zero));
+      // Valid samples are counted in byte lanes (each adds sizeof(Sample) to them), folded into
+      // the 64-bit sums before a lane can wrap, every 255 vectors at most.
+      constexpr std::uint32_t kFoldEvery = 252 * kLanes;  // a multiple of four vectors
+      for (std::uint32_t chunk_end = 0; u + kLanes <= w; u = chunk_end) {
+        chunk_end = std::min(w - w % kLanes, u + kFoldEvery);
+        __m128i valid_bytes = zero, hole_bytes = zero;
+        auto count = [&](__m128i d) {
+          if (!any_valid) return;
+          valid_bytes = _mm_sub_epi8(valid_bytes, valid_range(d));
           for (int k = 0; k < hole_count; ++k) {
-            in_holes = _mm_add_epi64(in_holes, _mm_sad_epu8(Equal<Sample>(d, hole[k]), zero));
+            hole_bytes = _mm_sub_epi8(hole_bytes, Equal<Sample>(d, hole[k]));
           }
+        };
+        auto load = [&](std::uint32_t at) {
+          return _mm_loadu_si128(reinterpret_cast<const __m128i*>(drow + at * sizeof(Sample)));
+        };
+        // Four vectors at a time: one branch for all four when none passes (most of a frame).
+        for (; u + 4 * kLanes <= chunk_end; u += 4 * kLanes) {
+          const __m128i d0 = load(u), d1 = load(u + kLanes);
+          const __m128i d2 = load(u + 2 * kLanes), d3 = load(u + 3 * kLanes);
+          count(d0), count(d1), count(d2), count(d3);
+          if (!any_pass) continue;
+          const __m128i p0 = pass_range(d0), p1 = pass_range(d1);
+          const __m128i p2 = pass_range(d2), p3 = pass_range(d3);
+          if (_mm_movemask_epi8(_mm_or_si128(_mm_or_si128(p0, p1), _mm_or_si128(p2, p3))) == 0) {
+            continue;
+          }
+          visit(u, p0), visit(u + kLanes, p1), visit(u + 2 * kLanes, p2);
+          visit(u + 3 * kLanes, p3);
         }
-        if (!any_pass) continue;
-        for (unsigned mask = LaneBits<Sample>(pass_range(d)); mask != 0; mask &= mask - 1) {
-          const auto j = static_cast<std::uint32_t>(__builtin_ctz(mask));
-          const Sample s = internal::LoadSample<Sample>(drow, u + j);
-          if (kFast || pass_exact || (flags[s] & kPasses)) pixel(u + j, s);
+        for (; u + kLanes <= chunk_end; u += kLanes) {
+          const __m128i d = load(u);
+          count(d);
+          if (any_pass) visit(u, pass_range(d));
         }
+        in_valid_range = _mm_add_epi64(in_valid_range, _mm_sad_epu8(valid_bytes, zero));
+        in_holes = _mm_add_epi64(in_holes, _mm_sad_epu8(hole_bytes, zero));
       }
     }
     for (; u < w; ++u) {
@@ -296,7 +326,7 @@ void RunTableKernel(const DepthConstants& c, const float* zt, const Float4* z4,
   alignas(16) std::uint64_t sums[2], holes[2];
   _mm_store_si128(reinterpret_cast<__m128i*>(sums), in_valid_range);
   _mm_store_si128(reinterpret_cast<__m128i*>(holes), in_holes);
-  valid += (sums[0] + sums[1] - holes[0] - holes[1]) / (255 * sizeof(Sample));
+  valid += (sums[0] + sums[1] - holes[0] - holes[1]) / sizeof(Sample);
   tally->valid = valid;
   tally->passed = passed;
 }
