@@ -170,6 +170,15 @@ class VoxelAccumulator {
   absl::Status Run(const Point* points, std::size_t n, const VoxelGridParams& params,
                    PointVector* out, const Bounds* bounds = nullptr);
 
+  // The same in batches, for a caller that knows a box holding every point before it has the
+  // points (the box need not be tight: it only numbers the voxels). BeginNarrow returns false,
+  // having started nothing, unless 32-bit keys fit the box; then AddNarrow takes batches of
+  // finite points inside it (at most max_points in all), and Finish writes the voxels as Run
+  // does. A run of one voxel's points across two batches costs one more look-up, nothing else.
+  bool BeginNarrow(const Bounds& box, const VoxelGridParams& params, std::size_t max_points);
+  void AddNarrow(const Point* points, std::size_t n);
+  void Finish(const VoxelGridParams& params, PointVector* out);
+
   // Sums of one or more points: (x, y), (z, count) in double, colour (b, g, r, a) in 32 bits.
   struct Sums {
     __m128d xy;
@@ -196,11 +205,22 @@ class VoxelAccumulator {
   struct Cursor {
     std::uint64_t* table;
     Voxel* voxels;
+    std::uint32_t* slot_of;
     std::uint64_t mask;
     int shift;
     std::size_t count;
     std::size_t grow_at;  // count at which the table is more than half full
   };
+  // Numbers voxels from `bounds` (corner, key fields, key width); errors for extents that keys
+  // cannot hold.
+  absl::Status Layout(const Bounds& bounds, const VoxelGridParams& params);
+  // Empties the accumulator and sizes its table for clouds like the last ones (at most
+  // max_points points).
+  void StartCloud(std::size_t max_points);
+  // Room for `voxels` voxels.
+  void Reserve(std::size_t voxels);
+  // Empties the slots of this cloud's voxels, so that the next cloud finds an empty table.
+  void ClearTable();
   Cursor MakeCursor();
   void Grow(Cursor* cursor);
   template <bool kWide>
@@ -219,6 +239,7 @@ class VoxelAccumulator {
   void ResizeTable(std::size_t slots);
 
   std::vector<Voxel, DefaultInitAllocator<Voxel>> voxels_;
+  std::vector<std::uint32_t, DefaultInitAllocator<std::uint32_t>> slot_of_;  // voxel -> slot
   std::size_t voxel_count_ = 0;
   // Slot: (key << 32 | voxel + 1) for 32-bit keys; for 64-bit keys two words. 0: empty.
   std::vector<std::uint64_t> table_;
@@ -226,6 +247,11 @@ class VoxelAccumulator {
   int shift_ = 64;
   bool wide_ = false;  // 64-bit keys: table_ holds (key, voxel + 1) pairs
   int key_bits_ = 0;   // bits the keys of this cloud use
+  // This cloud's voxel numbering (Layout): 1/leaf, the box's corner in voxels, key fields.
+  float inv_[3] = {};
+  std::int64_t corner_[3] = {};
+  int shift_y_ = 0, shift_z_ = 0;
+  bool int32_indices_ = true;
   std::vector<std::uint64_t> sort_a_, sort_b_;
   std::uint32_t sort_counts_[3 << 11];  // the radix sort's bucket counts, for up to 3 passes
   // Voxel counts of the last clouds: the table is sized for the largest, so that a stream whose

@@ -29,6 +29,7 @@ using internal::VoxelAccumulator;
 template <bool kTrack>
 struct PointSink {
   static constexpr bool kTrackBounds = kTrack;
+  static constexpr bool kBanded = false;
   Point* out;
   std::size_t count = 0;
   internal::Bounds bounds;
@@ -38,6 +39,19 @@ struct PointSink {
     p.rgba = rgba;
     if constexpr (kTrackBounds) bounds.Add(xyz);
   }
+};
+
+// Points that go to the voxel grid band by band: whenever a row ends with `band` points or more
+// in the buffer, they are added to the accumulator and the buffer starts again, so it stays in
+// cache between the scan writing it and the voxel grid reading it.
+struct BandSink {
+  static constexpr bool kTrackBounds = false;
+  static constexpr bool kBanded = true;
+  Point* out;  // room for band + one row of points
+  std::size_t count = 0;
+  internal::Bounds bounds;  // unused: the accumulator was given a box before the scan
+  VoxelAccumulator* accumulator;
+  std::size_t band;
 };
 
 // (x, y, z) of pixel (u, v) as PCL computes it: x = ((u - cx) * z) * (1 / fx), same for y, and
@@ -73,8 +87,8 @@ struct ScanPlan {
   std::uint32_t valid_lo = 1, valid_hi = 0;
   std::uint32_t holes[4] = {0, 0, 0, 0};
   int hole_count = 0;
-  bool pass_exact = false;  // every value in [pass_lo, pass_hi] passes: no flag look-up needed
-  float z_max = 0;          // the largest z that passes
+  bool pass_exact = false;     // every value in [pass_lo, pass_hi] passes: no flag look-up needed
+  float z_min = 0, z_max = 0;  // the smallest and largest z that pass
   // Some passing pixel's x or y may overflow to infinity (set per frame by the caller).
   bool x_y_may_overflow = true;
 
@@ -313,15 +327,24 @@ void RunTableKernel(const DepthConstants& c, const float* zt, const Float4* z4,
     }
   };
   const bool fast = pass_exact && !check_finite;
+  std::uint64_t passed = 0;
   for (std::uint32_t v = 0; v < h; ++v) {
     if (fast && v + 1 < h) {
       scan_row(v, std::true_type{});
     } else {
       scan_row(v, std::false_type{});
     }
+    if constexpr (Sink::kBanded) {
+      const auto in_band = static_cast<std::size_t>(o - first);
+      if (in_band >= sink->band || v + 1 == h) {
+        sink->accumulator->AddNarrow(first, in_band);
+        passed += in_band;
+        o = first;
+      }
+    }
   }
-  const auto passed = static_cast<std::uint64_t>(o - first);
-  sink->count += passed;
+  passed += static_cast<std::uint64_t>(o - first);
+  sink->count += static_cast<std::size_t>(o - first);
   if constexpr (Sink::kTrackBounds) sink->bounds = bounds;
   alignas(16) std::uint64_t sums[2], holes[2];
   _mm_store_si128(reinterpret_cast<__m128i*>(sums), in_valid_range);
@@ -365,6 +388,10 @@ void RunGenericKernel(const DepthConstants& c, const DepthTable* table,
 }
 
 }  // namespace
+
+// Points per band of the banded path: 64 KB of them, which stay in L2 between the scan and the
+// voxel grid.
+constexpr std::size_t kBandPoints = 4096;
 
 struct Pipeline::Impl {
   VoxelAccumulator accumulator;
@@ -425,9 +452,12 @@ struct Pipeline::Impl {
     flags_constants = c;
     flags_passthrough = pt;
     plan = ScanPlan::From(flags.data(), n);
+    plan.z_min = std::numeric_limits<float>::max();
     plan.z_max = 0;
     for (std::size_t d = 0; d < n; ++d) {
-      if (flags[d] & kPasses) plan.z_max = std::max(plan.z_max, table.z[d]);
+      if (!(flags[d] & kPasses)) continue;
+      plan.z_min = std::min(plan.z_min, table.z[d]);
+      plan.z_max = std::max(plan.z_max, table.z[d]);
     }
     if (bits == 8) {
       z4.resize(n);
@@ -436,6 +466,29 @@ struct Pipeline::Impl {
     }
     return flags.data();
   }
+
+  // A box holding every point the table kernel can produce on a w x h frame, from the range of
+  // z that passes and the frame's edges: x and y are products that float rounding keeps
+  // monotonic in each factor, so their extremes are at the corners (computed as the kernel
+  // computes points). False when nothing passes or some x or y may overflow.
+  bool StreamBox(const DepthConstants& c, std::uint32_t w, std::uint32_t h,
+                 internal::Bounds* box) const {
+    if (plan.pass_lo > plan.pass_hi || plan.x_y_may_overflow) return false;
+    const __m128 scale = _mm_setr_ps(c.inv_fx, c.inv_fy, 1.0f, 0.0f);
+    for (const float u : {0.0f, static_cast<float>(w - 1)}) {
+      for (const float v : {0.0f, static_cast<float>(h - 1)}) {
+        for (const float z : {plan.z_min, plan.z_max}) {
+          const __m128 a = _mm_setr_ps(u - c.cx, v - c.cy, 1.0f, 0.0f);
+          box->Add(_mm_mul_ps(_mm_mul_ps(a, _mm_set1_ps(z)), scale));
+        }
+      }
+    }
+    return true;
+  }
+
+  // Set by the kernel when it voxelised the points band by band (the Pipeline then has
+  // nothing left to do but count).
+  bool streamed = false;
 
   template <typename Sink>
   struct Kernel {
@@ -446,6 +499,9 @@ struct Pipeline::Impl {
     const ColorView& colour;
     Sink* sink;
     Tally* tally;
+    // With the voxel grid on: its parameters and output, for the banded path.
+    const VoxelGridParams* voxel = nullptr;
+    PointVector* voxel_out = nullptr;
 
     template <typename Sample, ColorEncoding C>
     void operator()() const {
@@ -457,9 +513,20 @@ struct Pipeline::Impl {
         if (!passthrough.enabled || passthrough.axis == Axis::kZ) {
           const std::uint8_t* flags = impl->PassFlags(c, passthrough, kBits);
           impl->plan.x_y_may_overflow = impl->XyMayOverflow(c, disparity.width, disparity.height);
-          RunTableKernel<Sample, C>(c, impl->table.z.data(), impl->z4.data(),
-                                    impl->Columns(disparity.width, c.cx), flags, impl->plan,
-                                    disparity, colour, sink, tally);
+          const Float4* column = impl->Columns(disparity.width, c.cx);
+          internal::Bounds box;
+          if (voxel != nullptr && impl->StreamBox(c, disparity.width, disparity.height, &box) &&
+              impl->accumulator.BeginNarrow(box, *voxel,
+                                            std::size_t{disparity.width} * disparity.height)) {
+            BandSink band{sink->out, 0, {}, &impl->accumulator, kBandPoints};
+            RunTableKernel<Sample, C>(c, impl->table.z.data(), impl->z4.data(), column, flags,
+                                      impl->plan, disparity, colour, &band, tally);
+            impl->accumulator.Finish(*voxel, voxel_out);
+            impl->streamed = true;
+            return;
+          }
+          RunTableKernel<Sample, C>(c, impl->table.z.data(), impl->z4.data(), column, flags,
+                                    impl->plan, disparity, colour, sink, tally);
         } else {
           RunGenericKernel<Sample, C>(c, &impl->table, passthrough, disparity, colour, sink, tally);
         }
@@ -488,12 +555,16 @@ absl::Status Pipeline::Run(const PipelineOptions& options, const DisparityView& 
   if (options.voxel.enabled) {
     if (impl_->passed.size() < pixels) impl_->passed.resize(pixels);
     PointSink<true> sink{impl_->passed.data(), 0, {}};
-    internal::DispatchEncodings(disparity.encoding, colour.encoding,
-                                Impl::Kernel<PointSink<true>>{impl_.get(), c, options.passthrough,
-                                                              disparity, colour, &sink, &tally});
-    if (auto s = impl_->accumulator.Run(impl_->passed.data(), sink.count, options.voxel,
-                                        &out->points, &sink.bounds);
-        !s.ok()) {
+    impl_->streamed = false;
+    internal::DispatchEncodings(
+        disparity.encoding, colour.encoding,
+        Impl::Kernel<PointSink<true>>{impl_.get(), c, options.passthrough, disparity, colour, &sink,
+                                      &tally, &options.voxel, &out->points});
+    if (impl_->streamed) {
+      // Voxelised band by band.
+    } else if (auto s = impl_->accumulator.Run(impl_->passed.data(), sink.count, options.voxel,
+                                               &out->points, &sink.bounds);
+               !s.ok()) {
       out->points.clear();
       out->width = 0;
       return s;

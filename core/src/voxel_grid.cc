@@ -87,6 +87,7 @@ void VoxelAccumulator::ResizeTable(std::size_t slots) {
       while (table_[h] != 0) h = (h + 1) & mask_;
       table_[h] = (key << 32) | voxel_plus_1;
     }
+    slot_of_[voxel_plus_1 - 1] = static_cast<std::uint32_t>(h);
   };
   if (wide_) {
     for (std::size_t i = 0; i + 1 < old.size(); i += 2) {
@@ -100,7 +101,8 @@ void VoxelAccumulator::ResizeTable(std::size_t slots) {
 }
 
 VoxelAccumulator::Cursor VoxelAccumulator::MakeCursor() {
-  return Cursor{table_.data(), voxels_.data(), mask_, shift_, voxel_count_, (mask_ + 1) / 2};
+  return Cursor{table_.data(), voxels_.data(), slot_of_.data(), mask_,
+                shift_,        voxel_count_,   (mask_ + 1) / 2};
 }
 
 void VoxelAccumulator::Grow(Cursor* cursor) {
@@ -142,6 +144,7 @@ inline void VoxelAccumulator::AddSums(Cursor& c, std::uint64_t key, const Sums& 
   } else {
     c.table[h] = (key << 32) | (index + 1);
   }
+  c.slot_of[index] = static_cast<std::uint32_t>(h);
   Voxel& voxel = c.voxels[index];
   const __m128i keep = _mm_set1_epi64x(-static_cast<std::int64_t>(match));
   const __m128d keep_d = _mm_castsi128_pd(keep);
@@ -383,6 +386,95 @@ void VoxelAccumulator::Emit(std::uint32_t min_points, const std::uint64_t* order
   out->resize(static_cast<std::size_t>(o - out->data()));
 }
 
+absl::Status VoxelAccumulator::Layout(const Bounds& bounds, const VoxelGridParams& params) {
+  const float inv[3] = {1.0f / params.leaf_x, 1.0f / params.leaf_y, 1.0f / params.leaf_z};
+  alignas(16) float lo[4], hi[4];
+  _mm_store_ps(lo, bounds.lo);
+  _mm_store_ps(hi, bounds.hi);
+  // Float products and floor are monotonic, so the box's corners bound every point's index.
+  int bits[3];
+  int32_indices_ = true;
+  for (int a = 0; a < 3; ++a) {
+    const double tlo = std::floor(static_cast<double>(lo[a] * inv[a]));
+    const double thi = std::floor(static_cast<double>(hi[a] * inv[a]));
+    if (!(std::fabs(tlo) < 4e18) || !(std::fabs(thi) < 4e18)) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "voxel grid: the cloud reaches ", std::fabs(tlo) > std::fabs(thi) ? lo[a] : hi[a],
+          " on axis ", std::string(Name(static_cast<Axis>(a))),
+          ", more than 2^62 leaves from the origin; use a larger voxel.leaf"));
+    }
+    inv_[a] = inv[a];
+    corner_[a] = static_cast<std::int64_t>(tlo);
+    bits[a] = BitWidth(static_cast<std::uint64_t>(static_cast<std::int64_t>(thi) - corner_[a]));
+    int32_indices_ &= std::fabs(tlo) < 2e9 && std::fabs(thi) < 2e9;
+  }
+  const int total_bits = bits[0] + bits[1] + bits[2];
+  if (total_bits > 64) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("voxel grid: the cloud spans 2^", bits[0], " x 2^", bits[1], " x 2^", bits[2],
+                     " voxels, more than 64-bit keys hold; use a larger voxel.leaf"));
+  }
+  shift_y_ = bits[0];
+  shift_z_ = bits[0] + bits[1];
+  wide_ = total_bits > 32 || !int32_indices_;
+  key_bits_ = total_bits;
+  return absl::OkStatus();
+}
+
+void VoxelAccumulator::Reserve(std::size_t voxels) {
+  if (voxels_.size() >= voxels) return;
+  // Left uninitialised; grows geometrically, so batches of a large cloud copy little.
+  const std::size_t size = std::max(voxels, 2 * voxels_.size());
+  voxels_.resize(size);
+  slot_of_.resize(size);
+}
+
+void VoxelAccumulator::StartCloud(std::size_t max_points) {
+  voxel_count_ = 0;
+  std::size_t slots = kMinSlots;
+  std::size_t recent = 256;
+  for (std::size_t v : recent_voxels_) recent = std::max(recent, v);
+  const std::size_t expected = std::min(max_points, recent);
+  while (slots < 2 * expected) slots *= 2;
+  // The table is left empty by the cloud before (ClearTable): only a new size needs a new one.
+  if (slots != mask_ + 1 || table_.size() != (wide_ ? 2 * slots : slots)) ResizeTable(slots);
+}
+
+void VoxelAccumulator::ClearTable() {
+  // Only the slots this cloud's voxels took: a frame with few points does not pay for the
+  // whole table, which is sized for the largest of the last clouds.
+  std::uint64_t* table = table_.data();
+  const std::uint32_t* slot = slot_of_.data();
+  if (wide_) {
+    for (std::size_t i = 0; i < voxel_count_; ++i) table[2 * slot[i]] = table[2 * slot[i] + 1] = 0;
+  } else {
+    for (std::size_t i = 0; i < voxel_count_; ++i) table[slot[i]] = 0;
+  }
+}
+
+void VoxelAccumulator::Finish(const VoxelGridParams& params, PointVector* out) {
+  recent_voxels_[clouds_++ % 8] = voxel_count_;
+  Emit(params.min_points_per_voxel, params.key_order ? KeyOrder() : nullptr, out);
+  ClearTable();
+}
+
+bool VoxelAccumulator::BeginNarrow(const Bounds& box, const VoxelGridParams& params,
+                                   std::size_t max_points) {
+  voxel_count_ = 0;
+  if (box.empty() || !Layout(box, params).ok() || wide_) return false;
+  StartCloud(max_points);
+  return true;
+}
+
+void VoxelAccumulator::AddNarrow(const Point* points, std::size_t n) {
+  Reserve(voxel_count_ + n);  // every point may be a voxel of its own
+  const SimdKeys keys{_mm_setr_ps(inv_[0], inv_[1], inv_[2], 0.0f),
+                      _mm_setr_epi32(static_cast<int>(corner_[0]), static_cast<int>(corner_[1]),
+                                     static_cast<int>(corner_[2]), 0),
+                      shift_y_, shift_z_};
+  AccumulateFiniteNarrow(points, n, keys);
+}
+
 absl::Status VoxelAccumulator::Run(const Point* points, std::size_t n,
                                    const VoxelGridParams& params, PointVector* out,
                                    const Bounds* known_bounds) {
@@ -403,63 +495,25 @@ absl::Status VoxelAccumulator::Run(const Point* points, std::size_t n,
   }
   voxel_count_ = 0;
   if (n == 0 || bounds.empty()) return absl::OkStatus();
-
-  const float inv[3] = {1.0f / params.leaf_x, 1.0f / params.leaf_y, 1.0f / params.leaf_z};
-  alignas(16) float lo[4], hi[4];
-  _mm_store_ps(lo, bounds.lo);
-  _mm_store_ps(hi, bounds.hi);
-  // Float products and floor are monotonic, so the box's corners bound every point's index.
-  std::int64_t corner[3];
-  int bits[3];
-  bool int32_indices = true;
-  for (int a = 0; a < 3; ++a) {
-    const double tlo = std::floor(static_cast<double>(lo[a] * inv[a]));
-    const double thi = std::floor(static_cast<double>(hi[a] * inv[a]));
-    if (!(std::fabs(tlo) < 4e18) || !(std::fabs(thi) < 4e18)) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          "voxel grid: the cloud reaches ", std::fabs(tlo) > std::fabs(thi) ? lo[a] : hi[a],
-          " on axis ", std::string(Name(static_cast<Axis>(a))),
-          ", more than 2^62 leaves from the origin; use a larger voxel.leaf"));
-    }
-    corner[a] = static_cast<std::int64_t>(tlo);
-    bits[a] = BitWidth(static_cast<std::uint64_t>(static_cast<std::int64_t>(thi) - corner[a]));
-    int32_indices &= std::fabs(tlo) < 2e9 && std::fabs(thi) < 2e9;
-  }
-  const int total_bits = bits[0] + bits[1] + bits[2];
-  if (total_bits > 64) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("voxel grid: the cloud spans 2^", bits[0], " x 2^", bits[1], " x 2^", bits[2],
-                     " voxels, more than 64-bit keys hold; use a larger voxel.leaf"));
-  }
-  wide_ = total_bits > 32 || !int32_indices;
-  key_bits_ = total_bits;
-
-  // Every finite point may be a voxel of its own: room for all, left uninitialised.
-  if (voxels_.size() < n) voxels_.resize(n);
-  std::size_t slots = kMinSlots;
-  std::size_t recent = 256;
-  for (std::size_t v : recent_voxels_) recent = std::max(recent, v);
-  const std::size_t expected = std::min(n, recent);
-  while (slots < 2 * expected) slots *= 2;
-  ResizeTable(slots);
-
-  if (int32_indices) {
-    SimdKeys keys{_mm_setr_ps(inv[0], inv[1], inv[2], 0.0f),
-                  _mm_setr_epi32(static_cast<int>(corner[0]), static_cast<int>(corner[1]),
-                                 static_cast<int>(corner[2]), 0),
-                  bits[0], bits[0] + bits[1]};
+  if (auto s = Layout(bounds, params); !s.ok()) return s;
+  StartCloud(n);
+  Reserve(n);  // every finite point may be a voxel of its own
+  if (int32_indices_) {
+    const SimdKeys keys{_mm_setr_ps(inv_[0], inv_[1], inv_[2], 0.0f),
+                        _mm_setr_epi32(static_cast<int>(corner_[0]), static_cast<int>(corner_[1]),
+                                       static_cast<int>(corner_[2]), 0),
+                        shift_y_, shift_z_};
     if (all_finite && !wide_) {
       AccumulateFiniteNarrow(points, n, keys);
     } else {
       Accumulate(points, n, keys);
     }
   } else {
-    WideKeys keys{
-        {inv[0], inv[1], inv[2]}, {corner[0], corner[1], corner[2]}, bits[0], bits[0] + bits[1]};
+    const WideKeys keys{
+        {inv_[0], inv_[1], inv_[2]}, {corner_[0], corner_[1], corner_[2]}, shift_y_, shift_z_};
     Accumulate(points, n, keys);
   }
-  recent_voxels_[clouds_++ % 8] = voxel_count_;
-  Emit(params.min_points_per_voxel, params.key_order ? KeyOrder() : nullptr, out);
+  Finish(params, out);
   return absl::OkStatus();
 }
 
