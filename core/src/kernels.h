@@ -205,7 +205,6 @@ class VoxelAccumulator {
   struct Cursor {
     std::uint64_t* table;
     Voxel* voxels;
-    std::uint32_t* slot_of;
     std::uint64_t mask;
     int shift;
     std::size_t count;
@@ -219,8 +218,6 @@ class VoxelAccumulator {
   void StartCloud(std::size_t max_points);
   // Room for `voxels` voxels.
   void Reserve(std::size_t voxels);
-  // Empties the slots of this cloud's voxels, so that the next cloud finds an empty table.
-  void ClearTable();
   Cursor MakeCursor();
   void Grow(Cursor* cursor);
   template <bool kWide>
@@ -239,7 +236,6 @@ class VoxelAccumulator {
   void ResizeTable(std::size_t slots);
 
   std::vector<Voxel, DefaultInitAllocator<Voxel>> voxels_;
-  std::vector<std::uint32_t, DefaultInitAllocator<std::uint32_t>> slot_of_;  // voxel -> slot
   std::size_t voxel_count_ = 0;
   // Slot: (key << 32 | voxel + 1) for 32-bit keys; for 64-bit keys two words. 0: empty.
   std::vector<std::uint64_t> table_;

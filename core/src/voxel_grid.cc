@@ -87,7 +87,6 @@ void VoxelAccumulator::ResizeTable(std::size_t slots) {
       while (table_[h] != 0) h = (h + 1) & mask_;
       table_[h] = (key << 32) | voxel_plus_1;
     }
-    slot_of_[voxel_plus_1 - 1] = static_cast<std::uint32_t>(h);
   };
   if (wide_) {
     for (std::size_t i = 0; i + 1 < old.size(); i += 2) {
@@ -101,8 +100,7 @@ void VoxelAccumulator::ResizeTable(std::size_t slots) {
 }
 
 VoxelAccumulator::Cursor VoxelAccumulator::MakeCursor() {
-  return Cursor{table_.data(), voxels_.data(), slot_of_.data(), mask_,
-                shift_,        voxel_count_,   (mask_ + 1) / 2};
+  return Cursor{table_.data(), voxels_.data(), mask_, shift_, voxel_count_, (mask_ + 1) / 2};
 }
 
 void VoxelAccumulator::Grow(Cursor* cursor) {
@@ -144,7 +142,6 @@ inline void VoxelAccumulator::AddSums(Cursor& c, std::uint64_t key, const Sums& 
   } else {
     c.table[h] = (key << 32) | (index + 1);
   }
-  c.slot_of[index] = static_cast<std::uint32_t>(h);
   Voxel& voxel = c.voxels[index];
   const __m128i keep = _mm_set1_epi64x(-static_cast<std::int64_t>(match));
   const __m128d keep_d = _mm_castsi128_pd(keep);
@@ -154,6 +151,7 @@ inline void VoxelAccumulator::AddSums(Cursor& c, std::uint64_t key, const Sums& 
 }
 
 // One point as sums: (x, y) and (z, 1) in double (the count rides along with z), colour as is.
+// Only lanes 0 to 2 of `v` are read.
 inline VoxelAccumulator::Sums OnePoint(__m128 v, __m128i bgra32) {
   const __m128 z1 = _mm_unpacklo_ps(_mm_movehl_ps(v, v), _mm_set1_ps(1.0f));
   return {_mm_cvtps_pd(v), _mm_cvtps_pd(z1), bgra32};
@@ -206,7 +204,6 @@ void VoxelAccumulator::AccumulateFiniteNarrow(const Point* points, std::size_t n
     return _mm_sub_epi32(_mm_add_epi32(i, _mm_castps_si128(_mm_cmplt_ps(t, _mm_cvtepi32_ps(i)))),
                          corner);
   };
-  const __m128 xyz_mask = _mm_castsi128_ps(_mm_setr_epi32(-1, -1, -1, 0));
   const __m128i zero = _mm_setzero_si128();
   Cursor c = MakeCursor();
   std::size_t i = 0;
@@ -257,10 +254,11 @@ void VoxelAccumulator::AccumulateFiniteNarrow(const Point* points, std::size_t n
     const __m128 t2 = _mm_unpackhi_ps(p0, p1), t3 = _mm_unpackhi_ps(p2, p3);
     const __m128i colour = _mm_castps_si128(_mm_movehl_ps(t3, t2));
     const __m128i c16lo = _mm_unpacklo_epi8(colour, zero), c16hi = _mm_unpackhi_epi8(colour, zero);
-    add(key[0], _mm_and_ps(p0, xyz_mask), _mm_unpacklo_epi16(c16lo, zero));
-    add(key[1], _mm_and_ps(p1, xyz_mask), _mm_unpackhi_epi16(c16lo, zero));
-    add(key[2], _mm_and_ps(p2, xyz_mask), _mm_unpacklo_epi16(c16hi, zero));
-    add(key[3], _mm_and_ps(p3, xyz_mask), _mm_unpackhi_epi16(c16hi, zero));
+    // Lane 3 (the colour's bits) never reaches the sums: OnePoint converts lanes 0 to 2 only.
+    add(key[0], p0, _mm_unpacklo_epi16(c16lo, zero));
+    add(key[1], p1, _mm_unpackhi_epi16(c16lo, zero));
+    add(key[2], p2, _mm_unpacklo_epi16(c16hi, zero));
+    add(key[3], p3, _mm_unpackhi_epi16(c16hi, zero));
     // Checked every four points: the table has room for four more beyond half full.
     if (c.count >= c.grow_at) Grow(&c);
   }
@@ -426,7 +424,6 @@ void VoxelAccumulator::Reserve(std::size_t voxels) {
   // Left uninitialised; grows geometrically, so batches of a large cloud copy little.
   const std::size_t size = std::max(voxels, 2 * voxels_.size());
   voxels_.resize(size);
-  slot_of_.resize(size);
 }
 
 void VoxelAccumulator::StartCloud(std::size_t max_points) {
@@ -436,26 +433,12 @@ void VoxelAccumulator::StartCloud(std::size_t max_points) {
   for (std::size_t v : recent_voxels_) recent = std::max(recent, v);
   const std::size_t expected = std::min(max_points, recent);
   while (slots < 2 * expected) slots *= 2;
-  // The table is left empty by the cloud before (ClearTable): only a new size needs a new one.
-  if (slots != mask_ + 1 || table_.size() != (wide_ ? 2 * slots : slots)) ResizeTable(slots);
-}
-
-void VoxelAccumulator::ClearTable() {
-  // Only the slots this cloud's voxels took: a frame with few points does not pay for the
-  // whole table, which is sized for the largest of the last clouds.
-  std::uint64_t* table = table_.data();
-  const std::uint32_t* slot = slot_of_.data();
-  if (wide_) {
-    for (std::size_t i = 0; i < voxel_count_; ++i) table[2 * slot[i]] = table[2 * slot[i] + 1] = 0;
-  } else {
-    for (std::size_t i = 0; i < voxel_count_; ++i) table[slot[i]] = 0;
-  }
+  ResizeTable(slots);
 }
 
 void VoxelAccumulator::Finish(const VoxelGridParams& params, PointVector* out) {
   recent_voxels_[clouds_++ % 8] = voxel_count_;
   Emit(params.min_points_per_voxel, params.key_order ? KeyOrder() : nullptr, out);
-  ClearTable();
 }
 
 bool VoxelAccumulator::BeginNarrow(const Bounds& box, const VoxelGridParams& params,
