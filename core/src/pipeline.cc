@@ -212,7 +212,7 @@ void RunTableKernel(const DepthConstants& c, const float* zt, const Float4* z4,
                     const DisparityView& disparity, const ColorView& colour, Sink* sink,
                     Tally* tally) {
   const std::uint32_t w = disparity.width;
-  const std::uint32_t h = disparity.height;
+  std::uint32_t h = disparity.height;
   constexpr std::uint32_t kLanes = 16 / sizeof(Sample);
   std::uint64_t valid = 0;
   // Valid-pixel counts as byte counts (psadbw), divided out at the end.
@@ -279,44 +279,57 @@ void RunTableKernel(const DepthConstants& c, const float* zt, const Float4* z4,
       }
     };
     std::uint32_t u = 0;
-    if (simd) {
-      // Valid samples are counted in byte lanes (each adds sizeof(Sample) to them), folded into
-      // the 64-bit sums before a lane can wrap, every 255 vectors at most.
-      constexpr std::uint32_t kFoldEvery = 252 * kLanes;  // a multiple of four vectors
-      for (std::uint32_t chunk_end = 0; u + kLanes <= w; u = chunk_end) {
-        chunk_end = std::min(w - w % kLanes, u + kFoldEvery);
-        __m128i valid_bytes = zero, hole_bytes = zero;
-        auto count = [&](__m128i d) {
-          if (!any_valid) return;
-          valid_bytes = _mm_sub_epi8(valid_bytes, valid_range(d));
+    // Valid samples are counted in byte lanes (each adds sizeof(Sample) to them), folded into
+    // the 64-bit sums before a lane can wrap, every 255 vectors at most.
+    auto chunk = [&](std::uint32_t end, auto holes_tag, auto pass_tag) {
+      constexpr bool kHoles = decltype(holes_tag)::value;
+      constexpr bool kAnyPass = decltype(pass_tag)::value;  // false: no value passes
+      __m128i valid_bytes = zero, hole_bytes = zero;
+      auto count = [&](__m128i d) {
+        valid_bytes = _mm_sub_epi8(valid_bytes, valid_range(d));
+        if constexpr (kHoles) {
           for (int k = 0; k < hole_count; ++k) {
             hole_bytes = _mm_sub_epi8(hole_bytes, Equal<Sample>(d, hole[k]));
           }
-        };
-        auto load = [&](std::uint32_t at) {
-          return _mm_loadu_si128(reinterpret_cast<const __m128i*>(drow + at * sizeof(Sample)));
-        };
-        // Four vectors at a time: one branch for all four when none passes (most of a frame).
-        for (; u + 4 * kLanes <= chunk_end; u += 4 * kLanes) {
-          const __m128i d0 = load(u), d1 = load(u + kLanes);
-          const __m128i d2 = load(u + 2 * kLanes), d3 = load(u + 3 * kLanes);
-          count(d0), count(d1), count(d2), count(d3);
-          if (!any_pass) continue;
-          const __m128i p0 = pass_range(d0), p1 = pass_range(d1);
-          const __m128i p2 = pass_range(d2), p3 = pass_range(d3);
-          if (_mm_movemask_epi8(_mm_or_si128(_mm_or_si128(p0, p1), _mm_or_si128(p2, p3))) == 0) {
-            continue;
-          }
-          visit(u, p0), visit(u + kLanes, p1), visit(u + 2 * kLanes, p2);
-          visit(u + 3 * kLanes, p3);
         }
-        for (; u + kLanes <= chunk_end; u += kLanes) {
-          const __m128i d = load(u);
-          count(d);
-          if (any_pass) visit(u, pass_range(d));
+      };
+      const std::uint8_t* at = drow + std::size_t{u} * sizeof(Sample);
+      auto load = [](const std::uint8_t* q) {
+        return _mm_loadu_si128(reinterpret_cast<const __m128i*>(q));
+      };
+      // Four vectors at a time: one branch for all four when none passes (most of a frame).
+      for (; u + 4 * kLanes <= end; u += 4 * kLanes, at += 64) {
+        const __m128i d0 = load(at), d1 = load(at + 16), d2 = load(at + 32), d3 = load(at + 48);
+        count(d0), count(d1), count(d2), count(d3);
+        if constexpr (!kAnyPass) continue;
+        const __m128i p0 = pass_range(d0), p1 = pass_range(d1);
+        const __m128i p2 = pass_range(d2), p3 = pass_range(d3);
+        if (_mm_movemask_epi8(_mm_or_si128(_mm_or_si128(p0, p1), _mm_or_si128(p2, p3))) == 0) {
+          continue;
         }
-        in_valid_range = _mm_add_epi64(in_valid_range, _mm_sad_epu8(valid_bytes, zero));
-        in_holes = _mm_add_epi64(in_holes, _mm_sad_epu8(hole_bytes, zero));
+        visit(u, p0), visit(u + kLanes, p1), visit(u + 2 * kLanes, p2);
+        visit(u + 3 * kLanes, p3);
+      }
+      for (; u + kLanes <= end; u += kLanes, at += 16) {
+        const __m128i d = load(at);
+        count(d);
+        if constexpr (kAnyPass) visit(u, pass_range(d));
+      }
+      in_valid_range = _mm_add_epi64(in_valid_range, _mm_sad_epu8(valid_bytes, zero));
+      in_holes = _mm_add_epi64(in_holes, _mm_sad_epu8(hole_bytes, zero));
+    };
+    if (simd) {
+      constexpr std::uint32_t kFoldEvery = 252 * kLanes;  // a multiple of four vectors
+      const std::uint32_t simd_end = w - w % kLanes;
+      while (u < simd_end) {
+        const std::uint32_t end = std::min(simd_end, u + kFoldEvery);
+        if (!any_pass) {
+          chunk(end, std::true_type{}, std::false_type{});
+        } else if (hole_count == 0) {
+          chunk(end, std::false_type{}, std::true_type{});
+        } else {
+          chunk(end, std::true_type{}, std::true_type{});
+        }
       }
     }
     for (; u < w; ++u) {
@@ -328,6 +341,8 @@ void RunTableKernel(const DepthConstants& c, const float* zt, const Float4* z4,
   };
   const bool fast = pass_exact && !check_finite;
   std::uint64_t passed = 0;
+  // No valid value at all (every pixel invalid): nothing to count and nothing passes.
+  if (!any_valid) h = 0;
   for (std::uint32_t v = 0; v < h; ++v) {
     if (fast && v + 1 < h) {
       scan_row(v, std::true_type{});
