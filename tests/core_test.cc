@@ -352,6 +352,38 @@ TEST(VoxelGrid, MatchesBruteForceOnRandomCloudsIncludingWideKeys) {
   }
 }
 
+// One VoxelGrid (and its scratch memory) reused over many clouds whose sizes, key widths and
+// orders change from cloud to cloud: every result is the definition's.
+TEST(VoxelGrid, ReusedOverManyDifferentClouds) {
+  std::mt19937 rng(11);
+  VoxelGrid grid;
+  for (int round = 0; round < 300; ++round) {
+    const int clusters = round % 7 == 0 ? 3000 : static_cast<int>(rng() % 200);
+    const float spread = round % 5 == 0 ? 1e3f : 20.0f;  // 1e3 with leaf 1e-3: 63-bit keys
+    std::uniform_real_distribution<float> coord(-spread, spread);
+    PointCloud in;
+    for (int i = 0; i < clusters; ++i) {
+      const float cx = coord(rng), cy = coord(rng), cz = coord(rng);
+      for (int k = 0; k < 4; ++k) {
+        in.points.push_back(Point{cx + k * 1e-4f, cy, cz, static_cast<std::uint32_t>(rng())});
+      }
+    }
+    in.width = static_cast<std::uint32_t>(in.size());
+    in.height = 1;
+    VoxelGridParams p;
+    p.SetLeaf(round % 5 == 0 ? 1e-3f : 0.05f);
+    p.key_order = round % 3 == 0;
+    PointCloud out;
+    ASSERT_TRUE(grid.Filter(in, p, &out).ok()) << "round " << round;
+    const PointCloud brute = testing::BruteForceVoxelGrid(in, p, /*pcl_order=*/true);
+    if (p.key_order) {
+      ASSERT_TRUE(CloudsMatchInOrder(brute, out, 1e-5, 0)) << "round " << round;
+    } else {
+      ASSERT_TRUE(CloudsMatch(brute, out, 1e-5, 0)) << "round " << round;
+    }
+  }
+}
+
 TEST(VoxelGrid, RejectsExtentsBeyondSixtyFourBitKeys) {
   const PointCloud in = CloudOf({{-3e38f, -3e38f, -3e38f, 0}, {3e38f, 3e38f, 3e38f, 0}});
   VoxelGrid grid;
