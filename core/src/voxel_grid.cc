@@ -1,6 +1,7 @@
 #include <algorithm>
 #include <cmath>
 #include <string>
+#include <type_traits>
 
 #include "absl/strings/str_cat.h"
 #include "cloudcast/core/filters.h"
@@ -345,41 +346,51 @@ void VoxelAccumulator::Emit(std::uint32_t min_points, const std::uint64_t* order
   // Locals: the stores of points could alias the members, which would be reloaded per voxel.
   const Voxel* const voxels = voxels_.data();
   const std::size_t count = voxel_count_;
-  for (std::size_t i = 0; i < count; ++i) {
-    // In key order the voxels are read in a random order: fetch them a few ahead.
-    if (order != nullptr && i + 8 < count) {
-      _mm_prefetch(reinterpret_cast<const char*>(&voxels[order[i + 8] & 0xFFFFFFFFu]), _MM_HINT_T0);
+  auto emit = [&](auto ordered_tag) {
+    constexpr bool kOrdered = decltype(ordered_tag)::value;
+    for (std::size_t i = 0; i < count; ++i) {
+      // In key order the voxels are read in a random order: fetch them a few ahead.
+      if (kOrdered && i + 8 < count) {
+        _mm_prefetch(reinterpret_cast<const char*>(&voxels[order[i + 8] & 0xFFFFFFFFu]),
+                     _MM_HINT_T0);
+      }
+      const Voxel& v = voxels[kOrdered ? order[i] & 0xFFFFFFFFu : i];
+      const double n = _mm_cvtsd_f64(_mm_unpackhi_pd(v.sum_z_n, v.sum_z_n));
+      if (n < min_points) continue;
+      const __m128d inv = _mm_set1_pd(1.0 / n);
+      const __m128d xy = _mm_mul_pd(v.sum_xy, inv);
+      const __m128d zn = _mm_mul_pd(v.sum_z_n, inv);
+      std::uint32_t rgba;
+      if (n < (1 << 23)) {  // sums < 2^31: exact as signed 32-bit
+        const __m128d scale = _mm_set1_pd((1.0 / n) * kNudge);
+        const __m128i bg = _mm_cvttpd_epi32(_mm_mul_pd(_mm_cvtepi32_pd(v.sum_bgra), scale));
+        const __m128i ra = _mm_cvttpd_epi32(
+            _mm_mul_pd(_mm_cvtepi32_pd(_mm_unpackhi_epi64(v.sum_bgra, v.sum_bgra)), scale));
+        // (b, g, r, a), each 0..255, narrowed to bytes in that order: PCL's packing.
+        const __m128i bgra = _mm_packs_epi32(_mm_unpacklo_epi64(bg, ra), _mm_setzero_si128());
+        rgba = static_cast<std::uint32_t>(
+            _mm_cvtsi128_si32(_mm_packus_epi16(bgra, _mm_setzero_si128())));
+      } else {
+        alignas(16) std::uint32_t sums[4];
+        _mm_store_si128(reinterpret_cast<__m128i*>(sums), v.sum_bgra);
+        const auto points = static_cast<std::uint32_t>(n);
+        rgba = PackRgba(static_cast<std::uint8_t>(sums[2] / points),
+                        static_cast<std::uint8_t>(sums[1] / points),
+                        static_cast<std::uint8_t>(sums[0] / points),
+                        static_cast<std::uint8_t>(sums[3] / points));
+      }
+      // PCL: the centroid of the points, and the truncated mean of each colour channel. One
+      // 16-byte store: (x, y) and (z, colour).
+      const __m128 z_rgba = _mm_unpacklo_ps(
+          _mm_cvtpd_ps(zn), _mm_castsi128_ps(_mm_cvtsi32_si128(static_cast<int>(rgba))));
+      _mm_storeu_ps(&o->x, _mm_movelh_ps(_mm_cvtpd_ps(xy), z_rgba));
+      ++o;
     }
-    const Voxel& v = voxels[order != nullptr ? order[i] & 0xFFFFFFFFu : i];
-    const double n = _mm_cvtsd_f64(_mm_unpackhi_pd(v.sum_z_n, v.sum_z_n));
-    if (n < min_points) continue;
-    const __m128d inv = _mm_set1_pd(1.0 / n);
-    const __m128d xy = _mm_mul_pd(v.sum_xy, inv);
-    const __m128d zn = _mm_mul_pd(v.sum_z_n, inv);
-    std::uint32_t rgba;
-    if (n < (1 << 23)) {  // sums < 2^31: exact as signed 32-bit
-      const __m128d scale = _mm_set1_pd((1.0 / n) * kNudge);
-      const __m128i bg = _mm_cvttpd_epi32(_mm_mul_pd(_mm_cvtepi32_pd(v.sum_bgra), scale));
-      const __m128i ra = _mm_cvttpd_epi32(
-          _mm_mul_pd(_mm_cvtepi32_pd(_mm_unpackhi_epi64(v.sum_bgra, v.sum_bgra)), scale));
-      // (b, g, r, a), each 0..255, narrowed to bytes in that order: PCL's packing.
-      const __m128i bgra = _mm_packs_epi32(_mm_unpacklo_epi64(bg, ra), _mm_setzero_si128());
-      rgba = static_cast<std::uint32_t>(
-          _mm_cvtsi128_si32(_mm_packus_epi16(bgra, _mm_setzero_si128())));
-    } else {
-      alignas(16) std::uint32_t sums[4];
-      _mm_store_si128(reinterpret_cast<__m128i*>(sums), v.sum_bgra);
-      const auto points = static_cast<std::uint32_t>(n);
-      rgba = PackRgba(
-          static_cast<std::uint8_t>(sums[2] / points), static_cast<std::uint8_t>(sums[1] / points),
-          static_cast<std::uint8_t>(sums[0] / points), static_cast<std::uint8_t>(sums[3] / points));
-    }
-    // PCL: the centroid of the points, and the truncated mean of each colour channel. One
-    // 16-byte store: (x, y) and (z, colour).
-    const __m128 z_rgba = _mm_unpacklo_ps(
-        _mm_cvtpd_ps(zn), _mm_castsi128_ps(_mm_cvtsi32_si128(static_cast<int>(rgba))));
-    _mm_storeu_ps(&o->x, _mm_movelh_ps(_mm_cvtpd_ps(xy), z_rgba));
-    ++o;
+  };
+  if (order != nullptr) {
+    emit(std::true_type{});
+  } else {
+    emit(std::false_type{});
   }
   out->resize(static_cast<std::size_t>(o - out->data()));
 }
