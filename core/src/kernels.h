@@ -205,6 +205,7 @@ class VoxelAccumulator {
   struct Cursor {
     std::uint64_t* table;
     Voxel* voxels;
+    std::uint64_t tag;  // this cloud's tag, where a slot holds it
     std::uint64_t mask;
     int shift;
     std::size_t count;
@@ -225,11 +226,11 @@ class VoxelAccumulator {
   template <bool kWide>
   static void AddPoint(Cursor& c, std::uint64_t key, __m128 xyz, __m128i bgra32);
   // Writes the voxels' points in first-seen order, or in the order of `order` (voxel indices in
-  // the low 32 bits).
+  // the low 25 bits).
   void Emit(std::uint32_t min_points, const std::uint64_t* order, PointVector* out) const;
   // The voxels in increasing key order, which is PCL's order: keys are numbered from the
   // bounding box's corner and packed x, then y, then z, as PCL numbers its voxels. Voxel indices
-  // in the low 32 bits.
+  // in the low 25 bits.
   const std::uint64_t* KeyOrder();
   template <int kPasses>
   const std::uint64_t* RadixSortTable();
@@ -237,8 +238,12 @@ class VoxelAccumulator {
 
   std::vector<Voxel, DefaultInitAllocator<Voxel>> voxels_;
   std::size_t voxel_count_ = 0;
-  // Slot: (key << 32 | voxel + 1) for 32-bit keys; for 64-bit keys two words. 0: empty.
+  // Slot: (key << 32 | tag << 25 | voxel + 1) for 32-bit keys; for 64-bit keys two words, key
+  // and (tag << 32 | voxel + 1). A slot is this cloud's when it holds tag_: slots of earlier
+  // clouds read as empty, and the table needs no clearing between clouds.
   std::vector<std::uint64_t> table_;
+  std::uint32_t tag_ = 0;    // 1 to 127 while a cloud is accumulated
+  bool table_wide_ = false;  // the layout of table_'s slots
   std::uint64_t mask_ = 0;
   int shift_ = 64;
   bool wide_ = false;  // 64-bit keys: table_ holds (key, voxel + 1) pairs

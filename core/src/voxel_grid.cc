@@ -13,6 +13,13 @@ namespace internal {
 namespace {
 
 constexpr std::uint64_t kHashMultiplier = 0x9E3779B97F4A7C15ull;
+// A 32-bit-key slot: key << 32 | tag << 25 | voxel + 1. The tag is the cloud's (1 to 127): slots
+// of earlier clouds are stale, so the table is not cleared between clouds. Voxel + 1 <= 2^24 + 1
+// (Limits::max_pixels points at most) fits in 25 bits.
+constexpr int kVoxelBits = 25;
+constexpr std::uint64_t kVoxelMask = (std::uint64_t{1} << kVoxelBits) - 1;
+constexpr std::uint64_t kTagMask = std::uint64_t{0x7F} << kVoxelBits;
+constexpr std::uint32_t kLastTag = 127;
 constexpr std::size_t kMinSlots = 1024;
 
 // Voxel indices from four-float SSE points: floor(v * inv) per lane, as int32 (the caller has
@@ -70,38 +77,42 @@ inline bool Finite(__m128 v) {
 }  // namespace
 
 void VoxelAccumulator::ResizeTable(std::size_t slots) {
-  // Rehash from the old table's own (key, voxel) entries.
+  // Rehash from the old table's own live (key, voxel) entries.
   std::vector<std::uint64_t> old;
   old.swap(table_);
   const bool had_entries = voxel_count_ > 0;
   table_.assign(wide_ ? 2 * slots : slots, 0);
+  table_wide_ = wide_;
   mask_ = slots - 1;
   shift_ = 64 - BitWidth(slots - 1);
   if (!had_entries) return;
-  auto insert = [&](std::uint64_t key, std::uint64_t voxel_plus_1) {
+  auto insert = [&](std::uint64_t key, std::uint64_t tagged_voxel) {
     std::uint64_t h = (key * kHashMultiplier) >> shift_;
     if (wide_) {
       while (table_[2 * h + 1] != 0) h = (h + 1) & mask_;
       table_[2 * h] = key;
-      table_[2 * h + 1] = voxel_plus_1;
+      table_[2 * h + 1] = tagged_voxel;
     } else {
       while (table_[h] != 0) h = (h + 1) & mask_;
-      table_[h] = (key << 32) | voxel_plus_1;
+      table_[h] = (key << 32) | tagged_voxel;
     }
   };
   if (wide_) {
+    const std::uint64_t tag = std::uint64_t{tag_} << 32;
     for (std::size_t i = 0; i + 1 < old.size(); i += 2) {
-      if (old[i + 1] != 0) insert(old[i], old[i + 1]);
+      if ((old[i + 1] >> 32 << 32) == tag) insert(old[i], old[i + 1]);
     }
   } else {
+    const std::uint64_t tag = std::uint64_t{tag_} << kVoxelBits;
     for (std::uint64_t e : old) {
-      if ((e & 0xFFFFFFFFu) != 0) insert(e >> 32, e & 0xFFFFFFFFu);
+      if ((e & kTagMask) == tag) insert(e >> 32, e & 0xFFFFFFFFu);
     }
   }
 }
 
 VoxelAccumulator::Cursor VoxelAccumulator::MakeCursor() {
-  return Cursor{table_.data(), voxels_.data(), mask_, shift_, voxel_count_, (mask_ + 1) / 2};
+  const std::uint64_t tag = std::uint64_t{tag_} << (wide_ ? 32 : kVoxelBits);
+  return Cursor{table_.data(), voxels_.data(), tag, mask_, shift_, voxel_count_, (mask_ + 1) / 2};
 }
 
 void VoxelAccumulator::Grow(Cursor* cursor) {
@@ -120,15 +131,19 @@ inline __m128i WidenColour(std::uint32_t rgba) {
 template <bool kWide>
 inline void VoxelAccumulator::AddSums(Cursor& c, std::uint64_t key, const Sums& s) {
   std::uint64_t h = (key * kHashMultiplier) >> c.shift;
-  std::uint64_t found;  // voxel + 1, or 0 for an empty slot
+  std::uint64_t found;  // voxel + 1, or 0 for a slot that is empty or an earlier cloud's
   bool match;
   for (;;) {  // almost always one round: the table is at most half full
     if constexpr (kWide) {
-      found = c.table[2 * h + 1];
+      const std::uint64_t e = c.table[2 * h + 1];
+      const std::uint64_t live = 0 - static_cast<std::uint64_t>((e >> 32 << 32) == c.tag);
+      found = e & 0xFFFFFFFFu & live;
       match = found != 0 && c.table[2 * h] == key;
     } else {
       const std::uint64_t e = c.table[h];
-      found = e & 0xFFFFFFFFu;
+      // This cloud's slot: voxel + 1 (< 2^25) once the tag is xor-ed out; anything else is more.
+      const std::uint64_t x = (e & 0xFFFFFFFFu) ^ c.tag;
+      found = x & (0 - static_cast<std::uint64_t>(x <= kVoxelMask));
       match = found != 0 && (e >> 32) == key;
     }
     if (match || found == 0) break;
@@ -139,9 +154,9 @@ inline void VoxelAccumulator::AddSums(Cursor& c, std::uint64_t key, const Sums& 
   c.count += match ? 0 : 1;
   if constexpr (kWide) {
     c.table[2 * h] = key;
-    c.table[2 * h + 1] = index + 1;
+    c.table[2 * h + 1] = c.tag | (index + 1);
   } else {
-    c.table[h] = (key << 32) | (index + 1);
+    c.table[h] = (key << 32) | c.tag | (index + 1);
   }
   Voxel& voxel = c.voxels[index];
   const __m128i keep = _mm_set1_epi64x(-static_cast<std::int64_t>(match));
@@ -272,8 +287,10 @@ const std::uint64_t* VoxelAccumulator::KeyOrder() {
   if (wide_) {  // 64-bit keys (rare): a comparison sort of (key, voxel) pairs
     std::vector<std::pair<std::uint64_t, std::uint64_t>> pairs;
     pairs.reserve(voxel_count_);
+    const std::uint64_t tag = std::uint64_t{tag_} << 32;
     for (std::size_t i = 0; i + 1 < table_.size(); i += 2) {
-      if (table_[i + 1] != 0) pairs.emplace_back(table_[i], table_[i + 1] - 1);
+      const std::uint64_t e = table_[i + 1];
+      if ((e >> 32 << 32) == tag) pairs.emplace_back(table_[i], (e & 0xFFFFFFFFu) - 1);
     }
     std::sort(pairs.begin(), pairs.end());
     sort_a_.resize(voxel_count_);
@@ -304,8 +321,9 @@ const std::uint64_t* VoxelAccumulator::RadixSortTable() {
   const std::size_t buckets = std::size_t{1} << digit;
   std::uint32_t* const counts = sort_counts_;
   std::fill(counts, counts + kPasses * buckets, 0u);
+  const std::uint64_t tag = std::uint64_t{tag_} << kVoxelBits;
   for (const std::uint64_t e : table_) {
-    if ((e & 0xFFFFFFFFu) == 0) continue;
+    if ((e & kTagMask) != tag) continue;
     for (int p = 0; p < kPasses; ++p)
       ++counts[p * buckets + ((e >> (32 + p * digit)) & digit_mask)];
   }
@@ -322,7 +340,7 @@ const std::uint64_t* VoxelAccumulator::RadixSortTable() {
   std::uint64_t* from = sort_a_.data();
   std::uint64_t* to = sort_b_.data();
   for (const std::uint64_t e : table_) {
-    if ((e & 0xFFFFFFFFu) != 0) from[counts[(e >> 32) & digit_mask]++] = e - 1;
+    if ((e & kTagMask) == tag) from[counts[(e >> 32) & digit_mask]++] = e - 1;
   }
   for (int p = 1; p < kPasses; ++p) {
     std::uint32_t* offset = counts + p * buckets;
@@ -351,10 +369,10 @@ void VoxelAccumulator::Emit(std::uint32_t min_points, const std::uint64_t* order
     for (std::size_t i = 0; i < count; ++i) {
       // In key order the voxels are read in a random order: fetch them a few ahead.
       if (kOrdered && i + 8 < count) {
-        _mm_prefetch(reinterpret_cast<const char*>(&voxels[order[i + 8] & 0xFFFFFFFFu]),
+        _mm_prefetch(reinterpret_cast<const char*>(&voxels[order[i + 8] & kVoxelMask]),
                      _MM_HINT_T0);
       }
-      const Voxel& v = voxels[kOrdered ? order[i] & 0xFFFFFFFFu : i];
+      const Voxel& v = voxels[kOrdered ? order[i] & kVoxelMask : i];
       const double n = _mm_cvtsd_f64(_mm_unpackhi_pd(v.sum_z_n, v.sum_z_n));
       if (n < min_points) continue;
       const __m128d inv = _mm_set1_pd(1.0 / n);
@@ -444,7 +462,12 @@ void VoxelAccumulator::StartCloud(std::size_t max_points) {
   for (std::size_t v : recent_voxels_) recent = std::max(recent, v);
   const std::size_t expected = std::min(max_points, recent);
   while (slots < 2 * expected) slots *= 2;
-  ResizeTable(slots);
+  // A new tag makes every slot stale: no clearing, but once every 127 clouds.
+  if (++tag_ > kLastTag) {
+    tag_ = 1;
+    std::fill(table_.begin(), table_.end(), 0);
+  }
+  if (slots != mask_ + 1 || table_wide_ != wide_ || table_.empty()) ResizeTable(slots);
 }
 
 void VoxelAccumulator::Finish(const VoxelGridParams& params, PointVector* out) {
@@ -455,7 +478,7 @@ void VoxelAccumulator::Finish(const VoxelGridParams& params, PointVector* out) {
 bool VoxelAccumulator::BeginNarrow(const Bounds& box, const VoxelGridParams& params,
                                    std::size_t max_points) {
   voxel_count_ = 0;
-  if (box.empty() || !Layout(box, params).ok() || wide_) return false;
+  if (max_points >= kVoxelMask || box.empty() || !Layout(box, params).ok() || wide_) return false;
   StartCloud(max_points);
   return true;
 }
@@ -490,6 +513,8 @@ absl::Status VoxelAccumulator::Run(const Point* points, std::size_t n,
   voxel_count_ = 0;
   if (n == 0 || bounds.empty()) return absl::OkStatus();
   if (auto s = Layout(bounds, params); !s.ok()) return s;
+  // More voxels than a 32-bit key's slot numbers (beyond Limits' default): 64-bit slots.
+  if (n >= kVoxelMask) wide_ = true;
   StartCloud(n);
   Reserve(n);  // every finite point may be a voxel of its own
   if (int32_indices_) {
