@@ -198,14 +198,15 @@ class VoxelAccumulator {
   };
   template <typename KeyPolicy>
   void Accumulate(const Point* points, std::size_t n, const KeyPolicy& keys);
-  template <typename KeyPolicy>
+  template <bool kKeys, typename KeyPolicy>
   void AccumulateFiniteNarrow(const Point* points, std::size_t n, const KeyPolicy& keys);
   // The hot state, copied into locals while points are added: through members every store to
   // the table (uint64_t) could alias them, and the compiler would reload them for every point.
   struct Cursor {
     std::uint64_t* table;
     Voxel* voxels;
-    std::uint64_t tag;  // this cloud's tag, where a slot holds it
+    std::uint32_t* keys;  // per voxel, kept for key order (32-bit keys)
+    std::uint64_t tag;    // this cloud's tag, where a slot holds it
     std::uint64_t mask;
     int shift;
     std::size_t count;
@@ -221,9 +222,10 @@ class VoxelAccumulator {
   void Reserve(std::size_t voxels);
   Cursor MakeCursor();
   void Grow(Cursor* cursor);
-  template <bool kWide>
+  // kKeys: also keep each voxel's key (32-bit keys), for key order.
+  template <bool kWide, bool kKeys>
   static void AddSums(Cursor& c, std::uint64_t key, const Sums& s);
-  template <bool kWide>
+  template <bool kWide, bool kKeys>
   static void AddPoint(Cursor& c, std::uint64_t key, __m128 xyz, __m128i bgra32);
   // Writes the voxels' points in first-seen order, or in the order of `order` (voxel indices in
   // the low 25 bits).
@@ -233,10 +235,12 @@ class VoxelAccumulator {
   // in the low 25 bits.
   const std::uint64_t* KeyOrder();
   template <int kPasses>
-  const std::uint64_t* RadixSortTable();
+  const std::uint64_t* RadixSortKeys();
   void ResizeTable(std::size_t slots);
 
   std::vector<Voxel, DefaultInitAllocator<Voxel>> voxels_;
+  std::vector<std::uint32_t, DefaultInitAllocator<std::uint32_t>> keys_;  // with keep_keys_
+  bool keep_keys_ = false;
   std::size_t voxel_count_ = 0;
   // Slot: (key << 32 | tag << 25 | voxel + 1) for 32-bit keys; for 64-bit keys two words, key
   // and (tag << 32 | voxel + 1). A slot is this cloud's when it holds tag_: slots of earlier

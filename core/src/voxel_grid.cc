@@ -112,7 +112,8 @@ void VoxelAccumulator::ResizeTable(std::size_t slots) {
 
 VoxelAccumulator::Cursor VoxelAccumulator::MakeCursor() {
   const std::uint64_t tag = std::uint64_t{tag_} << (wide_ ? 32 : kVoxelBits);
-  return Cursor{table_.data(), voxels_.data(), tag, mask_, shift_, voxel_count_, (mask_ + 1) / 2};
+  return Cursor{table_.data(), voxels_.data(), keys_.data(), tag,
+                mask_,         shift_,         voxel_count_, (mask_ + 1) / 2};
 }
 
 void VoxelAccumulator::Grow(Cursor* cursor) {
@@ -128,7 +129,7 @@ inline __m128i WidenColour(std::uint32_t rgba) {
   return _mm_unpacklo_epi16(_mm_unpacklo_epi8(bytes, zero), zero);
 }
 
-template <bool kWide>
+template <bool kWide, bool kKeys>
 inline void VoxelAccumulator::AddSums(Cursor& c, std::uint64_t key, const Sums& s) {
   std::uint64_t h = (key * kHashMultiplier) >> c.shift;
   std::uint64_t found;  // voxel + 1, or 0 for a slot that is empty or an earlier cloud's
@@ -157,6 +158,7 @@ inline void VoxelAccumulator::AddSums(Cursor& c, std::uint64_t key, const Sums& 
     c.table[2 * h + 1] = c.tag | (index + 1);
   } else {
     c.table[h] = (key << 32) | c.tag | (index + 1);
+    if constexpr (kKeys) c.keys[index] = static_cast<std::uint32_t>(key);
   }
   Voxel& voxel = c.voxels[index];
   const __m128i keep = _mm_set1_epi64x(-static_cast<std::int64_t>(match));
@@ -179,9 +181,9 @@ inline void AddTo(VoxelAccumulator::Sums& s, __m128 v, __m128i bgra32) {
   s.bgra = _mm_add_epi32(s.bgra, one.bgra);
 }
 
-template <bool kWide>
+template <bool kWide, bool kKeys>
 inline void VoxelAccumulator::AddPoint(Cursor& c, std::uint64_t key, __m128 v, __m128i bgra32) {
-  AddSums<kWide>(c, key, OnePoint(v, bgra32));
+  AddSums<kWide, kKeys>(c, key, OnePoint(v, bgra32));
 }
 
 template <typename KeyPolicy>
@@ -192,9 +194,11 @@ void VoxelAccumulator::Accumulate(const Point* points, std::size_t n, const KeyP
     const __m128 v = _mm_and_ps(_mm_loadu_ps(&points[i].x), xyz_mask);
     if (!Finite(v)) continue;
     if (wide_) {
-      AddPoint<true>(c, keys(v), v, WidenColour(points[i].rgba));
+      AddPoint<true, false>(c, keys(v), v, WidenColour(points[i].rgba));
+    } else if (keep_keys_) {
+      AddPoint<false, true>(c, keys(v), v, WidenColour(points[i].rgba));
     } else {
-      AddPoint<false>(c, keys(v), v, WidenColour(points[i].rgba));
+      AddPoint<false, false>(c, keys(v), v, WidenColour(points[i].rgba));
     }
     if (c.count >= c.grow_at) Grow(&c);
   }
@@ -203,7 +207,7 @@ void VoxelAccumulator::Accumulate(const Point* points, std::size_t n, const KeyP
 
 // The common case, finite points and 32-bit keys: four points at a time, transposed so that the
 // voxel keys and colours of all four come out of a few SSE instructions.
-template <typename KeyPolicy>
+template <bool kKeys, typename KeyPolicy>
 void VoxelAccumulator::AccumulateFiniteNarrow(const Point* points, std::size_t n,
                                               const KeyPolicy& keys) {
   const __m128 inv_x = _mm_set1_ps(_mm_cvtss_f32(keys.inv));
@@ -231,7 +235,7 @@ void VoxelAccumulator::AccumulateFiniteNarrow(const Point* points, std::size_t n
     if (k == run_key) {
       AddTo(run, v, bgra);
     } else {
-      if (run_key != ~std::uint64_t{0}) AddSums<false>(c, run_key, run);
+      if (run_key != ~std::uint64_t{0}) AddSums<false, kKeys>(c, run_key, run);
       run_key = k;
       run = OnePoint(v, bgra);
     }
@@ -278,7 +282,7 @@ void VoxelAccumulator::AccumulateFiniteNarrow(const Point* points, std::size_t n
     // Checked every four points: the table has room for four more beyond half full.
     if (c.count >= c.grow_at) Grow(&c);
   }
-  if (run_key != ~std::uint64_t{0}) AddSums<false>(c, run_key, run);
+  if (run_key != ~std::uint64_t{0}) AddSums<false, kKeys>(c, run_key, run);
   voxel_count_ = c.count;
   Accumulate(points + i, n - i, keys);
 }
@@ -297,35 +301,38 @@ const std::uint64_t* VoxelAccumulator::KeyOrder() {
     for (std::size_t i = 0; i < pairs.size(); ++i) sort_a_[i] = pairs[i].second;
     return sort_a_.data();
   }
-  // 32-bit keys: the table's entries (key << 32 | voxel + 1) sorted as numbers. Least
-  // significant digit first, over the bits the keys use, in as few passes of at most 11 bits
-  // (2048 buckets: few enough for the scattered stores to stay in cache) as those bits need.
+  // 32-bit keys: (key << 32 | voxel) sorted as numbers. Least significant digit first, over the
+  // bits the keys use, in as few passes of at most 11 bits (2048 buckets: few enough for the
+  // scattered stores to stay in cache) as those bits need.
+  if (voxel_count_ == 0) return nullptr;
   switch ((key_bits_ + 10) / 11) {
     case 0:
     case 1:
-      return RadixSortTable<1>();
+      return RadixSortKeys<1>();
     case 2:
-      return RadixSortTable<2>();
+      return RadixSortKeys<2>();
     default:
-      return RadixSortTable<3>();
+      return RadixSortKeys<3>();
   }
 }
 
 template <int kPasses>
-const std::uint64_t* VoxelAccumulator::RadixSortTable() {
+const std::uint64_t* VoxelAccumulator::RadixSortKeys() {
   const std::size_t m = voxel_count_;
-  sort_a_.resize(m);
-  sort_b_.resize(m);
+  sort_a_.resize(m + 1);
+  sort_b_.resize(m + 1);
+  // (key << 32 | voxel) from the keys kept per voxel while accumulating.
+  std::uint64_t* packed = sort_b_.data();
+  for (std::size_t i = 0; i < m; ++i) packed[i] = (std::uint64_t{keys_[i]} << 32) | i;
   const int digit = std::max(1, (key_bits_ + kPasses - 1) / kPasses);
   const std::uint64_t digit_mask = (std::uint64_t{1} << digit) - 1;
   const std::size_t buckets = std::size_t{1} << digit;
   std::uint32_t* const counts = sort_counts_;
   std::fill(counts, counts + kPasses * buckets, 0u);
-  const std::uint64_t tag = std::uint64_t{tag_} << kVoxelBits;
-  for (const std::uint64_t e : table_) {
-    if ((e & kTagMask) != tag) continue;
-    for (int p = 0; p < kPasses; ++p)
-      ++counts[p * buckets + ((e >> (32 + p * digit)) & digit_mask)];
+  for (std::size_t i = 0; i < m; ++i) {
+    for (int p = 0; p < kPasses; ++p) {
+      ++counts[p * buckets + ((packed[i] >> (32 + p * digit)) & digit_mask)];
+    }
   }
   for (int p = 0; p < kPasses; ++p) {  // counts become each bucket's first position
     std::uint32_t* offset = counts + p * buckets;
@@ -336,13 +343,9 @@ const std::uint64_t* VoxelAccumulator::RadixSortTable() {
       sum += k;
     }
   }
-  // The first pass reads the table itself; the others the previous pass's output.
-  std::uint64_t* from = sort_a_.data();
-  std::uint64_t* to = sort_b_.data();
-  for (const std::uint64_t e : table_) {
-    if ((e & kTagMask) == tag) from[counts[(e >> 32) & digit_mask]++] = e - 1;
-  }
-  for (int p = 1; p < kPasses; ++p) {
+  std::uint64_t* from = packed;
+  std::uint64_t* to = sort_a_.data();
+  for (int p = 0; p < kPasses; ++p) {
     std::uint32_t* offset = counts + p * buckets;
     const int shift = 32 + p * digit;
     for (std::size_t i = 0; i < m; ++i) to[offset[(from[i] >> shift) & digit_mask]++] = from[i];
@@ -453,6 +456,7 @@ void VoxelAccumulator::Reserve(std::size_t voxels) {
   // Left uninitialised; grows geometrically, so batches of a large cloud copy little.
   const std::size_t size = std::max(voxels, 2 * voxels_.size());
   voxels_.resize(size);
+  keys_.resize(size);
 }
 
 void VoxelAccumulator::StartCloud(std::size_t max_points) {
@@ -479,6 +483,7 @@ bool VoxelAccumulator::BeginNarrow(const Bounds& box, const VoxelGridParams& par
                                    std::size_t max_points) {
   voxel_count_ = 0;
   if (max_points >= kVoxelMask || box.empty() || !Layout(box, params).ok() || wide_) return false;
+  keep_keys_ = params.key_order;
   StartCloud(max_points);
   return true;
 }
@@ -489,7 +494,11 @@ void VoxelAccumulator::AddNarrow(const Point* points, std::size_t n) {
                       _mm_setr_epi32(static_cast<int>(corner_[0]), static_cast<int>(corner_[1]),
                                      static_cast<int>(corner_[2]), 0),
                       shift_y_, shift_z_};
-  AccumulateFiniteNarrow(points, n, keys);
+  if (keep_keys_) {
+    AccumulateFiniteNarrow<true>(points, n, keys);
+  } else {
+    AccumulateFiniteNarrow<false>(points, n, keys);
+  }
 }
 
 absl::Status VoxelAccumulator::Run(const Point* points, std::size_t n,
@@ -515,6 +524,7 @@ absl::Status VoxelAccumulator::Run(const Point* points, std::size_t n,
   if (auto s = Layout(bounds, params); !s.ok()) return s;
   // More voxels than a 32-bit key's slot numbers (beyond Limits' default): 64-bit slots.
   if (n >= kVoxelMask) wide_ = true;
+  keep_keys_ = params.key_order && !wide_;
   StartCloud(n);
   Reserve(n);  // every finite point may be a voxel of its own
   if (int32_indices_) {
@@ -522,8 +532,10 @@ absl::Status VoxelAccumulator::Run(const Point* points, std::size_t n,
                         _mm_setr_epi32(static_cast<int>(corner_[0]), static_cast<int>(corner_[1]),
                                        static_cast<int>(corner_[2]), 0),
                         shift_y_, shift_z_};
-    if (all_finite && !wide_) {
-      AccumulateFiniteNarrow(points, n, keys);
+    if (all_finite && !wide_ && keep_keys_) {
+      AccumulateFiniteNarrow<true>(points, n, keys);
+    } else if (all_finite && !wide_) {
+      AccumulateFiniteNarrow<false>(points, n, keys);
     } else {
       Accumulate(points, n, keys);
     }
