@@ -18,6 +18,7 @@ namespace {
 using testing::CloudsIdentical;
 using testing::CloudsMatch;
 using testing::CloudTolerance;
+using testing::CloudsMatchInOrder;
 using testing::MakeFrame;
 using testing::RandomFrame;
 using testing::SetSample;
@@ -295,6 +296,30 @@ TEST(VoxelGrid, CentroidAndTruncatedMeanColour) {
   EXPECT_EQ(out.size(), 1u);
 }
 
+TEST(VoxelGrid, KeyOrderIsPclOrder) {
+  // Voxels (x, y, z indices) first met as (0, 0, 0), (1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, 0, -1),
+  // (-1, 1, 0); PCL's order is by z, then y, then x.
+  const PointCloud in = CloudOf({{0.01f, 0.01f, 0.01f, PackRgba(1, 1, 1)},
+                                 {0.04f, 0.01f, 0.01f, PackRgba(2, 2, 2)},
+                                 {-0.01f, 0.01f, 0.01f, PackRgba(3, 3, 3)},
+                                 {0.01f, 0.04f, 0.01f, PackRgba(4, 4, 4)},
+                                 {0.02f, 0.02f, 0.02f, PackRgba(1, 1, 1)},
+                                 {0.01f, 0.01f, -0.01f, PackRgba(5, 5, 5)},
+                                 {-0.02f, 0.05f, 0.02f, PackRgba(6, 6, 6)}});
+  VoxelGrid grid;
+  PointCloud out;
+  VoxelGridParams p;
+  p.key_order = true;
+  ASSERT_TRUE(grid.Filter(in, p, &out).ok());
+  std::vector<int> reds;
+  for (const Point& q : out.points) reds.push_back(RedOf(q.rgba));
+  EXPECT_THAT(reds, ::testing::ElementsAre(5, 3, 1, 2, 6, 4));
+  p.min_points_per_voxel = 2;  // only voxel (0, 0, 0) keeps its point
+  ASSERT_TRUE(grid.Filter(in, p, &out).ok());
+  ASSERT_EQ(out.size(), 1u);
+  EXPECT_EQ(RedOf(out.points[0].rgba), 1);
+}
+
 TEST(VoxelGrid, MatchesBruteForceOnRandomCloudsIncludingWideKeys) {
   std::mt19937 rng(7);
   std::uniform_real_distribution<float> coord(-50.0f, 50.0f);
@@ -317,9 +342,44 @@ TEST(VoxelGrid, MatchesBruteForceOnRandomCloudsIncludingWideKeys) {
     p.leaf_x = leaf;
     PointCloud out;
     ASSERT_TRUE(grid.Filter(in, p, &out).ok()) << grid.Filter(in, p, &out);
-    EXPECT_TRUE(CloudsMatch(testing::BruteForceVoxelGrid(in, p), out,
-                            CloudTolerance::Equivalence(/*colour=*/0)))
-        << "leaf " << leaf;
+    EXPECT_TRUE(CloudsMatch(testing::BruteForceVoxelGrid(in, p), out, CloudTolerance::Equivalence(/*colour=*/0))) << "leaf " << leaf;
+    p.key_order = true;  // 32- and 64-bit keys alike come out in (z, y, x) index order
+    ASSERT_TRUE(grid.Filter(in, p, &out).ok());
+    EXPECT_TRUE(
+        CloudsMatchInOrder(testing::BruteForceVoxelGrid(in, p, /*pcl_order=*/true), out, CloudTolerance::Equivalence(/*colour=*/0)))
+        << "leaf " << leaf << ", key order";
+  }
+}
+
+// One VoxelGrid (and its scratch memory) reused over many clouds whose sizes, key widths and
+// orders change from cloud to cloud: every result is the definition's.
+TEST(VoxelGrid, ReusedOverManyDifferentClouds) {
+  std::mt19937 rng(11);
+  VoxelGrid grid;
+  for (int round = 0; round < 300; ++round) {
+    const int clusters = round % 7 == 0 ? 3000 : static_cast<int>(rng() % 200);
+    const float spread = round % 5 == 0 ? 1e3f : 20.0f;  // 1e3 with leaf 1e-3: 63-bit keys
+    std::uniform_real_distribution<float> coord(-spread, spread);
+    PointCloud in;
+    for (int i = 0; i < clusters; ++i) {
+      const float cx = coord(rng), cy = coord(rng), cz = coord(rng);
+      for (int k = 0; k < 4; ++k) {
+        in.points.push_back(Point{cx + k * 1e-4f, cy, cz, static_cast<std::uint32_t>(rng())});
+      }
+    }
+    in.width = static_cast<std::uint32_t>(in.size());
+    in.height = 1;
+    VoxelGridParams p;
+    p.SetLeaf(round % 5 == 0 ? 1e-3f : 0.05f);
+    p.key_order = round % 3 == 0;
+    PointCloud out;
+    ASSERT_TRUE(grid.Filter(in, p, &out).ok()) << "round " << round;
+    const PointCloud brute = testing::BruteForceVoxelGrid(in, p, /*pcl_order=*/true);
+    if (p.key_order) {
+      ASSERT_TRUE(CloudsMatchInOrder(brute, out, CloudTolerance::Equivalence(/*colour=*/0))) << "round " << round;
+    } else {
+      ASSERT_TRUE(CloudsMatch(brute, out, CloudTolerance::Equivalence(/*colour=*/0))) << "round " << round;
+    }
   }
 }
 
@@ -361,6 +421,10 @@ TEST(Pipeline, FusedEqualsStagedForAllEncodings) {
           ASSERT_TRUE(grid.Filter(passed, o.voxel, &staged).ok());
           // Same points in the same order: both walk the image in raster order.
           EXPECT_TRUE(CloudsIdentical(staged, fused));
+          o.voxel.key_order = true;  // and both sort the same voxels the same way
+          ASSERT_TRUE(grid.Filter(passed, o.voxel, &staged).ok());
+          ASSERT_TRUE(pipeline.Run(o, f.disparity, f.colour, &fused).ok());
+          EXPECT_TRUE(CloudsIdentical(staged, fused)) << "key order";
         } else {
           EXPECT_TRUE(CloudsIdentical(passed, fused));
         }

@@ -22,6 +22,7 @@ using reference::ToPcl;
 using testing::CloudsIdentical;
 using testing::CloudsMatch;
 using testing::CloudTolerance;
+using testing::CloudsMatchInOrder;
 
 // PCL VoxelGrid's own test (voxel_grid.hpp): it gives up when the voxel count along the bounding
 // box exceeds INT32_MAX.
@@ -126,6 +127,23 @@ bool ExpectSameAsPcl(const DisparityView& disparity, const ColorView& colour,
         << "fused chain";
   } else {
     EXPECT_TRUE(CloudsIdentical(FromPcl(*pcl_passed), ours.fused)) << "fused chain, no voxels";
+  }
+  if (voxel.enabled) {
+    // In key order, the voxels come out in PCL's own order: point by point.
+    VoxelGridParams in_key_order = voxel;
+    in_key_order.key_order = true;
+    PointCloud sorted, fused_sorted;
+    if (!ok(grid.Filter(ours.passed, in_key_order, &sorted))) return false;
+    options.voxel = in_key_order;
+    if (!ok(pipeline.Run(options, disparity, colour, &fused_sorted))) return false;
+    if (pcl_gave_up) {
+      const PointCloud brute = testing::BruteForceVoxelGrid(ours.passed, voxel, /*pcl_order=*/true);
+      EXPECT_TRUE(CloudsMatchInOrder(brute, sorted, CloudTolerance::Equivalence(/*colour=*/0))) << "voxel grid, key order";
+      EXPECT_TRUE(CloudsMatchInOrder(brute, fused_sorted, CloudTolerance::Equivalence(/*colour=*/0))) << "fused chain, key order";
+    } else {
+      EXPECT_TRUE(CloudsMatchInOrder(FromPcl(pcl_voxel), sorted, CloudTolerance::Equivalence())) << "voxel grid, key order";
+      EXPECT_TRUE(CloudsMatchInOrder(FromPcl(pcl_voxel), fused_sorted, CloudTolerance::Equivalence())) << "fused chain, key order";
+    }
   }
   std::uint64_t finite = 0;
   for (const auto& p : pcl_organized) finite += pcl::isFinite(p) ? 1 : 0;

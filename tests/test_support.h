@@ -102,8 +102,10 @@ inline TestFrame RandomFrame(std::mt19937& rng, std::uint32_t w, std::uint32_t h
 }
 
 // Voxel grid by the definition: std::map of float-computed floor(v * (1/leaf)) indices, double
-// sums. Independent of the hashing and key packing under test.
-inline PointCloud BruteForceVoxelGrid(const PointCloud& in, const VoxelGridParams& p) {
+// sums. Independent of the hashing and key packing under test. Voxels come out ordered by their
+// (x, y, z) indices, or with `pcl_order` by (z, y, x), which is PCL's order.
+inline PointCloud BruteForceVoxelGrid(const PointCloud& in, const VoxelGridParams& p,
+                                      bool pcl_order = false) {
   struct Sum {
     double x = 0, y = 0, z = 0;
     std::uint64_t n = 0, r = 0, g = 0, b = 0, a = 0;
@@ -115,7 +117,8 @@ inline PointCloud BruteForceVoxelGrid(const PointCloud& in, const VoxelGridParam
     auto idx = [&](float v, float i) {
       return static_cast<std::int64_t>(std::floor(static_cast<double>(v * i)));
     };
-    Sum& s = voxels[{idx(q.x, inv[0]), idx(q.y, inv[1]), idx(q.z, inv[2])}];
+    const std::int64_t ix = idx(q.x, inv[0]), iy = idx(q.y, inv[1]), iz = idx(q.z, inv[2]);
+    Sum& s = pcl_order ? voxels[{iz, iy, ix}] : voxels[{ix, iy, iz}];
     s.x += q.x;
     s.y += q.y;
     s.z += q.z;

@@ -1,5 +1,8 @@
 #include "cloudcast/core/pipeline.h"
 
+#include <algorithm>
+#include <cmath>
+#include <cstring>
 #include <limits>
 #include <type_traits>
 #include <utility>
@@ -24,8 +27,10 @@ using internal::VoxelAccumulator;
 
 // Where the points that pass go: a buffer sized for the worst case (left uninitialised), with
 // their bounding box when the voxel grid needs it. A point arrives as (x, y, z, 0) plus colour.
-template <bool kTrackBounds>
+template <bool kTrack>
 struct PointSink {
+  static constexpr bool kTrackBounds = kTrack;
+  static constexpr bool kBanded = false;
   Point* out;
   std::size_t count = 0;
   internal::Bounds bounds;
@@ -35,6 +40,19 @@ struct PointSink {
     p.rgba = rgba;
     if constexpr (kTrackBounds) bounds.Add(xyz);
   }
+};
+
+// Points that go to the voxel grid band by band: whenever a row ends with `band` points or more
+// in the buffer, they are added to the accumulator and the buffer starts again, so it stays in
+// cache between the scan writing it and the voxel grid reading it.
+struct BandSink {
+  static constexpr bool kTrackBounds = false;
+  static constexpr bool kBanded = true;
+  Point* out;  // room for band + one row of points
+  std::size_t count = 0;
+  internal::Bounds bounds;  // unused: the accumulator was given a box before the scan
+  VoxelAccumulator* accumulator;
+  std::size_t band;
 };
 
 // (x, y, z) of pixel (u, v) as PCL computes it: x = ((u - cx) * z) * (1 / fx), same for y, and
@@ -70,6 +88,10 @@ struct ScanPlan {
   std::uint32_t valid_lo = 1, valid_hi = 0;
   std::uint32_t holes[4] = {0, 0, 0, 0};
   int hole_count = 0;
+  bool pass_exact = false;     // every value in [pass_lo, pass_hi] passes: no flag look-up needed
+  float z_min = 0, z_max = 0;  // the smallest and largest z that pass
+  // Some passing pixel's x or y may overflow to infinity (set per frame by the caller).
+  bool x_y_may_overflow = true;
 
   static ScanPlan From(const std::uint8_t* flags, std::size_t n) {
     ScanPlan plan;
@@ -90,6 +112,9 @@ struct ScanPlan {
     if (vlo >= 0)
       plan.valid_lo = static_cast<std::uint32_t>(vlo),
       plan.valid_hi = static_cast<std::uint32_t>(vhi);
+    plan.pass_exact = true;
+    for (std::int64_t d = plo; plo >= 0 && d <= phi; ++d)
+      plan.pass_exact &= (flags[d] & kPasses) != 0;
     plan.simd = true;
     for (std::int64_t d = vlo; vlo >= 0 && d <= vhi; ++d) {
       if (flags[d] & kValid) continue;
@@ -103,80 +128,208 @@ struct ScanPlan {
   }
 };
 
-// Lanes of `d` within [lo, hi] (unsigned), as all-ones lanes.
+// Four floats, 16-byte aligned: an SSE register in a table.
+struct alignas(16) Float4 {
+  float f[4];
+};
+
+// Lanes of 16 bytes of samples within [lo, hi] (unsigned), as all-ones lanes; the constants are
+// made once per frame.
 template <typename Sample>
-inline __m128i InRange(__m128i d, std::uint32_t lo, std::uint32_t hi) {
+struct RangeTest {
+  __m128i lo, span;
+  RangeTest(std::uint32_t l, std::uint32_t h) {
+    if constexpr (sizeof(Sample) == 1) {
+      lo = _mm_set1_epi8(static_cast<char>(l));
+      span = _mm_set1_epi8(static_cast<char>(h - l));
+    } else {
+      // No unsigned 16-bit compare in SSE2: flip the sign bit and compare signed.
+      lo = _mm_set1_epi16(static_cast<short>(l));
+      span = _mm_set1_epi16(static_cast<short>((h - l) ^ 0x8000));
+    }
+  }
+  __m128i operator()(__m128i d) const {
+    if constexpr (sizeof(Sample) == 1) {
+      return _mm_cmpeq_epi8(_mm_max_epu8(_mm_sub_epi8(d, lo), span), span);
+    } else {
+      const __m128i x =
+          _mm_xor_si128(_mm_sub_epi16(d, lo), _mm_set1_epi16(static_cast<short>(0x8000)));
+      return _mm_xor_si128(_mm_cmpgt_epi16(x, span), _mm_set1_epi32(-1));
+    }
+  }
+};
+template <typename Sample>
+inline __m128i Equal(__m128i d, __m128i value) {
   if constexpr (sizeof(Sample) == 1) {
-    const __m128i span = _mm_set1_epi8(static_cast<char>(hi - lo));
-    const __m128i x = _mm_sub_epi8(d, _mm_set1_epi8(static_cast<char>(lo)));
-    return _mm_cmpeq_epi8(_mm_max_epu8(x, span), span);
+    return _mm_cmpeq_epi8(d, value);
   } else {
-    // No unsigned 16-bit compare in SSE2: flip the sign bit and compare signed.
-    const __m128i flip = _mm_set1_epi16(static_cast<short>(0x8000));
-    const __m128i x = _mm_xor_si128(_mm_sub_epi16(d, _mm_set1_epi16(static_cast<short>(lo))), flip);
-    const __m128i span = _mm_set1_epi16(static_cast<short>((hi - lo) ^ 0x8000));
-    return _mm_xor_si128(_mm_cmpgt_epi16(x, span), _mm_set1_epi32(-1));
+    return _mm_cmpeq_epi16(d, value);
   }
 }
 template <typename Sample>
-inline __m128i Equal(__m128i d, std::uint32_t value) {
+inline __m128i Splat(std::uint32_t value) {
   if constexpr (sizeof(Sample) == 1) {
-    return _mm_cmpeq_epi8(d, _mm_set1_epi8(static_cast<char>(value)));
+    return _mm_set1_epi8(static_cast<char>(value));
   } else {
-    return _mm_cmpeq_epi16(d, _mm_set1_epi16(static_cast<short>(value)));
+    return _mm_set1_epi16(static_cast<short>(value));
   }
+}
+// One bit per sample of a lane mask.
+template <typename Sample>
+inline unsigned LaneBits(__m128i m) {
+  if constexpr (sizeof(Sample) == 1) {
+    return static_cast<unsigned>(_mm_movemask_epi8(m));
+  } else {
+    return static_cast<unsigned>(_mm_movemask_epi8(_mm_packs_epi16(m, _mm_setzero_si128())));
+  }
+}
+
+// The colour of pixel u as PCL packs it, from one 4-byte load (the byte after a 3-byte pixel is
+// ignored): the caller makes sure that byte is inside the buffer.
+template <ColorEncoding C>
+inline std::uint32_t PackPixelWide(const std::uint8_t* row, std::uint32_t u) {
+  std::uint32_t w;
+  if constexpr (C == ColorEncoding::kMono8) {
+    return (std::uint32_t{row[u]} * 0x010101u) | 0xFF000000u;
+  } else {
+    std::memcpy(&w, row + static_cast<std::size_t>(u) * (C == ColorEncoding::kRGBA8 ? 4 : 3), 4);
+  }
+  if constexpr (C == ColorEncoding::kBGR8) return w | 0xFF000000u;  // bytes b, g, r: in place
+  return (__builtin_bswap32(w) >> 8) | 0xFF000000u;                 // bytes r, g, b: reversed
 }
 
 // 8/16-bit disparities with the passthrough on z (or off): z, validity and the passthrough
 // decision all depend on the raw value only, so they come from tables. Sixteen bytes of pixels
 // are tested at once against the range of passing values, and valid pixels are counted with the
 // same registers; only blocks holding a passing pixel are looked at one pixel at a time.
+//
+// A passing pixel costs about twenty instructions: (u - cx, 0, 0, 0) comes from a per-column
+// table and (z, z, z, z) from a per-value one (8-bit samples), so the point is two loads, an or
+// and PCL's two products; its colour one load. The sink's state lives in locals, which the
+// stores of points cannot alias.
 template <typename Sample, ColorEncoding C, typename Sink>
-void RunTableKernel(const DepthConstants& c, const float* zt, const std::uint8_t* flags,
-                    const ScanPlan& plan, const DisparityView& disparity, const ColorView& colour,
-                    Sink* sink, Tally* tally) {
+void RunTableKernel(const DepthConstants& c, const float* zt, const Float4* z4,
+                    const Float4* column, const std::uint8_t* flags, const ScanPlan& plan,
+                    const DisparityView& disparity, const ColorView& colour, Sink* sink,
+                    Tally* tally) {
   const std::uint32_t w = disparity.width;
-  const std::uint32_t h = disparity.height;
+  std::uint32_t h = disparity.height;
   constexpr std::uint32_t kLanes = 16 / sizeof(Sample);
-  std::uint64_t valid = 0, passed = 0;
-  // Valid-pixel counts as sums of 0xFF bytes (psadbw), divided out at the end.
+  std::uint64_t valid = 0;
+  // Valid-pixel counts as byte counts (psadbw), divided out at the end.
   __m128i in_valid_range = _mm_setzero_si128(), in_holes = _mm_setzero_si128();
   const __m128i zero = _mm_setzero_si128();
   const bool any_pass = plan.pass_lo <= plan.pass_hi;
   const bool any_valid = plan.valid_lo <= plan.valid_hi;
-  auto pixel = [&](std::uint32_t u, const std::uint8_t* crow, float yc, Sample d) {
-    const __m128 p = PixelPoint(c, u, yc, zt[d]);
-    if (!XyFinite(p)) {
-      --valid;  // z finite but x or y overflowed: not a finite point
-      return;
-    }
-    ++passed;
-    sink->Add(p, internal::PackPixel<C>(crow, u));
-  };
-  for (std::uint32_t v = 0; v < h; ++v) {
+  const bool simd = plan.simd;
+  const bool pass_exact = plan.pass_exact;
+  const bool check_finite = plan.x_y_may_overflow;
+  const int hole_count = plan.hole_count;
+  const RangeTest<Sample> valid_range(plan.valid_lo, plan.valid_hi);
+  const RangeTest<Sample> pass_range(plan.pass_lo, plan.pass_hi);
+  __m128i hole[4];
+  for (int k = 0; k < 4; ++k) hole[k] = Splat<Sample>(plan.holes[k]);
+  const __m128 scale = _mm_setr_ps(c.inv_fx, c.inv_fy, 1.0f, 0.0f);
+  Point* const first = sink->out + sink->count;
+  Point* o = first;
+  internal::Bounds bounds = sink->bounds;
+  const std::uint8_t* colour_end =
+      static_cast<const std::uint8_t*>(colour.data) + colour.size_bytes;
+  // kFast: a row where no test is needed per passing pixel: every value in the passing range
+  // passes, no x or y can overflow, and the byte after each pixel's colour is in the buffer (all
+  // rows but the last: the next row follows).
+  auto scan_row = [&](std::uint32_t v, auto fast) {
+    constexpr bool kFast = decltype(fast)::value;
     const std::uint8_t* drow = disparity.row(v);
     const std::uint8_t* crow = colour.row(v);
-    const float yc = static_cast<float>(v) - c.cy;
+    // (0, yc, 1, 0): or-ed with (u - cx, 0, 0, 0), times (z, z, z, z), times (1/fx, 1/fy, 1, 0)
+    // gives PCL's ((u - cx) * z) * (1/fx), ((v - cy) * z) * (1/fy), z * 1 * 1 == z, and 0.
+    const __m128 row_part = _mm_setr_ps(0.0f, static_cast<float>(v) - c.cy, 1.0f, 0.0f);
+    // Pixels whose colour can be read with one 4-byte load.
+    const std::uint32_t wide_end =
+        C == ColorEncoding::kBGR8 || C == ColorEncoding::kRGB8
+            ? static_cast<std::uint32_t>(
+                  std::min<std::size_t>(w, (static_cast<std::size_t>(colour_end - crow) - 1) / 3))
+            : w;
+    auto pixel = [&](std::uint32_t u, Sample d) {
+      __m128 zz;
+      if constexpr (sizeof(Sample) == 1) {
+        zz = _mm_load_ps(z4[d].f);
+      } else {
+        zz = _mm_set1_ps(zt[d]);
+      }
+      const __m128 p =
+          _mm_mul_ps(_mm_mul_ps(_mm_or_ps(_mm_load_ps(column[u].f), row_part), zz), scale);
+      if (!kFast && check_finite && !XyFinite(p)) {
+        --valid;  // z finite but x or y overflowed: not a finite point
+        return;
+      }
+      const std::uint32_t rgba =
+          kFast || u < wide_end ? PackPixelWide<C>(crow, u) : internal::PackPixel<C>(crow, u);
+      _mm_storeu_ps(&o->x, p);
+      o->rgba = rgba;
+      ++o;
+      if constexpr (Sink::kTrackBounds) bounds.Add(p);
+    };
+    // The passing pixels of one vector of samples.
+    auto visit = [&](std::uint32_t at, __m128i pass) {
+      for (unsigned mask = LaneBits<Sample>(pass); mask != 0; mask &= mask - 1) {
+        const auto j = static_cast<std::uint32_t>(__builtin_ctz(mask));
+        const Sample s = internal::LoadSample<Sample>(drow, at + j);
+        if (kFast || pass_exact || (flags[s] & kPasses)) pixel(at + j, s);
+      }
+    };
     std::uint32_t u = 0;
-    if (plan.simd) {
-      for (; u + kLanes <= w; u += kLanes) {
-        const __m128i d =
-            _mm_loadu_si128(reinterpret_cast<const __m128i*>(drow + u * sizeof(Sample)));
-        if (any_valid) {
-          in_valid_range = _mm_add_epi64(
-              in_valid_range, _mm_sad_epu8(InRange<Sample>(d, plan.valid_lo, plan.valid_hi), zero));
-          for (int k = 0; k < plan.hole_count; ++k) {
-            in_holes = _mm_add_epi64(in_holes, _mm_sad_epu8(Equal<Sample>(d, plan.holes[k]), zero));
+    // Valid samples are counted in byte lanes (each adds sizeof(Sample) to them), folded into
+    // the 64-bit sums before a lane can wrap, every 255 vectors at most.
+    auto chunk = [&](std::uint32_t end, auto holes_tag, auto pass_tag) {
+      constexpr bool kHoles = decltype(holes_tag)::value;
+      constexpr bool kAnyPass = decltype(pass_tag)::value;  // false: no value passes
+      __m128i valid_bytes = zero, hole_bytes = zero;
+      auto count = [&](__m128i d) {
+        valid_bytes = _mm_sub_epi8(valid_bytes, valid_range(d));
+        if constexpr (kHoles) {
+          for (int k = 0; k < hole_count; ++k) {
+            hole_bytes = _mm_sub_epi8(hole_bytes, Equal<Sample>(d, hole[k]));
           }
         }
-        if (!any_pass) continue;
-        unsigned mask = static_cast<unsigned>(
-            _mm_movemask_epi8(InRange<Sample>(d, plan.pass_lo, plan.pass_hi)));
-        while (mask != 0) {
-          const std::uint32_t j = static_cast<std::uint32_t>(__builtin_ctz(mask)) / sizeof(Sample);
-          mask &= ~((sizeof(Sample) == 1 ? 1u : 3u) << (j * sizeof(Sample)));
-          const Sample s = internal::LoadSample<Sample>(drow, u + j);
-          if (flags[s] & kPasses) pixel(u + j, crow, yc, s);
+      };
+      const std::uint8_t* at = drow + std::size_t{u} * sizeof(Sample);
+      auto load = [](const std::uint8_t* q) {
+        return _mm_loadu_si128(reinterpret_cast<const __m128i*>(q));
+      };
+      // Four vectors at a time: one branch for all four when none passes (most of a frame).
+      for (; u + 4 * kLanes <= end; u += 4 * kLanes, at += 64) {
+        const __m128i d0 = load(at), d1 = load(at + 16), d2 = load(at + 32), d3 = load(at + 48);
+        count(d0), count(d1), count(d2), count(d3);
+        if constexpr (!kAnyPass) continue;
+        const __m128i p0 = pass_range(d0), p1 = pass_range(d1);
+        const __m128i p2 = pass_range(d2), p3 = pass_range(d3);
+        if (_mm_movemask_epi8(_mm_or_si128(_mm_or_si128(p0, p1), _mm_or_si128(p2, p3))) == 0) {
+          continue;
+        }
+        visit(u, p0), visit(u + kLanes, p1), visit(u + 2 * kLanes, p2);
+        visit(u + 3 * kLanes, p3);
+      }
+      for (; u + kLanes <= end; u += kLanes, at += 16) {
+        const __m128i d = load(at);
+        count(d);
+        if constexpr (kAnyPass) visit(u, pass_range(d));
+      }
+      in_valid_range = _mm_add_epi64(in_valid_range, _mm_sad_epu8(valid_bytes, zero));
+      in_holes = _mm_add_epi64(in_holes, _mm_sad_epu8(hole_bytes, zero));
+    };
+    if (simd) {
+      constexpr std::uint32_t kFoldEvery = 252 * kLanes;  // a multiple of four vectors
+      const std::uint32_t simd_end = w - w % kLanes;
+      while (u < simd_end) {
+        const std::uint32_t end = std::min(simd_end, u + kFoldEvery);
+        if (!any_pass) {
+          chunk(end, std::true_type{}, std::false_type{});
+        } else if (hole_count == 0) {
+          chunk(end, std::false_type{}, std::true_type{});
+        } else {
+          chunk(end, std::true_type{}, std::true_type{});
         }
       }
     }
@@ -184,13 +337,35 @@ void RunTableKernel(const DepthConstants& c, const float* zt, const std::uint8_t
       const Sample d = internal::LoadSample<Sample>(drow, u);
       const std::uint8_t f = flags[d];
       valid += f & kValid;
-      if (f & kPasses) pixel(u, crow, yc, d);
+      if (f & kPasses) pixel(u, d);
+    }
+  };
+  const bool fast = pass_exact && !check_finite;
+  std::uint64_t passed = 0;
+  // No valid value at all (every pixel invalid): nothing to count and nothing passes.
+  if (!any_valid) h = 0;
+  for (std::uint32_t v = 0; v < h; ++v) {
+    if (fast && v + 1 < h) {
+      scan_row(v, std::true_type{});
+    } else {
+      scan_row(v, std::false_type{});
+    }
+    if constexpr (Sink::kBanded) {
+      const auto in_band = static_cast<std::size_t>(o - first);
+      if (in_band >= sink->band || v + 1 == h) {
+        sink->accumulator->AddNarrow(first, in_band);
+        passed += in_band;
+        o = first;
+      }
     }
   }
+  passed += static_cast<std::uint64_t>(o - first);
+  sink->count += static_cast<std::size_t>(o - first);
+  if constexpr (Sink::kTrackBounds) sink->bounds = bounds;
   alignas(16) std::uint64_t sums[2], holes[2];
   _mm_store_si128(reinterpret_cast<__m128i*>(sums), in_valid_range);
   _mm_store_si128(reinterpret_cast<__m128i*>(holes), in_holes);
-  valid += (sums[0] + sums[1] - holes[0] - holes[1]) / (255 * sizeof(Sample));
+  valid += (sums[0] + sums[1] - holes[0] - holes[1]) / sizeof(Sample);
   tally->valid = valid;
   tally->passed = passed;
 }
@@ -230,6 +405,10 @@ void RunGenericKernel(const DepthConstants& c, const DepthTable* table,
 
 }  // namespace
 
+// Points per band of the banded path: 64 KB of them, which stay in L2 between the scan and the
+// voxel grid.
+constexpr std::size_t kBandPoints = 4096;
+
 struct Pipeline::Impl {
   VoxelAccumulator accumulator;
   DepthTable table;
@@ -242,6 +421,33 @@ struct Pipeline::Impl {
   PointVector passed;
 
   ScanPlan plan;
+  // (z, z, z, z) per 8-bit value, made with the flags; (u - cx, 0, 0, 0) per column.
+  std::vector<Float4> z4;
+  std::vector<Float4> column;
+  std::uint32_t column_width = 0;
+  float column_cx = 0;
+
+  const Float4* Columns(std::uint32_t w, float cx) {
+    if (column_width == w && column_cx == cx && !column.empty()) return column.data();
+    column.resize(w);
+    for (std::uint32_t u = 0; u < w; ++u) {
+      column[u] = Float4{{static_cast<float>(u) - cx, 0.0f, 0.0f, 0.0f}};
+    }
+    column_width = w;
+    column_cx = cx;
+    return column.data();
+  }
+
+  // Whether a pixel that passes may have an x or y beyond float's range: z is at most
+  // plan.z_max, and |u - cx|, |v - cy| are largest at the frame's edges.
+  bool XyMayOverflow(const DepthConstants& c, std::uint32_t w, std::uint32_t h) const {
+    const double du = std::max(std::fabs(0.0 - c.cx), std::fabs(w - 1.0 - c.cx));
+    const double dv = std::max(std::fabs(0.0 - c.cy), std::fabs(h - 1.0 - c.cy));
+    const double z = plan.z_max;
+    // Float rounding adds a few parts in 10^7 to each product: far inside the margin.
+    constexpr double kSafe = 1e37;
+    return !(du * z * std::fabs(c.inv_fx) < kSafe && dv * z * std::fabs(c.inv_fy) < kSafe);
+  }
 
   const std::uint8_t* PassFlags(const DepthConstants& c, const PassThroughParams& pt, int bits) {
     if (flags_bits == bits && flags_constants.SameAs(c) &&
@@ -262,8 +468,43 @@ struct Pipeline::Impl {
     flags_constants = c;
     flags_passthrough = pt;
     plan = ScanPlan::From(flags.data(), n);
+    plan.z_min = std::numeric_limits<float>::max();
+    plan.z_max = 0;
+    for (std::size_t d = 0; d < n; ++d) {
+      if (!(flags[d] & kPasses)) continue;
+      plan.z_min = std::min(plan.z_min, table.z[d]);
+      plan.z_max = std::max(plan.z_max, table.z[d]);
+    }
+    if (bits == 8) {
+      z4.resize(n);
+      for (std::size_t d = 0; d < n; ++d)
+        z4[d] = Float4{{table.z[d], table.z[d], table.z[d], table.z[d]}};
+    }
     return flags.data();
   }
+
+  // A box holding every point the table kernel can produce on a w x h frame, from the range of
+  // z that passes and the frame's edges: x and y are products that float rounding keeps
+  // monotonic in each factor, so their extremes are at the corners (computed as the kernel
+  // computes points). False when nothing passes or some x or y may overflow.
+  bool StreamBox(const DepthConstants& c, std::uint32_t w, std::uint32_t h,
+                 internal::Bounds* box) const {
+    if (plan.pass_lo > plan.pass_hi || plan.x_y_may_overflow) return false;
+    const __m128 scale = _mm_setr_ps(c.inv_fx, c.inv_fy, 1.0f, 0.0f);
+    for (const float u : {0.0f, static_cast<float>(w - 1)}) {
+      for (const float v : {0.0f, static_cast<float>(h - 1)}) {
+        for (const float z : {plan.z_min, plan.z_max}) {
+          const __m128 a = _mm_setr_ps(u - c.cx, v - c.cy, 1.0f, 0.0f);
+          box->Add(_mm_mul_ps(_mm_mul_ps(a, _mm_set1_ps(z)), scale));
+        }
+      }
+    }
+    return true;
+  }
+
+  // Set by the kernel when it voxelised the points band by band (the Pipeline then has
+  // nothing left to do but count).
+  bool streamed = false;
 
   template <typename Sink>
   struct Kernel {
@@ -274,6 +515,9 @@ struct Pipeline::Impl {
     const ColorView& colour;
     Sink* sink;
     Tally* tally;
+    // With the voxel grid on: its parameters and output, for the banded path.
+    const VoxelGridParams* voxel = nullptr;
+    PointVector* voxel_out = nullptr;
 
     template <typename Sample, ColorEncoding C>
     void operator()() const {
@@ -284,8 +528,21 @@ struct Pipeline::Impl {
         impl->table.Prepare(c, kBits);
         if (!passthrough.enabled || passthrough.axis == Axis::kZ) {
           const std::uint8_t* flags = impl->PassFlags(c, passthrough, kBits);
-          RunTableKernel<Sample, C>(c, impl->table.z.data(), flags, impl->plan, disparity, colour,
-                                    sink, tally);
+          impl->plan.x_y_may_overflow = impl->XyMayOverflow(c, disparity.width, disparity.height);
+          const Float4* column = impl->Columns(disparity.width, c.cx);
+          internal::Bounds box;
+          if (voxel != nullptr && impl->StreamBox(c, disparity.width, disparity.height, &box) &&
+              impl->accumulator.BeginNarrow(box, *voxel,
+                                            std::size_t{disparity.width} * disparity.height)) {
+            BandSink band{sink->out, 0, {}, &impl->accumulator, kBandPoints};
+            RunTableKernel<Sample, C>(c, impl->table.z.data(), impl->z4.data(), column, flags,
+                                      impl->plan, disparity, colour, &band, tally);
+            impl->accumulator.Finish(*voxel, voxel_out);
+            impl->streamed = true;
+            return;
+          }
+          RunTableKernel<Sample, C>(c, impl->table.z.data(), impl->z4.data(), column, flags,
+                                    impl->plan, disparity, colour, sink, tally);
         } else {
           RunGenericKernel<Sample, C>(c, &impl->table, passthrough, disparity, colour, sink, tally);
         }
@@ -314,12 +571,16 @@ absl::Status Pipeline::Run(const PipelineOptions& options, const DisparityView& 
   if (options.voxel.enabled) {
     if (impl_->passed.size() < pixels) impl_->passed.resize(pixels);
     PointSink<true> sink{impl_->passed.data(), 0, {}};
-    internal::DispatchEncodings(disparity.encoding, colour.encoding,
-                                Impl::Kernel<PointSink<true>>{impl_.get(), c, options.passthrough,
-                                                              disparity, colour, &sink, &tally});
-    if (auto s = impl_->accumulator.Run(impl_->passed.data(), sink.count, options.voxel,
-                                        &out->points, &sink.bounds);
-        !s.ok()) {
+    impl_->streamed = false;
+    internal::DispatchEncodings(
+        disparity.encoding, colour.encoding,
+        Impl::Kernel<PointSink<true>>{impl_.get(), c, options.passthrough, disparity, colour, &sink,
+                                      &tally, &options.voxel, &out->points});
+    if (impl_->streamed) {
+      // Voxelised band by band.
+    } else if (auto s = impl_->accumulator.Run(impl_->passed.data(), sink.count, options.voxel,
+                                               &out->points, &sink.bounds);
+               !s.ok()) {
       out->points.clear();
       out->width = 0;
       return s;

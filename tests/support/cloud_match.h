@@ -254,6 +254,26 @@ inline ::testing::AssertionResult CloudsMatch(const PointCloud& reference, const
   return ::testing::AssertionSuccess();
 }
 
+// CloudsMatch's criterion point by point in order: the same number of points, and point i of
+// ours close to the reference's point i (for a voxel grid in PCL's own key order).
+inline ::testing::AssertionResult CloudsMatchInOrder(const PointCloud& reference,
+                                                     const PointCloud& ours,
+                                                     const CloudTolerance& tolerance) {
+  if (reference.size() != ours.size()) {
+    return ::testing::AssertionFailure()
+           << "point counts differ: reference " << reference.size() << ", ours " << ours.size();
+  }
+  namespace in = cloud_match_internal;
+  for (std::size_t i = 0; i < reference.size(); ++i) {
+    if (!in::Close(reference.points[i], ours.points[i], tolerance)) {
+      return ::testing::AssertionFailure() << "point " << i << " differs: reference "
+                                           << in::Describe(reference.points[i]) << ", ours "
+                                           << in::Describe(ours.points[i]);
+    }
+  }
+  return ::testing::AssertionSuccess();
+}
+
 // The same points, bit for bit, in any order (NaNs and signed zeros included); `compare_alpha`
 // off for formats without alpha.
 inline ::testing::AssertionResult SamePoints(const PointCloud& expected, const PointCloud& actual,

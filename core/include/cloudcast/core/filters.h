@@ -44,6 +44,12 @@ struct VoxelGridParams {
   // Voxels with fewer points produce nothing (PCL's setMinimumPointsNumberPerVoxel; 0 and 1 keep
   // every occupied voxel).
   std::uint32_t min_points_per_voxel = 0;
+  // Emit the voxels in PCL's order (by voxel index: z, then y, then x, as pcl::VoxelGrid's sort
+  // leaves them) instead of the order in which they were first met. Draco's sequential coder
+  // (speed 10) predicts each point from the previous one, so the order changes the bytes: on the
+  // ten New Tsukuba frames key order takes 14% fewer bytes at the codec's defaults (4% to 33% per
+  // frame), for a sort of about 90 instructions a voxel (cloudcast-chain-bench --key-order).
+  bool key_order = false;
 
   void SetLeaf(float leaf) { leaf_x = leaf_y = leaf_z = leaf; }
   // Finite positive leaves when enabled; errors name the member under `field`.
@@ -69,7 +75,8 @@ class VoxelGrid {
   VoxelGrid& operator=(VoxelGrid&&) noexcept;
 
   // Non-finite points of `in` are skipped. `out` gets one point per voxel, unorganized, in the
-  // order the voxels were first met. `out` must not alias `in`.
+  // order the voxels were first met (or PCL's order: params.key_order). `out` must not alias
+  // `in`.
   absl::Status Filter(const PointCloud& in, const VoxelGridParams& params, PointCloud* out);
 
  private:
