@@ -38,21 +38,23 @@ inline int FreeLoopbackPort() {
   return port;
 }
 
-// One cloudcast-server process. Its output goes to `log_path`.
+// One cloudcast-server process. Its output goes to `log_path`. Metrics are off unless
+// `metrics_listen` names an address.
 class ServerProcess {
  public:
   ServerProcess(const std::string& address, const std::string& instance,
-                const std::vector<std::string>& extra_args, const std::string& log_path)
+                const std::vector<std::string>& extra_args, const std::string& log_path,
+                const std::string& log_level = "warn", const std::string& metrics_listen = "")
       : address_(address), instance_(instance), log_path_(log_path) {
     std::vector<std::string> args = {BinDir() + "/cloudcast-server",
                                      "--listen",
                                      address,
                                      "--metrics-listen",
-                                     "",
+                                     metrics_listen,
                                      "--instance",
                                      instance,
                                      "--log-level",
-                                     "warn"};
+                                     log_level};
     args.insert(args.end(), extra_args.begin(), extra_args.end());
     pid_ = fork();
     if (pid_ == 0) {
