@@ -480,6 +480,39 @@ TEST_F(TokensTest, TokensNeverAppearInTheLogOrTheMetrics) {
   }
 }
 
+// SIGHUP re-reads the tokens file: a rotated token gets in, the retired one no longer; a broken
+// file keeps the tokens in use.
+TEST_F(TokensTest, SighupReloadsTheTokensFile) {
+  constexpr char kRotated[] = "rotated-token-a41c9e03d7b2f586";
+  const std::string address = "127.0.0.1:" + std::to_string(testing::FreeLoopbackPort());
+  testing::ServerProcess process(address, "tokens", {"--tokens-file", Path("tokens.json")},
+                                 Path("server.log"));
+  cc::ClientOptions fleet = Options("", "", kFleetToken);
+  fleet.connect_timeout = seconds(30);  // waits for the process to listen
+  auto client = cc::Client::Connect(address, fleet);
+  ASSERT_TRUE(client.ok()) << client.status() << "\n" << process.log();
+  ASSERT_TRUE((*client)->GetInfo().ok());
+
+  WriteFile(Path("tokens.new"),
+            std::string(R"({"tenants": [{"name": "fleet", "tokens": [")") + kRotated + R"("]}]})");
+  std::filesystem::rename(Path("tokens.new"), Path("tokens.json"));
+  process.Signal(SIGHUP);
+  // The reload runs on the server's signal thread; nothing tells the test when it is done.
+  EXPECT_TRUE(testing::Eventually([&] { return GetInfo(address, Options("", "", kRotated)).ok(); }))
+      << process.log();
+  auto retired = GetInfo(address, Options("", "", kFleetToken));
+  EXPECT_EQ(retired.status().code(), absl::StatusCode::kUnauthenticated) << retired.status();
+
+  WriteFile(Path("tokens.json"), "{ broken");
+  process.Signal(SIGHUP);
+  EXPECT_TRUE(testing::Eventually([&] {
+    return process.log().find("reload failed, keeping the previous tokens") != std::string::npos;
+  })) << process.log();
+  EXPECT_TRUE(GetInfo(address, Options("", "", kRotated)).ok());
+  process.Signal(SIGTERM);
+  EXPECT_EQ(process.Wait(), std::optional<int>(0)) << process.log();
+}
+
 // A tokens file is checked whole at startup; every error names the tenant and the key, and
 // never quotes a token.
 TEST(TokensFileTest, ErrorsNameTheTenantAndTheKey) {
