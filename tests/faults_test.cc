@@ -183,9 +183,9 @@ class Child {
 TEST(FaultsTest, ClientsVanishingMidFrameLeaveNoStreamAndOthersCarryOn) {
   const std::string dir = ::testing::TempDir();
   const int port = testing::FreeLoopbackPort(), metrics = testing::FreeLoopbackPort();
-  ServerProcess server("127.0.0.1:" + std::to_string(port), "faults",
-                       {"--metrics-listen", "127.0.0.1:" + std::to_string(metrics)},
-                       dir + "/vanish_server.log");
+  ServerProcess server("127.0.0.1:" + std::to_string(port), "faults", {},
+                       dir + "/vanish_server.log", "warn",
+                       "127.0.0.1:" + std::to_string(metrics));
   ASSERT_TRUE(server.WaitUntilServing());
   auto metric = [&](const std::string& name) {
     return server::MetricValue(server::ScrapeMetrics(metrics), name);
@@ -280,8 +280,8 @@ TEST(FaultsTest, NetworkStallOfSecondsThenRecoveryLosesNothing) {
   Namespace ns;
   if (!ns.ok()) GTEST_SKIP() << "could not make a network namespace with a veth pair here";
   const std::string address = ns.ns_ip() + ":50051";
-  ServerProcess server(address, "stalled", {}, ::testing::TempDir() + "/stall_server.log",
-                       ns.Prefix());
+  ServerProcess server(address, "stalled", {}, ::testing::TempDir() + "/stall_server.log", "warn",
+                       "", ns.Prefix());
   ASSERT_TRUE(server.WaitUntilServing()) << server.log();
   auto client = Connect(address);
   ASSERT_NE(client, nullptr);

@@ -39,24 +39,22 @@ inline int FreeLoopbackPort() {
   return port;
 }
 
-// One cloudcast-server process. Its output goes to `log_path`. Without a --metrics-listen among
-// `extra_args` it serves no metrics. `prefix` runs it through another program that execs it in
+// One cloudcast-server process. Its output goes to `log_path`. Metrics are off unless
+// `metrics_listen` names an address. `prefix` runs it through another program that execs it in
 // place (e.g. `ip netns exec NS`), so the pid is still the server's.
 class ServerProcess {
  public:
   ServerProcess(const std::string& address, const std::string& instance,
                 const std::vector<std::string>& extra_args, const std::string& log_path,
+                const std::string& log_level = "warn", const std::string& metrics_listen = "",
                 const std::vector<std::string>& prefix = {})
       : address_(address), instance_(instance), log_path_(log_path) {
     std::vector<std::string> args = prefix;
-    for (const std::string& a : {BinDir() + "/cloudcast-server", std::string("--listen"), address,
-                                 std::string("--instance"), instance, std::string("--log-level"),
-                                 std::string("warn")}) {
+    for (const std::string& a :
+         {BinDir() + "/cloudcast-server", std::string("--listen"), address,
+          std::string("--metrics-listen"), metrics_listen, std::string("--instance"), instance,
+          std::string("--log-level"), log_level}) {
       args.push_back(a);
-    }
-    if (std::find(extra_args.begin(), extra_args.end(), "--metrics-listen") == extra_args.end()) {
-      args.push_back("--metrics-listen");
-      args.push_back("");
     }
     args.insert(args.end(), extra_args.begin(), extra_args.end());
     pid_ = fork();

@@ -14,6 +14,7 @@
 #include "cloudcast/server/cli.h"
 #include "cloudcast/server/options.h"
 #include "cloudcast/testing/metrics_scrape.h"
+#include "program_support.h"
 #include "support/server_support.h"
 
 namespace cloudcast::server {
@@ -180,7 +181,12 @@ TEST(ServerOptionsTest, FlagsAndConfigFile) {
                            "--draco-speed",
                            "--delivery",
                            "--log-level",
-                           "--config"}) {
+                           "--config",
+                           "--tls-cert",
+                           "--tls-key",
+                           "--tls-client-ca",
+                           "--tokens-file",
+                           "--no-reflection"}) {
     EXPECT_NE(help.find(flag), std::string::npos) << flag;
   }
   EXPECT_NE(help.find("=0.0.0.0:50051"), std::string::npos) << help;
@@ -191,6 +197,48 @@ TEST(ServerOptionsTest, FlagsAndConfigFile) {
   std::reverse(bad_args.begin(), bad_args.end());
   bad_app.parse(bad_args);
   EXPECT_FALSE(bad.Options().ok());
+}
+
+// A misspelt key in --config was silently ignored (CLI11's default): now it is an error that
+// names the key, and cloudcast-server exits 2 (a usage error).
+TEST(ServerOptionsTest, UnknownConfigKeyIsAnError) {
+  const std::string path = (std::filesystem::temp_directory_path() /
+                            ("cloudcast_server_test_bad_" + std::to_string(getpid()) + ".toml"))
+                               .string();
+  {
+    std::ofstream out(path);
+    out << "max-streams = 8\nmax-streamz = 3\n";
+  }
+  CLI::App app;
+  ServerFlags flags(app);
+  std::vector<std::string> args = {"--config", path};
+  std::reverse(args.begin(), args.end());
+  try {
+    app.parse(args);
+    ADD_FAILURE() << "the unknown key was accepted";
+  } catch (const CLI::ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("max-streamz"), std::string::npos) << e.what();
+  }
+  const testing::RunResult r =
+      testing::RunProgram(testing::BinDir() + "/cloudcast-server", {"--config", path},
+                          std::filesystem::temp_directory_path().string());
+  EXPECT_EQ(r.code, 2) << r;
+  EXPECT_NE(r.err.find("max-streamz"), std::string::npos) << r;
+  std::filesystem::remove(path);
+}
+
+// --no-reflection reaches the options; reflection is on by default.
+TEST(ServerOptionsTest, NoReflectionFlag) {
+  for (bool given : {false, true}) {
+    CLI::App app;
+    ServerFlags flags(app);
+    std::vector<std::string> args;
+    if (given) args.push_back("--no-reflection");
+    app.parse(args);
+    auto options = flags.Options();
+    ASSERT_TRUE(options.ok()) << options.status();
+    EXPECT_EQ(options->reflection, !given);
+  }
 }
 
 }  // namespace

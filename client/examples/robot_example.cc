@@ -2,12 +2,16 @@
 // stereo matcher delivers them) to a cloudcast server at 10 Hz and prints each cloud's size and
 // end-to-end latency.
 //
-//   cloudcast-robot-example [--compress] [TARGET [FRAMES [DISPARITY_DIR COLOUR_DIR]]]
+//   cloudcast-robot-example [--compress] [--tls-ca FILE [--tls-cert FILE --tls-key FILE]
+//                           [--tls-server-name NAME]] [--token-file FILE]
+//                           [TARGET [FRAMES [DISPARITY_DIR COLOUR_DIR]]]
 //
 // Without folders it renders the synthetic scene; with them it sends their PNGs in name order
 // (e.g. New Tsukuba's groundtruth/disparity_maps/left and illumination/daylight/left).
 // --compress sends the pixels losslessly compressed (row deltas + zstd): about a third of the
-// raw bytes, for a robot on Wi-Fi.
+// raw bytes, for a robot on Wi-Fi. --tls-ca trusts that CA for the server's certificate (TLS);
+// --tls-cert / --tls-key send a client certificate (mutual TLS); --token-file sends the bearer
+// token in that file with every call (README, "Security").
 #include <chrono>
 #include <cinttypes>
 #include <cstdio>
@@ -59,12 +63,35 @@ int Fail(const absl::Status& status) {
 int main(int argc, char** argv) {
   std::vector<std::string> args;
   bool compress = false;
+  cc::TlsFiles tls_files;
+  std::string token_file;
   for (int i = 1; i < argc; ++i) {
-    if (std::string(argv[i]) == "--compress") {
+    const std::string arg = argv[i];
+    std::string* value = arg == "--tls-ca"            ? &tls_files.ca_file
+                         : arg == "--tls-cert"        ? &tls_files.cert_file
+                         : arg == "--tls-key"         ? &tls_files.key_file
+                         : arg == "--tls-server-name" ? &tls_files.server_name
+                         : arg == "--token-file"      ? &token_file
+                                                      : nullptr;
+    if (value != nullptr && i + 1 < argc) {
+      *value = argv[++i];
+    } else if (arg == "--compress") {
       compress = true;
     } else {
-      args.push_back(argv[i]);
+      args.push_back(arg);
     }
+  }
+  // Connection security: TLS when a CA (or a client certificate) is given, and the token.
+  cc::ClientOptions client_options;
+  if (!tls_files.ca_file.empty() || !tls_files.cert_file.empty()) {
+    auto tls = cc::LoadTlsFiles(tls_files);
+    if (!tls.ok()) return Fail(tls.status());
+    client_options.security.tls = *std::move(tls);
+  }
+  if (!token_file.empty()) {
+    auto token = cc::ReadTokenFile(token_file);
+    if (!token.ok()) return Fail(token.status());
+    client_options.security.bearer_token = *std::move(token);
   }
   const std::string target = args.size() > 0 ? args[0] : "localhost:50051";
   const int frames = args.size() > 1 ? std::atoi(args[1].c_str()) : 30;
@@ -75,7 +102,7 @@ int main(int argc, char** argv) {
   }
 
   // --- The integration: about 30 lines. ---
-  auto client = cc::Client::Connect(target);  // waits up to 5 s for the server
+  auto client = cc::Client::Connect(target, client_options);  // waits up to 5 s for the server
   if (!client.ok()) return Fail(client.status());
 
   cc::StreamOptions options;  // replies arrive on the library's receiver thread, in order

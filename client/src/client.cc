@@ -571,18 +571,20 @@ absl::StatusOr<std::unique_ptr<Client>> Client::Connect(const std::string& targe
     args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS,
                 static_cast<int>(options.max_reconnect_backoff.count()));
   }
-  std::shared_ptr<grpc::ChannelCredentials> credentials =
-      options.credentials != nullptr ? options.credentials : grpc::InsecureChannelCredentials();
-  std::shared_ptr<grpc::Channel> channel = grpc::CreateCustomChannel(target, credentials, args);
-  if (channel == nullptr) {
-    return absl::InternalError(absl::StrCat("cannot create a gRPC channel to ", target));
-  }
+  auto created = CreateChannel(target, options.security, args, options.credentials);
+  if (!created.ok()) return created.status();
+  std::shared_ptr<grpc::Channel> channel = *std::move(created);
   if (options.connect_timeout.count() > 0 &&
       !channel->WaitForConnected(std::chrono::system_clock::now() + options.connect_timeout)) {
     return absl::UnavailableError(absl::StrCat(
         "cannot connect to the cloudcast server at ", target, " within ",
         options.connect_timeout.count(), " ms (channel ", StateName(channel->GetState(false)),
-        "); is the server running, and are the address and port right?"));
+        "); is the server running, and are the address and port right?",
+        options.security.tls.has_value()
+            ? " With TLS: does the server speak TLS, does its certificate chain to the CA given "
+              "and name the host (or the server name override), and does it accept this "
+              "client's certificate?"
+            : " (A server that speaks TLS refuses plaintext clients.)"));
   }
   auto impl = std::make_unique<Impl>();
   impl->target = target;

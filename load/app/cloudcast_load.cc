@@ -18,6 +18,7 @@
 #include <thread>
 
 #include "cloudcast/cli/checks.h"
+#include "cloudcast/cli/connection_flags.h"
 #include "cloudcast/cli/stage_flags.h"
 #include "cloudcast/core/limits.h"
 #include "cloudcast/load/fleet.h"
@@ -311,12 +312,19 @@ int main(int argc, char** argv) {
       "server cannot hide behind a slowed sender (no coordinated omission)."};
   Flags f;
   auto stages = AddFlags(app, f);
+  const cloudcast::cli::ConnectionFlags connection(app);
   CLI11_PARSE(app, argc, argv);
+  auto security = connection.Security();
+  if (!security.ok()) {
+    std::cerr << "cloudcast-load: " << security.status().message() << "\n";
+    return kExitUsage;
+  }
 
   if (f.probe) {
     const absl::Status s = load::ProbeHealth(
         f.server, f.probe_service,
-        std::chrono::milliseconds(static_cast<std::int64_t>(f.connect_timeout_s * 1000)));
+        std::chrono::milliseconds(static_cast<std::int64_t>(f.connect_timeout_s * 1000)),
+        *security);
     if (!s.ok()) {
       std::cerr << "cloudcast-load --probe: " << s.message() << "\n";
       return kExitFailure;
@@ -384,6 +392,7 @@ int main(int argc, char** argv) {
   source.jpeg_quality = f.jpeg_quality;
 
   load::FleetOptions o;
+  o.security = *security;
   o.server = f.server;
   o.streams = f.streams;
   o.connections = f.connections;

@@ -626,7 +626,9 @@ absl::StatusOr<std::unique_ptr<Fleet>> Fleet::Connect(const FleetOptions& o,
       // A DNS TXT record must not replace the policy asked for.
       args.SetInt(GRPC_ARG_SERVICE_CONFIG_DISABLE_RESOLUTION, 1);
     }
-    auto channel = grpc::CreateCustomChannel(o.server, grpc::InsecureChannelCredentials(), args);
+    auto created = client::CreateChannel(o.server, o.security, args);
+    if (!created.ok()) return created.status();
+    std::shared_ptr<grpc::Channel> channel = *std::move(created);
     channel->GetState(/*try_to_connect=*/true);  // every channel connects meanwhile
     fleet->channels_.push_back(std::move(channel));
   }

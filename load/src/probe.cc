@@ -11,8 +11,11 @@
 namespace cloudcast::load {
 
 absl::Status ProbeHealth(const std::string& target, const std::string& service,
-                         std::chrono::milliseconds timeout) {
-  auto channel = grpc::CreateChannel(target, grpc::InsecureChannelCredentials());
+                         std::chrono::milliseconds timeout,
+                         const client::ChannelSecurity& security) {
+  auto created = client::CreateChannel(target, security, grpc::ChannelArguments());
+  if (!created.ok()) return created.status();
+  std::shared_ptr<grpc::Channel> channel = *std::move(created);
   grpc::GenericStub stub(channel);
   // HealthCheckRequest { string service = 1; }
   std::string request(1, static_cast<char>((1 << 3) | 2));

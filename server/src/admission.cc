@@ -20,11 +20,13 @@ void Admission::Ticket::Release() {
   if (admission_ != nullptr) std::exchange(admission_, nullptr)->Give(kind_, client_);
 }
 
-absl::StatusOr<Admission::Ticket> Admission::Admit(Kind kind, const std::string& client) {
+absl::StatusOr<Admission::Ticket> Admission::Admit(Kind kind, const Client& client) {
   const bool stream = kind == Kind::kStream;
   const std::uint32_t limit = stream ? limits_.max_streams : limits_.max_process;
+  const std::uint32_t own_limit = stream ? client.max_streams : client.max_process;
   const std::uint32_t share =
-      stream ? limits_.max_streams_per_client : limits_.max_process_per_client;
+      own_limit > 0 ? own_limit
+                    : (stream ? limits_.max_streams_per_client : limits_.max_process_per_client);
   const char* what = stream ? "concurrent streams" : "Process calls in flight";
   {
     std::lock_guard<std::mutex> lock(mu_);
@@ -34,11 +36,18 @@ absl::StatusOr<Admission::Ticket> Admission::Admit(Kind kind, const std::string&
           absl::StrCat("too many ", what, ": the server's limit is ", limit,
                        stream ? " (max_streams, --max-streams)" : " (max_streams, --max-streams)"));
     }
-    Counts& mine = clients_[client];
+    Counts& mine = clients_[client.key];
     std::uint32_t& own = stream ? mine.streams : mine.process;
     if (own >= share) {
+      if (!client.tenant.empty() && own_limit > 0) {
+        return absl::ResourceExhaustedError(absl::StrCat(
+            "too many ", what, " for tenant '", client.tenant, "': its limit is ", share,
+            stream ? " (max_streams" : " (max_process_in_flight", " in --tokens-file)"));
+      }
+      const std::string who =
+          client.tenant.empty() ? client.key : absl::StrCat("tenant '", client.tenant, "'");
       return absl::ResourceExhaustedError(
-          absl::StrCat("too many ", what, " from ", client, ": the limit per client is ", share,
+          absl::StrCat("too many ", what, " from ", who, ": the limit per client is ", share,
                        stream ? " (--max-streams-per-client)" : " (--max-process-per-client)"));
     }
     ++own;
@@ -47,7 +56,7 @@ absl::StatusOr<Admission::Ticket> Admission::Admit(Kind kind, const std::string&
   Ticket t;
   t.admission_ = this;
   t.kind_ = kind;
-  t.client_ = client;
+  t.client_ = client.key;
   return t;
 }
 

@@ -1,7 +1,7 @@
 // Who may open a call now: the server-wide limits on streams and on Process calls in flight,
 // and each client's share of them, so that one client (a robot, a misbehaving script, or an
 // attacker) cannot take every slot. A client is its peer address without the port, or, with
-// authentication, its tenant.
+// bearer tokens (--tokens-file), its tenant, whose own limits replace the per-client shares.
 #pragma once
 
 #include <atomic>
@@ -42,12 +42,25 @@ class Admission {
     std::string client_;
   };
 
+  // Whom a call counts against, and that client's own shares.
+  struct Client {
+    std::string key;     // the peer host (PeerHost), or with tokens "tenant:" + the tenant
+    std::string tenant;  // the tenant's name, for messages; "" without tokens
+    // The tenant's own limits (--tokens-file); 0: the server's per-client share.
+    std::uint32_t max_streams = 0;
+    std::uint32_t max_process = 0;
+  };
+
   explicit Admission(const Limits& limits) : limits_(limits) {}
   Admission(const Admission&) = delete;
   Admission& operator=(const Admission&) = delete;
 
-  // A place for `client`, or RESOURCE_EXHAUSTED saying which limit (and its flag) it hit.
-  absl::StatusOr<Ticket> Admit(Kind kind, const std::string& client);
+  // A place for `client`, or RESOURCE_EXHAUSTED saying which limit (and its flag, or its key in
+  // the tokens file) it hit.
+  absl::StatusOr<Ticket> Admit(Kind kind, const Client& client);
+  absl::StatusOr<Ticket> Admit(Kind kind, const std::string& peer_host) {
+    return Admit(kind, Client{peer_host, "", 0, 0});
+  }
 
   std::uint32_t open(Kind kind) const;
 

@@ -24,7 +24,10 @@ ServerFlags::ServerFlags(CLI::App& app)
   app.option_defaults()->always_capture_default();
   app.set_config("--config", "",
                  "Read flags from this TOML or INI file: one `name = value` per flag, the name "
-                 "without its dashes (e.g. max-streams = 8); the command line wins");
+                 "without its dashes (e.g. max-streams = 8); the command line wins; an unknown "
+                 "name is an error");
+  // A misspelt key (max-stream = 8) must not be ignored silently: CLI11's default drops it.
+  app.allow_config_extras(false);
 
   ServerOptions& o = options_;
   app.add_option("--listen", o.listen, "gRPC address, host:port; port 0 picks a free one")
@@ -58,6 +61,28 @@ ServerFlags::ServerFlags(CLI::App& app)
                  "cancelled; 0 = no limit")
       ->check(CLI::Range(0.0, 2.0e6))
       ->group("Service");
+
+  const std::string security = "Security (README, Security)";
+  app.add_option("--tls-cert", o.tls_cert_file,
+                 "Serve TLS with this PEM certificate chain (leaf first); with --tls-key. "
+                 "Re-read on SIGHUP. Default: plaintext")
+      ->group(security);
+  app.add_option("--tls-key", o.tls_key_file,
+                 "The PEM private key of --tls-cert (unencrypted). Re-read on SIGHUP")
+      ->group(security);
+  app.add_option("--tls-client-ca", o.tls_client_ca_file,
+                 "Mutual TLS: require a client certificate that chains to these PEM CAs; clients "
+                 "without one are refused. Re-read on SIGHUP")
+      ->group(security);
+  app.add_option("--tokens-file", o.tokens_file,
+                 "Require a bearer token (metadata 'authorization: Bearer <token>') on every "
+                 "CloudCast call: a JSON file of tenants, their tokens and limits (README, "
+                 "Security). Health checks stay open. Re-read on SIGHUP. Default: no "
+                 "authentication")
+      ->group(security);
+  app.add_flag("--no-reflection", no_reflection_,
+               "Do not serve gRPC server reflection (which lets anyone list the API)")
+      ->group(security);
 
   app.add_option("--max-message-bytes", o.max_message_bytes,
                  "Largest request message; a larger one ends its call with RESOURCE_EXHAUSTED")
@@ -118,6 +143,7 @@ absl::StatusOr<ServerOptions> ServerFlags::Options() const {
   o.first_message_timeout = ToMillis(first_message_timeout_seconds_);
   o.memory_budget_bytes = memory_budget_mb_ << 20;
   o.shutdown_grace = ToMillis(shutdown_grace_seconds_);
+  o.reflection = !no_reflection_;
   o.max_connection_age = ToMillis(max_connection_age_seconds_);
   o.max_connection_age_grace = ToMillis(max_connection_age_grace_seconds_);
   auto frame = stages_->Apply(o.defaults.frame);

@@ -102,6 +102,8 @@ std::uint64_t FramePixels(const v1::Frame& frame) {
   std::uint64_t pixels = 0;
   if (d.has_raw()) {
     pixels = std::uint64_t{d.raw().width()} * d.raw().height();
+  } else if (d.has_compressed()) {
+    pixels = std::uint64_t{d.compressed().width()} * d.compressed().height();
   } else if (d.has_encoded()) {
     std::uint32_t w = 0, h = 0;
     const char* format = nullptr;

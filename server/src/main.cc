@@ -2,7 +2,11 @@
 //
 // SIGINT / SIGTERM start a graceful shutdown: health checks go NOT_SERVING, new calls are refused,
 // frames in flight get --shutdown-grace seconds, then the process exits 0. A second signal exits
-// at once. Signals are taken by sigwait on a thread, never handled inside a signal handler.
+// at once. SIGHUP re-reads the TLS files and the tokens file (a bad one is logged and the one in
+// use stays). Signals are taken by sigwait on the main thread, never inside a signal handler.
+//
+// Exit status: 0 after a shutdown, 1 when the server cannot start (address in use), 2 for a
+// usage error: a bad flag, an unknown --config key, a missing or bad TLS or tokens file.
 #include <malloc.h>
 #include <pthread.h>
 #include <signal.h>
@@ -42,7 +46,16 @@ int main(int argc, char** argv) {
       "point clouds out, over gRPC (cloudcast.v1.CloudCast). Health checking and reflection are "
       "on; Prometheus metrics are served over HTTP."};
   cloudcast::server::ServerFlags flags(app);
-  CLI11_PARSE(app, argc, argv);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ConfigError& e) {
+    std::cerr << "cloudcast-server: --config: " << e.what()
+              << " (not a flag of cloudcast-server: check its spelling against --help)\n";
+    return 2;
+  } catch (const CLI::ParseError& e) {
+    const int code = app.exit(e);  // prints --help, or the error
+    return code == 0 ? 0 : 2;
+  }
   spdlog::set_level(spdlog::level::from_str(flags.log_level()));
 
   auto options = flags.Options();
@@ -57,17 +70,30 @@ int main(int argc, char** argv) {
   sigemptyset(&signals);
   sigaddset(&signals, SIGINT);
   sigaddset(&signals, SIGTERM);
-  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
+  sigset_t with_hangup = signals;
+  sigaddset(&with_hangup, SIGHUP);
+  pthread_sigmask(SIG_BLOCK, &with_hangup, nullptr);
 
   auto server = cloudcast::server::Server::Start(*options);
   if (!server.ok()) {
+    // A file the operator named that is missing or bad is a usage error, like a bad flag.
+    if (server.status().code() == absl::StatusCode::kInvalidArgument) {
+      std::cerr << "cloudcast-server: " << server.status().message() << "\n";
+      return 2;
+    }
     spdlog::critical("{}", std::string(server.status().message()));
     return 1;
   }
 
   int signal_number = 0;
-  sigwait(&signals, &signal_number);
+  for (;;) {
+    sigwait(&with_hangup, &signal_number);
+    if (signal_number != SIGHUP) break;
+    spdlog::info("SIGHUP: reloading the TLS and tokens files");
+    (void)(*server)->ReloadSecurity();  // logs what it did, and any error
+  }
   spdlog::info("{}: shutting down gracefully (again to stop at once)", strsignal(signal_number));
+  // SIGHUP stays blocked: a reload during shutdown is pointless, and must not end the process.
   std::thread([signals] {
     int again = 0;
     sigwait(&signals, &again);

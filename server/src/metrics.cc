@@ -98,6 +98,8 @@ Metrics::Metrics()
                                            "Stream calls refused: shutting down")),
       streams_idle_timeout(NewCounter(*registry_, "cloudcast_streams_idle_timeout_total",
                                       "Stream calls ended by the idle timeout")),
+      calls_unauthenticated(NewCounter(*registry_, "cloudcast_calls_unauthenticated_total",
+                                       "Calls refused for a missing or invalid bearer token")),
       unparsable_family_(prometheus::BuildCounter()
                              .Name("cloudcast_requests_unparsable_total")
                              .Help("Requests whose bytes did not parse as their RPC's message; "

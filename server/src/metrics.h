@@ -43,6 +43,8 @@ class Metrics {
   prometheus::Counter& streams_rejected_limit;     // over --max-streams
   prometheus::Counter& streams_rejected_shutdown;  // arrived while shutting down
   prometheus::Counter& streams_idle_timeout;
+  // Calls refused for a missing or invalid bearer token (--tokens-file).
+  prometheus::Counter& calls_unauthenticated;
 
  private:
   prometheus::Family<prometheus::Counter>& unparsable_family_;

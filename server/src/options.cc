@@ -56,6 +56,14 @@ absl::Status ServerOptions::Validate() const {
   if (max_connection_age_grace.count() < 0 || max_connection_age_grace.count() > kMaxMs) {
     return Invalid("--max-connection-age-grace must be in [0, 2^31 ms)");
   }
+  if (tls_cert_file.empty() != tls_key_file.empty()) {
+    return Invalid(tls_cert_file.empty()
+                       ? "--tls-key needs --tls-cert (the certificate it belongs to)"
+                       : "--tls-cert needs --tls-key (its private key)");
+  }
+  if (!tls_client_ca_file.empty() && tls_cert_file.empty()) {
+    return Invalid("--tls-client-ca (mutual TLS) needs --tls-cert and --tls-key");
+  }
   if (auto s = defaults.frame.Validate("defaults"); !s.ok()) {
     return Invalid(absl::StrCat("stream defaults: ", s.message()));
   }

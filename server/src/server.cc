@@ -8,6 +8,7 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <exception>
 #include <thread>
@@ -17,6 +18,8 @@
 #include "metrics.h"
 #include "metrics_http.h"
 #include "service.h"
+#include "tenants.h"
+#include "tls.h"
 
 namespace cloudcast::server {
 namespace {
@@ -38,6 +41,25 @@ std::string MetricsAddress(const ServerOptions& options) {
   return options.listen.substr(0, colon == std::string::npos ? 0 : colon) + options.metrics_listen;
 }
 
+// Reflection for this server only. gRPC's reflection plugin registers itself for every server
+// of the process once linked in, so it is added here when wanted and removed when not.
+class ReflectionOption final : public grpc::ServerBuilderOption {
+ public:
+  explicit ReflectionOption(bool enabled) : enabled_(enabled) {}
+  void UpdateArguments(grpc::ChannelArguments* /*args*/) override {}
+  void UpdatePlugins(std::vector<std::unique_ptr<grpc::ServerBuilderPlugin>>* plugins) override {
+    const std::string name = grpc::reflection::ProtoServerReflectionPlugin().name();
+    plugins->erase(std::remove_if(plugins->begin(), plugins->end(),
+                                  [&](const auto& p) { return p->name() == name; }),
+                   plugins->end());
+    if (enabled_)
+      plugins->push_back(std::make_unique<grpc::reflection::ProtoServerReflectionPlugin>());
+  }
+
+ private:
+  const bool enabled_;
+};
+
 }  // namespace
 
 const char* HealthServiceName() { return "cloudcast.v1.CloudCast"; }
@@ -46,16 +68,35 @@ Server::Server(const ServerOptions& options) : options_(options) {}
 
 absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& options) {
   if (absl::Status s = options.Validate(); !s.ok()) return s;
+  // The security files first: a bad one is the operator's error, named before anything starts.
+  std::unique_ptr<ServerTls> tls;
+  if (!options.tls_cert_file.empty()) {
+    auto loaded = ServerTls::Load(
+        TlsFiles{options.tls_cert_file, options.tls_key_file, options.tls_client_ca_file});
+    if (!loaded.ok()) return loaded.status();
+    tls = *std::move(loaded);
+  }
+  std::shared_ptr<const TenantDirectory> tenants;
+  if (!options.tokens_file.empty()) {
+    auto loaded = TenantDirectory::Load(options.tokens_file, options.limits.max_pixels);
+    if (!loaded.ok()) return loaded.status();
+    tenants = *std::move(loaded);
+  }
   std::unique_ptr<Server> server(new Server(options));
+  server->tls_ = std::move(tls);
   server->metrics_ = std::make_unique<Metrics>();
   server->service_ = std::make_unique<CloudCastService>(options, server->metrics_.get());
+  server->service_->SetTenants(tenants);
 
-  // Both are process-wide switches read when a server is built.
+  // A process-wide switch read when a server is built.
   grpc::EnableDefaultHealthCheckService(true);
-  grpc::reflection::InitProtoReflectionServerBuilderPlugin();
 
   grpc::ServerBuilder builder;
-  builder.AddListeningPort(options.listen, grpc::InsecureServerCredentials(), &server->port_);
+  builder.AddListeningPort(
+      options.listen,
+      server->tls_ != nullptr ? server->tls_->Credentials() : grpc::InsecureServerCredentials(),
+      &server->port_);
+  builder.SetOption(std::make_unique<ReflectionOption>(options.reflection));
   builder.SetMaxReceiveMessageSize(static_cast<int>(options.max_message_bytes));
   // gRPC sets SO_REUSEPORT by default, so a second server on a busy port would silently share
   // it; an operator wants "address in use" instead.
@@ -101,11 +142,45 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& optio
   grpc::HealthCheckServiceInterface* health = server->server_->GetHealthCheckService();
   health->SetServingStatus("", true);
   health->SetServingStatus(HealthServiceName(), true);
-  spdlog::info("cloudcast-server listening on {} ({} workers, metrics {})", server->address_,
-               server->service_->worker_threads(),
+  spdlog::info("cloudcast-server listening on {} ({} workers, metrics {}; {}, {}, reflection {})",
+               server->address_, server->service_->worker_threads(),
                server->metrics_port_ > 0 ? "http://" + server->metrics_address_ + "/metrics"
-                                         : std::string("off"));
+                                         : std::string("off"),
+               server->tls_ == nullptr  ? "plaintext"
+               : server->tls_->mutual() ? "mutual TLS"
+                                        : "TLS",
+               tenants == nullptr
+                   ? std::string("no authentication")
+                   : absl::StrCat("bearer tokens of ", tenants->tenants(), " tenants"),
+               options.reflection ? "on" : "off");
   return server;
+}
+
+absl::Status Server::ReloadSecurity() {
+  absl::Status result;
+  if (tls_ != nullptr) {
+    if (absl::Status s = tls_->Reload(); s.ok()) {
+      spdlog::info("TLS: reloaded {} (new connections get it within {} s)", options_.tls_cert_file,
+                   ServerTls::kRefreshSeconds);
+    } else {
+      spdlog::error("TLS: reload failed, keeping the previous certificate: {}",
+                    std::string(s.message()));
+      result = s;
+    }
+  }
+  if (!options_.tokens_file.empty()) {
+    auto tenants = TenantDirectory::Load(options_.tokens_file, options_.limits.max_pixels);
+    if (tenants.ok()) {
+      spdlog::info("tokens: reloaded {} ({} tenants); open calls keep their tenant",
+                   options_.tokens_file, (*tenants)->tenants());
+      service_->SetTenants(*std::move(tenants));
+    } else {
+      spdlog::error("tokens: reload failed, keeping the previous tokens: {}",
+                    std::string(tenants.status().message()));
+      if (result.ok()) result = tenants.status();
+    }
+  }
+  return result;
 }
 
 Server::~Server() { Shutdown(); }

@@ -74,14 +74,15 @@ class CloudCastService::StreamReactor final
     : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer> {
  public:
   StreamReactor(CloudCastService* service, grpc::CallbackServerContext* context,
-                Admission::Ticket ticket)
+                Admission::Ticket ticket, Caller caller)
       : service_(service),
         ticket_(std::move(ticket)),
         context_(context),
-        peer_(context->peer()),
-        client_key_(std::hash<std::string>{}(peer_)),
+        caller_(std::move(caller)),
+        peer_(caller_.label),
+        client_key_(std::hash<std::string>{}(context->peer())),
         call_key_(service->next_call_key_.fetch_add(1)),
-        settings_(service->default_settings_),
+        settings_(caller_.defaults),
         queue_(service->options_.max_queued_frames),
         last_activity_(Clock::now()) {
     spdlog::info("stream from {} opened ({} active)", peer_, service_->active_streams());
@@ -302,7 +303,7 @@ class CloudCastService::StreamReactor final
   void Accept(Job* job, std::size_t bytes) {
     switch (job->request.kind_case()) {
       case v1::StreamRequest::kConfig: {
-        auto settings = convert::Resolve(job->request.config(), *service_->default_settings_);
+        auto settings = convert::Resolve(job->request.config(), *caller_.defaults);
         if (settings.ok()) {
           settings_ = std::make_shared<const StreamSettings>(*std::move(settings));
           spdlog::debug("stream from {}: new config, delivery {}", peer_,
@@ -315,6 +316,15 @@ class CloudCastService::StreamReactor final
         return;
       }
       case v1::StreamRequest::kFrame: {
+        if (absl::Status s = CheckTenantPixels(caller_, job->request.frame()); !s.ok()) {
+          const std::uint64_t sequence = job->request.frame().sequence();
+          const std::string frame_id = job->request.frame().frame_id();
+          job->request.Clear();
+          FillError(s, v1::ERROR_KIND_FRAME, sequence, frame_id, job->reply.mutable_error());
+          queue_.PushReply(job);
+          service_->NoteQueued(queue_.held());
+          return;
+        }
         if (!service_->memory_.TryTake(bytes)) {
           const v1::Frame& f = job->request.frame();
           const std::uint64_t sequence = f.sequence();
@@ -442,7 +452,8 @@ class CloudCastService::StreamReactor final
   CloudCastService* const service_;
   Admission::Ticket ticket_;  // this stream's place among the server's and its client's
   grpc::CallbackServerContext* const context_;
-  const std::string peer_;
+  const Caller caller_;
+  const std::string peer_;          // with the tenant, for logs
   const std::uint64_t client_key_;  // the connection, for the worker pool's fairness
   const std::uint64_t call_key_;
   std::atomic<int> refs_{1};
@@ -496,16 +507,18 @@ grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* CloudCastService::S
     return new RejectedStream(
         grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
   }
-  auto ticket = admission_.Admit(Admission::Kind::kStream, PeerHost(context->peer()));
+  auto caller = Identify(context);
+  if (!caller.ok()) return new RejectedStream(ToGrpc(caller.status()));
+  auto ticket = admission_.Admit(Admission::Kind::kStream, caller->client);
   if (!ticket.ok()) {
     metrics_->streams_rejected_limit.Increment();
-    spdlog::warn("stream from {} refused: {}", context->peer(),
+    spdlog::warn("stream from {} refused: {}", caller->label,
                  std::string(ticket.status().message()));
     return new RejectedStream(ToGrpc(ticket.status()));
   }
   metrics_->streams_accepted.Increment();
   metrics_->active_streams.Increment();
-  return new StreamReactor(this, context, *std::move(ticket));
+  return new StreamReactor(this, context, *std::move(ticket), *std::move(caller));
 }
 
 grpc::ServerUnaryReactor* CloudCastService::Process(grpc::CallbackServerContext* context,
@@ -525,6 +538,12 @@ grpc::ServerUnaryReactor* CloudCastService::Process(grpc::CallbackServerContext*
       if (memory != nullptr) memory->Give(charged);
     }
   };
+  // Before anything is parsed: a caller without a valid token costs nothing more.
+  auto caller = Identify(context);
+  if (!caller.ok()) {
+    reactor->Finish(ToGrpc(caller.status()));
+    return reactor;
+  }
   auto call = std::make_shared<Call>();
   call->memory = &memory_;
   const std::size_t bytes = request_bytes->Length();
@@ -545,15 +564,20 @@ grpc::ServerUnaryReactor* CloudCastService::Process(grpc::CallbackServerContext*
     reactor->Finish(grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
     return reactor;
   }
-  auto settings = convert::Resolve(call->request.config(), *default_settings_);
+  auto settings = convert::Resolve(call->request.config(), *caller->defaults);
   if (!settings.ok()) {
     metrics_->FrameErrors(settings.status().code()).Increment();
     reactor->Finish(ToGrpc(settings.status()));
     return reactor;
   }
+  if (absl::Status s = CheckTenantPixels(*caller, call->request.frame()); !s.ok()) {
+    metrics_->FrameErrors(s.code()).Increment();
+    reactor->Finish(ToGrpc(s));
+    return reactor;
+  }
   call->settings = std::make_shared<const StreamSettings>(*std::move(settings));
   // Each call holds its frame until a worker is done with it; bound them like streams.
-  auto ticket = admission_.Admit(Admission::Kind::kProcess, PeerHost(context->peer()));
+  auto ticket = admission_.Admit(Admission::Kind::kProcess, caller->client);
   if (!ticket.ok()) {
     reactor->Finish(ToGrpc(ticket.status()));
     return reactor;
@@ -589,6 +613,11 @@ grpc::ServerUnaryReactor* CloudCastService::Process(grpc::CallbackServerContext*
 grpc::ServerUnaryReactor* CloudCastService::GetInfo(grpc::CallbackServerContext* context,
                                                     const v1::GetInfoRequest* /*request*/,
                                                     v1::ServerInfo* info) {
+  if (auto caller = Identify(context); !caller.ok()) {
+    grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
+    reactor->Finish(ToGrpc(caller.status()));
+    return reactor;
+  }
   info->set_version(CLOUDCAST_VERSION);
   v1::ServerLimits* limits = info->mutable_limits();
   limits->set_max_message_bytes(options_.max_message_bytes);
@@ -616,6 +645,62 @@ grpc::ServerUnaryReactor* CloudCastService::GetInfo(grpc::CallbackServerContext*
   grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
   reactor->Finish(grpc::Status::OK);
   return reactor;
+}
+
+void CloudCastService::SetTenants(std::shared_ptr<const TenantDirectory> tenants) {
+  std::lock_guard<std::mutex> lock(tenants_mu_);
+  tenants_ = std::move(tenants);
+}
+
+absl::StatusOr<CloudCastService::Caller> CloudCastService::Identify(
+    grpc::CallbackServerContext* context) {
+  std::shared_ptr<const TenantDirectory> tenants;
+  {
+    std::lock_guard<std::mutex> lock(tenants_mu_);
+    tenants = tenants_;
+  }
+  Caller caller;
+  if (tenants == nullptr) {
+    caller.client.key = PeerHost(context->peer());
+    caller.defaults = default_settings_;
+    caller.label = context->peer();
+    return caller;
+  }
+  auto tenant = tenants->Authenticate(context->client_metadata());
+  if (!tenant.ok()) {
+    // Debug level: a stranger must not be able to flood the log. The metric counts them.
+    metrics_->calls_unauthenticated.Increment();
+    spdlog::debug("call from {} refused: {}", context->peer(),
+                  std::string(tenant.status().message()));
+    return tenant.status();
+  }
+  caller.tenant = *std::move(tenant);
+  caller.client.key = "tenant:" + caller.tenant->name;
+  caller.client.tenant = caller.tenant->name;
+  caller.client.max_streams = caller.tenant->max_streams;
+  caller.client.max_process = caller.tenant->max_process_in_flight;
+  caller.label = absl::StrCat(context->peer(), " (tenant ", caller.tenant->name, ")");
+  if (caller.tenant->max_pixels > 0 && caller.tenant->max_pixels < options_.limits.max_pixels) {
+    // The core checks every image against these, whatever its encoding.
+    auto defaults = std::make_shared<StreamSettings>(*default_settings_);
+    defaults->frame.pipeline.limits.max_pixels = caller.tenant->max_pixels;
+    caller.defaults = std::move(defaults);
+  } else {
+    caller.defaults = default_settings_;
+  }
+  return caller;
+}
+
+absl::Status CloudCastService::CheckTenantPixels(const Caller& caller, const v1::Frame& frame) {
+  if (caller.tenant == nullptr || caller.tenant->max_pixels == 0) return absl::OkStatus();
+  // FramePixels reads the sizes a frame states (raw, compressed) or its image header (PNG,
+  // JPEG); what it cannot tell is caught by the core's check against caller.defaults' limits.
+  const std::uint64_t pixels = FramePixels(frame);
+  if (pixels <= caller.tenant->max_pixels) return absl::OkStatus();
+  return absl::ResourceExhaustedError(absl::StrCat(
+      "frame.disparity: ", pixels, " pixels (width x height) is over the limit of tenant '",
+      caller.tenant->name, "': ", caller.tenant->max_pixels,
+      " pixels per frame (max_pixels in --tokens-file)"));
 }
 
 void CloudCastService::NoteQueued(std::uint32_t held) {

@@ -26,6 +26,7 @@
 #include "cloudcast/v1/cloudcast.grpc.pb.h"
 #include "frame_processor.h"
 #include "metrics.h"
+#include "tenants.h"
 #include "worker_pool.h"
 
 namespace cloudcast::server {
@@ -53,6 +54,10 @@ class CloudCastService final : public CallbackBase {
                                     const v1::GetInfoRequest* request,
                                     v1::ServerInfo* info) override;
 
+  // The bearer tokens new calls must carry (null: none needed). Calls already open keep the
+  // tenant they were admitted as. Thread-safe.
+  void SetTenants(std::shared_ptr<const TenantDirectory> tenants);
+
   // Shutdown, step 1: new Stream and Process calls get UNAVAILABLE; every open stream stops
   // reading, answers the frames it already holds and ends with UNAVAILABLE.
   void StartDraining();
@@ -74,6 +79,20 @@ class CloudCastService final : public CallbackBase {
  private:
   class StreamReactor;
 
+  // Who makes a call: its admission key and shares, its tenant (null without tokens) and the
+  // stream defaults with the tenant's pixel limit.
+  struct Caller {
+    Admission::Client client;
+    std::shared_ptr<const Tenant> tenant;
+    std::shared_ptr<const StreamSettings> defaults;
+    // "ipv4:10.0.0.1:40123" or "ipv4:10.0.0.1:40123 (tenant fleet-a)", for logs.
+    std::string label;
+  };
+  // UNAUTHENTICATED when tokens are required and the call has no valid one (counted).
+  absl::StatusOr<Caller> Identify(grpc::CallbackServerContext* context);
+  // RESOURCE_EXHAUSTED naming the tenant's limit when the frame has more pixels than it allows.
+  static absl::Status CheckTenantPixels(const Caller& caller, const v1::Frame& frame);
+
   void NoteQueued(std::uint32_t held);
   void ProcessCallDone();
   absl::Status MemoryExhausted(std::size_t bytes) const;
@@ -89,6 +108,9 @@ class CloudCastService final : public CallbackBase {
   // Before pool_: the workers use it until the pool is stopped.
   FrameRunner runner_;
   WorkerPool pool_;
+
+  std::mutex tenants_mu_;
+  std::shared_ptr<const TenantDirectory> tenants_;  // under tenants_mu_
 
   std::atomic<bool> draining_{false};
   std::atomic<int> active_process_calls_{0};

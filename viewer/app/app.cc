@@ -31,6 +31,7 @@
 #include "app/stats.h"
 #include "app/viewer.h"
 #include "cloudcast/cli/checks.h"
+#include "cloudcast/cli/connection_flags.h"
 #include "cloudcast/cli/stage_flags.h"
 #include "cloudcast/client/config.h"
 #include "cloudcast/core/camera.h"
@@ -76,6 +77,9 @@ struct Flags {
   bool lossless = false;
   std::string encoding = "raw";
   int jpeg_quality = 90;
+
+  // TLS and the bearer token (cli::ConnectionFlags), read after parsing.
+  client::ChannelSecurity security;
 
   // Camera and stages: cli::StageFlags.
 
@@ -468,6 +472,7 @@ int Run(const Flags& f, const cli::StageFlags& stages) {
 
   SessionOptions options;
   options.server = f.server;
+  options.security = f.security;
   options.connect_timeout = std::chrono::milliseconds(
       static_cast<std::int64_t>(std::llround(f.connect_timeout_s * 1000)));
   options.config = BuildConfig(f, stages, src.info());
@@ -605,6 +610,7 @@ int ClientMain(int argc, char** argv) {
       "Exit status: 0 success, 1 failure while running (server, files, stream), 2 usage error.");
   app.get_formatter()->column_width(34);
   const std::unique_ptr<cli::StageFlags> stages = AddFlags(app, f);
+  const cli::ConnectionFlags connection(app);
 
   try {
     app.parse(argc, argv);
@@ -650,6 +656,11 @@ int ClientMain(int argc, char** argv) {
   }
   if (auto s = stages->Apply(FrameSettings{}); !s.ok()) {
     return usage(std::string(s.status().message()));
+  }
+  if (auto security = connection.Security(); security.ok()) {
+    f.security = *std::move(security);
+  } else {
+    return usage(std::string(security.status().message()));
   }
   if (!f.open.empty()) {
     for (const char* flag :

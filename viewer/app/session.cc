@@ -69,6 +69,7 @@ absl::StatusOr<std::unique_ptr<Session>> Session::Start(const SessionOptions& op
   s->on_result_ = std::move(on_result);
 
   ClientOptions client_options;
+  client_options.security = options.security;
   client_options.connect_timeout = options.connect_timeout;
   client_options.decode_clouds = options.decode_clouds;
   auto client = Client::Connect(options.server, client_options);

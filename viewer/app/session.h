@@ -34,6 +34,8 @@ const char* Name(ImageEncoding encoding);
 
 struct SessionOptions {
   std::string server = "localhost:50051";
+  // TLS and the bearer token (cloudcast/client/security.h).
+  ChannelSecurity security;
   std::chrono::milliseconds connect_timeout{5000};
   // Sent as the stream's first message.
   StreamConfig config;

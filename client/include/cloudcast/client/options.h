@@ -11,6 +11,7 @@
 #include <string>
 
 #include "absl/status/status.h"
+#include "cloudcast/client/security.h"
 
 namespace cloudcast::client {
 
@@ -43,7 +44,11 @@ struct ClientOptions {
   // minutes after a Wi-Fi drop; a few seconds keeps reconnecting cheap and prompt.
   std::chrono::milliseconds max_reconnect_backoff{5000};
 
-  // Channel credentials. nullptr: plaintext (grpc::InsecureChannelCredentials()).
+  // TLS (nullopt: plaintext) and the bearer token sent with every call; see security.h.
+  ChannelSecurity security;
+
+  // Ready-made channel credentials, for what `security` does not cover; they must not be
+  // combined with security.tls. nullptr: security.tls decides.
   std::shared_ptr<grpc::ChannelCredentials> credentials;
 
   // false: Results carry the reply (Draco bytes, counts, times) but no decoded cloud, e.g. for a

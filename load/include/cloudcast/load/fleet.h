@@ -28,6 +28,7 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "cloudcast/client/security.h"
 #include "cloudcast/load/frame_store.h"
 #include "cloudcast/load/recorder.h"
 #include "cloudcast/load/schedule.h"
@@ -66,6 +67,8 @@ struct FleetOptions {
   std::string lb_policy;
   bool resilient = false;
   std::chrono::nanoseconds reconnect_timeout = std::chrono::seconds(30);
+  // TLS and the bearer token of every channel (cloudcast/client/security.h); default plaintext.
+  client::ChannelSecurity security;
 };
 
 // round_robin for a target that names several addresses ("ipv4:a:p,b:p", "ipv6:...") or asks

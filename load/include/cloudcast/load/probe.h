@@ -7,12 +7,15 @@
 #include <string>
 
 #include "absl/status/status.h"
+#include "cloudcast/client/security.h"
 
 namespace cloudcast::load {
 
 // OK when `target` answers SERVING for `service` within `timeout`; otherwise UNAVAILABLE (or the
 // call's own error) with a message naming the target and what it answered.
+// `security`: TLS as for the streams (the health service needs no token).
 absl::Status ProbeHealth(const std::string& target, const std::string& service,
-                         std::chrono::milliseconds timeout);
+                         std::chrono::milliseconds timeout,
+                         const client::ChannelSecurity& security = {});
 
 }  // namespace cloudcast::load

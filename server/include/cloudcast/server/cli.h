@@ -30,6 +30,7 @@ class ServerFlags {
   double max_connection_age_seconds_ = 0;
   double max_connection_age_grace_seconds_ = 0;
   std::string delivery_;
+  bool no_reflection_ = false;
   std::unique_ptr<cli::StageFlags> stages_;  // after the service flags in --help
   std::string log_level_ = "info";
 };

@@ -63,6 +63,21 @@ struct ServerOptions {
   std::string metrics_listen = ":9464";
   // This replica's name, sent in every reply and in GetInfo. Empty: the host name.
   std::string instance;
+
+  // Security (README, "Security"). All off by default: plaintext, no authentication.
+  // TLS on the gRPC port: the certificate chain (leaf first) and its unencrypted private key,
+  // both PEM files; empty: plaintext. Re-read by Server::ReloadSecurity (SIGHUP).
+  std::string tls_cert_file;
+  std::string tls_key_file;
+  // Mutual TLS: the PEM CAs a client's certificate must chain to; clients without a certificate
+  // are refused. Needs tls_cert_file. Empty: no client certificates asked for.
+  std::string tls_client_ca_file;
+  // The JSON file of bearer tokens and tenants (tenants.h). Empty: no authentication. With it,
+  // every CloudCast call needs "authorization: Bearer <token>" (health checks do not), and the
+  // per-client shares are per tenant, with the tenant's own limits.
+  std::string tokens_file;
+  // Server reflection (grpc.reflection.v1alpha), which lets tools like grpcurl list the API.
+  bool reflection = true;
   // What a stream gets for every StreamConfig field it leaves unset (GetInfo's `defaults`).
   // Its pipeline limits are ignored: `limits` above apply.
   StreamSettings defaults;

@@ -19,6 +19,7 @@ namespace cloudcast::server {
 class CloudCastService;
 class Metrics;
 class MetricsHttpServer;
+class ServerTls;
 
 class Server {
  public:
@@ -52,6 +53,12 @@ class Server {
   // Blocks until Shutdown() has finished.
   void Wait();
 
+  // SIGHUP: reads the TLS files and the tokens file again. Each that reads and checks well
+  // replaces the one in use (new connections get the new certificate within about a second,
+  // open ones keep theirs; new calls get the new tokens); one that does not is logged and the
+  // old one stays. Returns the first error. Thread-safe.
+  absl::Status ReloadSecurity();
+
   CloudCastService& service() { return *service_; }
   Metrics& metrics() { return *metrics_; }
   // The most frames one stream held at once (see CloudCastService::queued_frames_high_water).
@@ -63,6 +70,8 @@ class Server {
   void Abandon();
 
   const ServerOptions options_;
+  // Before server_: gRPC's certificate watcher reads the copies it holds until the server is gone.
+  std::unique_ptr<ServerTls> tls_;
   std::unique_ptr<Metrics> metrics_;
   std::unique_ptr<CloudCastService> service_;
   std::unique_ptr<grpc::Server> server_;
