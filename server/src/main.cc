@@ -28,13 +28,17 @@ namespace {
 // images). glibc serves blocks that large with mmap, or trims them off the heap once freed, so
 // each frame faulted its buffers in again: about 100 page faults and a fifth of a millisecond of
 // kernel time per raw 640x480 frame (README, part 3 of the profile). Kept on the heap, freed
-// buffers are reused by the next frame. The heap then stays at its peak (a few frames' worth per
-// stream in flight, bounded by max_queued_frames and the message limit); blocks over 32 MiB are
-// still mapped and unmapped. After a burst, the server's housekeeping gives the freed pages back
-// once no frame is in work (malloc_trim), so the peak does not stay.
+// buffers are reused by the next frame; blocks over 32 MiB are still mapped and unmapped.
+//
+// The trim threshold bounds what stays: free memory at the top of a heap beyond 16 MiB (a dozen
+// raw 640x480 frames, more than a few streams' steady state reuses) is given back when it is
+// freed. It must be a bound, not "never": malloc_trim, which housekeeping calls when the server
+// goes idle, releases free chunks inside every arena but the top of a thread arena's heap only
+// through this threshold, so a burst's frames freed into worker arenas stayed resident (16
+// streams that stopped reading left 132 to 149 MB behind, not 80).
 void KeepFrameBuffersOnTheHeap() {
   mallopt(M_MMAP_THRESHOLD, 32 << 20);
-  mallopt(M_TRIM_THRESHOLD, 256 << 20);
+  mallopt(M_TRIM_THRESHOLD, 16 << 20);
 }
 
 }  // namespace
