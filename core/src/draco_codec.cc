@@ -242,8 +242,16 @@ bool ReadableIndex(const draco::PointAttribute& attribute, int num_points) {
   return attribute.indices_map_size() >= static_cast<std::size_t>(num_points);
 }
 
+// Whether Draco's ConvertValue can read the attribute's values. DT_BOOL is refused: Draco 1.5.5
+// loads each byte as a C++ bool, undefined behaviour for any byte but 0 and 1, which a hostile
+// file sets freely (found by fuzz/draco_decode_fuzzer.cc).
+bool NumericType(draco::DataType type) {
+  return type >= draco::DT_INT8 && type <= draco::DT_FLOAT64;
+}
+
 // Reads positions into out->points[i].x/y/z. Returns false on an unreadable value.
 bool ReadPositions(const draco::PointAttribute& position, int num_points, PointCloud* out) {
+  if (!NumericType(position.data_type())) return false;
   Point* dst = out->points.data();
   const std::size_t needed = static_cast<std::size_t>(num_points) * 12;
   if (position.data_type() == draco::DT_FLOAT32 && position.num_components() == 3 &&
@@ -292,6 +300,7 @@ bool ReadColors(const draco::PointAttribute& color, int num_points, PointCloud* 
     return true;
   }
   const draco::DataType type = color.data_type();
+  if (!NumericType(type)) return false;
   const bool is_float = type == draco::DT_FLOAT32 || type == draco::DT_FLOAT64;
   for (int i = 0; i < num_points; ++i) {
     const draco::AttributeValueIndex avi = color.mapped_index(draco::PointIndex(i));
