@@ -557,6 +557,22 @@ TEST(DracoDecode, GarbageIsAnError) {
   }
 }
 
+// A POSITION attribute of type DT_BOOL holding bytes other than 0 and 1: Draco's ConvertValue
+// reads them as C++ bools (undefined behaviour, which UBSan reports in Draco's header). Found by
+// fuzz/draco_decode_fuzzer.cc; the reproducer is fuzz/corpus/draco_decode/regression_bool_position.
+TEST(DracoDecode, BooleanPositionsAreRefused) {
+  const std::string bytes(
+      "\x44\x52\x41\x43\x4f\x02\x03\x00\x00\x00\x00\x01\x00\x00\x00\x01\x02\x00\x0b"
+      "\x03\x00\x00\x03\x03\x02\x01\x01\x00\x00\x00\x01\x02\x00\x09\x03\xfc\xff\x02"
+      "\x03\x00\x00\x01\x01\x00\x03",
+      45);
+  PointCloud out;
+  const absl::Status s = DecodeDraco(bytes, &out);
+  EXPECT_EQ(s.code(), absl::StatusCode::kDataLoss) << s;
+  EXPECT_NE(s.message().find("POSITION"), std::string_view::npos) << s;
+  EXPECT_TRUE(out.empty());
+}
+
 TEST(DracoDecode, BadHeaderIsAnError) {
   for (const std::string& good : SampleEncodings()) {
     PointCloud out;

@@ -31,12 +31,6 @@ std::int64_t UnixNanos() {
 
 double Seconds(Clock::duration d) { return std::chrono::duration<double>(d).count(); }
 
-// Parses a request message from the bytes gRPC read; false when they are not one.
-bool Parse(grpc::ByteBuffer* bytes, google::protobuf::Message* message) {
-  grpc::ProtoBufferReader reader(bytes);
-  return message->ParseFromZeroCopyStream(&reader);
-}
-
 grpc::Status Unparsable(const char* what, std::size_t bytes) {
   return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
                       absl::StrCat("the request could not be parsed as a cloudcast.v1.", what, " (",
@@ -57,6 +51,11 @@ grpc::Status ToGrpc(const absl::Status& s) {
 }
 
 }  // namespace
+
+bool ParseRequest(grpc::ByteBuffer* bytes, google::protobuf::Message* message) {
+  grpc::ProtoBufferReader reader(bytes);
+  return message->ParseFromZeroCopyStream(&reader);
+}
 
 // ---------------------------------------------------------------------------------------------
 // One Stream call: gRPC's op sequencing around the stream's StreamQueue.
@@ -103,7 +102,7 @@ class CloudCastService::StreamReactor final
     bool parsed = false;
     if (ok) {
       bytes = job->in.Length();
-      parsed = Parse(&job->in, &job->request);
+      parsed = ParseRequest(&job->in, &job->request);
       job->in.Clear();
     }
     std::unique_lock<std::mutex> lock(mu_);
@@ -548,7 +547,7 @@ grpc::ServerUnaryReactor* CloudCastService::Process(grpc::CallbackServerContext*
   call->memory = &memory_;
   const std::size_t bytes = request_bytes->Length();
   grpc::ByteBuffer copy(*request_bytes);  // shares the slices; the reader consumes the copy
-  if (!Parse(&copy, &call->request)) {
+  if (!ParseRequest(&copy, &call->request)) {
     metrics_->process_requests_unparsable.Increment();
     reactor->Finish(Unparsable("ProcessRequest", bytes));
     return reactor;

@@ -1,0 +1,51 @@
+# Sanitizer and fuzzer builds. Each lives in its own build folder (scripts/fuzz, scripts/sanitize):
+#   CLOUDCAST_BUILD_FUZZERS=ON  clang: every target with -fsanitize=fuzzer-no-link,address,undefined,
+#                               the libFuzzer harnesses of fuzz/ linked with -fsanitize=fuzzer.
+#   CLOUDCAST_SANITIZE=address  the test suite under ASan + UBSan (gcc or clang).
+#   CLOUDCAST_SANITIZE=thread   the test suite under TSan (build only the server and client tests).
+# Debian's own libraries (gRPC, protobuf, OpenCV, PCL, Draco, zstd) are not instrumented: ASan
+# still checks every access our code makes and intercepts their malloc/free and memcpy; MSan,
+# which needs everything instrumented, is not offered.
+option(CLOUDCAST_BUILD_FUZZERS "Build the libFuzzer harnesses (fuzz/; needs clang)" OFF)
+set(CLOUDCAST_SANITIZE "" CACHE STRING "Sanitize everything: '', 'address' (+undefined), 'thread'")
+set_property(CACHE CLOUDCAST_SANITIZE PROPERTY STRINGS "" address thread)
+
+if(CLOUDCAST_BUILD_FUZZERS AND NOT CLOUDCAST_SANITIZE STREQUAL "")
+  message(FATAL_ERROR "CLOUDCAST_BUILD_FUZZERS=ON already sanitizes (address,undefined): "
+                      "leave CLOUDCAST_SANITIZE empty")
+endif()
+
+set(_cloudcast_san_flags "")
+if(CLOUDCAST_BUILD_FUZZERS)
+  if(NOT CMAKE_CXX_COMPILER_ID STREQUAL "Clang")
+    message(FATAL_ERROR "CLOUDCAST_BUILD_FUZZERS=ON needs clang (libFuzzer), e.g. "
+                        "-DCMAKE_CXX_COMPILER=clang++-14 -DCMAKE_C_COMPILER=clang-14")
+  endif()
+  # fuzzer-no-link: coverage instrumentation everywhere; only the harnesses link libFuzzer's main.
+  set(_cloudcast_san_flags -fsanitize=fuzzer-no-link,address,undefined)
+  set(_cloudcast_san_link -fsanitize=address,undefined)
+elseif(CLOUDCAST_SANITIZE STREQUAL "address")
+  set(_cloudcast_san_flags -fsanitize=address,undefined)
+  set(_cloudcast_san_link -fsanitize=address,undefined)
+elseif(CLOUDCAST_SANITIZE STREQUAL "thread")
+  set(_cloudcast_san_flags -fsanitize=thread)
+  set(_cloudcast_san_link -fsanitize=thread)
+elseif(NOT CLOUDCAST_SANITIZE STREQUAL "")
+  message(FATAL_ERROR "CLOUDCAST_SANITIZE must be '', 'address' or 'thread', not "
+                      "'${CLOUDCAST_SANITIZE}'")
+endif()
+
+if(_cloudcast_san_flags)
+  # An undefined-behaviour report is a failure, not a warning: the program stops at the first.
+  if(NOT CLOUDCAST_SANITIZE STREQUAL "thread")
+    list(APPEND _cloudcast_san_flags -fno-sanitize-recover=undefined)
+  endif()
+  add_compile_options(${_cloudcast_san_flags} -fno-omit-frame-pointer -g)
+  add_link_options(${_cloudcast_san_link})
+  # Eigen (inside PCL's headers) switches to its own aligned malloc when it sees
+  # __SANITIZE_ADDRESS__ (gcc defines it under ASan; clang 14 does not), while Debian's libpcl was
+  # built with plain malloc: a PointCloud allocated in our code and freed in libpcl then crashes in
+  # free(). glibc's and ASan's malloc both return 16-byte aligned blocks on x86-64, so telling Eigen
+  # so keeps both sides on malloc/free, as in the normal build.
+  add_compile_definitions(EIGEN_MALLOC_ALREADY_ALIGNED=1)
+endif()

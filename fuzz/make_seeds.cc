@@ -1,0 +1,411 @@
+// Writes the fuzzers' seed corpora (fuzz/corpus/<harness>/): tiny valid inputs of every kind each
+// harness reads, a few KB each, made with the project's own writers (convert, frame_codec,
+// EncodeDraco, SaveCloud) and OpenCV's encoders. Deterministic: run again, same bytes.
+//   make_seeds <fuzz/corpus folder>
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <string>
+#include <vector>
+
+#include "cloudcast/core/draco_codec.h"
+#include "cloudcast/core/frame_codec.h"
+#include "cloudcast/io/cloud_io.h"
+#include "cloudcast/proto/convert.h"
+#include "cloudcast/v1/cloudcast.pb.h"
+
+using namespace cloudcast;
+namespace fs = std::filesystem;
+
+namespace {
+
+fs::path g_root;
+
+void Write(const std::string& harness, const std::string& name, const std::string& bytes) {
+  const fs::path dir = g_root / harness;
+  fs::create_directories(dir);
+  std::ofstream(dir / name, std::ios::binary) << bytes;
+}
+
+void Check(const absl::Status& s) {
+  if (!s.ok()) {
+    std::cerr << "make_seeds: " << s << "\n";
+    std::exit(1);
+  }
+}
+
+// A 16 x 12 scene: disparities 51..205 (z = 615 / d in [3, 12], inside the paper's passthrough),
+// a few invalid (0) pixels, colour a gradient.
+constexpr std::uint32_t kW = 16, kH = 12;
+
+cv::Mat DisparityU8() {
+  cv::Mat m(kH, kW, CV_8UC1);
+  for (std::uint32_t v = 0; v < kH; ++v)
+    for (std::uint32_t u = 0; u < kW; ++u)
+      m.at<std::uint8_t>(v, u) = (u + v) % 7 == 0 ? 0 : 51 + (u * 9 + v * 3) % 150;
+  return m;
+}
+cv::Mat DisparityU16() {
+  cv::Mat m;
+  DisparityU8().convertTo(m, CV_16U, 16.0);  // 1/16 fixed point, as stereo matchers write it
+  return m;
+}
+cv::Mat DisparityF32() {
+  cv::Mat m;
+  DisparityU8().convertTo(m, CV_32F, 1.0);
+  m.at<float>(0, 1) = NAN;
+  return m;
+}
+cv::Mat ColourBgr() {
+  cv::Mat m(kH, kW, CV_8UC3);
+  for (std::uint32_t v = 0; v < kH; ++v)
+    for (std::uint32_t u = 0; u < kW; ++u) m.at<cv::Vec3b>(v, u) = cv::Vec3b(u * 16, v * 20, 200);
+  return m;
+}
+cv::Mat ColourBgra() {
+  cv::Mat m(kH, kW, CV_8UC4);
+  for (std::uint32_t v = 0; v < kH; ++v)
+    for (std::uint32_t u = 0; u < kW; ++u)
+      m.at<cv::Vec4b>(v, u) = cv::Vec4b(u * 16, v * 20, 200, u * 10);
+  return m;
+}
+cv::Mat Grey() {
+  cv::Mat m(kH, kW, CV_8UC1);
+  for (std::uint32_t v = 0; v < kH; ++v)
+    for (std::uint32_t u = 0; u < kW; ++u) m.at<std::uint8_t>(v, u) = u * 8 + v;
+  return m;
+}
+
+std::string Encode(const std::string& ext, const cv::Mat& m, std::vector<int> params = {}) {
+  std::vector<std::uint8_t> out;
+  if (!cv::imencode(ext, m, out, params)) {
+    std::cerr << "make_seeds: imencode " << ext << " failed\n";
+    std::exit(1);
+  }
+  return std::string(out.begin(), out.end());
+}
+
+template <typename Encoding>
+ImageView<Encoding> View(const cv::Mat& m, Encoding e) {
+  ImageView<Encoding> v;
+  v.data = m.data;
+  v.size_bytes = m.step[0] * m.rows;
+  v.width = m.cols;
+  v.height = m.rows;
+  v.stride_bytes = m.step[0];
+  v.encoding = e;
+  return v;
+}
+
+// Frames, each image as raw / encoded / compressed.
+enum class As { kRaw, kEncoded, kCompressed };
+
+v1::Frame MakeFrame(As disparity_as, const cv::Mat& disparity, DisparityEncoding de, As colour_as,
+                    const cv::Mat& colour, ColorEncoding ce, v1::Compression codec,
+                    std::uint64_t sequence) {
+  v1::Frame f;
+  f.set_sequence(sequence);
+  f.set_frame_id("seed-" + std::to_string(sequence));
+  f.set_capture_time_unix_ns(1'700'000'000'000'000'000 + sequence);
+  const convert::Compression compression{codec, 1};
+  switch (disparity_as) {
+    case As::kRaw:
+      Check(convert::ToProto(View(disparity, de), "d", f.mutable_disparity()->mutable_raw()));
+      break;
+    case As::kEncoded:
+      f.mutable_disparity()->set_encoded(Encode(".png", disparity));
+      break;
+    case As::kCompressed:
+      Check(convert::ToProto(View(disparity, de), compression, "d",
+                             f.mutable_disparity()->mutable_compressed()));
+      break;
+  }
+  switch (colour_as) {
+    case As::kRaw:
+      Check(convert::ToProto(View(colour, ce), "c", f.mutable_colour()->mutable_raw()));
+      break;
+    case As::kEncoded:
+      f.mutable_colour()->set_encoded(Encode(".png", colour));
+      break;
+    case As::kCompressed:
+      Check(convert::ToProto(View(colour, ce), compression, "c",
+                             f.mutable_colour()->mutable_compressed()));
+      break;
+  }
+  return f;
+}
+
+std::vector<std::pair<std::string, v1::Frame>> Frames() {
+  const cv::Mat d8 = DisparityU8(), d16 = DisparityU16(), df = DisparityF32();
+  const cv::Mat bgr = ColourBgr(), bgra = ColourBgra(), grey = Grey();
+  return {
+      {"raw_u8_bgr", MakeFrame(As::kRaw, d8, DisparityEncoding::kU8, As::kRaw, bgr,
+                               ColorEncoding::kBGR8, v1::COMPRESSION_ZSTD, 1)},
+      {"raw_u16_rgba", MakeFrame(As::kRaw, d16, DisparityEncoding::kU16, As::kRaw, bgra,
+                                 ColorEncoding::kRGBA8, v1::COMPRESSION_ZSTD, 2)},
+      {"raw_f32_mono", MakeFrame(As::kRaw, df, DisparityEncoding::kF32, As::kRaw, grey,
+                                 ColorEncoding::kMono8, v1::COMPRESSION_ZSTD, 3)},
+      {"png_png", MakeFrame(As::kEncoded, d8, DisparityEncoding::kU8, As::kEncoded, bgr,
+                            ColorEncoding::kBGR8, v1::COMPRESSION_ZSTD, 4)},
+      {"zstd_rows", MakeFrame(As::kCompressed, d8, DisparityEncoding::kU8, As::kCompressed, bgr,
+                              ColorEncoding::kRGB8, v1::COMPRESSION_ZSTD_DELTA_ROWS, 5)},
+      {"zstd_left_u16", MakeFrame(As::kCompressed, d16, DisparityEncoding::kU16, As::kCompressed,
+                                  bgra, ColorEncoding::kBGR8, v1::COMPRESSION_ZSTD_DELTA_LEFT, 6)},
+  };
+}
+
+v1::StreamConfig FullConfig() {
+  PipelineOptions options;
+  v1::StreamConfig c = convert::MakeStreamConfig(options);
+  DracoOptions draco;
+  convert::SetDraco(draco, &c);
+  c.set_delivery(v1::DELIVERY_ALL);
+  c.mutable_camera()->mutable_invalid_disparities()->add_values(0);
+  return c;
+}
+
+void StreamSeeds() {
+  const std::string h = "stream_request";
+  v1::StreamRequest r;
+  r.mutable_config();
+  Write(h, "config_empty", r.SerializeAsString());
+  *r.mutable_config() = FullConfig();
+  Write(h, "config_full", r.SerializeAsString());
+  r.Clear();
+  Write(h, "neither", r.SerializeAsString());
+  for (const auto& [name, frame] : Frames()) {
+    r.Clear();
+    *r.mutable_frame() = frame;
+    Write(h, "frame_" + name, r.SerializeAsString());
+  }
+}
+
+void ProcessSeeds() {
+  const std::string h = "process_request";
+  const auto frames = Frames();
+  v1::ProcessRequest r;
+  *r.mutable_frame() = frames[0].second;
+  Write(h, "defaults_raw", r.SerializeAsString());
+  *r.mutable_config() = FullConfig();
+  Write(h, "full_config_raw", r.SerializeAsString());
+  // Every stage off but the conversion: every valid pixel becomes a point.
+  v1::StreamConfig off;
+  off.mutable_passthrough()->set_enabled(false);
+  off.mutable_voxel_grid()->set_enabled(false);
+  *r.mutable_config() = off;
+  *r.mutable_frame() = frames[2].second;
+  Write(h, "stages_off_f32", r.SerializeAsString());
+  // The kd-tree coder (speed 7) and libdraco's path, many position bits.
+  v1::StreamConfig kd;
+  kd.mutable_draco()->set_encode_speed(7);
+  kd.mutable_draco()->set_decode_speed(7);
+  kd.mutable_draco()->set_position_bits(14);
+  kd.mutable_draco()->set_color_bits(5);
+  kd.mutable_voxel_grid()->set_leaf(0.01f);
+  *r.mutable_config() = kd;
+  *r.mutable_frame() = frames[1].second;
+  Write(h, "draco_kdtree_u16", r.SerializeAsString());
+  // A camera of its own, passthrough on x, negative, a per-axis leaf and a minimum per voxel.
+  v1::StreamConfig cam;
+  v1::CameraModel* m = cam.mutable_camera();
+  m->set_fx(500);
+  m->set_fy(510);
+  m->set_cx(7.5);
+  m->set_cy(6);
+  m->set_baseline(0.12);
+  m->set_disparity_scale(1.0 / 16);
+  m->set_disparity_offset(0.5);
+  cam.mutable_passthrough()->set_axis(v1::AXIS_X);
+  cam.mutable_passthrough()->set_min(-1);
+  cam.mutable_passthrough()->set_max(1);
+  cam.mutable_passthrough()->set_negative(true);
+  cam.mutable_voxel_grid()->set_leaf_x(0.05f);
+  cam.mutable_voxel_grid()->set_leaf_y(0.02f);
+  cam.mutable_voxel_grid()->set_leaf_z(0.1f);
+  cam.mutable_voxel_grid()->set_min_points_per_voxel(2);
+  cam.mutable_draco()->set_max_position_error(0.001f);
+  *r.mutable_config() = cam;
+  *r.mutable_frame() = frames[5].second;
+  Write(h, "camera_axis_x_zstd", r.SerializeAsString());
+  r.clear_config();
+  *r.mutable_frame() = frames[3].second;
+  Write(h, "defaults_png", r.SerializeAsString());
+  *r.mutable_frame() = frames[4].second;
+  Write(h, "defaults_zstd", r.SerializeAsString());
+}
+
+std::string Le16(std::uint32_t v) {
+  return {static_cast<char>(v & 0xFF), static_cast<char>(v >> 8)};
+}
+
+void ImageSeeds() {
+  const std::string h = "frame_images";
+  const cv::Mat d8 = DisparityU8(), d16 = DisparityU16(), df = DisparityF32();
+  const cv::Mat bgr = ColourBgr(), bgra = ColourBgra(), grey = Grey();
+  // Mode 0: disparity bytes.
+  Write(h, "d_png_u8", std::string(1, '\0') + Encode(".png", d8));
+  Write(h, "d_png_u16", std::string(1, '\0') + Encode(".png", d16));
+  Write(h, "d_tiff_f32", std::string(1, '\0') + Encode(".tiff", df));
+  Write(h, "d_pfm", std::string(1, '\0') + Encode(".pfm", df));
+  Write(h, "d_pgm", std::string(1, '\0') + Encode(".pgm", d8));
+  Write(h, "d_jpeg_refused", std::string(1, '\0') + Encode(".jpg", d8));
+  // Mode 1: colour bytes.
+  Write(h, "c_png_bgr", "\x01" + Encode(".png", bgr));
+  Write(h, "c_png_bgra", "\x01" + Encode(".png", bgra));
+  Write(h, "c_jpeg", "\x01" + Encode(".jpg", bgr, {cv::IMWRITE_JPEG_QUALITY, 50}));
+  Write(h, "c_ppm", "\x01" + Encode(".ppm", bgr));
+  Write(h, "c_tiff_grey", "\x01" + Encode(".tiff", grey));
+  // Modes 2 and 3: the zstd uplink, every encoding and predictor.
+  PlaneCompressor compressor;
+  struct D {
+    const char* name;
+    const cv::Mat* m;
+    DisparityEncoding e;
+    v1::DisparityEncoding pe;
+  };
+  const D ds[] = {{"u8", &d8, DisparityEncoding::kU8, v1::DISPARITY_U8},
+                  {"u16", &d16, DisparityEncoding::kU16, v1::DISPARITY_U16},
+                  {"f32", &df, DisparityEncoding::kF32, v1::DISPARITY_F32}};
+  const v1::Compression codecs[] = {v1::COMPRESSION_ZSTD, v1::COMPRESSION_ZSTD_DELTA_ROWS,
+                                    v1::COMPRESSION_ZSTD_DELTA_LEFT};
+  for (const D& d : ds) {
+    for (v1::Compression codec : codecs) {
+      v1::CompressedDisparity c;
+      Check(convert::ToProto(View(*d.m, d.e), convert::Compression{codec, 1}, "d", &c));
+      Write(h, std::string("d_zstd_") + d.name + "_" + std::to_string(codec),
+            std::string{'\x02', static_cast<char>(d.pe), static_cast<char>(codec)} + Le16(kW) +
+                Le16(kH) + c.payload());
+    }
+  }
+  struct C {
+    const char* name;
+    const cv::Mat* m;
+    ColorEncoding e;
+    v1::ColorEncoding pe;
+  };
+  const C cs[] = {{"bgr", &bgr, ColorEncoding::kBGR8, v1::COLOR_BGR8},
+                  {"rgba", &bgra, ColorEncoding::kRGBA8, v1::COLOR_RGBA8},
+                  {"mono", &grey, ColorEncoding::kMono8, v1::COLOR_MONO8}};
+  for (const C& c : cs) {
+    for (v1::Compression codec : codecs) {
+      v1::CompressedColor cc;
+      Check(convert::ToProto(View(*c.m, c.e), convert::Compression{codec, 1}, "c", &cc));
+      Write(h, std::string("c_zstd_") + c.name + "_" + std::to_string(codec),
+            std::string{'\x03', static_cast<char>(c.pe), static_cast<char>(codec)} + Le16(kW) +
+                Le16(kH) + cc.payload());
+    }
+  }
+}
+
+PointCloud SmallCloud(std::uint32_t width, std::uint32_t height, bool with_nan) {
+  PointCloud cloud;
+  cloud.width = width;
+  cloud.height = height;
+  for (std::uint32_t v = 0; v < height; ++v) {
+    for (std::uint32_t u = 0; u < width; ++u) {
+      Point p{0.1f * u - 0.8f, 0.07f * v - 0.4f, 3.0f + 0.05f * ((u * 7 + v) % 11),
+              PackRgba(u * 16, v * 20, 200)};
+      if (with_nan && (u + v) % 5 == 0) p = Point{NAN, NAN, NAN, 0};
+      cloud.points.push_back(p);
+    }
+  }
+  return cloud;
+}
+
+std::string ReadFile(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(in), {});
+}
+
+void DracoSeeds() {
+  const std::string h = "draco_decode";
+  const PointCloud cloud = SmallCloud(64, 1, false);
+  struct Case {
+    const char* name;
+    int bits, color_bits, speed;
+    bool libdraco;
+  };
+  const Case cases[] = {{"seq10_ours", 10, 8, 10, false},
+                        {"seq10_libdraco", 10, 8, 10, true},
+                        {"seq10_24bits", 24, 8, 10, false},
+                        {"kd7_12bits", 12, 8, 7, false},
+                        {"kd0_colour5", 11, 5, 0, false}};
+  for (const Case& c : cases) {
+    DracoOptions o;
+    o.position_bits = c.bits;
+    o.color_bits = c.color_bits;
+    o.encode_speed = o.decode_speed = c.speed;
+    o.force_libdraco = c.libdraco;
+    std::string bytes;
+    Check(EncodeDraco(cloud, o, &bytes));
+    Write(h, c.name, bytes);
+  }
+  std::string empty;
+  Check(EncodeDraco(PointCloud{}, DracoOptions{}, &empty));
+  Write(h, "empty", empty);
+}
+
+void CloudFileSeeds() {
+  const std::string h = "cloud_readers";
+  const fs::path tmp = fs::temp_directory_path() / ("cloudcast-seeds-" + std::to_string(getpid()));
+  fs::create_directories(tmp);
+  const PointCloud organized = SmallCloud(6, 4, true);
+  const PointCloud flat = SmallCloud(20, 1, false);
+  const char* const exts[] = {".pcd", ".ply", ".drc"};
+  for (int i = 0; i < 3; ++i) {
+    const std::string prefix(1, static_cast<char>(i));
+    const std::string ext = exts[i];
+    for (const auto& [name, cloud] :
+         {std::pair{"organized", &organized}, std::pair{"flat", &flat}}) {
+      const fs::path p = tmp / (std::string(name) + ext);
+      Check(SaveCloud(p.string(), *cloud));
+      Write(h, ext.substr(1) + "_" + name, prefix + ReadFile(p));
+    }
+    const fs::path p = tmp / ("empty" + ext);
+    Check(SaveCloud(p.string(), PointCloud{}));
+    Write(h, ext.substr(1) + "_empty", prefix + ReadFile(p));
+  }
+  fs::remove_all(tmp);
+  // Other tools' flavours: ASCII PCD with rgba as an integer, ASCII PLY with doubles and no
+  // colour, a binary-compressed PCD header.
+  Write(h, "pcd_ascii_rgba",
+        std::string(1, '\0') +
+            "# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS x y z rgba\n"
+            "SIZE 4 4 4 4\nTYPE F F F U\nCOUNT 1 1 1 1\nWIDTH 3\nHEIGHT 1\n"
+            "VIEWPOINT 0 0 0 1 0 0 0\nPOINTS 3\nDATA ascii\n"
+            "0.1 0.2 3.0 4278190335\n0.2 0.3 3.5 4278255360\nnan nan nan 0\n");
+  Write(h, "ply_ascii_double",
+        std::string(1, '\1') +
+            "ply\nformat ascii 1.0\ncomment other tool\nelement vertex 3\nproperty double x\n"
+            "property double y\nproperty double z\nend_header\n0 0 3\n1 0 3\n0 1 4\n");
+  Write(h, "ply_binary_uchar_colour",
+        std::string(1, '\1') +
+            "ply\nformat binary_little_endian 1.0\nelement vertex 1\nproperty float x\n"
+            "property float y\nproperty float z\nproperty uchar red\nproperty uchar green\n"
+            "property uchar blue\nend_header\n" +
+            std::string("\x00\x00\x80\x3f\x00\x00\x00\x40\x00\x00\x40\x40\x10\x20\x30", 15));
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc != 2) {
+    std::cerr << "usage: make_seeds <corpus folder, e.g. fuzz/corpus>\n";
+    return 2;
+  }
+  g_root = argv[1];
+  StreamSeeds();
+  ProcessSeeds();
+  ImageSeeds();
+  DracoSeeds();
+  CloudFileSeeds();
+  std::cout << "make_seeds: wrote the seed corpora under " << g_root << "\n";
+  return 0;
+}
