@@ -13,11 +13,11 @@ TEST(AdmissionTest, OneClientCannotTakeEverySlot) {
   Admission admission({/*max_streams=*/4, /*per_client=*/2, /*max_process=*/4, /*per_client=*/1});
   std::vector<Admission::Ticket> held;
   for (int i = 0; i < 2; ++i) {
-    auto t = admission.Admit(Admission::Kind::kStream, "ipv4:10.0.0.1");
+    auto t = admission.Admit(Admission::Kind::kStream, "ipv4:127.0.0.1");
     ASSERT_TRUE(t.ok());
     held.push_back(*std::move(t));
   }
-  auto third = admission.Admit(Admission::Kind::kStream, "ipv4:10.0.0.1");
+  auto third = admission.Admit(Admission::Kind::kStream, "ipv4:127.0.0.1");
   ASSERT_FALSE(third.ok());
   EXPECT_EQ(third.status().code(), absl::StatusCode::kResourceExhausted);
   EXPECT_NE(std::string(third.status().message()).find("--max-streams-per-client"),
@@ -25,20 +25,20 @@ TEST(AdmissionTest, OneClientCannotTakeEverySlot) {
       << third.status();
   // Another client still gets in, up to the server's limit.
   for (int i = 0; i < 2; ++i) {
-    auto t = admission.Admit(Admission::Kind::kStream, "ipv4:10.0.0.2");
+    auto t = admission.Admit(Admission::Kind::kStream, "ipv4:127.0.0.2");
     ASSERT_TRUE(t.ok());
     held.push_back(*std::move(t));
   }
-  auto over = admission.Admit(Admission::Kind::kStream, "ipv4:10.0.0.3");
+  auto over = admission.Admit(Admission::Kind::kStream, "ipv4:127.0.0.3");
   ASSERT_FALSE(over.ok());
   EXPECT_NE(std::string(over.status().message()).find("--max-streams"), std::string::npos);
   // Process calls are counted apart.
-  auto p = admission.Admit(Admission::Kind::kProcess, "ipv4:10.0.0.1");
+  auto p = admission.Admit(Admission::Kind::kProcess, "ipv4:127.0.0.1");
   ASSERT_TRUE(p.ok());
-  EXPECT_FALSE(admission.Admit(Admission::Kind::kProcess, "ipv4:10.0.0.1").ok());
+  EXPECT_FALSE(admission.Admit(Admission::Kind::kProcess, "ipv4:127.0.0.1").ok());
   // A ticket given back frees its place.
   held.front().Release();
-  EXPECT_TRUE(admission.Admit(Admission::Kind::kStream, "ipv4:10.0.0.1").ok());
+  EXPECT_TRUE(admission.Admit(Admission::Kind::kStream, "ipv4:127.0.0.1").ok());
   EXPECT_EQ(admission.open(Admission::Kind::kStream), 3u);  // the temporary one was given back
 }
 

@@ -24,6 +24,7 @@
 #include "cloudcast/load/frame_store.h"
 #include "cloudcast/load/report.h"
 #include "replica_support.h"
+#include "support/waiting.h"
 
 namespace cloudcast {
 namespace {
@@ -113,14 +114,15 @@ class LoadReplicasTest : public testing::ScratchDirTest {
     load::FleetResult result;
     std::thread run([&] { result = (*fleet)->Run(); });
     if (victim != nullptr) {
-      const auto deadline = std::chrono::steady_clock::now() + seconds(60);
-      for (;;) {
-        auto per = (*fleet)->recorder().per_instance();
-        bool all = per.size() >= replicas_.size();
-        for (const auto& [name, n] : per) all = all && n >= min_frames;
-        if (all || std::chrono::steady_clock::now() > deadline) break;
-        std::this_thread::sleep_for(std::chrono::milliseconds(5));  // polling: no event to wait on
-      }
+      // Until every replica has answered min_frames: the recorder announces nothing to wait on.
+      testing::Eventually(
+          [&] {
+            auto per = (*fleet)->recorder().per_instance();
+            bool all = per.size() >= replicas_.size();
+            for (const auto& [name, n] : per) all = all && n >= min_frames;
+            return all;
+          },
+          std::chrono::seconds(60));
       out.frames_at_loss = (*fleet)->recorder().per_instance();
       out.sent_at_loss = (*fleet)->recorder().totals().sent;
       victim->Signal(signal_number);
