@@ -30,6 +30,7 @@
 #include "cloudcast/datasets/synthetic.h"
 #include "cloudcast/testing/metrics_scrape.h"
 #include "replica_support.h"
+#include "support/robot.h"
 #include "support/waiting.h"
 
 extern char** environ;
@@ -56,62 +57,10 @@ const std::vector<SyntheticFrame>& Frames() {
   return frames;
 }
 
-// A DELIVERY_ALL robot and what it got back, sequence by sequence.
-struct Robot {
-  std::unique_ptr<cc::Stream> stream;
-  std::mutex mu;
-  std::condition_variable cv;
-  std::map<std::uint64_t, int> answers;  // sequence -> times answered
-  std::map<std::uint64_t, std::chrono::steady_clock::time_point> sent_at, answered_at;
-  std::vector<std::string> errors;
-  std::vector<cc::Reconnect> reconnects;
-  absl::Status final_status;
-
-  std::size_t answered() {
-    std::lock_guard<std::mutex> lock(mu);
-    return answers.size();
-  }
-  bool WaitForAnswers(std::size_t n) {
-    std::unique_lock<std::mutex> lock(mu);
-    return cv.wait_for(lock, std::chrono::seconds(60), [&] { return answers.size() >= n; });
-  }
-  // The longest time from a send to its answer, ms.
-  double MaxLatencyMs() {
-    std::lock_guard<std::mutex> lock(mu);
-    double worst = 0;
-    for (const auto& [seq, t] : answered_at) {
-      worst = std::max(worst, std::chrono::duration<double, std::milli>(t - sent_at[seq]).count());
-    }
-    return worst;
-  }
-};
+using testing::Robot;
 
 std::unique_ptr<Robot> OpenRobot(cc::Client& client, bool resilient) {
-  auto robot = std::make_unique<Robot>();
-  Robot* r = robot.get();
-  cc::StreamConfig config;
-  config.set_delivery(v1::DELIVERY_ALL);
-  cc::StreamOptions options;
-  options.resilient = resilient;
-  options.reconnect_timeout = milliseconds(30000);
-  options.on_result = [r](cc::Result&& result) {
-    std::lock_guard<std::mutex> lock(r->mu);
-    if (!result.ok()) {
-      r->errors.push_back(std::string(result.status.message()));
-    } else {
-      ++r->answers[result.sequence];
-      r->answered_at.emplace(result.sequence, std::chrono::steady_clock::now());
-    }
-    r->cv.notify_all();
-  };
-  options.on_reconnect = [r](const cc::Reconnect& event) {
-    std::lock_guard<std::mutex> lock(r->mu);
-    r->reconnects.push_back(event);
-  };
-  auto stream = client.OpenStream(config, options);
-  EXPECT_TRUE(stream.ok()) << stream.status();
-  if (stream.ok()) robot->stream = *std::move(stream);
-  return robot;
+  return testing::OpenRobot(client, resilient, milliseconds(30000));
 }
 
 // Sends `frames` frames at `fps` (a camera's pace), then finishes the stream.
@@ -130,15 +79,6 @@ void Drive(Robot* robot, int frames, double fps) {
     if (!robot->stream->Send(f.disparity_view(), f.colour_view(), meta).ok()) break;
   }
   robot->final_status = robot->stream->Finish();
-}
-
-// Every frame answered exactly once, no frame error, the stream ended OK.
-void ExpectEveryFrameOnce(Robot& r, int frames) {
-  std::lock_guard<std::mutex> lock(r.mu);
-  EXPECT_TRUE(r.final_status.ok()) << r.final_status;
-  EXPECT_TRUE(r.errors.empty()) << r.errors.front();
-  ASSERT_EQ(r.answers.size(), static_cast<std::size_t>(frames));
-  for (const auto& [sequence, times] : r.answers) EXPECT_EQ(times, 1) << "frame " << sequence;
 }
 
 std::unique_ptr<cc::Client> Connect(const std::string& target) {
@@ -217,7 +157,7 @@ TEST(FaultsTest, ClientsVanishingMidFrameLeaveNoStreamAndOthersCarryOn) {
   auto robot = OpenRobot(*client, false);
   ASSERT_NE(robot->stream, nullptr);
   Drive(robot.get(), 30, 100);
-  ExpectEveryFrameOnce(*robot, 30);
+  robot->ExpectEveryFrameOnce(30);
 }
 
 // A network namespace with one end of a veth pair, made by the test and removed after. The
@@ -301,7 +241,7 @@ TEST(FaultsTest, NetworkStallOfSecondsThenRecoveryLosesNothing) {
               ns.how(), at_stall, during, robot->answered(), robot->MaxLatencyMs(),
               robot->reconnects.size());
   EXPECT_LE(during, 2u);  // nothing passes while stalled (an answer already on the wire may)
-  ExpectEveryFrameOnce(*robot, kFrames);
+  robot->ExpectEveryFrameOnce(kFrames);
   EXPECT_TRUE(robot->reconnects.empty());
 }
 
@@ -345,7 +285,7 @@ TEST_P(ServerStopTest, ResilientStreamLosesNothingAcrossAServerRestart) {
               sigabbrev_np(signal_number), at_stop, robot->reconnects.size(), took.c_str(),
               static_cast<unsigned long>(robot->stream->frames_resent()), robot->answered(),
               kFrames);
-  ExpectEveryFrameOnce(*robot, kFrames);
+  robot->ExpectEveryFrameOnce(kFrames);
   ASSERT_GE(robot->reconnects.size(), 1u);
   EXPECT_EQ(robot->reconnects.front().cause.code(), absl::StatusCode::kUnavailable)
       << robot->reconnects.front().cause;

@@ -20,6 +20,7 @@
 #include "cloudcast/client/client.h"
 #include "cloudcast/datasets/synthetic.h"
 #include "replica_support.h"
+#include "support/robot.h"
 #include "support/waiting.h"
 
 namespace cloudcast {
@@ -110,52 +111,10 @@ class ReplicasTest : public testing::ScratchDirTest {
   int port_ = 0;
 };
 
-// One robot: a resilient DELIVERY_ALL stream that sends `frames` frames at `fps`, and what it got.
-struct Robot {
-  std::unique_ptr<cc::Stream> stream;
-  std::mutex mu;
-  std::condition_variable cv;
-  std::map<std::uint64_t, int> answers;     // sequence -> times answered
-  std::map<std::uint64_t, std::string> by;  // sequence -> the replica that answered
-  std::vector<std::string> errors;
-  std::vector<cc::Reconnect> reconnects;
-  std::string first_instance;
-  std::uint64_t sent = 0;
-  absl::Status final_status;
-
-  std::size_t answered() {
-    std::lock_guard<std::mutex> lock(mu);
-    return answers.size();
-  }
-};
+using testing::Robot;
 
 std::unique_ptr<Robot> OpenRobot(cc::Client& client) {
-  auto robot = std::make_unique<Robot>();
-  Robot* r = robot.get();
-  cc::StreamConfig config;
-  config.set_delivery(v1::DELIVERY_ALL);
-  cc::StreamOptions options;
-  options.resilient = true;
-  options.reconnect_timeout = milliseconds(20000);
-  options.on_result = [r](cc::Result&& result) {
-    std::lock_guard<std::mutex> lock(r->mu);
-    if (!result.ok()) {
-      r->errors.push_back(std::string(result.status.message()));
-    } else {
-      ++r->answers[result.sequence];
-      r->by[result.sequence] = result.server_instance;
-      if (r->first_instance.empty()) r->first_instance = result.server_instance;
-    }
-    r->cv.notify_all();
-  };
-  options.on_reconnect = [r](const cc::Reconnect& event) {
-    std::lock_guard<std::mutex> lock(r->mu);
-    r->reconnects.push_back(event);
-  };
-  auto stream = client.OpenStream(config, options);
-  EXPECT_TRUE(stream.ok()) << stream.status();
-  if (stream.ok()) robot->stream = *std::move(stream);
-  return robot;
+  return testing::OpenRobot(client, /*resilient=*/true, milliseconds(20000));
 }
 
 // Sends `frames` frames as fast as the stream takes them (flow control keeps a few in flight, so
