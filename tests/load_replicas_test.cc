@@ -49,33 +49,14 @@ const load::FrameStore& Store() {
 class LoadReplicasTest : public testing::ScratchDirTest {
  public:
   void StartReplicas(int n) {
-    for (int attempt = 0; attempt < 5 && replicas_.size() < static_cast<std::size_t>(n);
-         ++attempt) {
-      replicas_.clear();
-      const int port = testing::FreeLoopbackPort();
-      for (int i = 0; i < n; ++i) {
-        const std::string id = std::to_string(i + 1);
-        replicas_.push_back(std::make_unique<ServerProcess>(
-            "127.0.0." + id + ":" + std::to_string(port), "replica-" + id,
-            std::vector<std::string>{"--threads", "1"}, Path("replica" + id + ".log")));
-      }
-      for (auto& r : replicas_) {
-        if (!r->WaitUntilServing()) {
-          replicas_.clear();  // the port was taken meanwhile: another one
-          break;
-        }
-      }
-    }
+    replicas_ = testing::StartReplicaSet(n, {"--threads", "1"},
+                                         [this](const std::string& id) {
+                                           return Path("replica" + id + ".log");
+                                         });
     ASSERT_EQ(replicas_.size(), static_cast<std::size_t>(n)) << "replicas did not start";
   }
 
-  std::string Target() const {
-    std::string t = "ipv4:";
-    for (std::size_t i = 0; i < replicas_.size(); ++i) {
-      t += (i ? "," : "") + replicas_[i]->address();
-    }
-    return t;
-  }
+  std::string Target() const { return testing::ReplicaTarget(replicas_); }
 
   // Closed loop with more frames in flight per stream (8) than a server holds per stream (4):
   // whenever a replica goes, frames it has not read or not answered are outstanding, so the

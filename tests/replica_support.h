@@ -13,6 +13,8 @@
 
 #include <algorithm>
 #include <chrono>
+#include <functional>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -109,5 +111,39 @@ class ServerProcess {
   pid_t pid_ = -1;
   std::optional<int> exit_status_;
 };
+
+// `n` cloudcast-server processes on 127.0.0.1, .2, ... sharing one free port (another port when
+// it was taken meanwhile), each serving; instance names replica-1, replica-2, ... and logs from
+// `log_path(i)`. Empty when they could not be started.
+inline std::vector<std::unique_ptr<ServerProcess>> StartReplicaSet(
+    int n, const std::vector<std::string>& args,
+    const std::function<std::string(const std::string& id)>& log_path) {
+  std::vector<std::unique_ptr<ServerProcess>> replicas;
+  for (int attempt = 0; attempt < 5 && replicas.size() < static_cast<std::size_t>(n); ++attempt) {
+    replicas.clear();
+    const int port = FreeLoopbackPort();
+    for (int i = 0; i < n; ++i) {
+      const std::string id = std::to_string(i + 1);
+      replicas.push_back(std::make_unique<ServerProcess>(
+          "127.0.0." + id + ":" + std::to_string(port), "replica-" + id, args, log_path(id)));
+    }
+    for (auto& r : replicas) {
+      if (!r->WaitUntilServing()) {
+        replicas.clear();  // the port was taken meanwhile: another one
+        break;
+      }
+    }
+  }
+  return replicas;
+}
+
+// The gRPC target that lists every replica: "ipv4:127.0.0.1:p,127.0.0.2:p,...".
+inline std::string ReplicaTarget(const std::vector<std::unique_ptr<ServerProcess>>& replicas) {
+  std::string t = "ipv4:";
+  for (std::size_t i = 0; i < replicas.size(); ++i) {
+    t += (i ? "," : "") + replicas[i]->address();
+  }
+  return t;
+}
 
 }  // namespace cloudcast::testing

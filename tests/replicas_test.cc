@@ -50,34 +50,13 @@ const std::vector<SyntheticFrame>& Frames() {
 class ReplicasTest : public testing::ScratchDirTest {
  public:
   void StartReplicas(int n, const std::vector<std::string>& args = {}) {
-    for (int attempt = 0; attempt < 5 && replicas_.size() < static_cast<std::size_t>(n);
-         ++attempt) {
-      replicas_.clear();
-      port_ = testing::FreeLoopbackPort();
-      for (int i = 0; i < n; ++i) {
-        const std::string address =
-            "127.0.0." + std::to_string(i + 1) + ":" + std::to_string(port_);
-        replicas_.push_back(
-            std::make_unique<ServerProcess>(address, "replica-" + std::to_string(i + 1), args,
-                                            Path("replica" + std::to_string(i + 1) + ".log")));
-      }
-      for (auto& r : replicas_) {
-        if (!r->WaitUntilServing()) {
-          replicas_.clear();  // the port was taken meanwhile: another one
-          break;
-        }
-      }
-    }
+    replicas_ = testing::StartReplicaSet(n, args, [this](const std::string& id) {
+      return Path("replica" + id + ".log");
+    });
     ASSERT_EQ(replicas_.size(), static_cast<std::size_t>(n)) << "replicas did not start";
   }
 
-  std::string Target() const {
-    std::string t = "ipv4:";
-    for (std::size_t i = 0; i < replicas_.size(); ++i) {
-      t += (i ? "," : "") + replicas_[i]->address();
-    }
-    return t;
-  }
+  std::string Target() const { return testing::ReplicaTarget(replicas_); }
 
   std::unique_ptr<cc::Client> Connect() {
     cc::ClientOptions options;
@@ -108,7 +87,6 @@ class ReplicasTest : public testing::ScratchDirTest {
 
  public:
   std::vector<std::unique_ptr<ServerProcess>> replicas_;
-  int port_ = 0;
 };
 
 using testing::Robot;
