@@ -194,9 +194,12 @@ TEST_F(ServerTest, ProcessRpcMatchesCorePipeline) {
 // frames: a reader that stops reading stops the server's writes within a few replies.
 
 TEST_F(ServerTest, LatestModeSlowReaderGetsDropsAndTheyAreReported) {
-  // The client sends 30 frames before it reads a reply: the server keeps reading, works on one
-  // frame at a time, and once the replies fill the client's window it cannot write the next, so
-  // the waiting frame keeps being replaced.
+  // The client sends 30 frames as fast as it can and reads a reply every 50 ms: the server works
+  // on one frame at a time and keeps reading while a reply is being written (up to
+  // kMaxDropsPerWrite frames, then it waits for the reader), so the waiting frame keeps being
+  // replaced. (A client that read nothing until it had written all 30 would block its own
+  // writes: the server stops reading a LATEST stream whose replies are not taken, hardening
+  // defect 6.)
   constexpr int kFrames = 30;
   auto stub = testing::NewStub(shared_server(), FixedWindow());
   std::vector<v1::StreamRequest> requests = {
@@ -204,7 +207,7 @@ TEST_F(ServerTest, LatestModeSlowReaderGetsDropsAndTheyAreReported) {
   for (int i = 0; i < kFrames; ++i) {
     requests.push_back(FrameRequest(MakeFrame(Frames()[i % Frames().size()], i)));
   }
-  const StreamResult result = RunStream(*stub, requests, /*write_all_first=*/true);
+  const StreamResult result = RunStream(*stub, requests, std::chrono::milliseconds(50));
   ASSERT_TRUE(result.status.ok()) << result.status.error_message();
   ASSERT_FALSE(result.replies.empty());
   std::uint64_t last_dropped = 0;

@@ -34,6 +34,7 @@
 #include "cloudcast/v1/cloudcast.grpc.pb.h"
 #include "support/cloud_match.h"
 #include "support/server_fixture.h"
+#include "support/waiting.h"
 #include "test_support.h"
 
 namespace cloudcast::server {
@@ -246,31 +247,26 @@ struct StreamResult {
 // Sends `requests` from a writer thread while this thread reads (a client that only wrote first
 // would deadlock a lossless stream: the server stops reading when its queue is full). With
 // `write_all_first`, reading starts only once every request is sent.
+// Writes `requests` on one thread while this one reads every reply; a `read_pause` makes the
+// reader a slow one (a client's own pace, not a wait for the writer).
 inline StreamResult RunStream(v1::CloudCast::Stub& stub,
                               const std::vector<v1::StreamRequest>& requests,
-                              bool write_all_first = false) {
+                              std::chrono::milliseconds read_pause = std::chrono::milliseconds(0)) {
   grpc::ClientContext ctx;
   SetDeadline(&ctx);
   auto stream = stub.Stream(&ctx);
-  std::mutex mu;
-  std::condition_variable cv;
-  bool written = false;
   std::thread writer([&] {
     for (const auto& r : requests) {
       if (!stream->Write(r)) break;
     }
     stream->WritesDone();
-    std::lock_guard<std::mutex> lock(mu);
-    written = true;
-    cv.notify_all();
   });
-  if (write_all_first) {
-    std::unique_lock<std::mutex> lock(mu);
-    cv.wait(lock, [&] { return written; });
-  }
   StreamResult result;
   v1::StreamReply reply;
-  while (stream->Read(&reply)) result.replies.push_back(reply);
+  while (stream->Read(&reply)) {
+    result.replies.push_back(reply);
+    if (read_pause.count() > 0) testing::PauseFor(read_pause);
+  }
   writer.join();
   result.status = stream->Finish();
   return result;
