@@ -31,6 +31,7 @@
 #include "cloudcast/testing/metrics_scrape.h"
 #include "replica_support.h"
 #include "support/robot.h"
+#include "support/small_frames.h"
 #include "support/waiting.h"
 
 extern char** environ;
@@ -42,20 +43,7 @@ namespace cc = cloudcast::client;
 using std::chrono::milliseconds;
 using testing::ServerProcess;
 
-const std::vector<SyntheticFrame>& Frames() {
-  static const std::vector<SyntheticFrame> frames = [] {
-    std::vector<SyntheticFrame> f;
-    for (int i = 0; i < 3; ++i) {
-      SyntheticOptions o;
-      o.width = 160;
-      o.height = 120;
-      o.frame = static_cast<std::uint64_t>(i);
-      f.push_back(*SyntheticScene::Default().Render(o));
-    }
-    return f;
-  }();
-  return frames;
-}
+const std::vector<SyntheticFrame>& Frames() { return testing::SmallFrames(3); }
 
 using testing::Robot;
 

@@ -21,6 +21,7 @@
 #include "cloudcast/datasets/synthetic.h"
 #include "replica_support.h"
 #include "support/robot.h"
+#include "support/small_frames.h"
 #include "support/waiting.h"
 
 namespace cloudcast {
@@ -30,22 +31,7 @@ namespace cc = cloudcast::client;
 using std::chrono::milliseconds;
 using testing::ServerProcess;
 
-// A few frames of the synthetic scene, small so three servers on two cores keep up.
-const std::vector<SyntheticFrame>& Frames() {
-  static const std::vector<SyntheticFrame> frames = [] {
-    std::vector<SyntheticFrame> f;
-    const SyntheticScene scene = SyntheticScene::Default();
-    for (int i = 0; i < 4; ++i) {
-      SyntheticOptions o;
-      o.width = 160;
-      o.height = 120;
-      o.frame = static_cast<std::uint64_t>(i);
-      f.push_back(*scene.Render(o));
-    }
-    return f;
-  }();
-  return frames;
-}
+const std::vector<SyntheticFrame>& Frames() { return testing::SmallFrames(4); }
 
 class ReplicasTest : public testing::ScratchDirTest {
  public:
