@@ -25,14 +25,26 @@ using testing::CloudTolerance;
 using testing::CloudsMatchInOrder;
 
 // PCL VoxelGrid's own test (voxel_grid.hpp): it gives up when the voxel count along the bounding
-// box exceeds INT32_MAX.
+// box exceeds INT32_MAX. PCL computes it with int64 casts and products that overflow for huge
+// boxes (and an empty cloud's inverted one), which x86 resolves as below: a float out of int64's
+// range becomes INT64_MIN (cvttss2si), and products wrap. Spelled out here, so that this model of
+// PCL has no undefined behaviour of its own (UBSan found the overflow).
+std::int64_t X86FloatToInt64(float v) {
+  constexpr float kTwo63 = 9223372036854775808.0f;
+  if (!(v >= -kTwo63 && v < kTwo63)) return std::numeric_limits<std::int64_t>::min();
+  return static_cast<std::int64_t>(v);
+}
+
 bool PclGivesUp(const PclCloud& cloud, const VoxelGridParams& p) {
   Eigen::Vector4f lo, hi;
   pcl::getMinMax3D(cloud, lo, hi);
   const float inv[3] = {1.0f / p.leaf_x, 1.0f / p.leaf_y, 1.0f / p.leaf_z};
-  std::int64_t n = 1;
-  for (int a = 0; a < 3; ++a) n *= static_cast<std::int64_t>((hi[a] - lo[a]) * inv[a]) + 1;
-  return n > static_cast<std::int64_t>(std::numeric_limits<std::int32_t>::max());
+  std::uint64_t n = 1;
+  for (int a = 0; a < 3; ++a) {
+    n *= static_cast<std::uint64_t>(X86FloatToInt64((hi[a] - lo[a]) * inv[a])) + 1u;
+  }
+  return static_cast<std::int64_t>(n) >
+         static_cast<std::int64_t>(std::numeric_limits<std::int32_t>::max());
 }
 
 struct Chain {

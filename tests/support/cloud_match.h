@@ -106,8 +106,11 @@ inline std::string Describe(const Point& p) {
 using Cell = std::tuple<std::int64_t, std::int64_t, std::int64_t>;
 struct CellHash {
   std::size_t operator()(const Cell& c) const {
-    return std::hash<std::int64_t>()(std::get<0>(c) * 73856093 ^ std::get<1>(c) * 19349663 ^
-                                     std::get<2>(c) * 83492791);
+    // Unsigned: cells of far-off points overflow a signed product (UBSan found it).
+    const auto u = [](std::int64_t v) { return static_cast<std::uint64_t>(v); };
+    return std::hash<std::uint64_t>()(u(std::get<0>(c)) * 73856093u ^
+                                      u(std::get<1>(c)) * 19349663u ^
+                                      u(std::get<2>(c)) * 83492791u);
   }
 };
 
