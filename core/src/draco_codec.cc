@@ -19,6 +19,7 @@
 #include "draco/compression/config/compression_shared.h"
 #include "draco/compression/decode.h"
 #include "draco/compression/expert_encode.h"
+#include "draco/compression/mesh/mesh_edgebreaker_decoder.h"
 #include "draco/compression/mesh/mesh_sequential_decoder.h"
 #include "draco/compression/point_cloud/point_cloud_kd_tree_decoder.h"
 #include "draco/compression/point_cloud/point_cloud_sequential_decoder.h"
@@ -400,13 +401,6 @@ absl::Status DecodeCapped(std::string_view bytes, std::unique_ptr<draco::PointCl
   if (!status.ok()) {
     return absl::DataLossError(absl::StrCat("draco: bad header: ", status.error_msg()));
   }
-  // Bitstreams before 2.2 (written only by Draco releases before 1.0, 2017) go through legacy
-  // decoding paths that nothing current exercises: refused rather than trusted.
-  if (header.version_major < 2 || (header.version_major == 2 && header.version_minor < 2)) {
-    return absl::DataLossError(absl::StrCat(
-        "draco: bitstream version ", int{header.version_major}, ".", int{header.version_minor},
-        " predates 2.2 (Draco 1.0) and is not read; re-encode it with a current draco_encoder"));
-  }
   if (header.encoder_type == draco::POINT_CLOUD) {
     switch (header.encoder_method) {
       case draco::POINT_CLOUD_SEQUENTIAL_ENCODING:
@@ -421,15 +415,7 @@ absl::Status DecodeCapped(std::string_view bytes, std::unique_ptr<draco::PointCl
       case draco::MESH_SEQUENTIAL_ENCODING:
         return RunCapped<CappedDecoder<draco::MeshSequentialDecoder>, draco::Mesh>(&buffer, out);
       case draco::MESH_EDGEBREAKER_ENCODING:
-        // libdraco 1.5.5's Edgebreaker decoder corrupts its heap on crafted connectivity (our
-        // fuzzer found it: fuzz/corpus/cloud_readers/legacy-edgebreaker-heap-corruption, and
-        // upstream keeps open reports of the same kind). We read clouds, not meshes, so that
-        // decoder stays out of reach of untrusted bytes; a mesh's vertices are still read from
-        // a sequentially coded mesh, or from a PLY.
-        return absl::DataLossError(
-            "draco: Edgebreaker-coded meshes are not read (cloudcast reads point clouds); "
-            "re-encode the vertices as a point cloud (draco_encoder -point_cloud) or "
-            "as a sequential mesh (draco_encoder -cl 0), or convert it to PLY");
+        return RunCapped<CappedDecoder<draco::MeshEdgebreakerDecoder>, draco::Mesh>(&buffer, out);
     }
   }
   return absl::DataLossError(absl::StrCat("draco: unsupported geometry type ",

@@ -282,6 +282,13 @@ absl::StatusOr<std::uint64_t> CheckPcdHeader(const std::string& path, std::istre
   // PCL's rules: keywords match by prefix, '#' starts a comment, empty lines are skipped, and
   // the first line that is none of these ends the header (DATA does not). Mirroring them means
   // both parsers see the same header.
+  // The PCD format also fixes the entries' order, each at most once. PCL does not check it: it
+  // sizes its buffer from the entries seen when POINTS comes, so a FIELDS, SIZE or TYPE repeated
+  // after it makes readBodyASCII write past that buffer (valgrind: "Invalid write of size 4 ...
+  // 16 bytes after a block of size 64"; our fuzzer saw the heap corrupted later). Refused here.
+  static constexpr const char* kOrder[] = {"VERSION", "FIELDS", "SIZE",      "TYPE",   "COUNT",
+                                           "WIDTH",   "HEIGHT", "VIEWPOINT", "POINTS", "DATA"};
+  int last_entry = -1;
   std::streamoff data_at = -1;
   for (int i = 0; i < 4096 && std::getline(in, line); ++i) {
     if (line.empty()) continue;
@@ -289,7 +296,19 @@ absl::StatusOr<std::uint64_t> CheckPcdHeader(const std::string& path, std::istre
     const std::string key = w.empty() ? std::string() : w[0];
     auto is = [&key](const char* k) { return key.rfind(k, 0) == 0; };
     const std::vector<std::string> rest(w.empty() ? w.end() : w.begin() + 1, w.end());
-    if (is("#") || is("VERSION")) continue;
+    if (is("#")) continue;
+    for (int e = 0; e < static_cast<int>(std::size(kOrder)); ++e) {
+      if (!(is(kOrder[e]) || (e == 1 && is("COLUMNS")))) continue;
+      if (e <= last_entry) {
+        return bad(absl::StrCat(kOrder[e], " comes after ", kOrder[last_entry],
+                                "; the header's entries go once each, in the order VERSION, "
+                                "FIELDS, SIZE, TYPE, COUNT, WIDTH, HEIGHT, VIEWPOINT, POINTS, "
+                                "DATA"));
+      }
+      last_entry = e;
+      break;
+    }
+    if (is("VERSION")) continue;
     if (is("FIELDS") || is("COLUMNS")) {
       fields = rest;
     } else if (is("SIZE")) {
