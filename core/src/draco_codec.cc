@@ -19,7 +19,6 @@
 #include "draco/compression/config/compression_shared.h"
 #include "draco/compression/decode.h"
 #include "draco/compression/expert_encode.h"
-#include "draco/compression/mesh/mesh_edgebreaker_decoder.h"
 #include "draco/compression/mesh/mesh_sequential_decoder.h"
 #include "draco/compression/point_cloud/point_cloud_kd_tree_decoder.h"
 #include "draco/compression/point_cloud/point_cloud_sequential_decoder.h"
@@ -415,7 +414,15 @@ absl::Status DecodeCapped(std::string_view bytes, std::unique_ptr<draco::PointCl
       case draco::MESH_SEQUENTIAL_ENCODING:
         return RunCapped<CappedDecoder<draco::MeshSequentialDecoder>, draco::Mesh>(&buffer, out);
       case draco::MESH_EDGEBREAKER_ENCODING:
-        return RunCapped<CappedDecoder<draco::MeshEdgebreakerDecoder>, draco::Mesh>(&buffer, out);
+        // libdraco 1.5.5's Edgebreaker decoder sizes its connectivity buffers from counts in
+        // the file before any of the caps above can see them: a fuzzed 146-byte file made it
+        // reserve 5.6 GB (fuzz/corpus/cloud_readers/drc_edgebreaker_connectivity_bomb). We read
+        // clouds, not meshes, so that decoder stays out of reach of untrusted bytes; a mesh's
+        // vertices are still read from a sequentially coded mesh, or from a PLY.
+        return absl::DataLossError(
+            "draco: Edgebreaker-coded meshes are not read (cloudcast reads point clouds); "
+            "re-encode the vertices as a point cloud (draco_encoder -point_cloud) or "
+            "as a sequential mesh (draco_encoder -cl 0), or convert it to PLY");
     }
   }
   return absl::DataLossError(absl::StrCat("draco: unsupported geometry type ",
