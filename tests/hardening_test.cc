@@ -398,20 +398,27 @@ TEST_F(HardeningTest, OneClientCannotLockEveryoneOut) {
     contexts.push_back(std::make_unique<grpc::ClientContext>());
     calls.push_back(stub->Stream(contexts.back().get()));
   }
-  // The fifth is refused at once, naming the limit; the four silent ones are ended soon.
+  // One of the five, whichever reached the server last (not always the fifth sent: the ASan run
+  // showed another order), is refused naming the limit; the four silent ones are ended soon.
   v1::StreamReply reply;
-  EXPECT_FALSE(calls[4]->Read(&reply));
-  const grpc::Status refused = calls[4]->Finish();
-  EXPECT_EQ(refused.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
-  EXPECT_NE(refused.error_message().find("--max-streams-per-client"), std::string::npos)
-      << refused.error_message();
-  for (int i = 0; i < 4; ++i) {
+  int refused = 0, ended = 0;
+  for (int i = 0; i < 5; ++i) {
     EXPECT_FALSE(calls[i]->Read(&reply));
     const grpc::Status s = calls[i]->Finish();
-    EXPECT_EQ(s.error_code(), grpc::StatusCode::DEADLINE_EXCEEDED) << i;
-    EXPECT_NE(s.error_message().find("--first-message-timeout"), std::string::npos)
-        << s.error_message();
+    if (s.error_code() == grpc::StatusCode::RESOURCE_EXHAUSTED) {
+      ++refused;
+      EXPECT_NE(s.error_message().find("--max-streams-per-client"), std::string::npos)
+          << s.error_message();
+    } else {
+      ++ended;
+      EXPECT_EQ(s.error_code(), grpc::StatusCode::DEADLINE_EXCEEDED)
+          << i << ": " << s.error_message();
+      EXPECT_NE(s.error_message().find("--first-message-timeout"), std::string::npos)
+          << s.error_message();
+    }
   }
+  EXPECT_EQ(refused, 1);
+  EXPECT_EQ(ended, 4);
   // A stream that talks is not cut short by the first-message timeout.
   grpc::ClientContext ctx;
   auto call = stub->Stream(&ctx);

@@ -400,6 +400,15 @@ absl::Status DecodeCapped(std::string_view bytes, std::unique_ptr<draco::PointCl
   if (!status.ok()) {
     return absl::DataLossError(absl::StrCat("draco: bad header: ", status.error_msg()));
   }
+  // Bitstreams before 2.2 (written only by Draco releases before 1.0, 2017) go through legacy
+  // decoding paths: a fuzzed 42-byte kd-tree file of version 2.0 kept libdraco busy for 33 s and
+  // came back with 1.4 billion points (fuzz/corpus/cloud_readers/drc_kdtree_shared_values_bomb).
+  // Refused from the header.
+  if (header.version_major < 2 || (header.version_major == 2 && header.version_minor < 2)) {
+    return absl::DataLossError(absl::StrCat(
+        "draco: bitstream version ", int{header.version_major}, ".", int{header.version_minor},
+        " predates 2.2 (Draco 1.0) and is not read; re-encode it with a current draco_encoder"));
+  }
   if (header.encoder_type == draco::POINT_CLOUD) {
     switch (header.encoder_method) {
       case draco::POINT_CLOUD_SEQUENTIAL_ENCODING:
@@ -592,6 +601,16 @@ absl::Status DecodeDraco(std::string_view bytes, PointCloud* out) {
     return absl::DataLossError("draco: COLOR holds fewer values than points");
   }
 
+  // CappedDecoder bounds the count where Draco reads it, but a decoder can end with more points
+  // than it allocated values for, sharing values through its point-to-value map (a fuzzed
+  // 42-byte kd-tree file of bitstream 2.0 decoded to 1.4 billion points, and the cloud below
+  // would have been 22 GB). The same bound holds for what we allocate.
+  if (const std::uint64_t most = MaxPointsFor(bytes.size());
+      static_cast<std::uint64_t>(num_points) > most) {
+    return absl::DataLossError(absl::StrCat("draco: a ", bytes.size(), "-byte file claims ",
+                                            num_points, " points; at most ", most,
+                                            " are accepted"));
+  }
   out->ResizeUnorganized(static_cast<std::size_t>(num_points));
   if (!ReadPositions(*position, num_points, out)) {
     out->ResizeUnorganized(0);  // no half-filled cloud on error
