@@ -324,6 +324,14 @@ bool ReadColors(const draco::PointAttribute& color, int num_points, PointCloud* 
   return true;
 }
 
+// A file that claims more than the caps below allow: one wording wherever a cap is checked.
+std::string PointCountRefusal(std::uint64_t points, std::uint64_t most) {
+  return absl::StrCat(points, " points; at most ", most, " are accepted");
+}
+absl::Status FileClaims(std::size_t file_bytes, const std::string& what) {
+  return absl::DataLossError(absl::StrCat("draco: a ", file_bytes, "-byte file claims ", what));
+}
+
 // Draco sizes each attribute from the point count stored in the file before it reads a single
 // value, and zero-fills it: one flipped byte of a 30 KB frame made it touch 24 GB here, and the
 // kernel killed the process. Each Draco decoder is therefore wrapped to refuse a count above
@@ -343,7 +351,7 @@ class CappedDecoder : public Base {
   bool DecodePointAttributes() override {
     const auto points = static_cast<std::uint64_t>(this->point_cloud()->num_points());
     if (points > max_points_) {
-      refusal_ = absl::StrCat(points, " points; at most ", max_points_, " are accepted");
+      refusal_ = PointCountRefusal(points, max_points_);
       return false;
     }
     return Base::DecodePointAttributes();
@@ -381,8 +389,7 @@ absl::Status RunCapped(draco::DecoderBuffer* buffer, std::unique_ptr<draco::Poin
   const draco::DecoderOptions options;
   const draco::Status status = decoder.Decode(options, buffer, geometry.get());
   if (!decoder.refusal().empty()) {
-    return absl::DataLossError(
-        absl::StrCat("draco: a ", size, "-byte file claims ", decoder.refusal()));
+    return FileClaims(static_cast<std::size_t>(size), decoder.refusal());
   }
   if (!status.ok()) {
     return absl::DataLossError(absl::StrCat("draco: cannot decode: ", status.error_msg()));
@@ -607,9 +614,8 @@ absl::Status DecodeDraco(std::string_view bytes, PointCloud* out) {
   // would have been 22 GB). The same bound holds for what we allocate.
   if (const std::uint64_t most = MaxPointsFor(bytes.size());
       static_cast<std::uint64_t>(num_points) > most) {
-    return absl::DataLossError(absl::StrCat("draco: a ", bytes.size(), "-byte file claims ",
-                                            num_points, " points; at most ", most,
-                                            " are accepted"));
+    return FileClaims(bytes.size(),
+                      PointCountRefusal(static_cast<std::uint64_t>(num_points), most));
   }
   out->ResizeUnorganized(static_cast<std::size_t>(num_points));
   if (!ReadPositions(*position, num_points, out)) {
