@@ -1,6 +1,6 @@
 // What the server does with a request's bytes, without sockets: the harnesses of
 // stream_request_fuzzer.cc and process_request_fuzzer.cc run their messages through the same
-// calls the service makes (ParseRequest, convert::Resolve, FramePixels, FrameRunner::Run,
+// calls the service makes (RequestReader, convert::Resolve, FramePixels, FrameRunner::Run,
 // convert::FillError, the reply's serialization).
 #pragma once
 
@@ -14,11 +14,20 @@
 #include "cloudcast/v1/cloudcast.pb.h"
 #include "frame_processor.h"
 #include "metrics.h"
+#include "request_reader.h"
 
 namespace cloudcast::fuzz {
 
-// The bytes as gRPC hands them to the service (one slice).
+// The bytes as gRPC hands them to the service: in slices, here of 1 to 64 bytes in turn, so that
+// fields and rows fall across slice boundaries (gRPC's are 16 KB).
 grpc::ByteBuffer ToByteBuffer(const std::uint8_t* data, std::size_t size);
+
+// Parses the bytes as the service does (RequestReader) and checks it against protobuf's own
+// parse of them: both accept or both refuse, and with the pixels put back the messages are
+// equal. A difference aborts, so the fuzzer reports it.
+template <typename Request>
+bool ParseChecked(const std::uint8_t* data, std::size_t size, server::RequestReader* reader,
+                  Request* request);
 
 class FrameHarness {
  public:
@@ -32,7 +41,8 @@ class FrameHarness {
   // CloudReply, a FrameError on failure, then the reply serialized. A cloud that was produced
   // must decode with libdraco to point_count points (the server's own output: anything else
   // aborts, so the fuzzer reports it).
-  void RunFrame(const v1::Frame& frame, const FrameSettings& settings);
+  void RunFrame(const v1::Frame& frame, const server::InPlacePixels* in_place,
+                const FrameSettings& settings);
 
  private:
   server::Metrics metrics_;

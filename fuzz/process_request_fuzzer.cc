@@ -7,17 +7,16 @@
 #include <cstdint>
 
 #include "frame_harness.h"
-#include "service.h"
 
 using namespace cloudcast;
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   static fuzz::FrameHarness* harness = new fuzz::FrameHarness;
-  grpc::ByteBuffer bytes = fuzz::ToByteBuffer(data, size);
+  static server::RequestReader* reader = new server::RequestReader;  // kept, as a stream's slot
   v1::ProcessRequest request;
-  if (!server::ParseRequest(&bytes, &request)) return 0;  // UNPARSABLE
+  if (!fuzz::ParseChecked(data, size, reader, &request)) return 0;  // UNPARSABLE
   auto settings = convert::Resolve(request.config(), harness->defaults());
   if (!settings.ok()) return 0;  // the call ends with the resolve error
-  harness->RunFrame(request.frame(), settings->frame);
+  harness->RunFrame(request.frame(), &reader->pixels(), settings->frame);
   return 0;
 }

@@ -91,6 +91,13 @@ void UndoLeftT(const PlaneLayout& l, std::uint8_t* pixels) {
 
 template <typename View>
 absl::Status CheckView(const View& view, std::string_view field) {
+  if (view.rows != nullptr) {
+    // Compress() reads rows `stride_bytes` apart; a row table is only made for frames received.
+    return absl::InvalidArgumentError(
+        absl::StrCat(std::string(field),
+                     " has a row table (rows in scattered memory); compress an image "
+                     "whose rows are stride_bytes apart"));
+  }
   return ValidateView(view, kNoLimits, field);
 }
 

@@ -233,8 +233,11 @@ void RunTableKernel(const DepthConstants& c, const float* zt, const Float4* z4,
   Point* const first = sink->out + sink->count;
   Point* o = first;
   internal::Bounds bounds = sink->bounds;
+  // Without a row table, the end of the colour buffer bounds the 4-byte loads; a row table
+  // promises a readable byte after every row (ImageView::rows).
   const std::uint8_t* colour_end =
-      static_cast<const std::uint8_t*>(colour.data) + colour.size_bytes;
+      colour.rows != nullptr ? nullptr
+                             : static_cast<const std::uint8_t*>(colour.data) + colour.size_bytes;
   // kFast: a row where no test is needed per passing pixel: every value in the passing range
   // passes, no x or y can overflow, and the byte after each pixel's colour is in the buffer (all
   // rows but the last: the next row follows).
@@ -247,7 +250,7 @@ void RunTableKernel(const DepthConstants& c, const float* zt, const Float4* z4,
     const __m128 row_part = _mm_setr_ps(0.0f, static_cast<float>(v) - c.cy, 1.0f, 0.0f);
     // Pixels whose colour can be read with one 4-byte load.
     const std::uint32_t wide_end =
-        C == ColorEncoding::kBGR8 || C == ColorEncoding::kRGB8
+        (C == ColorEncoding::kBGR8 || C == ColorEncoding::kRGB8) && colour_end != nullptr
             ? static_cast<std::uint32_t>(
                   std::min<std::size_t>(w, (static_cast<std::size_t>(colour_end - crow) - 1) / 3))
             : w;

@@ -169,11 +169,13 @@ absl::Status ResolveDraco(const v1::DracoConfig& c, std::string_view p, FrameSet
 }
 
 template <typename View, typename Raw, typename Encoding>
-absl::Status ViewAny(const Raw& raw, std::string_view field, const Limits& limits,
-                     Encoding encoding, const std::string& encoding_name, View* view) {
+absl::Status ViewAny(const Raw& raw, std::string_view pixels, std::string_view field,
+                     const Limits& limits, Encoding encoding, const std::string& encoding_name,
+                     View* view) {
   const std::uint64_t row_bytes = std::uint64_t{raw.width()} * BytesPerPixel(encoding);
-  view->data = raw.pixels().data();
-  view->size_bytes = raw.pixels().size();
+  view->data = pixels.data();
+  view->size_bytes = pixels.size();
+  view->rows = nullptr;
   view->width = raw.width();
   view->height = raw.height();
   view->stride_bytes = raw.row_stride() == 0 ? row_bytes : raw.row_stride();
@@ -421,20 +423,20 @@ v1::StreamConfig MakeStreamConfig(const PipelineOptions& options) {
 
 namespace {
 
-// Copies `height` rows of `row_bytes` from `src` (rows `stride` apart) into `out`, packed.
-void CopyRows(const void* src, std::size_t stride, std::size_t row_bytes, std::uint32_t height,
-              std::string* out) {
-  const std::size_t total = row_bytes * height;
+// Copies the view's rows into `out`, packed.
+template <typename View>
+void CopyRows(const View& view, std::string* out) {
+  const std::size_t row_bytes = std::size_t{view.width} * BytesPerPixel(view.encoding);
+  const std::size_t total = row_bytes * view.height;
   // Same-size frames keep the size, so resize() neither allocates nor zero-fills after the first.
   out->resize(total);
   char* dst = out->data();
-  const char* s = static_cast<const char*>(src);
-  if (stride == row_bytes) {
-    std::memcpy(dst, s, total);
+  if (view.rows == nullptr && view.stride_bytes == row_bytes) {
+    std::memcpy(dst, view.data, total);
     return;
   }
-  for (std::uint32_t v = 0; v < height; ++v) {
-    std::memcpy(dst + v * row_bytes, s + v * stride, row_bytes);
+  for (std::uint32_t v = 0; v < view.height; ++v) {
+    std::memcpy(dst + v * row_bytes, view.row(v), row_bytes);
   }
 }
 
@@ -445,8 +447,7 @@ absl::Status FillRaw(const View& view, std::string_view field, Raw* raw) {
   raw->set_width(view.width);
   raw->set_height(view.height);
   raw->set_row_stride(0);
-  CopyRows(view.data, view.stride_bytes, std::size_t{view.width} * BytesPerPixel(view.encoding),
-           view.height, raw->mutable_pixels());
+  CopyRows(view, raw->mutable_pixels());
   return absl::OkStatus();
 }
 
@@ -487,18 +488,30 @@ absl::Status BgraToProto(const void* data, std::size_t size_bytes, std::uint32_t
   return absl::OkStatus();
 }
 
-absl::Status ViewRaw(const v1::RawDisparity& raw, std::string_view field, const Limits& limits,
-                     DisparityView* view) {
+absl::Status ViewRaw(const v1::RawDisparity& raw, std::string_view pixels, std::string_view field,
+                     const Limits& limits, DisparityView* view) {
   DisparityEncoding encoding;
   if (auto s = FromProto(raw.encoding(), Path(field, "encoding"), &encoding); !s.ok()) return s;
-  return ViewAny(raw, field, limits, encoding, v1::DisparityEncoding_Name(raw.encoding()), view);
+  return ViewAny(raw, pixels, field, limits, encoding, v1::DisparityEncoding_Name(raw.encoding()),
+                 view);
+}
+
+absl::Status ViewRaw(const v1::RawColor& raw, std::string_view pixels, std::string_view field,
+                     const Limits& limits, ColorView* view) {
+  ColorEncoding encoding;
+  if (auto s = FromProto(raw.encoding(), Path(field, "encoding"), &encoding); !s.ok()) return s;
+  return ViewAny(raw, pixels, field, limits, encoding, v1::ColorEncoding_Name(raw.encoding()),
+                 view);
+}
+
+absl::Status ViewRaw(const v1::RawDisparity& raw, std::string_view field, const Limits& limits,
+                     DisparityView* view) {
+  return ViewRaw(raw, raw.pixels(), field, limits, view);
 }
 
 absl::Status ViewRaw(const v1::RawColor& raw, std::string_view field, const Limits& limits,
                      ColorView* view) {
-  ColorEncoding encoding;
-  if (auto s = FromProto(raw.encoding(), Path(field, "encoding"), &encoding); !s.ok()) return s;
-  return ViewAny(raw, field, limits, encoding, v1::ColorEncoding_Name(raw.encoding()), view);
+  return ViewRaw(raw, raw.pixels(), field, limits, view);
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -1,5 +1,7 @@
 #include "frame_input.h"
 
+#include <algorithm>
+#include <cstring>
 #include <string_view>
 
 #include "absl/strings/str_cat.h"
@@ -29,15 +31,79 @@ absl::Status DecodeChecked(std::string_view bytes, const char* field, const Limi
   return ValidateView(*view, limits, field);
 }
 
+// Points view->rows at the rows of `bytes` (the view's size was checked against bytes.size).
+// A row is read in place when it and one byte after it lie in one piece (the kernels may load a
+// 3-byte pixel with 4 bytes); otherwise it is copied into `table->bounce`, with a byte to spare.
+template <typename View>
+void GatherRows(const ScatteredBytes& bytes, RowTable* table, View* view) {
+  const std::size_t row_bytes = std::size_t{view->width} * BytesPerPixel(view->encoding);
+  table->rows.resize(view->height);
+  // Pass 1: rows in place, and how many need copying.
+  std::size_t piece = 0, piece_start = 0, copied = 0;
+  for (std::uint32_t v = 0; v < view->height; ++v) {
+    const std::size_t at = std::size_t{v} * view->stride_bytes;
+    while (at >= piece_start + bytes.pieces[piece].size()) {
+      piece_start += bytes.pieces[piece++].size();
+    }
+    const std::size_t offset = at - piece_start;
+    if (offset + row_bytes < bytes.pieces[piece].size()) {
+      table->rows[v] = reinterpret_cast<const std::uint8_t*>(bytes.pieces[piece].data()) + offset;
+    } else {
+      table->rows[v] = nullptr;
+      ++copied;
+    }
+  }
+  // Pass 2: the straddling rows, gathered from the pieces they span.
+  const std::size_t slot = row_bytes + 1;
+  if (table->bounce.size() < copied * slot) table->bounce.resize(copied * slot);
+  std::uint8_t* next = table->bounce.data();
+  piece = 0, piece_start = 0;
+  for (std::uint32_t v = 0; v < view->height; ++v) {
+    if (table->rows[v] != nullptr) continue;
+    std::size_t at = std::size_t{v} * view->stride_bytes;
+    while (at >= piece_start + bytes.pieces[piece].size()) {
+      piece_start += bytes.pieces[piece++].size();
+    }
+    table->rows[v] = next;
+    std::size_t p = piece, p_start = piece_start, left = row_bytes;
+    while (left > 0) {
+      const std::string_view s = bytes.pieces[p];
+      const std::size_t take = std::min(left, s.size() - (at - p_start));
+      std::memcpy(next, s.data() + (at - p_start), take);
+      next += take, at += take, left -= take;
+      p_start += s.size(), ++p;
+    }
+    *next++ = 0;  // the spare byte
+  }
+  view->rows = table->rows.data();
+}
+
+// Views a raw image: in the message, or in the pieces RequestReader left it in.
+template <typename Raw, typename View>
+absl::Status ViewRawImage(const Raw& raw, const ScatteredBytes* in_place, const char* field,
+                          const Limits& limits, RowTable* table, View* view) {
+  if (in_place == nullptr || in_place->size == 0) return convert::ViewRaw(raw, field, limits, view);
+  const std::string_view first = in_place->pieces.front();
+  if (absl::Status s = convert::ViewRaw(raw, std::string_view(first.data(), in_place->size), field,
+                                        limits, view);
+      !s.ok()) {
+    return s;
+  }
+  if (in_place->pieces.size() > 1) GatherRows(*in_place, table, view);
+  return absl::OkStatus();
+}
+
 }  // namespace
 
 absl::Status PrepareFrameImages(const v1::Frame& frame, const Limits& limits,
-                                DecodeScratch* scratch, FrameImages* out) {
+                                DecodeScratch* scratch, FrameImages* out,
+                                const InPlacePixels* in_place) {
   out->decoded = false;
   switch (frame.disparity().data_case()) {
     case v1::DisparityImage::kRaw:
-      if (auto s = convert::ViewRaw(frame.disparity().raw(), "frame.disparity.raw", limits,
-                                    &out->disparity);
+      if (auto s = ViewRawImage(
+              frame.disparity().raw(), in_place != nullptr ? &in_place->disparity : nullptr,
+              "frame.disparity.raw", limits, &scratch->disparity_rows, &out->disparity);
           !s.ok()) {
         return s;
       }
@@ -67,7 +133,9 @@ absl::Status PrepareFrameImages(const v1::Frame& frame, const Limits& limits,
   }
   switch (frame.colour().data_case()) {
     case v1::ColorImage::kRaw:
-      if (auto s = convert::ViewRaw(frame.colour().raw(), "frame.colour.raw", limits, &out->colour);
+      if (auto s =
+              ViewRawImage(frame.colour().raw(), in_place != nullptr ? &in_place->colour : nullptr,
+                           "frame.colour.raw", limits, &scratch->colour_rows, &out->colour);
           !s.ok()) {
         return s;
       }

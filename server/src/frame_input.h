@@ -9,6 +9,7 @@
 #include "cloudcast/core/limits.h"
 #include "cloudcast/io/image_io.h"
 #include "cloudcast/v1/cloudcast.pb.h"
+#include "request_reader.h"
 
 namespace cloudcast::server {
 
@@ -20,8 +21,16 @@ struct FrameImages {
   bool decoded = false;
 };
 
+// Where the rows of a raw image in pieces are: in place where a row lies inside one piece, else
+// in `bounce` (the rows that straddle two pieces, copied: a few in a hundred).
+struct RowTable {
+  std::vector<const std::uint8_t*> rows;
+  std::vector<std::uint8_t> bounce;
+};
+
 // Decoded pixels, kept by a worker from frame to frame.
 struct DecodeScratch {
+  RowTable disparity_rows, colour_rows;
   OwnedDisparity disparity;
   OwnedColor colour;
   // Compressed images: buffers that grow to the largest frame seen and are then reused.
@@ -37,8 +46,12 @@ struct DecodeScratch {
 //
 // Errors name the field by its proto path under "frame." and the limit it broke:
 // RESOURCE_EXHAUSTED for an image over `limits`, INVALID_ARGUMENT for anything malformed.
+//
+// `in_place`: the pixels RequestReader left in gRPC's slices, for a frame it parsed. A raw image
+// whose pixels are there is viewed through a row table in `scratch` (ImageView::rows).
 absl::Status PrepareFrameImages(const v1::Frame& frame, const Limits& limits,
-                                DecodeScratch* scratch, FrameImages* out);
+                                DecodeScratch* scratch, FrameImages* out,
+                                const InPlacePixels* in_place = nullptr);
 
 // The frame's size in pixels as its message states it (raw sizes, or an encoded image's header),
 // without decoding anything: the cost the worker pool weighs it by. 1 when it cannot tell (such

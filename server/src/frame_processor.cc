@@ -28,8 +28,9 @@ double ThreadCpuSeconds() {
   return static_cast<double>(ts.tv_sec) + static_cast<double>(ts.tv_nsec) * 1e-9;
 }
 
-absl::Status FrameProcessor::Process(const v1::Frame& frame, const FrameSettings& settings,
-                                     v1::CloudReply* reply, FrameCosts* costs) {
+absl::Status FrameProcessor::Process(const v1::Frame& frame, const InPlacePixels* in_place,
+                                     const FrameSettings& settings, v1::CloudReply* reply,
+                                     FrameCosts* costs) {
   *costs = FrameCosts{};
   reply->set_sequence(frame.sequence());
   reply->set_frame_id(frame.frame_id());
@@ -37,7 +38,8 @@ absl::Status FrameProcessor::Process(const v1::Frame& frame, const FrameSettings
 
   const Clock::time_point t0 = Clock::now();
   FrameImages images;
-  if (absl::Status s = PrepareFrameImages(frame, settings.pipeline.limits, &decode_, &images);
+  if (absl::Status s =
+          PrepareFrameImages(frame, settings.pipeline.limits, &decode_, &images, in_place);
       !s.ok()) {
     return s;
   }
@@ -86,14 +88,15 @@ FrameRunner::FrameRunner(int workers, Metrics* metrics, std::string instance)
 }
 
 absl::Status FrameRunner::Run(std::size_t worker, const v1::Frame& frame,
-                              const FrameSettings& settings, const Arrival& arrival,
-                              v1::CloudReply* reply) {
+                              const InPlacePixels* in_place, const FrameSettings& settings,
+                              const Arrival& arrival, v1::CloudReply* reply) {
   const Clock::time_point start = Clock::now();
   Metrics& m = *metrics_;
   m.queue_seconds.Observe(Seconds(start - arrival.time));
   const double cpu0 = ThreadCpuSeconds();
   FrameCosts costs;
-  const absl::Status status = processors_[worker]->Process(frame, settings, reply, &costs);
+  const absl::Status status =
+      processors_[worker]->Process(frame, in_place, settings, reply, &costs);
   m.core_cpu_seconds.Increment(costs.core_cpu_seconds);
   if (status.ok()) {
     reply->mutable_times()->set_queue_us(Micros(Seconds(start - arrival.time)));

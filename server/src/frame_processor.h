@@ -35,8 +35,9 @@ class FrameProcessor {
   // in place), point_count, position_error_bound, position_bits, counts and the decode, pipeline
   // and encode times. Errors: see PrepareFrameImages; pipeline and Draco errors keep the core's
   // code.
-  absl::Status Process(const v1::Frame& frame, const FrameSettings& settings, v1::CloudReply* reply,
-                       FrameCosts* costs);
+  // `in_place`: the frame's pixels RequestReader left in gRPC's slices (see PrepareFrameImages).
+  absl::Status Process(const v1::Frame& frame, const InPlacePixels* in_place,
+                       const FrameSettings& settings, v1::CloudReply* reply, FrameCosts* costs);
 
  private:
   Pipeline pipeline_;
@@ -57,8 +58,9 @@ class FrameRunner {
 
   // On worker `worker`: processes `frame` into `reply`, which gets everything but its send time
   // and frames_dropped (the writer's). Counts the frame, its stage times and CPU, or its error.
-  absl::Status Run(std::size_t worker, const v1::Frame& frame, const FrameSettings& settings,
-                   const Arrival& arrival, v1::CloudReply* reply);
+  // `in_place`: as for FrameProcessor::Process (nullptr: the pixels are in `frame`).
+  absl::Status Run(std::size_t worker, const v1::Frame& frame, const InPlacePixels* in_place,
+                   const FrameSettings& settings, const Arrival& arrival, v1::CloudReply* reply);
 
   const std::string& instance() const { return instance_; }
 

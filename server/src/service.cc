@@ -10,7 +10,6 @@
 #include "absl/strings/str_cat.h"
 #include "admission.h"
 #include "draco/core/draco_version.h"
-#include "grpcpp/support/proto_buffer_reader.h"
 #include "spdlog/spdlog.h"
 #include "stream_queue.h"
 
@@ -51,11 +50,6 @@ grpc::Status ToGrpc(const absl::Status& s) {
 }
 
 }  // namespace
-
-bool ParseRequest(grpc::ByteBuffer* bytes, google::protobuf::Message* message) {
-  grpc::ProtoBufferReader reader(bytes);
-  return message->ParseFromZeroCopyStream(&reader);
-}
 
 // ---------------------------------------------------------------------------------------------
 // One Stream call: gRPC's op sequencing around the stream's StreamQueue.
@@ -102,8 +96,8 @@ class CloudCastService::StreamReactor final
     bool parsed = false;
     if (ok) {
       bytes = job->in.Length();
-      parsed = ParseRequest(&job->in, &job->request);
-      job->in.Clear();
+      parsed = job->reader.Parse(&job->in, &job->request);
+      job->in.Clear();  // the reader keeps the slices that hold the pixels
     }
     std::unique_lock<std::mutex> lock(mu_);
     reading_ = nullptr;
@@ -196,6 +190,7 @@ class CloudCastService::StreamReactor final
   struct Job : StreamSlot {
     grpc::ByteBuffer in;   // what gRPC read, until parsed into `request`
     grpc::ByteBuffer out;  // `reply` serialized, while gRPC writes it
+    RequestReader reader;  // parses `in`; holds the raw pixels in gRPC's slices until processed
     v1::StreamRequest request;
     v1::StreamReply reply;
     // The CloudReply last used by this job, kept out of `reply` between frames so that its
@@ -286,6 +281,7 @@ class CloudCastService::StreamReactor final
     Uncharge(job);
     job->in.Clear();
     job->out.Clear();
+    job->reader.Clear();
     job->request.Clear();
     if (job->reply.has_cloud()) job->spare_cloud.reset(job->reply.release_cloud());
     job->reply.Clear();
@@ -424,8 +420,8 @@ class CloudCastService::StreamReactor final
       cloud->Clear();  // keeps the draco buffer's capacity
       job->reply.set_allocated_cloud(cloud);
       const v1::Frame& frame = job->request.frame();
-      const absl::Status status =
-          service_->runner_.Run(worker, frame, job->settings->frame, job->arrival, cloud);
+      const absl::Status status = service_->runner_.Run(worker, frame, &job->reader.pixels(),
+                                                        job->settings->frame, job->arrival, cloud);
       if (!status.ok()) {
         const std::uint64_t sequence = frame.sequence();
         const std::string frame_id = frame.frame_id();
@@ -437,6 +433,7 @@ class CloudCastService::StreamReactor final
       }
       // The pixels are no longer needed; free them before the reply waits for the writer.
       job->request.Clear();
+      job->reader.Clear();
     }
     Uncharge(job);  // atomic: no lock needed
     {
@@ -527,6 +524,7 @@ grpc::ServerUnaryReactor* CloudCastService::Process(grpc::CallbackServerContext*
   const Arrival arrival{Clock::now(), UnixNanos()};
   // The request and its reply live until the worker is done with them.
   struct Call {
+    RequestReader reader;  // holds the raw pixels in gRPC's slices until the worker is done
     v1::ProcessRequest request;
     v1::CloudReply reply;
     std::shared_ptr<const StreamSettings> settings;
@@ -546,8 +544,8 @@ grpc::ServerUnaryReactor* CloudCastService::Process(grpc::CallbackServerContext*
   auto call = std::make_shared<Call>();
   call->memory = &memory_;
   const std::size_t bytes = request_bytes->Length();
-  grpc::ByteBuffer copy(*request_bytes);  // shares the slices; the reader consumes the copy
-  if (!ParseRequest(&copy, &call->request)) {
+  grpc::ByteBuffer copy(*request_bytes);  // shares the slices
+  if (!call->reader.Parse(&copy, &call->request)) {
     metrics_->process_requests_unparsable.Increment();
     reactor->Finish(Unparsable("ProcessRequest", bytes));
     return reactor;
@@ -586,8 +584,10 @@ grpc::ServerUnaryReactor* CloudCastService::Process(grpc::CallbackServerContext*
   const std::uint64_t pixels = FramePixels(call->request.frame());
   const bool submitted = pool_.Submit(
       [this, reactor, reply_bytes, arrival, call](std::size_t worker) {
-        const absl::Status status = runner_.Run(worker, call->request.frame(),
-                                                call->settings->frame, arrival, &call->reply);
+        const absl::Status status =
+            runner_.Run(worker, call->request.frame(), &call->reader.pixels(),
+                        call->settings->frame, arrival, &call->reply);
+        call->reader.Clear();
         grpc::Status result;
         if (status.ok()) {
           call->reply.set_send_time_unix_ns(UnixNanos());

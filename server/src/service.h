@@ -31,10 +31,6 @@
 
 namespace cloudcast::server {
 
-// Parses a request message (StreamRequest, ProcessRequest) from the bytes gRPC read, consuming
-// them; false when they are not one. Stream and Process parse with it (and so do the fuzzers).
-bool ParseRequest(grpc::ByteBuffer* bytes, google::protobuf::Message* message);
-
 // Stream and Process take raw bytes and parse them here, so that bytes which are not a valid
 // message get a status that says so (gRPC's own parsing reports a half-close, or UNIMPLEMENTED).
 using CallbackBase =

@@ -33,6 +33,12 @@ bool ParseColorEncoding(std::string_view name, ColorEncoding* out);
 
 // A view of pixel rows in memory. `stride_bytes` is the distance between row starts; `size_bytes`
 // is how much memory `data` points to, so a view can be checked before it is read.
+//
+// `rows`, when set, says where each row is instead: row v starts at rows[v]. The server sets it
+// for a frame it reads where gRPC received it, in pieces (one row may be in one network buffer
+// and the next in another). `data` and `size_bytes` then describe the image as it was sent (they
+// are what ValidateView checks); only row() reaches the pixels. Every row of such a view is
+// followed by at least one readable byte, so a kernel may load a 3-byte pixel with 4 bytes.
 template <typename Encoding>
 struct ImageView {
   const void* data = nullptr;
@@ -41,9 +47,10 @@ struct ImageView {
   std::uint32_t height = 0;
   std::size_t stride_bytes = 0;
   Encoding encoding{};
+  const std::uint8_t* const* rows = nullptr;
 
   const std::uint8_t* row(std::uint32_t v) const {
-    return static_cast<const std::uint8_t*>(data) + v * stride_bytes;
+    return rows != nullptr ? rows[v] : static_cast<const std::uint8_t*>(data) + v * stride_bytes;
   }
 };
 using DisparityView = ImageView<DisparityEncoding>;

@@ -106,6 +106,14 @@ absl::Status ViewRaw(const v1::RawDisparity& raw, std::string_view field, const 
                      DisparityView* view);
 absl::Status ViewRaw(const v1::RawColor& raw, std::string_view field, const Limits& limits,
                      ColorView* view);
+// The same for an image whose pixel bytes were kept apart from the message (the server leaves
+// them in the buffers gRPC received them in): `pixels` gives where they start and how many there
+// are, and is what the checks measure. When the bytes are in pieces, the caller then points
+// view->rows at the rows (ImageView::rows); view->data is only the first piece.
+absl::Status ViewRaw(const v1::RawDisparity& raw, std::string_view pixels, std::string_view field,
+                     const Limits& limits, DisparityView* view);
+absl::Status ViewRaw(const v1::RawColor& raw, std::string_view pixels, std::string_view field,
+                     const Limits& limits, ColorView* view);
 
 // Compressed raw images (CompressedDisparity / CompressedColor): see the proto for the format.
 
