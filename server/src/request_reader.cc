@@ -352,7 +352,15 @@ bool RequestReader::ParseWith(grpc::ByteBuffer* bytes, google::protobuf::Message
     if (walk.Run()) {
       PiecesInput input(rest_);
       walked_ = true;
-      if (message->ParseFromZeroCopyStream(&input)) return true;
+      if (message->ParseFromZeroCopyStream(&input)) {
+        // Nothing left in place (a config, an encoded or compressed frame): let the slices go
+        // now, as protobuf's own parse would, rather than while the frame waits and runs.
+        if (pixels_.disparity.size == 0 && pixels_.colour.size == 0) {
+          slices_.clear();
+          rest_.clear();
+        }
+        return true;
+      }
       // Not a valid message after all: protobuf said so on the same bytes.
       Clear();
       return false;
