@@ -81,18 +81,33 @@ void DecodeInto(bool decode, Result* result) {
   result->times.decode_us = MicrosSince(start);
 }
 
-// A frame sent and not answered yet. `request` is kept only where a resilient stream may have to
-// send it again (DELIVERY_ALL); otherwise its buffers went back to the spares after the write.
+// A frame sent and not answered yet. `bytes` are kept only where a resilient stream may have to
+// send it again (DELIVERY_ALL): they share the slices gRPC wrote, so keeping them copies nothing.
 struct Pending {
   std::uint64_t sequence = 0;
   std::string frame_id;
   std::int64_t capture_time_unix_ns = 0;
   Clock::time_point send;
   std::int64_t send_unix_ns = 0;
-  std::unique_ptr<v1::StreamRequest> request;
+  std::optional<grpc::ByteBuffer> bytes;
 };
 
-using StreamRpc = grpc::ClientReaderWriter<v1::StreamRequest, v1::StreamReply>;
+// Stream calls write bytes the client serialized itself (internal::RequestWriter) and read typed
+// replies. The generated stub only writes StreamRequest messages, so the call is made as the
+// generated code makes it, with ByteBuffer for the message type.
+using StreamRpc = grpc::ClientReaderWriter<grpc::ByteBuffer, v1::StreamReply>;
+
+const char* StreamMethodName() {
+  static const std::string name = absl::StrCat("/", v1::CloudCast::service_full_name(), "/Stream");
+  return name.c_str();
+}
+
+grpc::ByteBuffer Serialized(const google::protobuf::Message& message) {
+  grpc::ByteBuffer bytes;
+  bool own;
+  (void)grpc::SerializationTraits<google::protobuf::Message>::Serialize(message, &bytes, &own);
+  return bytes;
+}
 
 }  // namespace
 
@@ -104,8 +119,8 @@ using StreamRpc = grpc::ClientReaderWriter<v1::StreamRequest, v1::StreamReply>;
 // reconnect) while it holds write_mu, so no Send writes meanwhile.
 
 struct Stream::Impl {
-  std::shared_ptr<Stub> stub;  // shared with the Client: a stream may outlive it
   std::shared_ptr<grpc::Channel> channel;
+  std::optional<grpc::internal::RpcMethod> stream_method;  // on `channel`
   std::string target;
   bool decode_clouds = true;
   bool wait_for_ready = false;
@@ -120,22 +135,20 @@ struct Stream::Impl {
   std::unique_ptr<Call> call;
   bool cancelled = false;  // under call_mu
 
-  // Writer side. Configs and frames use separate messages: switching one message's oneof from
-  // frame to config would free the frame's pixel buffers, which later frames reuse.
+  // Writer side.
   std::timed_mutex write_mu;
   v1::StreamRequest config_request;  // the stream's config, sent again on each new call
+  internal::RequestWriter frames;    // serializes each frame
   bool writes_closed = false;
   bool write_failed = false;  // the current call refused a write; the reader learns why
   std::uint64_t next_sequence = 0;
   std::atomic<std::uint64_t> frames_sent{0};
   std::atomic<std::uint64_t> image_bytes_sent{0};
 
-  // Frames sent and not answered yet, in send order, and request buffers to reuse. Replies come
-  // in send order; frames the server skipped (DELIVERY_LATEST) are passed over when a later
-  // reply arrives.
+  // Frames sent and not answered yet, in send order. Replies come in send order; frames the
+  // server skipped (DELIVERY_LATEST) are passed over when a later reply arrives.
   std::mutex pending_mu;
   std::deque<Pending> pending;
-  std::vector<std::unique_ptr<v1::StreamRequest>> spare_requests;
 
   // Reader side.
   std::mutex read_mu;
@@ -171,21 +184,14 @@ struct Stream::Impl {
     auto c = std::make_unique<Call>();
     // A new call after a failure waits for a replica to be ready (bounded by the caller).
     c->context.set_wait_for_ready(wait_for_ready || failing_since.has_value());
-    c->rpc = stub->Stream(&c->context);
+    c->rpc.reset(
+        grpc::internal::ClientReaderWriterFactory<grpc::ByteBuffer, v1::StreamReply>::Create(
+            channel.get(), *stream_method, &c->context));
     return c;
   }
 
-  std::unique_ptr<v1::StreamRequest> TakeSpare() {
-    std::lock_guard<std::mutex> lock(pending_mu);
-    if (spare_requests.empty()) return std::make_unique<v1::StreamRequest>();
-    auto r = std::move(spare_requests.back());
-    spare_requests.pop_back();
-    return r;
-  }
-  void ReturnSpare(std::unique_ptr<v1::StreamRequest> r) {
-    if (r == nullptr) return;
-    std::lock_guard<std::mutex> lock(pending_mu);
-    spare_requests.push_back(std::move(r));
+  static bool WriteConfig(StreamRpc* rpc, const v1::StreamRequest& config) {
+    return rpc->Write(Serialized(config));
   }
 
   // Takes the send record of `sequence` (and passes over skipped frames before it).
@@ -194,11 +200,8 @@ struct Stream::Impl {
     auto it = std::find_if(pending.begin(), pending.end(),
                            [&](const Pending& p) { return p.sequence == sequence; });
     if (it == pending.end()) return false;
-    for (auto i = pending.begin(); i != it; ++i) {
-      if (i->request != nullptr) spare_requests.push_back(std::move(i->request));
-    }
     *out = std::move(*it);
-    if (out->request != nullptr) spare_requests.push_back(std::move(out->request));
+    out->bytes.reset();
     pending.erase(pending.begin(), it + 1);
     return true;
   }
@@ -210,28 +213,22 @@ struct Stream::Impl {
       return absl::FailedPreconditionError(
           absl::StrCat(What(), ": Send after CloseSend or Finish"));
     }
-    std::unique_ptr<v1::StreamRequest> request = TakeSpare();
-    v1::Frame* frame = request->mutable_frame();
-    if (absl::Status s = internal::FillImages(disparity, colour, frame); !s.ok()) {
-      ReturnSpare(std::move(request));
+    const std::uint64_t sequence = meta.sequence.value_or(next_sequence);
+    grpc::ByteBuffer bytes;
+    if (absl::Status s = frames.Write(disparity, colour, meta, sequence, &bytes); !s.ok()) {
       return s;
     }
-    const std::uint64_t image_bytes = internal::ImageBytes(*frame);
-    const std::uint64_t sequence = meta.sequence.value_or(next_sequence);
-    internal::FillMeta(meta, sequence, frame);
-    v1::StreamRequest* to_write = request.get();
-    const bool keep = KeepsFrames();
+    const std::uint64_t image_bytes = frames.image_bytes();
     {
-      // Recorded before the write: the reply may arrive before Write returns (gRPC has
-      // serialized the request by then, so the reader may recycle it).
-      Pending p{sequence,     meta.frame_id,  frame->capture_time_unix_ns(),
-                Clock::now(), UnixNanosNow(), keep ? std::move(request) : nullptr};
+      // Recorded before the write: the reply may arrive before Write returns.
+      Pending p{sequence, meta.frame_id, frames.frame().capture_time_unix_ns(), Clock::now(),
+                UnixNanosNow()};
+      if (KeepsFrames()) p.bytes = bytes;  // shares the slices
       std::lock_guard<std::mutex> plock(pending_mu);
       pending.push_back(std::move(p));
     }
     next_sequence = sequence + 1;
-    if (!write_failed && !call->rpc->Write(*to_write)) write_failed = true;
-    ReturnSpare(std::move(request));  // nullptr when kept
+    if (!write_failed && !call->rpc->Write(bytes)) write_failed = true;
     if (write_failed && !options.resilient) return Ended();
     // A resilient stream sends the frame again on its next call (or reports it lost).
     frames_sent.fetch_add(1, std::memory_order_relaxed);
@@ -245,7 +242,7 @@ struct Stream::Impl {
       return absl::FailedPreconditionError(absl::StrCat(What(), ": already closed by CloseSend"));
     }
     *config_request.mutable_config() = config;
-    if (!write_failed && !call->rpc->Write(config_request)) write_failed = true;
+    if (!write_failed && !WriteConfig(call->rpc.get(), config_request)) write_failed = true;
     return write_failed && !options.resilient ? Ended() : absl::OkStatus();
   }
 
@@ -290,7 +287,7 @@ struct Stream::Impl {
       // DELIVERY_LATEST frames are not sent again: the server would have dropped them anyway.
       std::lock_guard<std::mutex> lock(pending_mu);
       for (auto it = pending.begin(); it != pending.end();) {
-        if (it->request == nullptr) {
+        if (!it->bytes) {
           ++event->frames_dropped;
           it = pending.erase(it);
         } else {
@@ -313,13 +310,13 @@ struct Stream::Impl {
         continue;
       }
       std::unique_ptr<Call> next = StartCall();
-      bool ok = next->rpc != nullptr && next->rpc->Write(config_request);
+      bool ok = next->rpc != nullptr && WriteConfig(next->rpc.get(), config_request);
       std::uint64_t resent = 0;
       {
         std::lock_guard<std::mutex> lock(pending_mu);
         for (const Pending& p : pending) {
           if (!ok) break;
-          ok = next->rpc->Write(*p.request);
+          ok = next->rpc->Write(*p.bytes);
           ++resent;
         }
       }
@@ -361,7 +358,6 @@ struct Stream::Impl {
       r.times.send_unix_ns = p.send_unix_ns;
       r.frames_dropped = dropped_before + dropped_this_call;
       lost.push_back(std::move(r));
-      if (p.request != nullptr) spare_requests.push_back(std::move(p.request));
     }
     pending.clear();
   }
@@ -643,8 +639,9 @@ absl::StatusOr<std::unique_ptr<Stream>> Client::OpenStream(const StreamConfig& c
                      impl_->target, " within ", impl_->options.connect_timeout.count(), " ms"));
   }
   auto impl = std::make_unique<Stream::Impl>();
-  impl->stub = impl_->stub;
   impl->channel = impl_->channel;
+  impl->stream_method.emplace(StreamMethodName(), grpc::internal::RpcMethod::BIDI_STREAMING,
+                              impl->channel);
   impl->target = impl_->target;
   impl->decode_clouds = impl_->options.decode_clouds;
   impl->wait_for_ready = impl_->options.wait_for_ready;
@@ -654,7 +651,7 @@ absl::StatusOr<std::unique_ptr<Stream>> Client::OpenStream(const StreamConfig& c
   if (impl->call->rpc == nullptr) {
     return absl::InternalError(absl::StrCat("cannot start a stream to ", impl_->target));
   }
-  if (!impl->call->rpc->Write(impl->config_request)) {
+  if (!Stream::Impl::WriteConfig(impl->call->rpc.get(), impl->config_request)) {
     // The call is dead before it began; its status says why (e.g. UNAVAILABLE).
     absl::Status s = FromGrpc(impl->call->rpc->Finish(), impl->What());
     impl->finished = true;  // the destructor must not Finish twice

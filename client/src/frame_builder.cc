@@ -3,6 +3,7 @@
 #include <chrono>
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include "absl/strings/str_cat.h"
 #include "cloudcast/proto/convert.h"
@@ -37,27 +38,25 @@ absl::Status CheckEncoded(const EncodedImage& image, const char* field) {
 
 }  // namespace
 
-absl::Status FillImages(const DisparityInput& disparity, const ColorInput& colour,
-                        v1::Frame* frame) {
-  v1::DisparityImage* d = frame->mutable_disparity();
+absl::Status FillDisparity(const DisparityInput& disparity, v1::DisparityImage* d) {
   if (const auto* view = std::get_if<DisparityView>(&disparity)) {
-    if (absl::Status s = convert::ToProto(*view, "disparity", d->mutable_raw()); !s.ok()) return s;
-  } else if (const auto* c = std::get_if<CompressedDisparityView>(&disparity)) {
-    if (absl::Status s =
-            convert::ToProto(c->view, c->compression, "disparity", d->mutable_compressed());
-        !s.ok()) {
-      return s;
-    }
-  } else if (const auto* p = std::get_if<PrecompressedDisparity>(&disparity)) {
+    return convert::ToProto(*view, "disparity", d->mutable_raw());
+  }
+  if (const auto* c = std::get_if<CompressedDisparityView>(&disparity)) {
+    return convert::ToProto(c->view, c->compression, "disparity", d->mutable_compressed());
+  }
+  if (const auto* p = std::get_if<PrecompressedDisparity>(&disparity)) {
     if (p->message == nullptr) return absl::InvalidArgumentError("disparity message is null");
     *d->mutable_compressed() = *p->message;
-  } else {
-    const auto& encoded = std::get<EncodedImage>(disparity);
-    if (absl::Status s = CheckEncoded(encoded, "disparity"); !s.ok()) return s;
-    d->set_encoded(encoded.bytes.data(), encoded.bytes.size());
+    return absl::OkStatus();
   }
+  const auto& encoded = std::get<EncodedImage>(disparity);
+  if (absl::Status s = CheckEncoded(encoded, "disparity"); !s.ok()) return s;
+  d->set_encoded(encoded.bytes.data(), encoded.bytes.size());
+  return absl::OkStatus();
+}
 
-  v1::ColorImage* c = frame->mutable_colour();
+absl::Status FillColour(const ColorInput& colour, v1::ColorImage* c) {
   if (const auto* view = std::get_if<ColorView>(&colour)) {
     return convert::ToProto(*view, "colour", c->mutable_raw());
   }
@@ -79,6 +78,12 @@ absl::Status FillImages(const DisparityInput& disparity, const ColorInput& colou
   return absl::OkStatus();
 }
 
+absl::Status FillImages(const DisparityInput& disparity, const ColorInput& colour,
+                        v1::Frame* frame) {
+  if (absl::Status s = FillDisparity(disparity, frame->mutable_disparity()); !s.ok()) return s;
+  return FillColour(colour, frame->mutable_colour());
+}
+
 std::uint64_t ImageBytes(const v1::Frame& frame) {
   const v1::DisparityImage& d = frame.disparity();
   const v1::ColorImage& c = frame.colour();
@@ -91,6 +96,103 @@ void FillMeta(const FrameMeta& meta, std::uint64_t sequence, v1::Frame* frame) {
   frame->set_capture_time_unix_ns(meta.capture_time_unix_ns != 0 ? meta.capture_time_unix_ns
                                                                  : UnixNanosNow());
   frame->set_frame_id(meta.frame_id);
+}
+
+namespace {
+
+void PutVarint(std::uint64_t v, std::string* out) {
+  while (v >= 0x80) {
+    out->push_back(static_cast<char>((v & 0x7f) | 0x80));
+    v >>= 7;
+  }
+  out->push_back(static_cast<char>(v));
+}
+
+std::size_t VarintSize(std::uint64_t v) {
+  std::size_t n = 1;
+  while (v >= 0x80) v >>= 7, ++n;
+  return n;
+}
+
+// Appends frame { <image_field> { raw { pixels: <n bytes> } } } up to the pixels themselves.
+void PutPixelsHeader(int image_field, std::size_t n, std::string* out) {
+  constexpr int kLen = 2;
+  const int fields[4] = {v1::StreamRequest::kFrameFieldNumber, image_field,
+                         v1::DisparityImage::kRawFieldNumber, v1::RawDisparity::kPixelsFieldNumber};
+  static_assert(static_cast<int>(v1::DisparityImage::kRawFieldNumber) ==
+                    static_cast<int>(v1::ColorImage::kRawFieldNumber) &&
+                static_cast<int>(v1::RawDisparity::kPixelsFieldNumber) ==
+                    static_cast<int>(v1::RawColor::kPixelsFieldNumber));
+  // Each length covers the headers inside it and the pixels.
+  std::uint64_t inner[4];
+  inner[3] = n;
+  for (int j = 2; j >= 0; --j) {
+    inner[j] = VarintSize((fields[j + 1] << 3) | kLen) + VarintSize(inner[j + 1]) + inner[j + 1];
+  }
+  for (int j = 0; j < 4; ++j) {
+    PutVarint((static_cast<std::uint64_t>(fields[j]) << 3) | kLen, out);
+    PutVarint(inner[j], out);
+  }
+}
+
+// The rows of `view`, packed, in a slice of their own (the one copy).
+template <typename View>
+grpc::Slice PixelSlice(const View& view) {
+  grpc::Slice slice(convert::PackedBytes(view));
+  convert::PackRows(view, const_cast<std::uint8_t*>(slice.begin()));
+  return slice;
+}
+
+}  // namespace
+
+absl::Status RequestWriter::Write(const DisparityInput& disparity, const ColorInput& colour,
+                                  const FrameMeta& meta, std::uint64_t sequence,
+                                  grpc::ByteBuffer* out) {
+  v1::Frame* frame = request_.mutable_frame();
+  // Raw views get every field but their pixels, which go in slices of their own below.
+  const auto* disparity_view = std::get_if<DisparityView>(&disparity);
+  const auto* colour_view = std::get_if<ColorView>(&colour);
+  if (absl::Status s =
+          disparity_view != nullptr
+              ? convert::ToProtoWithoutPixels(*disparity_view, "disparity",
+                                              frame->mutable_disparity()->mutable_raw())
+              : FillDisparity(disparity, frame->mutable_disparity());
+      !s.ok()) {
+    return s;
+  }
+  if (absl::Status s = colour_view != nullptr
+                           ? convert::ToProtoWithoutPixels(*colour_view, "colour",
+                                                           frame->mutable_colour()->mutable_raw())
+                           : FillColour(colour, frame->mutable_colour());
+      !s.ok()) {
+    return s;
+  }
+  FillMeta(meta, sequence, frame);
+  image_bytes_ = ImageBytes(*frame);
+
+  head_.clear();
+  request_.AppendToString(&head_);
+  std::vector<grpc::Slice> slices;
+  if (disparity_view != nullptr) {
+    grpc::Slice pixels = PixelSlice(*disparity_view);
+    PutPixelsHeader(v1::Frame::kDisparityFieldNumber, pixels.size(), &head_);
+    slices.emplace_back(head_);
+    head_.clear();
+    image_bytes_ += pixels.size();
+    slices.push_back(std::move(pixels));
+  }
+  if (colour_view != nullptr) {
+    grpc::Slice pixels = PixelSlice(*colour_view);
+    PutPixelsHeader(v1::Frame::kColourFieldNumber, pixels.size(), &head_);
+    slices.emplace_back(head_);
+    head_.clear();
+    image_bytes_ += pixels.size();
+    slices.push_back(std::move(pixels));
+  }
+  if (!head_.empty()) slices.emplace_back(head_);
+  grpc::ByteBuffer bytes(slices.data(), slices.size());
+  out->Swap(&bytes);
+  return absl::OkStatus();
 }
 
 }  // namespace internal

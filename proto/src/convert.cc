@@ -423,31 +423,41 @@ v1::StreamConfig MakeStreamConfig(const PipelineOptions& options) {
 
 namespace {
 
-// Copies the view's rows into `out`, packed.
 template <typename View>
-void CopyRows(const View& view, std::string* out) {
+std::size_t PackedSize(const View& view) {
+  return std::size_t{view.width} * BytesPerPixel(view.encoding) * view.height;
+}
+
+// Copies the view's rows to `dst`, packed.
+template <typename View>
+void CopyRows(const View& view, void* dst) {
   const std::size_t row_bytes = std::size_t{view.width} * BytesPerPixel(view.encoding);
-  const std::size_t total = row_bytes * view.height;
-  // Same-size frames keep the size, so resize() neither allocates nor zero-fills after the first.
-  out->resize(total);
-  char* dst = out->data();
+  auto* out = static_cast<char*>(dst);
   if (view.rows == nullptr && view.stride_bytes == row_bytes) {
-    std::memcpy(dst, view.data, total);
+    std::memcpy(out, view.data, row_bytes * view.height);
     return;
   }
   for (std::uint32_t v = 0; v < view.height; ++v) {
-    std::memcpy(dst + v * row_bytes, view.row(v), row_bytes);
+    std::memcpy(out + v * row_bytes, view.row(v), row_bytes);
   }
 }
 
 template <typename View, typename Raw>
-absl::Status FillRaw(const View& view, std::string_view field, Raw* raw) {
+absl::Status FillRawHeader(const View& view, std::string_view field, Raw* raw) {
   if (absl::Status s = ValidateView(view, kNoLimits, field); !s.ok()) return s;
   raw->set_encoding(ToProto(view.encoding));
   raw->set_width(view.width);
   raw->set_height(view.height);
   raw->set_row_stride(0);
-  CopyRows(view, raw->mutable_pixels());
+  return absl::OkStatus();
+}
+
+template <typename View, typename Raw>
+absl::Status FillRaw(const View& view, std::string_view field, Raw* raw) {
+  if (absl::Status s = FillRawHeader(view, field, raw); !s.ok()) return s;
+  // Same-size frames keep the size, so resize() neither allocates nor zero-fills after the first.
+  raw->mutable_pixels()->resize(PackedSize(view));
+  CopyRows(view, raw->mutable_pixels()->data());
   return absl::OkStatus();
 }
 
@@ -460,6 +470,23 @@ absl::Status ToProto(const DisparityView& view, std::string_view field, v1::RawD
 absl::Status ToProto(const ColorView& view, std::string_view field, v1::RawColor* raw) {
   return FillRaw(view, field, raw);
 }
+
+absl::Status ToProtoWithoutPixels(const DisparityView& view, std::string_view field,
+                                  v1::RawDisparity* raw) {
+  raw->clear_pixels();
+  return FillRawHeader(view, field, raw);
+}
+
+absl::Status ToProtoWithoutPixels(const ColorView& view, std::string_view field,
+                                  v1::RawColor* raw) {
+  raw->clear_pixels();
+  return FillRawHeader(view, field, raw);
+}
+
+std::size_t PackedBytes(const DisparityView& view) { return PackedSize(view); }
+std::size_t PackedBytes(const ColorView& view) { return PackedSize(view); }
+void PackRows(const DisparityView& view, void* out) { CopyRows(view, out); }
+void PackRows(const ColorView& view, void* out) { CopyRows(view, out); }
 
 absl::Status BgraToProto(const void* data, std::size_t size_bytes, std::uint32_t width,
                          std::uint32_t height, std::size_t stride_bytes, std::string_view field,

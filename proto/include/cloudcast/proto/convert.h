@@ -93,6 +93,17 @@ v1::StreamConfig MakeStreamConfig(const PipelineOptions& options);
 // name it under `field`. `raw`'s pixel buffer keeps its capacity from frame to frame.
 absl::Status ToProto(const DisparityView& view, std::string_view field, v1::RawDisparity* raw);
 absl::Status ToProto(const ColorView& view, std::string_view field, v1::RawColor* raw);
+// The same, in two steps, for a sender that writes the pixels itself (the client library, straight
+// into a gRPC slice, so that they are copied once): ToProtoWithoutPixels checks the view and fills
+// every field of `raw` but `pixels`, which it clears; PackRows writes PackedBytes(view) bytes of
+// tightly packed rows to `out`.
+absl::Status ToProtoWithoutPixels(const DisparityView& view, std::string_view field,
+                                  v1::RawDisparity* raw);
+absl::Status ToProtoWithoutPixels(const ColorView& view, std::string_view field, v1::RawColor* raw);
+std::size_t PackedBytes(const DisparityView& view);
+std::size_t PackedBytes(const ColorView& view);
+void PackRows(const DisparityView& view, void* out);
+void PackRows(const ColorView& view, void* out);
 // Four-channel B, G, R, A rows (an OpenCV CV_8UC4 Mat) sent as BGR8, dropping the alpha while the
 // rows are copied: the protocol has no BGRA encoding, and the server ignores alpha anyway.
 absl::Status BgraToProto(const void* data, std::size_t size_bytes, std::uint32_t width,
