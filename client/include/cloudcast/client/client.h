@@ -38,9 +38,9 @@ class Stream {
   Stream(const Stream&) = delete;
   Stream& operator=(const Stream&) = delete;
 
-  // Sends one frame. Raw pixels are copied once, straight into the (reused) request, rows packed
-  // tightly whatever the input stride; encoded images are copied as they are. The inputs may be
-  // reused as soon as Send returns. Blocks while gRPC flow control holds the stream back.
+  // Sends one frame. Raw pixels are copied once, straight into the buffer gRPC sends from, rows
+  // packed tightly whatever the input stride; encoded images are copied as they are. The inputs may
+  // be reused as soon as Send returns. Blocks while gRPC flow control holds the stream back.
   //
   // Errors: INVALID_ARGUMENT for an input that cannot be read safely (null data, a buffer
   // smaller than its rows, a stride under the row size); FAILED_PRECONDITION after CloseSend;
