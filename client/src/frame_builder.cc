@@ -7,6 +7,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "cloudcast/proto/convert.h"
+#include "cloudcast/proto/wire.h"
 
 namespace cloudcast::client {
 
@@ -100,39 +101,16 @@ void FillMeta(const FrameMeta& meta, std::uint64_t sequence, v1::Frame* frame) {
 
 namespace {
 
-void PutVarint(std::uint64_t v, std::string* out) {
-  while (v >= 0x80) {
-    out->push_back(static_cast<char>((v & 0x7f) | 0x80));
-    v >>= 7;
-  }
-  out->push_back(static_cast<char>(v));
-}
-
-std::size_t VarintSize(std::uint64_t v) {
-  std::size_t n = 1;
-  while (v >= 0x80) v >>= 7, ++n;
-  return n;
-}
-
 // Appends frame { <image_field> { raw { pixels: <n bytes> } } } up to the pixels themselves.
 void PutPixelsHeader(int image_field, std::size_t n, std::string* out) {
-  constexpr int kLen = 2;
-  const int fields[4] = {v1::StreamRequest::kFrameFieldNumber, image_field,
-                         v1::DisparityImage::kRawFieldNumber, v1::RawDisparity::kPixelsFieldNumber};
   static_assert(static_cast<int>(v1::DisparityImage::kRawFieldNumber) ==
                     static_cast<int>(v1::ColorImage::kRawFieldNumber) &&
                 static_cast<int>(v1::RawDisparity::kPixelsFieldNumber) ==
                     static_cast<int>(v1::RawColor::kPixelsFieldNumber));
-  // Each length covers the headers inside it and the pixels.
-  std::uint64_t inner[4];
-  inner[3] = n;
-  for (int j = 2; j >= 0; --j) {
-    inner[j] = VarintSize((fields[j + 1] << 3) | kLen) + VarintSize(inner[j + 1]) + inner[j + 1];
-  }
-  for (int j = 0; j < 4; ++j) {
-    PutVarint((static_cast<std::uint64_t>(fields[j]) << 3) | kLen, out);
-    PutVarint(inner[j], out);
-  }
+  const std::uint64_t path[4] = {
+      v1::StreamRequest::kFrameFieldNumber, static_cast<std::uint64_t>(image_field),
+      v1::DisparityImage::kRawFieldNumber, v1::RawDisparity::kPixelsFieldNumber};
+  wire::PutNestedHeaders(path, 4, n, out);
 }
 
 // The rows of `view`, packed, in a slice of their own (the one copy).
@@ -173,22 +151,17 @@ absl::Status RequestWriter::Write(const DisparityInput& disparity, const ColorIn
   head_.clear();
   request_.AppendToString(&head_);
   std::vector<grpc::Slice> slices;
-  if (disparity_view != nullptr) {
-    grpc::Slice pixels = PixelSlice(*disparity_view);
-    PutPixelsHeader(v1::Frame::kDisparityFieldNumber, pixels.size(), &head_);
+  // The bytes so far, the pixels' headers, then the pixels in a slice of their own.
+  auto add_pixels = [&](const auto& view, int image_field) {
+    grpc::Slice pixels = PixelSlice(view);
+    PutPixelsHeader(image_field, pixels.size(), &head_);
     slices.emplace_back(head_);
     head_.clear();
     image_bytes_ += pixels.size();
     slices.push_back(std::move(pixels));
-  }
-  if (colour_view != nullptr) {
-    grpc::Slice pixels = PixelSlice(*colour_view);
-    PutPixelsHeader(v1::Frame::kColourFieldNumber, pixels.size(), &head_);
-    slices.emplace_back(head_);
-    head_.clear();
-    image_bytes_ += pixels.size();
-    slices.push_back(std::move(pixels));
-  }
+  };
+  if (disparity_view != nullptr) add_pixels(*disparity_view, v1::Frame::kDisparityFieldNumber);
+  if (colour_view != nullptr) add_pixels(*colour_view, v1::Frame::kColourFieldNumber);
   if (!head_.empty()) slices.emplace_back(head_);
   grpc::ByteBuffer bytes(slices.data(), slices.size());
   out->Swap(&bytes);

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cstdint>
 
+#include "cloudcast/proto/wire.h"
 #include "google/protobuf/io/zero_copy_stream.h"
 #include "grpcpp/support/proto_buffer_reader.h"
 
@@ -22,7 +23,10 @@ static_assert(N(v1::RawDisparity::kPixelsFieldNumber) == N(v1::RawColor::kPixels
 enum class Level { kRequest, kFrame, kImage, kRaw };
 enum class Plane { kNone, kDisparity, kColour };
 
-constexpr int kWireVarint = 0, kWireFixed64 = 1, kWireLen = 2, kWireFixed32 = 5;
+using wire::kWireFixed32;
+using wire::kWireFixed64;
+using wire::kWireLen;
+using wire::kWireVarint;
 constexpr int kMaxDepth = 3;  // request > frame > image > raw
 
 // What a field is to the walk.
@@ -52,20 +56,6 @@ Role RoleOf(Level level, std::uint64_t number, int oneof_sibling) {
       return number == v1::RawDisparity::kPixelsFieldNumber ? Role::kPixels : Role::kOther;
   }
   return Role::kOther;
-}
-
-std::size_t VarintSize(std::uint64_t v) {
-  std::size_t n = 1;
-  while (v >= 0x80) v >>= 7, ++n;
-  return n;
-}
-
-void PutVarint(std::uint64_t v, std::string* out) {
-  while (v >= 0x80) {
-    out->push_back(static_cast<char>((v & 0x7f) | 0x80));
-    v >>= 7;
-  }
-  out->push_back(static_cast<char>(v));
 }
 
 // Reads a message from pieces, for protobuf.
@@ -269,19 +259,9 @@ class RequestReader::Walk {
   void Emit(std::size_t from, std::size_t to, bool even_if_empty) {
     if (from == to && !even_if_empty) return;
     if (depth_ > 0) {
-      // Lengths from the inside out: each header's length covers the headers inside it.
-      std::uint64_t inner[kMaxDepth + 1];
-      inner[depth_] = to - from;
-      for (int j = depth_ - 1; j >= 0; --j) {
-        const std::uint64_t tag = (path_[j] << 3) | kWireLen;
-        inner[j] = VarintSize(tag) + VarintSize(inner[j + 1]) + inner[j + 1];
-      }
       std::string& h = reader_->headers_;
       const std::size_t start = h.size();
-      for (int j = 0; j < depth_; ++j) {
-        PutVarint((path_[j] << 3) | kWireLen, &h);
-        PutVarint(inner[j + 1], &h);
-      }
+      wire::PutNestedHeaders(path_, depth_, to - from, &h);
       segments_.push_back({true, start, h.size()});
     }
     if (from < to) segments_.push_back({false, from, to});
