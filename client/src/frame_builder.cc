@@ -3,7 +3,6 @@
 #include <chrono>
 #include <cstdint>
 #include <string>
-#include <vector>
 
 #include "absl/strings/str_cat.h"
 #include "cloudcast/proto/convert.h"
@@ -150,20 +149,21 @@ absl::Status RequestWriter::Write(const DisparityInput& disparity, const ColorIn
 
   head_.clear();
   request_.AppendToString(&head_);
-  std::vector<grpc::Slice> slices;
+  grpc::Slice slices[5];  // at most: head, disparity pixels, their header, colour pixels, tail
+  std::size_t n = 0;
   // The bytes so far, the pixels' headers, then the pixels in a slice of their own.
   auto add_pixels = [&](const auto& view, int image_field) {
     grpc::Slice pixels = PixelSlice(view);
     PutPixelsHeader(image_field, pixels.size(), &head_);
-    slices.emplace_back(head_);
+    slices[n++] = grpc::Slice(head_);
     head_.clear();
     image_bytes_ += pixels.size();
-    slices.push_back(std::move(pixels));
+    slices[n++] = std::move(pixels);
   };
   if (disparity_view != nullptr) add_pixels(*disparity_view, v1::Frame::kDisparityFieldNumber);
   if (colour_view != nullptr) add_pixels(*colour_view, v1::Frame::kColourFieldNumber);
-  if (!head_.empty()) slices.emplace_back(head_);
-  grpc::ByteBuffer bytes(slices.data(), slices.size());
+  if (!head_.empty()) slices[n++] = grpc::Slice(head_);
+  grpc::ByteBuffer bytes(slices, n);
   out->Swap(&bytes);
   return absl::OkStatus();
 }

@@ -119,9 +119,14 @@ class PiecesInput final : public google::protobuf::io::ZeroCopyInputStream {
 class RequestReader::Walk {
  public:
   Walk(const std::vector<grpc::Slice>& slices, int oneof_sibling, RequestReader* reader)
-      : oneof_sibling_(oneof_sibling), reader_(reader) {
-    starts_.reserve(slices.size() + 1);
-    views_.reserve(slices.size());
+      : oneof_sibling_(oneof_sibling),
+        reader_(reader),
+        views_(reader->slice_views_),
+        starts_(reader->slice_starts_),
+        segments_(reader->segments_) {
+    views_.clear();
+    starts_.clear();
+    segments_.clear();
     std::size_t at = 0;
     for (const grpc::Slice& s : slices) {
       starts_.push_back(at);
@@ -147,10 +152,7 @@ class RequestReader::Walk {
   }
 
  private:
-  struct Segment {
-    bool header;  // [from, to) of headers_; otherwise of the message
-    std::size_t from, to;
-  };
+  using Segment = RequestReader::Segment;
 
   unsigned char At(std::size_t pos) {
     while (pos >= starts_[slice_ + 1]) ++slice_;
@@ -281,12 +283,12 @@ class RequestReader::Walk {
 
   const int oneof_sibling_;
   RequestReader* const reader_;
-  std::vector<std::string_view> views_;
-  std::vector<std::size_t> starts_;  // of each slice, and the message's end
+  std::vector<std::string_view>& views_;
+  std::vector<std::size_t>& starts_;  // of each slice, and the message's end
+  std::vector<Segment>& segments_;
   std::size_t slice_ = 0;
   std::uint64_t path_[kMaxDepth] = {};
   int depth_ = 0;
-  std::vector<Segment> segments_;
 };
 
 bool RequestReader::Parse(grpc::ByteBuffer* bytes, v1::StreamRequest* message) {

@@ -70,6 +70,15 @@ class RequestReader {
   // The message without its pixels: pieces of the slices and headers made up for them.
   std::string headers_;
   std::vector<std::string_view> rest_;
+  // The walk's scratch, kept so that a warm reader allocates nothing per message: each slice's
+  // bytes and start, and what rest_ is made of ([from, to) of headers_ or of the message).
+  struct Segment {
+    bool header;
+    std::size_t from, to;
+  };
+  std::vector<std::string_view> slice_views_;
+  std::vector<std::size_t> slice_starts_;
+  std::vector<Segment> segments_;
 };
 
 }  // namespace cloudcast::server
