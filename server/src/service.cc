@@ -143,8 +143,8 @@ class CloudCastService::StreamReactor final
       std::lock_guard<std::mutex> lock(mu_);
       spdlog::info("stream from {} done: {} replies, {} dropped", peer_, queue_.written(),
                    queue_.dropped());
+      ticket_.Release();  // already released where Finish was decided, unless none was
     }
-    ticket_.Release();
     service_->Unregister(this);
     Unref();
   }
@@ -236,7 +236,13 @@ class CloudCastService::StreamReactor final
       } else if (queue_.Empty() && !read_open_) {
         ops.finish = grpc::Status::OK;
       }
-      if (ops.finish) finished_ = true;
+      if (ops.finish) {
+        finished_ = true;
+        // The stream's place is free once its end is decided: a client that has its status and
+        // opens the next stream at once must not be refused for this one (OnDone, where the
+        // ticket went before, may run after the client already holds the status).
+        ticket_.Release();
+      }
     }
     // Read the next message when there is room for it.
     if (reading_ == nullptr && !finished_ && read_open_ && !closing_ && !broken_ && !ending_ &&
