@@ -34,36 +34,29 @@ absl::Status DecodeChecked(std::string_view bytes, const char* field, const Limi
 // Points view->rows at the rows of `bytes` (the view's size was checked against bytes.size).
 // A row is read in place when it and one byte after it lie in one piece (the kernels may load a
 // 3-byte pixel with 4 bytes); otherwise it is copied into `table->bounce`, with a byte to spare.
+// Rows (with their spare byte) do not overlap, so each piece's end is crossed by one row at most:
+// the bounce buffer needs a slot per piece.
 template <typename View>
 void GatherRows(const ScatteredBytes& bytes, RowTable* table, View* view) {
   const std::size_t row_bytes = std::size_t{view->width} * BytesPerPixel(view->encoding);
-  table->rows.resize(view->height);
-  // Pass 1: rows in place, and how many need copying.
-  std::size_t piece = 0, piece_start = 0, copied = 0;
-  for (std::uint32_t v = 0; v < view->height; ++v) {
-    const std::size_t at = std::size_t{v} * view->stride_bytes;
-    while (at >= piece_start + bytes.pieces[piece].size()) {
-      piece_start += bytes.pieces[piece++].size();
-    }
-    const std::size_t offset = at - piece_start;
-    if (offset + row_bytes < bytes.pieces[piece].size()) {
-      table->rows[v] = reinterpret_cast<const std::uint8_t*>(bytes.pieces[piece].data()) + offset;
-    } else {
-      table->rows[v] = nullptr;
-      ++copied;
-    }
-  }
-  // Pass 2: the straddling rows, gathered from the pieces they span.
   const std::size_t slot = row_bytes + 1;
-  if (table->bounce.size() < copied * slot) table->bounce.resize(copied * slot);
+  if (table->bounce.size() < bytes.pieces.size() * slot) {
+    table->bounce.resize(bytes.pieces.size() * slot);
+  }
+  table->rows.resize(view->height);
   std::uint8_t* next = table->bounce.data();
-  piece = 0, piece_start = 0;
+  std::size_t piece = 0, piece_start = 0;
   for (std::uint32_t v = 0; v < view->height; ++v) {
-    if (table->rows[v] != nullptr) continue;
     std::size_t at = std::size_t{v} * view->stride_bytes;
     while (at >= piece_start + bytes.pieces[piece].size()) {
       piece_start += bytes.pieces[piece++].size();
     }
+    const std::string_view here = bytes.pieces[piece];
+    if (at - piece_start + row_bytes < here.size()) {
+      table->rows[v] = reinterpret_cast<const std::uint8_t*>(here.data()) + (at - piece_start);
+      continue;
+    }
+    // Across pieces: gathered from those it spans.
     table->rows[v] = next;
     std::size_t p = piece, p_start = piece_start, left = row_bytes;
     while (left > 0) {
