@@ -1,11 +1,10 @@
 #include "cloudcast/load/probe.h"
 
-#include <grpcpp/generic/generic_stub.h>
 #include <grpcpp/grpcpp.h>
+#include <grpcpp/impl/codegen/client_unary_call.h>
+#include <grpcpp/impl/codegen/rpc_method.h>
 #include <spdlog/fmt/fmt.h>
 
-#include <condition_variable>
-#include <mutex>
 #include <vector>
 
 namespace cloudcast::load {
@@ -16,7 +15,6 @@ absl::Status ProbeHealth(const std::string& target, const std::string& service,
   auto created = client::CreateChannel(target, security, grpc::ChannelArguments());
   if (!created.ok()) return created.status();
   std::shared_ptr<grpc::Channel> channel = *std::move(created);
-  grpc::GenericStub stub(channel);
   // HealthCheckRequest { string service = 1; }
   std::string request(1, static_cast<char>((1 << 3) | 2));
   request += static_cast<char>(service.size());  // service names are short (< 128 bytes)
@@ -26,21 +24,13 @@ absl::Status ProbeHealth(const std::string& target, const std::string& service,
   grpc::ClientContext context;
   context.set_deadline(std::chrono::system_clock::now() + timeout);
   context.set_wait_for_ready(true);  // a replica still starting is waited for, up to the deadline
-  std::mutex mu;
-  std::condition_variable cv;
-  bool done = false;
-  grpc::Status status;
-  stub.UnaryCall(&context, "/grpc.health.v1.Health/Check", grpc::StubOptions(), &in, &out,
-                 [&](grpc::Status s) {
-                   std::lock_guard<std::mutex> lock(mu);
-                   status = std::move(s);
-                   done = true;
-                   cv.notify_all();
-                 });
-  {
-    std::unique_lock<std::mutex> lock(mu);
-    cv.wait(lock, [&] { return done; });
-  }
+  // A blocking call on this thread, as the generated stubs make it (with ByteBuffers as the
+  // messages): GenericStub only offers the callback form, whose completion runs on a gRPC thread
+  // that still holds the call after the waiter has moved on.
+  const grpc::internal::RpcMethod method("/grpc.health.v1.Health/Check",
+                                         grpc::internal::RpcMethod::NORMAL_RPC, channel);
+  const grpc::Status status = grpc::internal::BlockingUnaryCall<grpc::ByteBuffer, grpc::ByteBuffer>(
+      channel.get(), method, &context, in, &out);
   if (!status.ok()) {
     return absl::UnavailableError(fmt::format("{}: health check of '{}' failed: {} {}", target,
                                               service, static_cast<int>(status.error_code()),
