@@ -8,7 +8,7 @@
 //               libspng, JPEG colour.
 #include <lz4.h>
 #include <spng.h>
-#define ZSTD_STATIC_LINKING_ONLY  // ZSTD_c_literalCompressionMode, for one candidate
+#define ZSTD_STATIC_LINKING_ONLY  // ZSTD_c_literalCompressionMode, for the tuned candidates
 #include <time.h>
 #include <zstd.h>
 
@@ -215,20 +215,50 @@ std::vector<Candidate> Candidates() {
     }
   }
 
-  // zstd with uncompressed literals (no Huffman stage): faster to decode, larger.
-  for (int level : {1, -1}) {
+  // zstd with parameters beyond the level, on up-predicted planes: stored literals (no Huffman
+  // stage: faster to decode, larger) and longer minimum matches (fewer sequences to decode).
+  struct Tuned {
+    std::string name, note;
+    int level;
+    std::function<void(ZSTD_CCtx*)> set;
+  };
+  const std::vector<Tuned> tuned = {
+      {"zstd1-up-rawlit", "literals stored, not Huffman-coded", 1,
+       [](ZSTD_CCtx* z) {
+         ZSTD_CCtx_setParameter(z, ZSTD_c_literalCompressionMode, ZSTD_ps_disable);
+       }},
+      {"zstd-1-up-rawlit", "literals stored, not Huffman-coded", -1,
+       [](ZSTD_CCtx* z) {
+         ZSTD_CCtx_setParameter(z, ZSTD_c_literalCompressionMode, ZSTD_ps_disable);
+       }},
+      {"zstd1-up-mm5", "minimum match 5", 1,
+       [](ZSTD_CCtx* z) { ZSTD_CCtx_setParameter(z, ZSTD_c_minMatch, 5); }},
+      {"zstd1-up-mm6", "minimum match 6", 1,
+       [](ZSTD_CCtx* z) { ZSTD_CCtx_setParameter(z, ZSTD_c_minMatch, 6); }},
+      {"zstd1-up-mm7", "minimum match 7", 1,
+       [](ZSTD_CCtx* z) { ZSTD_CCtx_setParameter(z, ZSTD_c_minMatch, 7); }},
+      {"zstd1-up-dfast", "double-fast matcher", 1,
+       [](ZSTD_CCtx* z) { ZSTD_CCtx_setParameter(z, ZSTD_c_strategy, ZSTD_dfast); }},
+      {"zstd1-up-dfast-mm6", "double-fast matcher, minimum match 6", 1,
+       [](ZSTD_CCtx* z) {
+         ZSTD_CCtx_setParameter(z, ZSTD_c_strategy, ZSTD_dfast);
+         ZSTD_CCtx_setParameter(z, ZSTD_c_minMatch, 6);
+       }},
+  };
+  for (const Tuned& t : tuned) {
     auto cctx = std::shared_ptr<ZSTD_CCtx>(ZSTD_createCCtx(), ZSTD_freeCCtx);
     auto dctx = std::shared_ptr<ZSTD_DCtx>(ZSTD_createDCtx(), ZSTD_freeDCtx);
     auto buf = std::make_shared<std::vector<std::uint8_t>>();
     c.push_back(Row(
-        "zstd" + std::to_string(level) + "-up-rawlit", "literals stored, not Huffman-coded",
+        t.name, t.note,
         [=](const Frame& f, Encoded* e) {
           auto one = [&](const void* data, const PlaneLayout& l, std::string* out) {
             buf->resize(l.bytes());
             ApplyPredictor(Predictor::kUp, l, data, l.width * l.bpp, buf->data());
             ZSTD_CCtx_reset(cctx.get(), ZSTD_reset_session_and_parameters);
-            ZSTD_CCtx_setParameter(cctx.get(), ZSTD_c_compressionLevel, level);
-            ZSTD_CCtx_setParameter(cctx.get(), ZSTD_c_literalCompressionMode, ZSTD_ps_disable);
+            ZSTD_CCtx_setParameter(cctx.get(), ZSTD_c_compressionLevel, t.level);
+            ZSTD_CCtx_setParameter(cctx.get(), ZSTD_c_checksumFlag, 1);  // as the uplink's
+            t.set(cctx.get());
             out->resize(ZSTD_compressBound(l.bytes()));
             out->resize(
                 ZSTD_compress2(cctx.get(), out->data(), out->size(), buf->data(), l.bytes()));

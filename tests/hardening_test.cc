@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 #include <netinet/in.h>
 #include <sys/socket.h>
+#include <sys/time.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -15,6 +16,7 @@
 #include <fstream>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -242,7 +244,9 @@ int IdleConnection(int port, const std::string& partial = "") {
   addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
   addr.sin_port = htons(static_cast<std::uint16_t>(port));
   EXPECT_EQ(connect(fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr), 0);
-  if (!partial.empty()) EXPECT_GT(write(fd, partial.data(), partial.size()), 0);
+  if (!partial.empty()) {
+    EXPECT_GT(write(fd, partial.data(), partial.size()), 0);
+  }
   return fd;
 }
 
@@ -317,6 +321,50 @@ TEST_F(HardeningTest, ShutdownDoesNotWaitForIdleClients) {
   shutdown.join();
   close(silent);
   close(preface);
+}
+
+// The server lets clients send HTTP/2 DATA frames of up to 256 KB, not the protocol's default
+// 16 KB (server.cc: a raw frame then reaches it in a quarter of the slices). Read from the
+// SETTINGS frame it sends a raw HTTP/2 connection.
+TEST_F(HardeningTest, ClientsMaySendHttp2FramesOf256KB) {
+  const int fd = IdleConnection(
+      server_->port(), std::string("PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n\0\0\0\4\0\0\0\0\0", 33));
+  timeval timeout{10, 0};  // a server that sends no SETTINGS fails the reads below
+  ASSERT_EQ(setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &timeout, sizeof timeout), 0);
+  std::string in;
+  auto read_at_least = [&](std::size_t n) {
+    char buf[4096];
+    while (in.size() < n) {
+      const ssize_t got = read(fd, buf, sizeof buf);
+      if (got <= 0) return false;
+      in.append(buf, static_cast<std::size_t>(got));
+    }
+    return true;
+  };
+  // Frames: 24-bit length, type, flags, 32-bit stream id. The server's SETTINGS (type 4, no
+  // ACK flag) come first; each setting is a 16-bit id and a 32-bit value.
+  std::optional<std::uint32_t> max_frame_size;
+  std::size_t at = 0;
+  bool settings_seen = false;
+  while (!settings_seen) {
+    ASSERT_TRUE(read_at_least(at + 9)) << "no SETTINGS frame from the server";
+    const auto byte = [&](std::size_t i) { return static_cast<std::uint8_t>(in[i]); };
+    const std::size_t length = (std::size_t{byte(at)} << 16) | (byte(at + 1) << 8) | byte(at + 2);
+    const std::uint8_t type = byte(at + 3), flags = byte(at + 4);
+    ASSERT_TRUE(read_at_least(at + 9 + length));
+    if (type == 4 && (flags & 1) == 0) {
+      settings_seen = true;
+      for (std::size_t k = at + 9; k + 6 <= at + 9 + length; k += 6) {
+        const std::uint16_t id = static_cast<std::uint16_t>((byte(k) << 8) | byte(k + 1));
+        const std::uint32_t value = (std::uint32_t{byte(k + 2)} << 24) | (byte(k + 3) << 16) |
+                                    (byte(k + 4) << 8) | byte(k + 5);
+        if (id == 5) max_frame_size = value;  // SETTINGS_MAX_FRAME_SIZE
+      }
+    }
+    at += 9 + length;
+  }
+  close(fd);
+  EXPECT_EQ(max_frame_size, std::optional<std::uint32_t>(256 * 1024));
 }
 
 // Defect 4: 4 greedy DELIVERY_ALL streams raised a paced stream's latency tenfold: the worker

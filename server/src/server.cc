@@ -107,6 +107,14 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& optio
   builder.AddChannelArgument(GRPC_ARG_HTTP2_BDP_PROBE, 0);
   builder.AddChannelArgument(GRPC_ARG_HTTP2_STREAM_LOOKAHEAD_BYTES,
                              static_cast<int>(options.stream_window_bytes));
+  // Clients may send DATA frames of up to 256 KB instead of HTTP/2's default 16 KB. A message
+  // reaches us as one slice per frame, and a raw 640x480 frame's rows that cross slices are
+  // copied to be read whole: 72 slices of its colour plane become about 20, and gRPC parses a
+  // quarter of the frame headers. Measured (cloudcast-e2e-bench, 4 alternating rounds): server
+  // CPU per raw frame -2%, per zstd frame -6%; 4 raw streams +4%, 4 zstd streams +7% frames/s.
+  // Flow control still bounds each stream by stream_window_bytes (64 KB at least). Larger frames
+  // only interleave the streams of one connection more coarsely (one robot's own streams).
+  builder.AddChannelArgument(GRPC_ARG_HTTP2_MAX_FRAME_SIZE, 256 * 1024);
   if (options.max_connection_age.count() > 0) {
     builder.AddChannelArgument(GRPC_ARG_MAX_CONNECTION_AGE_MS,
                                static_cast<int>(options.max_connection_age.count()));
