@@ -216,7 +216,8 @@ std::vector<Candidate> Candidates() {
   }
 
   // zstd with parameters beyond the level, on up-predicted planes: stored literals (no Huffman
-  // stage: faster to decode, larger) and longer minimum matches (fewer sequences to decode).
+  // stage: faster to decode, larger; negative levels store them anyway, so level 1 only), other
+  // minimum matches and the double-fast matcher.
   struct Tuned {
     std::string name, note;
     int level;
@@ -224,10 +225,6 @@ std::vector<Candidate> Candidates() {
   };
   const std::vector<Tuned> tuned = {
       {"zstd1-up-rawlit", "literals stored, not Huffman-coded", 1,
-       [](ZSTD_CCtx* z) {
-         ZSTD_CCtx_setParameter(z, ZSTD_c_literalCompressionMode, ZSTD_ps_disable);
-       }},
-      {"zstd-1-up-rawlit", "literals stored, not Huffman-coded", -1,
        [](ZSTD_CCtx* z) {
          ZSTD_CCtx_setParameter(z, ZSTD_c_literalCompressionMode, ZSTD_ps_disable);
        }},

@@ -236,6 +236,11 @@ TEST_F(HardeningTest, LatestStreamThatNeverReadsStopsBeingRead) {
   writer.join();
 }
 
+// What an HTTP/2 client sends first: the connection preface and an empty SETTINGS frame.
+std::string Http2PrefaceAndSettings() {
+  return std::string("PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n\0\0\0\4\0\0\0\0\0", 33);
+}
+
 // A TCP connection to the metrics port that sends nothing (or half a request) and stays open.
 int IdleConnection(int port, const std::string& partial = "") {
   const int fd = socket(AF_INET, SOCK_STREAM, 0);
@@ -290,8 +295,7 @@ TEST_F(HardeningTest, ShutdownDoesNotWaitForIdleClients) {
   auto idle = grpc::CreateChannel(server_->address(), grpc::InsecureChannelCredentials());
   ASSERT_TRUE(idle->WaitForConnected(std::chrono::system_clock::now() + seconds(10)));
   const int silent = IdleConnection(server_->port());
-  const int preface = IdleConnection(
-      server_->port(), std::string("PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n\0\0\0\4\0\0\0\0\0", 33));
+  const int preface = IdleConnection(server_->port(), Http2PrefaceAndSettings());
   // ...and a stream that sits idle (its one frame answered, so the server surely holds it).
   auto stub = v1::CloudCast::NewStub(channel_);
   grpc::ClientContext ctx;
@@ -327,8 +331,7 @@ TEST_F(HardeningTest, ShutdownDoesNotWaitForIdleClients) {
 // 16 KB (server.cc: a raw frame then reaches it in a quarter of the slices). Read from the
 // SETTINGS frame it sends a raw HTTP/2 connection.
 TEST_F(HardeningTest, ClientsMaySendHttp2FramesOf256KB) {
-  const int fd = IdleConnection(
-      server_->port(), std::string("PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n\0\0\0\4\0\0\0\0\0", 33));
+  const int fd = IdleConnection(server_->port(), Http2PrefaceAndSettings());
   timeval timeout{10, 0};  // a server that sends no SETTINGS fails the reads below
   ASSERT_EQ(setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &timeout, sizeof timeout), 0);
   std::string in;
