@@ -8,7 +8,13 @@
 //   throughput  every stream sends as fast as the server answers (delivery "all", a window of
 //               frames in flight per stream);
 //   paced       every stream sends at --paced-fps (delivery "latest"), the real-time use.
-// Latency is send to reply on the client's steady clock: transport both ways, queueing, work.
+// Latency: in the throughput runs (a closed loop) send to reply, on the client's steady clock;
+// in the paced runs from each frame's intended send time on the schedule, so a sender that
+// falls behind (flow control, a slow server) shows up in the latency instead of hiding it.
+//
+// --compare-bin runs every case on a second server binary too (an older build, say), the two
+// in turn and in alternating order, over --rounds rounds, and prints both sides' medians and
+// their ratios: the way to measure a change on a noisy machine.
 // The client does not decode the Draco replies here (a robot decodes on its own machine); the
 // client and the server share this machine's cores, so the figures are a lower bound.
 #include <arpa/inet.h>
@@ -140,14 +146,16 @@ double Percentile(std::vector<double> v, double q) {
 }
 
 struct CaseResult {
-  std::string encoding, mode;
-  int streams = 0;
+  std::string server, encoding, mode;  // server: the contender's label
+  int round = 0, streams = 0;
   double seconds = 0, fps = 0, p50 = 0, p90 = 0, p99 = 0;
   std::uint64_t frames = 0, errors = 0, dropped = 0;
   double server_cpu_ms_per_frame = 0, core_cpu_ms_per_frame = 0, outside_share = 0;
 
   nlohmann::json ToJson() const {
-    return {{"encoding", encoding},
+    return {{"server", server},
+            {"round", round},
+            {"encoding", encoding},
             {"mode", mode},
             {"streams", streams},
             {"seconds", seconds},
@@ -208,7 +216,10 @@ CaseResult RunCase(const ServerProcess& server, const std::vector<Frame>& frames
       ++answered;
       if (!res.ok()) ++errors;
       dropped = std::max<std::uint64_t>(dropped.load(), res.frames_dropped);
-      const double ms = std::chrono::duration<double, std::milli>(res.round_trip()).count();
+      // Paced: from the intended send time (the frame's capture time, set below).
+      const double ms = std::chrono::duration<double, std::milli>(paced_fps > 0 ? res.latency()
+                                                                                : res.round_trip())
+                            .count();
       std::lock_guard<std::mutex> lock(mu);
       latencies.push_back(ms);
     };
@@ -225,12 +236,21 @@ CaseResult RunCase(const ServerProcess& server, const std::vector<Frame>& frames
     StreamState& st = *states[s];
     std::size_t i = static_cast<std::size_t>(s) * 3;  // streams start at different frames
     auto next_send = Clock::now();
+    // The schedule's times on the Unix clock the replies' latency() is measured in.
+    const std::int64_t unix_minus_steady =
+        cc::UnixNanosNow() -
+        std::chrono::duration_cast<std::chrono::nanoseconds>(next_send.time_since_epoch()).count();
     const auto period = paced_fps > 0 ? std::chrono::duration_cast<Clock::duration>(
                                             std::chrono::duration<double>(1.0 / paced_fps))
                                       : Clock::duration::zero();
     while (!stop.load()) {
+      cc::FrameMeta meta;
       if (paced_fps > 0) {
         std::this_thread::sleep_until(next_send);
+        meta.capture_time_unix_ns =
+            unix_minus_steady +
+            std::chrono::duration_cast<std::chrono::nanoseconds>(next_send.time_since_epoch())
+                .count();
         next_send += period;
       } else {
         std::unique_lock<std::mutex> lock(st.mu);
@@ -243,11 +263,11 @@ CaseResult RunCase(const ServerProcess& server, const std::vector<Frame>& frames
         ++st.in_flight;
       }
       absl::Status sent =
-          uplink == Uplink::kPng
-              ? st.stream->Send(cc::EncodedImage{f.disparity_png}, cc::EncodedImage{f.colour_png})
+          uplink == Uplink::kPng    ? st.stream->Send(cc::EncodedImage{f.disparity_png},
+                                                      cc::EncodedImage{f.colour_png}, meta)
           : uplink == Uplink::kZstd ? st.stream->Send(cc::PrecompressedDisparity{&f.disparity_zstd},
-                                                      cc::PrecompressedColor{&f.colour_zstd})
-                                    : st.stream->Send(f.disparity.view(), f.colour.view());
+                                                      cc::PrecompressedColor{&f.colour_zstd}, meta)
+                                    : st.stream->Send(f.disparity.view(), f.colour.view(), meta);
       if (!sent.ok()) {
         std::cerr << "send: " << sent << "\n";
         break;
@@ -331,27 +351,166 @@ std::vector<Frame> LoadFrames(const std::string& dir) {
   return frames;
 }
 
+// One server binary under test, started once and kept for every round.
+struct Contender {
+  std::string label, binary;
+  std::unique_ptr<ServerProcess> server;
+};
+
+// Starts the contender's server and waits until it answers.
+bool Start(Contender& c, int threads) {
+  c.server = std::make_unique<ServerProcess>(c.binary, threads);
+  cc::ClientOptions o;
+  o.connect_timeout = std::chrono::seconds(10);
+  auto client = cc::Client::Connect("127.0.0.1:" + std::to_string(c.server->port()), o);
+  if (!client.ok()) {
+    std::cerr << c.binary << " did not come up: " << client.status() << "\n";
+    return false;
+  }
+  std::cout << c.label << ": " << c.binary << ", pid " << c.server->pid()
+            << ", 127.0.0.1:" << c.server->port() << "\n";
+  return true;
+}
+
+double Median(std::vector<double> v) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  const std::size_t m = v.size() / 2;
+  return v.size() % 2 != 0 ? v[m] : (v[m - 1] + v[m]) / 2;
+}
+
+// The medians over the rounds of one case on one server.
+struct CaseMedians {
+  std::string server, encoding, mode;
+  int streams = 0;
+  double fps = 0, p50 = 0, p99 = 0, server_cpu_ms_per_frame = 0, core_cpu_ms_per_frame = 0;
+};
+
+// In the results' order of first appearance.
+std::vector<CaseMedians> MediansOf(const std::vector<CaseResult>& results) {
+  std::vector<CaseMedians> out;
+  std::vector<std::vector<const CaseResult*>> groups;
+  for (const CaseResult& r : results) {
+    auto same = [&](const CaseMedians& m) {
+      return m.server == r.server && m.encoding == r.encoding && m.mode == r.mode &&
+             m.streams == r.streams;
+    };
+    const auto at =
+        static_cast<std::size_t>(std::find_if(out.begin(), out.end(), same) - out.begin());
+    if (at == out.size()) {
+      out.push_back({r.server, r.encoding, r.mode, r.streams});
+      groups.emplace_back();
+    }
+    groups[at].push_back(&r);
+  }
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    auto median = [&](double CaseResult::*field) {
+      std::vector<double> v;
+      for (const CaseResult* r : groups[i]) v.push_back(r->*field);
+      return Median(v);
+    };
+    out[i].fps = median(&CaseResult::fps);
+    out[i].p50 = median(&CaseResult::p50);
+    out[i].p99 = median(&CaseResult::p99);
+    out[i].server_cpu_ms_per_frame = median(&CaseResult::server_cpu_ms_per_frame);
+    out[i].core_cpu_ms_per_frame = median(&CaseResult::core_cpu_ms_per_frame);
+  }
+  return out;
+}
+
+// The medians table: one row per case, each server's figures side by side and, with two, the
+// first one's over the second's.
+void PrintMedians(const std::vector<CaseMedians>& medians, const std::vector<Contender>& servers,
+                  int rounds) {
+  const bool pair = servers.size() == 2;
+  std::cout << "\nmedians over " << rounds << " round" << (rounds == 1 ? "" : "s");
+  if (pair) {
+    std::cout << " (" << servers[0].label << " and " << servers[1].label
+              << " in turn, alternating which goes first; x: " << servers[0].label << " / "
+              << servers[1].label << ")";
+  }
+  std::cout << ":\n";
+  auto name = [](const std::string& label) { return label.substr(0, 10); };
+  char line[320];
+  // Three column groups (frames/s, server CPU per frame, p99 latency), each with one column per
+  // server and, for a pair, their ratio.
+  const int group = static_cast<int>(servers.size()) * 11 + (pair ? 7 : 0);
+  std::snprintf(line, sizeof line, "%-4s %7s %-14s |", "", "", "");
+  std::string top = line;
+  std::snprintf(line, sizeof line, "%-4s %7s %-14s |", "enc", "streams", "mode");
+  std::string header = line;
+  for (const char* figure : {"frames/s", "srv CPU ms", "p99 ms"}) {
+    std::snprintf(line, sizeof line, " %-*s |", group - 1, figure);
+    top += line;
+    for (const Contender& c : servers) {
+      std::snprintf(line, sizeof line, " %10s", name(c.label).c_str());
+      header += line;
+    }
+    header += pair ? "      x |" : " |";
+  }
+  top.erase(top.find_last_not_of(" |") + 1);
+  header.resize(header.size() - 2);
+  std::cout << top << "\n" << header << "\n";
+  for (std::size_t i = 0; i < medians.size(); i += servers.size()) {
+    const CaseMedians& a = medians[i];
+    std::snprintf(line, sizeof line, "%-4s %7d %-14s |", a.encoding.c_str(), a.streams,
+                  a.mode.c_str());
+    std::string row = line;
+    for (double CaseMedians::*field :
+         {&CaseMedians::fps, &CaseMedians::server_cpu_ms_per_frame, &CaseMedians::p99}) {
+      for (std::size_t s = 0; s < servers.size(); ++s) {
+        std::snprintf(line, sizeof line, field == &CaseMedians::fps ? " %10.1f" : " %10.3f",
+                      medians[i + s].*field);
+        row += line;
+      }
+      if (pair) {
+        const double b = medians[i + 1].*field;
+        std::snprintf(line, sizeof line, " %5.2fx", b > 0 ? a.*field / b : 0.0);
+        row += line;
+      }
+      row += " |";
+    }
+    row.resize(row.size() - 2);
+    std::cout << row << "\n";
+  }
+}
+
 int Main(int argc, char** argv) {
   CLI::App app{
       "cloudcast-e2e-bench: the gRPC service end to end over loopback. Starts cloudcast-server,\n"
       "streams frames through 1, 2 and 4 concurrent streams (raw, zstd, PNG), and prints\n"
-      "frames/s, latency p50/p90/p99 (send to reply) and the server's CPU per frame, inside\n"
-      "the core pipeline + Draco and outside them."};
+      "frames/s, latency p50/p90/p99 and the server's CPU per frame, inside the core pipeline\n"
+      "+ Draco and outside them. --compare-bin measures a second server binary side by side\n"
+      "(scripts/bench-against REV builds one from any commit)."};
   std::string data_dir = tsukuba::DefaultDir();
   std::string server_bin =
       (std::filesystem::read_symlink("/proc/self/exe").parent_path() / "cloudcast-server").string();
+  std::string label = "this", compare_bin, compare_label = "other";
   double seconds = 4, paced_fps = 30;
-  int window = 4, threads = 0;
+  int window = 4, threads = 0, rounds = 1;
   std::vector<int> stream_counts = {1, 2, 4};
   std::vector<std::string> encodings = {"raw", "png"};
   std::string json_path;
   app.add_option("--data", data_dir, "New Tsukuba folder; synthetic frames when absent")
       ->capture_default_str();
   app.add_option("--server-bin", server_bin, "the cloudcast-server binary")->capture_default_str();
+  app.add_option("--label", label, "the --server-bin's name in the tables")->capture_default_str();
+  app.add_option("--compare-bin", compare_bin,
+                 "a second cloudcast-server binary, measured in turn with --server-bin on every "
+                 "case of every round");
+  app.add_option("--compare-label", compare_label, "the --compare-bin's name in the tables")
+      ->capture_default_str();
+  app.add_option("--rounds", rounds,
+                 "rounds over all cases (medians over them are printed when more than one, or "
+                 "with --compare-bin)")
+      ->check(CLI::Range(1, 100))
+      ->capture_default_str();
   app.add_option("--seconds", seconds, "measured seconds per case")
       ->check(CLI::Range(0.5, 600.0))
       ->capture_default_str();
-  app.add_option("--streams", stream_counts, "concurrent stream counts")->capture_default_str();
+  app.add_option("--streams", stream_counts, "concurrent stream counts")
+      ->check(CLI::Range(1, 64))
+      ->capture_default_str();
   app.add_option("--encodings,--encoding", encodings,
                  "raw, zstd (the compressed uplink, compressed once up front) and/or png")
       ->check(CLI::IsMember({"raw", "zstd", "png"}))
@@ -368,9 +527,22 @@ int Main(int argc, char** argv) {
   CLI11_PARSE(app, argc, argv);
   signal(SIGPIPE, SIG_IGN);
 
-  if (!std::filesystem::exists(server_bin)) {
-    std::cerr << "no cloudcast-server at " << server_bin << " (--server-bin)\n";
-    return 1;
+  std::vector<Contender> servers;
+  servers.push_back({label, server_bin, nullptr});
+  if (!compare_bin.empty()) {
+    if (compare_label == label) {
+      std::cerr << "--compare-label must differ from --label (both are '" << label << "')\n";
+      return 1;
+    }
+    servers.push_back({compare_label, compare_bin, nullptr});
+  }
+  for (const auto& [flag, path] :
+       {std::pair<const char*, const std::string&>{"--server-bin", server_bin},
+        {"--compare-bin", compare_bin}}) {
+    if (!path.empty() && !std::filesystem::exists(path)) {
+      std::cerr << "no cloudcast-server at " << path << " (" << flag << ")\n";
+      return 1;
+    }
   }
   const std::vector<Frame> frames = LoadFrames(data_dir);
   std::size_t raw_bytes = 0, png_bytes = 0, zstd_bytes = 0;
@@ -383,53 +555,80 @@ int Main(int argc, char** argv) {
             << frames[0].disparity.height << ": " << raw_bytes / frames.size() / 1024 << " KB raw, "
             << zstd_bytes / frames.size() / 1024 << " KB as zstd, "
             << png_bytes / frames.size() / 1024 << " KB as PNG per frame\n";
-  ServerProcess server(server_bin, threads);
-  // Wait for the server to answer.
-  {
-    cc::ClientOptions o;
-    o.connect_timeout = std::chrono::seconds(10);
-    auto c = cc::Client::Connect("127.0.0.1:" + std::to_string(server.port()), o);
-    if (!c.ok()) {
-      std::cerr << "server did not come up: " << c.status() << "\n";
-      return 1;
-    }
+  for (Contender& c : servers) {
+    if (!Start(c, threads)) return 1;
   }
-  std::cout << "server: pid " << server.pid() << ", 127.0.0.1:" << server.port() << ", "
-            << std::thread::hardware_concurrency() << " cores shared with this client\n\n";
+  std::cout << std::thread::hardware_concurrency()
+            << " cores, shared by the server(s) and this client\n\n";
 
+  const bool labelled = servers.size() > 1 || rounds > 1;
   std::vector<CaseResult> results;
   char line[256];
-  std::snprintf(line, sizeof line, "%-4s %-7s %-14s %8s %7s %7s %7s %8s %11s %10s %8s\n", "enc",
-                "streams", "mode", "frames/s", "p50 ms", "p90 ms", "p99 ms", "dropped",
-                "srv CPU ms", "core+Draco", "outside");
+  std::snprintf(line, sizeof line, "%s%-4s %-7s %-14s %8s %7s %7s %7s %8s %11s %10s %8s\n",
+                labelled ? "round server     " : "", "enc", "streams", "mode", "frames/s", "p50 ms",
+                "p90 ms", "p99 ms", "dropped", "srv CPU ms", "core+Draco", "outside");
   std::cout << line;
-  for (const std::string& enc : encodings) {
-    for (int n : stream_counts) {
-      const Uplink uplink = enc == "png"    ? Uplink::kPng
-                            : enc == "zstd" ? Uplink::kZstd
-                                            : Uplink::kRaw;
-      std::vector<CaseResult> cases = {RunCase(server, frames, uplink, n, seconds, window, 0)};
-      if (paced_fps > 0) {
-        cases.push_back(RunCase(server, frames, uplink, n, seconds, window, paced_fps));
-      }
-      for (const CaseResult& r : cases) {
-        std::snprintf(line, sizeof line,
-                      "%-4s %7d %-14s %8.1f %7.2f %7.2f %7.2f %8lu %11.3f %10.3f %7.0f%%\n",
-                      r.encoding.c_str(), r.streams, r.mode.c_str(), r.fps, r.p50, r.p90, r.p99,
-                      static_cast<unsigned long>(r.dropped), r.server_cpu_ms_per_frame,
-                      r.core_cpu_ms_per_frame, 100 * r.outside_share);
-        std::cout << line << std::flush;
-        if (r.errors > 0) std::cout << "  (" << r.errors << " frame errors)\n";
-        results.push_back(r);
+  for (int round = 1; round <= rounds; ++round) {
+    for (const std::string& enc : encodings) {
+      for (int n : stream_counts) {
+        const Uplink uplink = enc == "png"    ? Uplink::kPng
+                              : enc == "zstd" ? Uplink::kZstd
+                                              : Uplink::kRaw;
+        std::vector<double> modes = {0.0};  // throughput
+        if (paced_fps > 0) modes.push_back(paced_fps);
+        for (const double fps : modes) {
+          // Even rounds run the servers in the other order: whoever runs second finds the
+          // machine warmed (or heated) by the first.
+          for (std::size_t k = 0; k < servers.size(); ++k) {
+            const std::size_t s = round % 2 == 0 ? servers.size() - 1 - k : k;
+            CaseResult r = RunCase(*servers[s].server, frames, uplink, n, seconds, window, fps);
+            r.server = servers[s].label;
+            r.round = round;
+            std::snprintf(line, sizeof line, "%5d %-10s ", round, r.server.substr(0, 10).c_str());
+            std::cout << (labelled ? line : "");
+            std::snprintf(line, sizeof line,
+                          "%-4s %7d %-14s %8.1f %7.2f %7.2f %7.2f %8lu %11.3f %10.3f %7.0f%%\n",
+                          r.encoding.c_str(), r.streams, r.mode.c_str(), r.fps, r.p50, r.p90, r.p99,
+                          static_cast<unsigned long>(r.dropped), r.server_cpu_ms_per_frame,
+                          r.core_cpu_ms_per_frame, 100 * r.outside_share);
+            std::cout << line << std::flush;
+            if (r.errors > 0) std::cout << "  (" << r.errors << " frame errors)\n";
+            results.push_back(r);
+          }
+        }
       }
     }
   }
-  std::cout << "\nsrv CPU ms: server process CPU (user + system) per answered frame; core+Draco: "
-               "the part inside Pipeline::Run and EncodeDraco (thread CPU time); outside: the "
-               "rest (gRPC, protobuf, PNG / zstd decoding, scheduling).\n";
+  std::cout
+      << "\nlatency: send to reply in the throughput runs (a closed loop), intended send time "
+         "to reply in the paced ones; srv CPU ms: server process CPU (user + system) per "
+         "answered frame; core+Draco: the part inside Pipeline::Run and EncodeDraco (thread "
+         "CPU time); outside: the rest (gRPC, protobuf, PNG / zstd decoding, scheduling).\n";
+  // Medians per case and server, in the first round's order: the servers in turn, in their
+  // order, within each case (what PrintMedians expects).
+  const std::vector<CaseMedians> medians = MediansOf(results);
+  if (labelled) PrintMedians(medians, servers, rounds);
   if (!json_path.empty()) {
-    nlohmann::json j = nlohmann::json::array();
-    for (const CaseResult& r : results) j.push_back(r.ToJson());
+    nlohmann::json j;
+    j["rounds"] = rounds;
+    j["servers"] = nlohmann::json::array();
+    for (const Contender& c : servers) {
+      j["servers"].push_back({{"label", c.label}, {"binary", c.binary}});
+    }
+    j["cases"] = nlohmann::json::array();
+    for (const CaseResult& r : results) j["cases"].push_back(r.ToJson());
+    j["medians"] = nlohmann::json::array();
+    for (const CaseMedians& m : medians) {
+      j["medians"].push_back({{"server", m.server},
+                              {"encoding", m.encoding},
+                              {"mode", m.mode},
+                              {"streams", m.streams},
+                              {"fps", m.fps},
+                              {"latency_ms_p50", m.p50},
+                              {"latency_ms_p99", m.p99},
+                              {"server_cpu_ms_per_frame", m.server_cpu_ms_per_frame},
+                              {"core_cpu_ms_per_frame", m.core_cpu_ms_per_frame}});
+    }
     std::ofstream(json_path) << j.dump(2) << "\n";
     std::cout << "wrote " << json_path << "\n";
   }

@@ -1,0 +1,140 @@
+// The benchmark programs' own behaviour (never their times): cloudcast-e2e-bench measuring two
+// server binaries in turn, and scripts/bench-against building another commit's server for it.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "program_support.h"
+
+namespace cloudcast {
+namespace {
+
+using testing::BinDir;
+using testing::ReadText;
+using testing::RunProgram;
+
+class E2eBenchTest : public testing::ScratchDirTest {
+ protected:
+  std::string Bench() const { return BinDir() + "/cloudcast-e2e-bench"; }
+  std::string Server() const { return BinDir() + "/cloudcast-server"; }
+  // The shortest cases the bench allows: one stream, raw frames.
+  std::vector<std::string> Short() const {
+    return {"--seconds", "0.5", "--streams", "1", "--encodings", "raw"};
+  }
+};
+
+double MedianOf(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return v.size() % 2 != 0 ? v[v.size() / 2] : (v[v.size() / 2 - 1] + v[v.size() / 2]) / 2;
+}
+
+TEST_F(E2eBenchTest, CompareBinRunsBothServersInTurnAndPrintsTheirMedians) {
+  std::vector<std::string> args = Short();
+  for (const char* a :
+       {"--paced-fps", "20", "--rounds", "2", "--label", "left", "--compare-label", "right"}) {
+    args.push_back(a);
+  }
+  args.insert(args.end(),
+              {"--server-bin", Server(), "--compare-bin", Server(), "--json", Path("e2e.json")});
+  const testing::RunResult r = RunProgram(Bench(), args, dir_.string());
+  ASSERT_EQ(r.code, 0) << r;
+  EXPECT_NE(r.out.find("medians over 2 rounds (left and right in turn"), std::string::npos) << r;
+  EXPECT_NE(r.out.find("x: left / right"), std::string::npos) << r;
+
+  const auto j = nlohmann::json::parse(ReadText(Path("e2e.json")));
+  EXPECT_EQ(j["rounds"], 2);
+  ASSERT_EQ(j["servers"].size(), 2u);
+  EXPECT_EQ(j["servers"][0]["label"], "left");
+  EXPECT_EQ(j["servers"][1]["label"], "right");
+  // 2 rounds x 2 modes (throughput, paced) x 2 servers, the servers' order flipped in round 2.
+  const auto& cases = j["cases"];
+  ASSERT_EQ(cases.size(), 8u) << j.dump(1);
+  const std::vector<std::string> order = {"left",  "right", "left",  "right",
+                                          "right", "left",  "right", "left"};
+  for (std::size_t i = 0; i < cases.size(); ++i) {
+    SCOPED_TRACE(cases[i].dump());
+    EXPECT_EQ(cases[i]["server"], order[i]);
+    EXPECT_EQ(cases[i]["round"], i < 4 ? 1 : 2);
+    EXPECT_EQ(cases[i]["mode"], i % 4 < 2 ? "throughput" : "paced 20 fps");
+    EXPECT_GT(cases[i]["frames"].get<int>(), 0);
+    EXPECT_EQ(cases[i]["errors"], 0);
+    EXPECT_GT(cases[i]["server_cpu_ms_per_frame"].get<double>(), 0);
+    EXPECT_GT(cases[i]["latency_ms_p50"].get<double>(), 0);
+  }
+  // One median per case and server, each the median of that pair's two rounds.
+  const auto& medians = j["medians"];
+  ASSERT_EQ(medians.size(), 4u) << j.dump(1);
+  for (const auto& m : medians) {
+    std::vector<double> fps, cpu;
+    for (const auto& c : cases) {
+      if (c["server"] == m["server"] && c["mode"] == m["mode"]) {
+        fps.push_back(c["fps"].get<double>());
+        cpu.push_back(c["server_cpu_ms_per_frame"].get<double>());
+      }
+    }
+    ASSERT_EQ(fps.size(), 2u) << m.dump();
+    EXPECT_DOUBLE_EQ(m["fps"].get<double>(), MedianOf(fps)) << m.dump();
+    EXPECT_DOUBLE_EQ(m["server_cpu_ms_per_frame"].get<double>(), MedianOf(cpu)) << m.dump();
+  }
+  EXPECT_EQ(medians[0]["server"], "left");
+  EXPECT_EQ(medians[1]["server"], "right");
+}
+
+TEST_F(E2eBenchTest, OneServerOneRoundKeepsThePlainTable) {
+  std::vector<std::string> args = Short();
+  args.insert(args.end(), {"--paced-fps", "0", "--json", Path("e2e.json")});
+  const testing::RunResult r = RunProgram(Bench(), args, dir_.string());
+  ASSERT_EQ(r.code, 0) << r;
+  EXPECT_EQ(r.out.find("medians over"), std::string::npos) << r;
+  EXPECT_NE(r.out.find("\nenc  streams mode"), std::string::npos) << r;
+  const auto j = nlohmann::json::parse(ReadText(Path("e2e.json")));
+  ASSERT_EQ(j["cases"].size(), 1u);
+  EXPECT_EQ(j["cases"][0]["server"], "this");
+  EXPECT_EQ(j["medians"].size(), 1u);
+}
+
+TEST_F(E2eBenchTest, BadServerFlagsAreNamed) {
+  std::vector<std::string> args = Short();
+  args.insert(args.end(), {"--compare-bin", Path("no-such-server")});
+  testing::RunResult r = RunProgram(Bench(), args, dir_.string());
+  EXPECT_EQ(r.code, 1) << r;
+  EXPECT_NE(r.err.find("no cloudcast-server at " + Path("no-such-server") + " (--compare-bin)"),
+            std::string::npos)
+      << r;
+
+  args = Short();
+  args.insert(args.end(), {"--compare-bin", Server(), "--label", "x", "--compare-label", "x"});
+  r = RunProgram(Bench(), args, dir_.string());
+  EXPECT_EQ(r.code, 1) << r;
+  EXPECT_NE(r.err.find("--compare-label must differ from --label"), std::string::npos) << r;
+}
+
+// The script end to end: it builds HEAD's server in a worktree of its own (from ccache, after
+// the main build) and measures it against this build's. Slow on a cold cache (one server build).
+TEST_F(E2eBenchTest, BenchAgainstBuildsTheCommitsServerAndComparesIt) {
+  const std::string script = std::string(CLOUDCAST_SOURCE_DIR) + "/scripts/bench-against";
+  const std::string env = "env CLOUDCAST_BUILD_DIR=" + testing::ShellQuote(CLOUDCAST_BUILD_DIR);
+  testing::RunResult r = RunProgram(script, {"no-such-revision"}, dir_.string(), env);
+  EXPECT_EQ(r.code, 2) << r;
+  EXPECT_NE(r.err.find("'no-such-revision' is not a commit"), std::string::npos) << r;
+
+  std::vector<std::string> args = {"HEAD"};
+  const std::vector<std::string> s = Short();
+  args.insert(args.end(), s.begin(), s.end());
+  args.insert(args.end(), {"--paced-fps", "0", "--rounds", "1", "--json", Path("e2e.json")});
+  r = RunProgram(script, args, dir_.string(), env);
+  ASSERT_EQ(r.code, 0) << r;
+  const auto j = nlohmann::json::parse(ReadText(Path("e2e.json")));
+  ASSERT_EQ(j["servers"].size(), 2u);
+  const std::string built = j["servers"][1]["binary"];
+  EXPECT_NE(built.find("build-against/"), std::string::npos) << built;
+  EXPECT_NE(built, j["servers"][0]["binary"].get<std::string>());
+  ASSERT_EQ(j["cases"].size(), 2u);
+  for (const auto& c : j["cases"]) EXPECT_GT(c["frames"].get<int>(), 0) << c.dump();
+}
+
+}  // namespace
+}  // namespace cloudcast
