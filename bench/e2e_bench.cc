@@ -151,6 +151,7 @@ struct CaseResult {
   double seconds = 0, fps = 0, p50 = 0, p90 = 0, p99 = 0;
   std::uint64_t frames = 0, errors = 0, dropped = 0;
   double server_cpu_ms_per_frame = 0, core_cpu_ms_per_frame = 0, outside_share = 0;
+  double client_cpu_ms_per_frame = 0;  // this process: the senders, gRPC's client side
 
   nlohmann::json ToJson() const {
     return {{"server", server},
@@ -167,6 +168,7 @@ struct CaseResult {
             {"errors", errors},
             {"dropped", dropped},
             {"server_cpu_ms_per_frame", server_cpu_ms_per_frame},
+            {"client_cpu_ms_per_frame", client_cpu_ms_per_frame},
             {"core_cpu_ms_per_frame", core_cpu_ms_per_frame},
             {"outside_core_share", outside_share}};
   }
@@ -279,6 +281,7 @@ CaseResult RunCase(const ServerProcess& server, const std::vector<Frame>& frames
 
   std::this_thread::sleep_for(std::chrono::milliseconds(800));  // warm-up
   const double cpu0 = ProcessCpuSeconds(server.pid());
+  const double client0 = ProcessCpuSeconds(getpid());
   const double core0 = server.CoreCpuSeconds();
   measuring = true;
   const auto t0 = Clock::now();
@@ -286,6 +289,7 @@ CaseResult RunCase(const ServerProcess& server, const std::vector<Frame>& frames
   measuring = false;
   const auto t1 = Clock::now();
   const double cpu1 = ProcessCpuSeconds(server.pid());
+  const double client1 = ProcessCpuSeconds(getpid());
   const double core1 = server.CoreCpuSeconds();
   stop = true;
   for (auto& st : states) st->cv.notify_all();
@@ -305,6 +309,7 @@ CaseResult RunCase(const ServerProcess& server, const std::vector<Frame>& frames
   }
   if (r.frames > 0) {
     r.server_cpu_ms_per_frame = (cpu1 - cpu0) * 1000.0 / r.frames;
+    r.client_cpu_ms_per_frame = (client1 - client0) * 1000.0 / r.frames;
     r.core_cpu_ms_per_frame = core0 >= 0 ? (core1 - core0) * 1000.0 / r.frames : 0;
     r.outside_share = r.server_cpu_ms_per_frame > 0
                           ? 1.0 - r.core_cpu_ms_per_frame / r.server_cpu_ms_per_frame
@@ -564,9 +569,9 @@ int Main(int argc, char** argv) {
   const bool labelled = servers.size() > 1 || rounds > 1;
   std::vector<CaseResult> results;
   char line[256];
-  std::snprintf(line, sizeof line, "%s%-4s %-7s %-14s %8s %7s %7s %7s %8s %11s %10s %8s\n",
+  std::snprintf(line, sizeof line, "%s%-4s %-7s %-14s %8s %7s %7s %7s %8s %11s %10s %8s %11s\n",
                 labelled ? "round server     " : "", "enc", "streams", "mode", "frames/s", "p50 ms",
-                "p90 ms", "p99 ms", "dropped", "srv CPU ms", "core+Draco", "outside");
+                "p90 ms", "p99 ms", "dropped", "srv CPU ms", "core+Draco", "outside", "cli CPU ms");
   std::cout << line;
   for (int round = 1; round <= rounds; ++round) {
     for (const std::string& enc : encodings) {
@@ -586,11 +591,12 @@ int Main(int argc, char** argv) {
             r.round = round;
             std::snprintf(line, sizeof line, "%5d %-10s ", round, r.server.substr(0, 10).c_str());
             std::cout << (labelled ? line : "");
-            std::snprintf(line, sizeof line,
-                          "%-4s %7d %-14s %8.1f %7.2f %7.2f %7.2f %8lu %11.3f %10.3f %7.0f%%\n",
-                          r.encoding.c_str(), r.streams, r.mode.c_str(), r.fps, r.p50, r.p90, r.p99,
-                          static_cast<unsigned long>(r.dropped), r.server_cpu_ms_per_frame,
-                          r.core_cpu_ms_per_frame, 100 * r.outside_share);
+            std::snprintf(
+                line, sizeof line,
+                "%-4s %7d %-14s %8.1f %7.2f %7.2f %7.2f %8lu %11.3f %10.3f %7.0f%% %11.3f\n",
+                r.encoding.c_str(), r.streams, r.mode.c_str(), r.fps, r.p50, r.p90, r.p99,
+                static_cast<unsigned long>(r.dropped), r.server_cpu_ms_per_frame,
+                r.core_cpu_ms_per_frame, 100 * r.outside_share, r.client_cpu_ms_per_frame);
             std::cout << line << std::flush;
             if (r.errors > 0) std::cout << "  (" << r.errors << " frame errors)\n";
             results.push_back(r);
@@ -603,7 +609,9 @@ int Main(int argc, char** argv) {
       << "\nlatency: send to reply in the throughput runs (a closed loop), intended send time "
          "to reply in the paced ones; srv CPU ms: server process CPU (user + system) per "
          "answered frame; core+Draco: the part inside Pipeline::Run and EncodeDraco (thread "
-         "CPU time); outside: the rest (gRPC, protobuf, PNG / zstd decoding, scheduling).\n";
+         "CPU time); outside: the rest (gRPC, protobuf, PNG / zstd decoding, scheduling); "
+         "cli CPU ms: this process (the senders and gRPC's client side; the client does "
+         "not decode the replies) per answered frame.\n";
   // Medians per case and server, in the first round's order: the servers in turn, in their
   // order, within each case (what PrintMedians expects).
   const std::vector<CaseMedians> medians = MediansOf(results);
