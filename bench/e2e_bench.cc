@@ -389,6 +389,7 @@ struct CaseMedians {
   std::string server, encoding, mode;
   int streams = 0;
   double fps = 0, p50 = 0, p99 = 0, server_cpu_ms_per_frame = 0, core_cpu_ms_per_frame = 0;
+  double client_cpu_ms_per_frame = 0;
 };
 
 // In the results' order of first appearance.
@@ -419,6 +420,7 @@ std::vector<CaseMedians> MediansOf(const std::vector<CaseResult>& results) {
     out[i].p99 = median(&CaseResult::p99);
     out[i].server_cpu_ms_per_frame = median(&CaseResult::server_cpu_ms_per_frame);
     out[i].core_cpu_ms_per_frame = median(&CaseResult::core_cpu_ms_per_frame);
+    out[i].client_cpu_ms_per_frame = median(&CaseResult::client_cpu_ms_per_frame);
   }
   return out;
 }
@@ -635,7 +637,8 @@ int Main(int argc, char** argv) {
                               {"latency_ms_p50", m.p50},
                               {"latency_ms_p99", m.p99},
                               {"server_cpu_ms_per_frame", m.server_cpu_ms_per_frame},
-                              {"core_cpu_ms_per_frame", m.core_cpu_ms_per_frame}});
+                              {"core_cpu_ms_per_frame", m.core_cpu_ms_per_frame},
+                              {"client_cpu_ms_per_frame", m.client_cpu_ms_per_frame}});
     }
     std::ofstream(json_path) << j.dump(2) << "\n";
     std::cout << "wrote " << json_path << "\n";

@@ -68,16 +68,19 @@ TEST_F(E2eBenchTest, CompareBinRunsBothServersInTurnAndPrintsTheirMedians) {
   const auto& medians = j["medians"];
   ASSERT_EQ(medians.size(), 4u) << j.dump(1);
   for (const auto& m : medians) {
-    std::vector<double> fps, cpu;
+    std::vector<double> fps, cpu, client;
     for (const auto& c : cases) {
       if (c["server"] == m["server"] && c["mode"] == m["mode"]) {
         fps.push_back(c["fps"].get<double>());
         cpu.push_back(c["server_cpu_ms_per_frame"].get<double>());
+        client.push_back(c["client_cpu_ms_per_frame"].get<double>());
       }
     }
     ASSERT_EQ(fps.size(), 2u) << m.dump();
     EXPECT_DOUBLE_EQ(m["fps"].get<double>(), MedianOf(fps)) << m.dump();
     EXPECT_DOUBLE_EQ(m["server_cpu_ms_per_frame"].get<double>(), MedianOf(cpu)) << m.dump();
+    EXPECT_DOUBLE_EQ(m["client_cpu_ms_per_frame"].get<double>(), MedianOf(client)) << m.dump();
+    EXPECT_GT(m["client_cpu_ms_per_frame"].get<double>(), 0) << m.dump();
   }
   EXPECT_EQ(medians[0]["server"], "left");
   EXPECT_EQ(medians[1]["server"], "right");
