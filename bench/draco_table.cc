@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "cloudcast/core/draco_codec.h"
+#include "stats.h"
 
 namespace cloudcast::bench {
 namespace {
@@ -23,15 +24,6 @@ constexpr int kFirstCloudRuns = 41;
 
 double Ms(Clock::time_point a, Clock::time_point b) {
   return std::chrono::duration<double, std::milli>(b - a).count();
-}
-
-double Median(std::vector<double> v) {
-  if (v.empty()) return 0.0;
-  const std::size_t mid = v.size() / 2;
-  std::nth_element(v.begin(), v.begin() + mid, v.end());
-  if (v.size() % 2 == 1) return v[mid];
-  const double upper = v[mid];
-  return 0.5 * (upper + *std::max_element(v.begin(), v.begin() + mid));
 }
 
 bool Finite(const Point& p) {

@@ -48,6 +48,7 @@
 #include "cloudcast/io/image_io.h"
 #include "cloudcast/proto/convert.h"
 #include "cloudcast/testing/metrics_scrape.h"
+#include "stats.h"
 
 namespace cloudcast::bench {
 namespace {
@@ -375,13 +376,6 @@ bool Start(Contender& c, int threads) {
   std::cout << c.label << ": " << c.binary << ", pid " << c.server->pid()
             << ", 127.0.0.1:" << c.server->port() << "\n";
   return true;
-}
-
-double Median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  const std::size_t m = v.size() / 2;
-  return v.size() % 2 != 0 ? v[m] : (v[m - 1] + v[m]) / 2;
 }
 
 // The medians over the rounds of one case on one server.

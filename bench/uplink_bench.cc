@@ -29,6 +29,7 @@
 #include "cloudcast/datasets/tsukuba.h"
 #include "cloudcast/io/image_io.h"
 #include "cloudcast/proto/convert.h"
+#include "stats.h"
 
 namespace cloudcast::bench {
 namespace {
@@ -51,12 +52,6 @@ double TimeMs(F&& f) {
   const double t0 = ThreadCpuMs();
   f();
   return ThreadCpuMs() - t0;
-}
-
-double Median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  return v[v.size() / 2];
 }
 
 // The bytes an encoding puts on the wire for one frame.
