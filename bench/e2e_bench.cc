@@ -378,50 +378,53 @@ bool Start(Contender& c, int threads) {
   return true;
 }
 
-// The medians over the rounds of one case on one server.
-struct CaseMedians {
-  std::string server, encoding, mode;
-  int streams = 0;
-  double fps = 0, p50 = 0, p99 = 0, server_cpu_ms_per_frame = 0, core_cpu_ms_per_frame = 0;
-  double client_cpu_ms_per_frame = 0;
-};
-
-// In the results' order of first appearance.
-std::vector<CaseMedians> MediansOf(const std::vector<CaseResult>& results) {
-  std::vector<CaseMedians> out;
+// The medians over the rounds of each case on each server, in the results' order of first
+// appearance: one CaseResult per case and server, round 0, every figure the median of its
+// rounds' (frames and errors summed, dropped the most of any round).
+std::vector<CaseResult> MediansOf(const std::vector<CaseResult>& results) {
+  std::vector<CaseResult> out;
   std::vector<std::vector<const CaseResult*>> groups;
   for (const CaseResult& r : results) {
-    auto same = [&](const CaseMedians& m) {
+    auto same = [&](const CaseResult& m) {
       return m.server == r.server && m.encoding == r.encoding && m.mode == r.mode &&
              m.streams == r.streams;
     };
     const auto at =
         static_cast<std::size_t>(std::find_if(out.begin(), out.end(), same) - out.begin());
     if (at == out.size()) {
-      out.push_back({r.server, r.encoding, r.mode, r.streams});
+      CaseResult m;
+      m.server = r.server;
+      m.encoding = r.encoding;
+      m.mode = r.mode;
+      m.streams = r.streams;
+      out.push_back(m);
       groups.emplace_back();
     }
     groups[at].push_back(&r);
   }
   for (std::size_t i = 0; i < out.size(); ++i) {
-    auto median = [&](double CaseResult::*field) {
+    CaseResult& m = out[i];
+    for (double CaseResult::*field :
+         {&CaseResult::seconds, &CaseResult::fps, &CaseResult::p50, &CaseResult::p90,
+          &CaseResult::p99, &CaseResult::server_cpu_ms_per_frame,
+          &CaseResult::core_cpu_ms_per_frame, &CaseResult::outside_share,
+          &CaseResult::client_cpu_ms_per_frame}) {
       std::vector<double> v;
       for (const CaseResult* r : groups[i]) v.push_back(r->*field);
-      return Median(v);
-    };
-    out[i].fps = median(&CaseResult::fps);
-    out[i].p50 = median(&CaseResult::p50);
-    out[i].p99 = median(&CaseResult::p99);
-    out[i].server_cpu_ms_per_frame = median(&CaseResult::server_cpu_ms_per_frame);
-    out[i].core_cpu_ms_per_frame = median(&CaseResult::core_cpu_ms_per_frame);
-    out[i].client_cpu_ms_per_frame = median(&CaseResult::client_cpu_ms_per_frame);
+      m.*field = Median(v);
+    }
+    for (const CaseResult* r : groups[i]) {
+      m.frames += r->frames;
+      m.errors += r->errors;
+      m.dropped = std::max(m.dropped, r->dropped);
+    }
   }
   return out;
 }
 
 // The medians table: one row per case, each server's figures side by side and, with two, the
 // first one's over the second's.
-void PrintMedians(const std::vector<CaseMedians>& medians, const std::vector<Contender>& servers,
+void PrintMedians(const std::vector<CaseResult>& medians, const std::vector<Contender>& servers,
                   int rounds) {
   const bool pair = servers.size() == 2;
   std::cout << "\nmedians over " << rounds << " round" << (rounds == 1 ? "" : "s");
@@ -453,14 +456,14 @@ void PrintMedians(const std::vector<CaseMedians>& medians, const std::vector<Con
   header.resize(header.size() - 2);
   std::cout << top << "\n" << header << "\n";
   for (std::size_t i = 0; i < medians.size(); i += servers.size()) {
-    const CaseMedians& a = medians[i];
+    const CaseResult& a = medians[i];
     std::snprintf(line, sizeof line, "%-4s %7d %-14s |", a.encoding.c_str(), a.streams,
                   a.mode.c_str());
     std::string row = line;
-    for (double CaseMedians::*field :
-         {&CaseMedians::fps, &CaseMedians::server_cpu_ms_per_frame, &CaseMedians::p99}) {
+    for (double CaseResult::*field :
+         {&CaseResult::fps, &CaseResult::server_cpu_ms_per_frame, &CaseResult::p99}) {
       for (std::size_t s = 0; s < servers.size(); ++s) {
-        std::snprintf(line, sizeof line, field == &CaseMedians::fps ? " %10.1f" : " %10.3f",
+        std::snprintf(line, sizeof line, field == &CaseResult::fps ? " %10.1f" : " %10.3f",
                       medians[i + s].*field);
         row += line;
       }
@@ -610,7 +613,7 @@ int Main(int argc, char** argv) {
          "not decode the replies) per answered frame.\n";
   // Medians per case and server, in the first round's order: the servers in turn, in their
   // order, within each case (what PrintMedians expects).
-  const std::vector<CaseMedians> medians = MediansOf(results);
+  const std::vector<CaseResult> medians = MediansOf(results);
   if (labelled) PrintMedians(medians, servers, rounds);
   if (!json_path.empty()) {
     nlohmann::json j;
@@ -622,18 +625,7 @@ int Main(int argc, char** argv) {
     j["cases"] = nlohmann::json::array();
     for (const CaseResult& r : results) j["cases"].push_back(r.ToJson());
     j["medians"] = nlohmann::json::array();
-    for (const CaseMedians& m : medians) {
-      j["medians"].push_back({{"server", m.server},
-                              {"encoding", m.encoding},
-                              {"mode", m.mode},
-                              {"streams", m.streams},
-                              {"fps", m.fps},
-                              {"latency_ms_p50", m.p50},
-                              {"latency_ms_p99", m.p99},
-                              {"server_cpu_ms_per_frame", m.server_cpu_ms_per_frame},
-                              {"core_cpu_ms_per_frame", m.core_cpu_ms_per_frame},
-                              {"client_cpu_ms_per_frame", m.client_cpu_ms_per_frame}});
-    }
+    for (const CaseResult& m : medians) j["medians"].push_back(m.ToJson());
     std::ofstream(json_path) << j.dump(2) << "\n";
     std::cout << "wrote " << json_path << "\n";
   }

@@ -71,8 +71,10 @@ TEST_F(E2eBenchTest, CompareBinRunsBothServersInTurnAndPrintsTheirMedians) {
   ASSERT_EQ(medians.size(), 4u) << j.dump(1);
   for (const auto& m : medians) {
     std::vector<double> fps, cpu, client;
+    int frames = 0;
     for (const auto& c : cases) {
       if (c["server"] == m["server"] && c["mode"] == m["mode"]) {
+        frames += c["frames"].get<int>();
         fps.push_back(c["fps"].get<double>());
         cpu.push_back(c["server_cpu_ms_per_frame"].get<double>());
         client.push_back(c["client_cpu_ms_per_frame"].get<double>());
@@ -83,6 +85,8 @@ TEST_F(E2eBenchTest, CompareBinRunsBothServersInTurnAndPrintsTheirMedians) {
     EXPECT_DOUBLE_EQ(m["server_cpu_ms_per_frame"].get<double>(), MedianOf(cpu)) << m.dump();
     EXPECT_DOUBLE_EQ(m["client_cpu_ms_per_frame"].get<double>(), MedianOf(client)) << m.dump();
     EXPECT_GT(m["client_cpu_ms_per_frame"].get<double>(), 0) << m.dump();
+    EXPECT_EQ(m["frames"].get<int>(), frames) << m.dump();  // summed over the rounds
+    EXPECT_EQ(m["round"], 0) << m.dump();
   }
   EXPECT_EQ(medians[0]["server"], "left");
   EXPECT_EQ(medians[1]["server"], "right");
