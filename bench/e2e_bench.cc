@@ -4,6 +4,9 @@
 // latency percentiles and the server's CPU per frame, split into the share inside the core
 // pipeline + Draco and the share outside them.
 //
+// Every stream is a robot of its own, with a Client (a connection) of its own;
+// --shared-connection puts a case's streams on one connection, as one robot with several cameras.
+//
 // Two runs per case:
 //   throughput  every stream sends as fast as the server answers (delivery "all", a window of
 //               frames in flight per stream);
@@ -175,10 +178,21 @@ struct CaseResult {
   }
 };
 
-// One case: `streams` streams for `seconds`, either as fast as possible with `window` frames in
-// flight per stream (paced_fps == 0) or at paced_fps each.
+// What every case shares.
+struct CaseOptions {
+  double seconds = 4;  // measured
+  int window = 4;      // frames in flight per stream in the throughput runs
+  // false: every stream is a robot of its own, a Client and a connection each; true: all the
+  // streams on one Client (one connection), as one robot with several cameras.
+  bool shared_connection = false;
+};
+
+// One case: `streams` streams, either as fast as possible with o.window frames in flight per
+// stream (paced_fps == 0) or at paced_fps each.
 CaseResult RunCase(const ServerProcess& server, const std::vector<Frame>& frames, Uplink uplink,
-                   int streams, double seconds, int window, double paced_fps) {
+                   int streams, double paced_fps, const CaseOptions& o) {
+  const double seconds = o.seconds;
+  const int window = o.window;
   CaseResult r;
   r.encoding = Name(uplink);
   r.mode = paced_fps > 0 ? "paced " + std::to_string(static_cast<int>(paced_fps)) + " fps"
@@ -186,10 +200,14 @@ CaseResult RunCase(const ServerProcess& server, const std::vector<Frame>& frames
   r.streams = streams;
   cc::ClientOptions options;
   options.decode_clouds = false;
-  auto client = cc::Client::Connect("127.0.0.1:" + std::to_string(server.port()), options);
-  if (!client.ok()) {
-    std::cerr << "connect: " << client.status() << "\n";
-    std::exit(1);
+  std::vector<std::unique_ptr<cc::Client>> clients;
+  for (int c = 0; c < (o.shared_connection ? 1 : streams); ++c) {
+    auto client = cc::Client::Connect("127.0.0.1:" + std::to_string(server.port()), options);
+    if (!client.ok()) {
+      std::cerr << "connect: " << client.status() << "\n";
+      std::exit(1);
+    }
+    clients.push_back(*std::move(client));
   }
   std::mutex mu;
   std::vector<double> latencies;
@@ -226,7 +244,7 @@ CaseResult RunCase(const ServerProcess& server, const std::vector<Frame>& frames
       std::lock_guard<std::mutex> lock(mu);
       latencies.push_back(ms);
     };
-    auto stream = (*client)->OpenStream(config, so);
+    auto stream = clients[o.shared_connection ? 0 : s]->OpenStream(config, so);
     if (!stream.ok()) {
       std::cerr << "open stream: " << stream.status() << "\n";
       std::exit(1);
@@ -490,8 +508,9 @@ int Main(int argc, char** argv) {
   std::string server_bin =
       (std::filesystem::read_symlink("/proc/self/exe").parent_path() / "cloudcast-server").string();
   std::string label = "this", compare_bin, compare_label = "other";
-  double seconds = 4, paced_fps = 30;
-  int window = 4, threads = 0, rounds = 1;
+  CaseOptions case_options;
+  double paced_fps = 30;
+  int threads = 0, rounds = 1;
   std::vector<int> stream_counts = {1, 2, 4};
   std::vector<std::string> encodings = {"raw", "png"};
   std::string json_path;
@@ -509,7 +528,7 @@ int Main(int argc, char** argv) {
                  "with --compare-bin)")
       ->check(CLI::Range(1, 100))
       ->capture_default_str();
-  app.add_option("--seconds", seconds, "measured seconds per case")
+  app.add_option("--seconds", case_options.seconds, "measured seconds per case")
       ->check(CLI::Range(0.5, 600.0))
       ->capture_default_str();
   app.add_option("--streams", stream_counts, "concurrent stream counts")
@@ -519,9 +538,13 @@ int Main(int argc, char** argv) {
                  "raw, zstd (the compressed uplink, compressed once up front) and/or png")
       ->check(CLI::IsMember({"raw", "zstd", "png"}))
       ->capture_default_str();
-  app.add_option("--window", window, "frames in flight per stream in the throughput runs")
+  app.add_option("--window", case_options.window,
+                 "frames in flight per stream in the throughput runs")
       ->check(CLI::Range(1, 64))
       ->capture_default_str();
+  app.add_flag("--shared-connection", case_options.shared_connection,
+               "all streams of a case on one connection (one robot with several cameras); by "
+               "default every stream is a robot of its own, with its own connection");
   app.add_option("--paced-fps", paced_fps, "frames/s per stream in the paced runs (0: skip)")
       ->check(CLI::Range(0.0, 1000.0))
       ->capture_default_str();
@@ -563,7 +586,10 @@ int Main(int argc, char** argv) {
     if (!Start(c, threads)) return 1;
   }
   std::cout << std::thread::hardware_concurrency()
-            << " cores, shared by the server(s) and this client\n\n";
+            << " cores, shared by the server(s) and this client; "
+            << (case_options.shared_connection ? "all streams on one connection"
+                                               : "a connection per stream")
+            << "\n\n";
 
   const bool labelled = servers.size() > 1 || rounds > 1;
   std::vector<CaseResult> results;
@@ -585,7 +611,7 @@ int Main(int argc, char** argv) {
           // machine warmed (or heated) by the first.
           for (std::size_t k = 0; k < servers.size(); ++k) {
             const std::size_t s = round % 2 == 0 ? servers.size() - 1 - k : k;
-            CaseResult r = RunCase(*servers[s].server, frames, uplink, n, seconds, window, fps);
+            CaseResult r = RunCase(*servers[s].server, frames, uplink, n, fps, case_options);
             r.server = servers[s].label;
             r.round = round;
             std::snprintf(line, sizeof line, "%5d %-10s ", round, r.server.substr(0, 10).c_str());
@@ -618,6 +644,7 @@ int Main(int argc, char** argv) {
   if (!json_path.empty()) {
     nlohmann::json j;
     j["rounds"] = rounds;
+    j["shared_connection"] = case_options.shared_connection;
     j["servers"] = nlohmann::json::array();
     for (const Contender& c : servers) {
       j["servers"].push_back({{"label", c.label}, {"binary", c.binary}});

@@ -20,6 +20,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <cstring>
 #include <memory>
 #include <mutex>
@@ -209,6 +210,45 @@ TEST(ClientConnectTest, EmptyTargetIsRejected) {
 
 // ---------------------------------------------------------------------------------------------
 // Unary calls
+
+// The TCP connections of this network namespace to `port` that are open, seen from the
+// connecting side (remote port `port`): a client's socket is a line of its own in /proc/net/tcp,
+// or tcp6 for gRPC's dual-stack sockets (127.0.0.1 as ::ffff:127.0.0.1).
+int ConnectionsTo(int port) {
+  int n = 0;
+  for (const char* table : {"/proc/net/tcp", "/proc/net/tcp6"}) {
+    std::FILE* f = std::fopen(table, "r");
+    if (f == nullptr) continue;
+    char line[512];
+    while (std::fgets(line, sizeof line, f) != nullptr) {
+      unsigned remote_port, state;
+      if (std::sscanf(line, " %*d: %*[0-9A-F]:%*X %*[0-9A-F]:%X %X", &remote_port, &state) == 2 &&
+          remote_port == static_cast<unsigned>(port) && state == 0x01 /* ESTABLISHED */) {
+        ++n;
+      }
+    }
+    std::fclose(f);
+  }
+  return n;
+}
+
+// A Client is a connection, as its header says: two robots in one process (or the load
+// generator's streams) are two clients to the server, fairly queued apart, not two streams on
+// one connection that gRPC's process-wide subchannel pool would otherwise share.
+TEST_F(ClientTest, EveryClientHasAConnectionOfItsOwn) {
+  const int port = shared_server().port();
+  ASSERT_TRUE(client_->GetInfo().ok());  // the fixture's client is connected
+  const int before = ConnectionsTo(port);
+  ASSERT_GE(before, 1) << "no connection to port " << port << " in /proc/net/tcp";
+  std::vector<std::unique_ptr<Client>> clients;
+  for (int i = 0; i < 2; ++i) {
+    absl::StatusOr<std::unique_ptr<Client>> c = Client::Connect(shared_target());
+    ASSERT_TRUE(c.ok()) << c.status();
+    ASSERT_TRUE((*c)->GetInfo().ok());
+    clients.push_back(*std::move(c));
+  }
+  EXPECT_EQ(ConnectionsTo(port), before + 2);
+}
 
 TEST_F(ClientTest, GetInfoDescribesTheServer) {
   absl::StatusOr<v1::ServerInfo> info = client_->GetInfo();
