@@ -103,6 +103,26 @@ TEST_F(E2eBenchTest, OneServerOneRoundKeepsThePlainTable) {
   ASSERT_EQ(j["cases"].size(), 1u);
   EXPECT_EQ(j["cases"][0]["server"], "this");
   EXPECT_EQ(j["medians"].size(), 1u);
+  // By default every stream is a robot with a connection of its own (a Client each, and a
+  // Client is a connection: client_test's EveryClientHasAConnectionOfItsOwn).
+  EXPECT_EQ(j["shared_connection"], false);
+  EXPECT_NE(r.out.find("a connection per stream"), std::string::npos) << r;
+}
+
+TEST_F(E2eBenchTest, SharedConnectionPutsAllStreamsOnOne) {
+  const testing::RunResult r =
+      RunProgram(Bench(),
+                 {"--seconds", "0.5", "--streams", "2", "--encodings", "raw", "--paced-fps", "0",
+                  "--shared-connection", "--json", Path("e2e.json")},
+                 dir_.string());
+  ASSERT_EQ(r.code, 0) << r;
+  EXPECT_NE(r.out.find("all streams on one connection"), std::string::npos) << r;
+  const auto j = nlohmann::json::parse(ReadText(Path("e2e.json")));
+  EXPECT_EQ(j["shared_connection"], true);
+  ASSERT_EQ(j["cases"].size(), 1u);
+  EXPECT_EQ(j["cases"][0]["streams"], 2);
+  EXPECT_GT(j["cases"][0]["frames"].get<int>(), 0);
+  EXPECT_EQ(j["cases"][0]["errors"], 0);
 }
 
 TEST_F(E2eBenchTest, BadServerFlagsAreNamed) {
