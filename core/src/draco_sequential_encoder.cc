@@ -6,7 +6,6 @@
 #include <emmintrin.h>
 
 #include <algorithm>
-#include <array>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -512,26 +511,20 @@ inline std::uint32_t BitLength(std::uint32_t a, std::uint32_t b, std::uint32_t c
   return static_cast<std::uint32_t>(MostSignificantBit(a | b | c | 1) + 1);
 }
 
-// BitLength of the symbols whose 4-fold OR is `scaled` (< 2^16), from a table: BSR takes 4
-// cycles of its unit per use on AMD's cores, and the narrow pass needs two per point.
-// [v]: the bit length for scaled values below 256; [256 + h]: for those with high byte h.
-constexpr std::array<std::uint8_t, 512> kScaledBitLengths = [] {
-  auto bit_length = [](std::uint32_t v) {  // of v / 4, at least 1
-    std::uint8_t b = 1;
-    for (v >>= 2; v > 1; v >>= 1) ++b;
-    return b;
-  };
-  std::array<std::uint8_t, 512> t{};
-  for (std::uint32_t v = 0; v < 256; ++v) {
-    t[v] = bit_length(v);
-    t[256 + v] = bit_length(v << 8);
-  }
-  return t;
-}();
-
-CLOUDCAST_INLINE std::uint32_t ScaledBitLength(std::size_t scaled) {
-  const std::size_t high = scaled >> 8;
-  return kScaledBitLengths[high != 0 ? 256 + high : scaled];
+// The bit lengths of a point's largest position symbol and largest colour symbol (BitLength),
+// from its scaled symbols (x y z - B G R -, 4 times the symbols, in 16-bit lanes), in 32-bit
+// lanes 0 and 2. Each attribute's three lanes are or-ed (the OR of 4a, 4b and 4c is 4 (a | b | c))
+// and or-ed with 4 (a symbol of at least 1); as a float that is exact (below 2^16), and its
+// exponent is 127 + 2 + floor(log2(symbols | 1)), the bit length plus 128. In the vector unit,
+// where the symbols already are: a table look-up per attribute took more instructions (and BSR
+// takes 4 cycles of its unit per use on AMD's cores).
+CLOUDCAST_INLINE __m128i ScaledBitLengths(__m128i scaled) {
+  __m128i o = _mm_or_si128(scaled, _mm_srli_epi64(scaled, 16));
+  o = _mm_or_si128(o, _mm_srli_epi64(scaled, 32));  // lanes 0 and 4: the three lanes or-ed
+  o = _mm_and_si128(o, _mm_setr_epi32(0xFFFF, 0, 0xFFFF, 0));
+  o = _mm_or_si128(o, _mm_setr_epi32(4, 0, 4, 0));
+  const __m128i exponent = _mm_srli_epi32(_mm_castps_si128(_mm_cvtepi32_ps(o)), 23);
+  return _mm_sub_epi32(exponent, _mm_set1_epi32(128));
 }
 
 // What Draco's EncodeSymbols looks at to choose between its schemes, gathered with the symbols.
@@ -566,7 +559,7 @@ void FinishTagStats(const std::uint32_t tag[33], SymbolStats* st) {
 // choice needs). Positions: AttributeQuantizationTransform's q = floor((v - min) * inv + 0.5)
 // in float (v - min >= 0, so floor is cvttps2dq's truncation). Colours: the colour word's bytes
 // (through `lut` when kLut). Both: delta from the previous point, wrap and zigzag, in 16-bit
-// lanes, all six values at once.
+// lanes, all six values at once. n > 0 (EncodeDracoSequential takes no empty cloud).
 template <bool kLut, bool kStats>
 void ComputeNarrowSymbols(const Point* points, std::size_t n, const PositionQuantizer& pq,
                           const Wrap& wp, const Wrap& wc, const std::uint8_t* lut, Scratch* s,
@@ -587,7 +580,6 @@ void ComputeNarrowSymbols(const Point* points, std::size_t n, const PositionQuan
   __m128i prev = lanes(wp.FirstPrediction(), wc.FirstPrediction());
   const __m128 half = _mm_set1_ps(0.5f);
   const __m128i zero = _mm_setzero_si128();
-  __m128i ored = zero;  // without kStats: for the largest bit lengths
   std::uint32_t ptag[33] = {}, ctag[33] = {};
   // The statistics of point i - 1 are gathered while point i is computed: they wait for the
   // vector results no longer, and the two halves of the work overlap.
@@ -604,14 +596,17 @@ void ComputeNarrowSymbols(const Point* points, std::size_t n, const PositionQuan
     ++chist[c0];
     ++chist[c1 + 1];
     ++chist[c2 + 2];
-    const std::uint32_t pb = ScaledBitLength(p0 | p1 | p2);
-    const std::uint32_t cb = ScaledBitLength(c0 | c1 | c2);
+    // Lanes 0 and 2 of the bit lengths in one 64-bit move.
+    const auto lengths = static_cast<std::uint64_t>(
+        _mm_cvtsi128_si64(_mm_shuffle_epi32(ScaledBitLengths(scaled), 0x08)));
+    const auto pb = static_cast<std::uint32_t>(lengths),
+               cb = static_cast<std::uint32_t>(lengths >> 32);
     bl[i] = static_cast<std::uint16_t>(pb | (cb << 8));
     ++ptag[pb];
     ++ctag[cb];
   };
-  __m128i pending = zero;
-  for (std::size_t i = 0; i < n; ++i) {
+  // Point i's scaled symbols (kHistogramLanes times them), stored for the stream pass.
+  auto symbols = [&](std::size_t i) {
     const __m128 v = _mm_loadu_ps(&points[i].x);
     const __m128i q = _mm_cvttps_epi32(_mm_add_ps(_mm_mul_ps(_mm_sub_ps(v, pq.min), pq.inv), half));
     __m128i value;  // x y z - B G R -; positions below 2^15 survive the signed pack
@@ -631,23 +626,27 @@ void ComputeNarrowSymbols(const Point* points, std::size_t n, const PositionQuan
     c = _mm_add_epi16(c, _mm_and_si128(below, max_dif));
     c = _mm_sub_epi16(c, _mm_and_si128(above, max_dif));
     const __m128i zigzag = _mm_xor_si128(_mm_slli_epi16(c, 1), _mm_srai_epi16(c, 15));
-    const __m128i scaled = _mm_slli_epi16(zigzag, 2);  // kHistogramLanes times the symbols
+    const __m128i scaled = _mm_slli_epi16(zigzag, 2);
     _mm_storeu_si128(reinterpret_cast<__m128i*>(rec + 8 * i), scaled);
     prev = value;
-    if constexpr (kStats) {
-      if (i > 0) gather(pending, i - 1);
-      pending = scaled;
-    } else {
-      ored = _mm_or_si128(ored, zigzag);  // symbols, unscaled
-    }
-  }
-  if constexpr (kStats) gather(pending, n - 1);
+    return scaled;
+  };
   if constexpr (kStats) {
+    // The first point outside the loop: inside it, every point has a predecessor to gather.
+    __m128i pending = symbols(0);
+    for (std::size_t i = 1; i < n; ++i) {
+      const __m128i scaled = symbols(i);
+      gather(pending, i - 1);
+      pending = scaled;
+    }
+    gather(pending, n - 1);
     FinishTagStats(ptag, ps);
     FinishTagStats(ctag, cs);
   } else {
+    __m128i ored = zero;  // for the largest bit lengths
+    for (std::size_t i = 0; i < n; ++i) ored = _mm_or_si128(ored, symbols(i));
     alignas(16) std::uint16_t o[8];
-    _mm_store_si128(reinterpret_cast<__m128i*>(o), ored);
+    _mm_store_si128(reinterpret_cast<__m128i*>(o), _mm_srli_epi16(ored, 2));  // the symbols
     ps->max_bit_length = static_cast<int>(BitLength(o[0], o[1], o[2]));
     cs->max_bit_length = static_cast<int>(BitLength(o[4], o[5], o[6]));
   }
