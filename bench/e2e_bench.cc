@@ -494,6 +494,14 @@ void PrintMedians(const std::vector<CaseResult>& medians, const std::vector<Cont
     }
     row.resize(row.size() - 2);
     std::cout << row << "\n";
+    // An error reply is answered fast and costs next to nothing: such figures measure the
+    // refusal (a server that does not know the uplink encoding, say), not clouds.
+    for (std::size_t s = 0; s < servers.size(); ++s) {
+      const CaseResult& m = medians[i + s];
+      if (m.errors == 0) continue;
+      std::cout << "  (" << name(m.server) << ": " << m.errors << " of " << m.frames
+                << " replies were frame errors: its figures in this row are not clouds)\n";
+    }
   }
 }
 

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -123,6 +124,34 @@ TEST_F(E2eBenchTest, SharedConnectionPutsAllStreamsOnOne) {
   EXPECT_EQ(j["cases"][0]["streams"], 2);
   EXPECT_GT(j["cases"][0]["frames"].get<int>(), 0);
   EXPECT_EQ(j["cases"][0]["errors"], 0);
+}
+
+// A server that refuses the frames (here: every frame is larger than its --max-pixels; in
+// practice an older server that does not know an uplink encoding) answers fast and cheaply; the
+// medians table says its figures are error replies rather than letting them pass as a speed-up.
+TEST_F(E2eBenchTest, MediansSayWhenAServerAnsweredWithErrors) {
+  const std::string refusing = Path("refusing-server");
+  {
+    std::ofstream script(refusing);
+    script << "#!/bin/sh\nexec '" << Server() << "' \"$@\" --max-pixels 1000\n";
+  }
+  std::filesystem::permissions(refusing, std::filesystem::perms::owner_all);
+  std::vector<std::string> args = Short();
+  args.insert(args.end(), {"--paced-fps", "0", "--label", "good", "--compare-bin", refusing,
+                           "--compare-label", "refusing", "--json", Path("e2e.json")});
+  const testing::RunResult r = RunProgram(Bench(), args, dir_.string());
+  ASSERT_EQ(r.code, 0) << r;
+  const auto j = nlohmann::json::parse(ReadText(Path("e2e.json")));
+  ASSERT_EQ(j["medians"].size(), 2u) << j.dump(1);
+  EXPECT_EQ(j["medians"][0]["errors"], 0) << j.dump(1);
+  const int errors = j["medians"][1]["errors"].get<int>();
+  EXPECT_GT(errors, 0) << j.dump(1);
+  EXPECT_EQ(errors, j["medians"][1]["frames"].get<int>()) << j.dump(1);  // every reply
+  EXPECT_NE(r.out.find("  (refusing: " + std::to_string(errors) + " of " + std::to_string(errors) +
+                       " replies were frame errors: its figures in this row are not clouds)"),
+            std::string::npos)
+      << r;
+  EXPECT_EQ(r.out.find("  (good: "), std::string::npos) << r;
 }
 
 TEST_F(E2eBenchTest, BadServerFlagsAreNamed) {
