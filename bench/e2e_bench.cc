@@ -33,13 +33,13 @@
 #include <chrono>
 #include <condition_variable>
 #include <cstdio>
+#include <ctime>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
 #include <mutex>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
-#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -90,20 +90,14 @@ int FreePort() {
   return port;
 }
 
-// utime + stime of a process, seconds.
+// User + system CPU of a process (all its threads, exited ones too), seconds, from its CPU-time
+// clock: nanoseconds, where /proc/PID/stat counts 10 ms ticks (a paced case of a few dozen
+// frames could read 0).
 double ProcessCpuSeconds(pid_t pid) {
-  std::ifstream in("/proc/" + std::to_string(pid) + "/stat");
-  std::string s((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  const auto close_paren = s.rfind(')');
-  if (close_paren == std::string::npos) return -1;
-  std::istringstream fields(s.substr(close_paren + 2));
-  std::string f;
-  double utime = 0, stime = 0;
-  for (int i = 3; i <= 15 && fields >> f; ++i) {
-    if (i == 14) utime = std::stod(f);
-    if (i == 15) stime = std::stod(f);
-  }
-  return (utime + stime) / static_cast<double>(sysconf(_SC_CLK_TCK));
+  clockid_t clock;
+  timespec t{};
+  if (clock_getcpuclockid(pid, &clock) != 0 || clock_gettime(clock, &t) != 0) return -1;
+  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
 }
 
 class ServerProcess {
