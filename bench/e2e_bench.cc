@@ -185,8 +185,6 @@ struct CaseOptions {
 // stream (paced_fps == 0) or at paced_fps each.
 CaseResult RunCase(const ServerProcess& server, const std::vector<Frame>& frames, Uplink uplink,
                    int streams, double paced_fps, const CaseOptions& o) {
-  const double seconds = o.seconds;
-  const int window = o.window;
   CaseResult r;
   r.encoding = Name(uplink);
   r.mode = paced_fps > 0 ? "paced " + std::to_string(static_cast<int>(paced_fps)) + " fps"
@@ -269,7 +267,7 @@ CaseResult RunCase(const ServerProcess& server, const std::vector<Frame>& frames
         next_send += period;
       } else {
         std::unique_lock<std::mutex> lock(st.mu);
-        st.cv.wait(lock, [&] { return st.in_flight < window || stop.load(); });
+        st.cv.wait(lock, [&] { return st.in_flight < o.window || stop.load(); });
         if (stop.load()) break;
       }
       const Frame& f = frames[i++ % frames.size()];
@@ -298,7 +296,7 @@ CaseResult RunCase(const ServerProcess& server, const std::vector<Frame>& frames
   const double core0 = server.CoreCpuSeconds();
   measuring = true;
   const auto t0 = Clock::now();
-  std::this_thread::sleep_for(std::chrono::duration<double>(seconds));
+  std::this_thread::sleep_for(std::chrono::duration<double>(o.seconds));
   measuring = false;
   const auto t1 = Clock::now();
   const double cpu1 = ProcessCpuSeconds(server.pid());

@@ -208,9 +208,6 @@ TEST(ClientConnectTest, EmptyTargetIsRejected) {
   EXPECT_EQ(Client::Connect("").status().code(), absl::StatusCode::kInvalidArgument);
 }
 
-// ---------------------------------------------------------------------------------------------
-// Unary calls
-
 // The TCP connections of this network namespace to `port` that are open, seen from the
 // connecting side (remote port `port`): a client's socket is a line of its own in /proc/net/tcp,
 // or tcp6 for gRPC's dual-stack sockets (127.0.0.1 as ::ffff:127.0.0.1).
@@ -248,6 +245,9 @@ TEST(ClientConnectTest, EveryClientHasAConnectionOfItsOwn) {
     EXPECT_EQ(ConnectionsTo(server->port()), i) << "after " << i << " clients";
   }
 }
+
+// ---------------------------------------------------------------------------------------------
+// Unary calls
 
 TEST_F(ClientTest, GetInfoDescribesTheServer) {
   absl::StatusOr<v1::ServerInfo> info = client_->GetInfo();

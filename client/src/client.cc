@@ -561,11 +561,6 @@ absl::StatusOr<std::unique_ptr<Client>> Client::Connect(const std::string& targe
         absl::StrCat("ClientOptions::load_balancing is '", options.load_balancing,
                      "'; it must be empty, \"pick_first\" or \"round_robin\""));
   }
-  // A Client is a connection of its own. gRPC's process-wide subchannel pool would otherwise put
-  // every Client to one target on one TCP connection: two robots in one process would be one
-  // client to the server's fair queue, and all their frames would go through one transport's
-  // reads (on 2 cores, 4 raw streams on one connection got a fifth fewer frames/s than on four).
-  args.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);
   args.SetMaxReceiveMessageSize(ClampToInt(options.max_message_bytes));
   args.SetMaxSendMessageSize(ClampToInt(options.max_message_bytes));
   if (options.max_reconnect_backoff.count() > 0) {

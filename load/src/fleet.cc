@@ -609,13 +609,11 @@ absl::StatusOr<std::unique_ptr<Fleet>> Fleet::Connect(const FleetOptions& o,
   fleet->lb_policy_ = lb;
   const int channels = o.connections == 0 ? o.streams : std::min(o.connections, o.streams);
   const auto deadline = std::chrono::system_clock::now() + o.connect_timeout;
+  // One connection per channel: CreateChannel never lets gRPC share one among them.
   for (int c = 0; c < channels; ++c) {
     grpc::ChannelArguments args;
     args.SetMaxReceiveMessageSize(-1);
     args.SetMaxSendMessageSize(-1);
-    // A distinct argument per channel keeps gRPC from sharing one connection among them.
-    args.SetInt("cloudcast.load.channel", c);
-    args.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);
     // As the client library: a lost replica is retried within seconds, not gRPC's 2 minutes.
     args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, 5000);
     if (lb == "round_robin") {

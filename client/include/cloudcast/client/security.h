@@ -69,8 +69,9 @@ absl::StatusOr<TlsOptions> LoadTlsFiles(const TlsFiles& files);
 // cannot be read, is empty, or holds whitespace or control characters inside the token.
 absl::StatusOr<std::string> ReadTokenFile(const std::string& path);
 
-// A channel to `target` with `security` on top of `args`: TLS credentials (or plaintext) and an
-// interceptor that adds the bearer token to every call. `credentials`, when not null, is used
+// A channel to `target` with `security` on top of `args`: TLS credentials (or plaintext), an
+// interceptor that adds the bearer token to every call, and a TCP connection of its own (never
+// shared with another channel to the same target). `credentials`, when not null, is used
 // instead of the TLS ones (it must not be combined with security.tls: INVALID_ARGUMENT).
 absl::StatusOr<std::shared_ptr<grpc::Channel>> CreateChannel(
     const std::string& target, const ChannelSecurity& security, grpc::ChannelArguments args,
