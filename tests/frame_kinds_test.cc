@@ -14,6 +14,7 @@
 
 #include "cloudcast/client/client.h"
 #include "cloudcast/client/config.h"
+#include "cloudcast/client/opencv.h"
 #include "cloudcast/core/pipeline.h"
 #include "support/server_fixture.h"
 #include "test_support.h"
@@ -244,6 +245,29 @@ TEST_F(FrameKindsTest, BadDepthFramesGetErrorsNamingTheField) {
     EXPECT_EQ(static_cast<int>(s.error_code()), static_cast<int>(c.code)) << s.error_message();
     EXPECT_NE(s.error_message().find(c.message_has), std::string::npos) << s.error_message();
   }
+}
+
+TEST(FrameKindsMatTest, DepthAndStereoMatsBecomeFramesOrNameWhatIsWrong) {
+  cv::Mat mm(4, 6, CV_16UC1, cv::Scalar(1500)), metres(4, 6, CV_32FC1, cv::Scalar(1.5));
+  cv::Mat bgr(4, 6, CV_8UC3, cv::Scalar(1, 2, 3)), grey(4, 6, CV_8UC1, cv::Scalar(7));
+  auto d = client::DepthFromMat(mm);
+  ASSERT_TRUE(d.ok()) << d.status();
+  EXPECT_EQ(std::get<DepthView>(*d).encoding, DepthEncoding::kU16);
+  EXPECT_EQ(std::get<DepthView>(*d).stride_bytes, 12u);
+  auto f = client::DepthFromMat(metres);
+  ASSERT_TRUE(f.ok());
+  EXPECT_EQ(std::get<DepthView>(*f).encoding, DepthEncoding::kF32);
+  const absl::Status bad = client::DepthFromMat(grey).status();
+  EXPECT_NE(bad.message().find("depth Mat has type CV_8UC1"), std::string::npos) << bad;
+  auto frame = client::DepthFrameFromMats(mm, bgr);
+  ASSERT_TRUE(frame.ok());
+  EXPECT_TRUE(std::holds_alternative<DepthFrame>(*frame));
+  auto pair = client::StereoFrameFromMats(grey, bgr);
+  ASSERT_TRUE(pair.ok());
+  EXPECT_TRUE(std::holds_alternative<client::StereoFrame>(*pair));
+  const absl::Status bad_right = client::StereoFrameFromMats(grey, metres).status();
+  EXPECT_NE(bad_right.message().find("right Mat has type CV_32FC1"), std::string::npos)
+      << bad_right;
 }
 
 }  // namespace
