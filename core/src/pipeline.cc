@@ -251,7 +251,11 @@ void RunTableKernel(const DepthConstants& c, const float* zt, const Float4* z4,
             : w;
     auto pixel = [&](std::uint32_t u, Sample d) {
       __m128 zz;
-      if constexpr (sizeof(Sample) == 1) {
+      if constexpr (std::is_same_v<Values, DepthView>) {
+        // A depth's multiplier is the raw value itself (the table holds float(d)): a convert
+        // instead of a load from a 256 KB table.
+        zz = _mm_set1_ps(static_cast<float>(d));
+      } else if constexpr (sizeof(Sample) == 1) {
         zz = _mm_load_ps(z4[d].f);
       } else {
         zz = _mm_set1_ps(zt[d]);
@@ -270,7 +274,8 @@ void RunTableKernel(const DepthConstants& c, const float* zt, const Float4* z4,
       if constexpr (Sink::kTrackBounds) bounds.Add(p);
     };
     // The passing pixels of one vector of samples.
-    auto visit = [&](std::uint32_t at, __m128i pass) {
+    // Inlined by force: gcc leaves it out of line for 16-bit samples, a call per vector.
+    auto visit = [&](std::uint32_t at, __m128i pass) __attribute__((always_inline)) {
       for (unsigned mask = LaneBits<Sample>(pass); mask != 0; mask &= mask - 1) {
         const auto j = static_cast<std::uint32_t>(__builtin_ctz(mask));
         const Sample s = internal::LoadSample<Sample>(drow, at + j);
