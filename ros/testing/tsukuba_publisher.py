@@ -92,6 +92,8 @@ def main():
                     help="first wait (up to 30 s) for N subscribers on TOPIC (relative to "
                          "/stereo, e.g. disparity=2); repeatable")
     ap.add_argument("--stamp-base", type=int, default=1000, help="stamp of frame 0, seconds")
+    ap.add_argument("--stamp-now", action="store_true",
+                    help="stamp each frame with the time it is published instead (latency)")
     args = ap.parse_args()
 
     rospy.init_node("tsukuba_publisher", disable_signals=False)
@@ -125,7 +127,7 @@ def main():
         for (disparity, colour), name in zip(frames, args.frames.split(",")):
             if rospy.is_shutdown():
                 return
-            stamp = rospy.Time(args.stamp_base + k, 0)
+            stamp = rospy.Time.now() if args.stamp_now else rospy.Time(args.stamp_base + k, 0)
             for msg in (disparity, disparity.image, colour, left_info, right_info):
                 msg.header.stamp = stamp
             pubs["disparity"].publish(disparity)

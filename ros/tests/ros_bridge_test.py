@@ -115,12 +115,15 @@ class RosBridgeTest(unittest.TestCase):
         cls.h.close()
         del code
 
-    def publish(self, frames, stamp_base, extra_subscribers=0, repeat=1, rate=10.0):
-        """Publishes once the bridge and the nodelet (and `extra_subscribers` more on every
-        topic) are connected."""
+    def publish(self, frames, stamp_base, extra_subscribers=0, extra_right=None, repeat=1,
+                rate=10.0):
+        """Publishes once the bridge and the nodelet (and `extra_subscribers` more on the left
+        topics, `extra_right` on the right camera_info, which only the nodelet reads) are
+        connected."""
         n = 2 + extra_subscribers
+        right = 1 + (extra_subscribers if extra_right is None else extra_right)
         waits = [f"disparity={n}", f"left/image_rect_color={n}", f"left/camera_info={n}",
-                 f"right/camera_info={n - 1}"]
+                 f"right/camera_info={right}"]
         p = self.h.start("publisher_%d" % stamp_base,
                          [sys.executable, os.path.join(ros_harness.HERE, "tsukuba_publisher.py"),
                           "--data", ARGS.data, "--frames", ",".join(frames), "--repeat",
@@ -267,11 +270,34 @@ class RosBridgeTest(unittest.TestCase):
                 self.assertIn(message, p.output())
 
 
+    def test_4_the_launch_file_starts_the_bridge(self):
+        from sensor_msgs.msg import PointCloud2
+        if not ARGS.ros_package_path:
+            self.skipTest("no --ros-package-path (build/ros_package)")
+        clouds = Collector("/launched/points2", PointCloud2)
+        launch = self.h.start("roslaunch", [
+            "roslaunch", "cloudcast_ros", "cloudcast_bridge.launch", "camera:=/stereo",
+            f"server:={self.server}", "points:=/launched/points2", "delivery:=all",
+            "name:=launched_bridge"],
+            extra_env={"ROS_PACKAGE_PATH": ARGS.ros_package_path})
+        self.h.wait_for_subscriber("/stereo/disparity", "/stereo/launched_bridge", timeout=30)
+        ros_harness.wait_until(lambda: clouds.sub.get_num_connections() > 0, 20,
+                               "a connection to /launched/points2")
+        base = 3000
+        self.publish(FRAMES[:1], base, extra_subscribers=1, extra_right=0)
+        (cloud,) = clouds.wait_for([stamp_ns(base, 0)], 30)
+        self.assertEqual(cloud.header.frame_id, "tsukuba_left_optical")
+        self.assertGreater(cloud.width, 0)
+        launch.stop()
+
+
 def main():
     global ARGS
     ap = argparse.ArgumentParser()
     ap.add_argument("--bin-dir", required=True)
     ap.add_argument("--data", required=True)
+    ap.add_argument("--ros-package-path", default="",
+                    help="the build's ROS package folder (build/ros_package), for roslaunch")
     ap.add_argument("-k", "--keep", action="store_true", help="keep the scratch folder and logs")
     ARGS, rest = ap.parse_known_args()
     why = ros_harness.ros_missing()
