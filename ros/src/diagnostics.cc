@@ -33,7 +33,7 @@ void BridgeStats::InputError(const absl::Status& s) {
   std::lock_guard<std::mutex> lock(mu_);
   ++input_errors_;
   ++period_errors_;
-  last_error_ = std::string(s.message());
+  last_error_ = s.ToString();  // with the code: UNAUTHENTICATED, ...
 }
 
 void BridgeStats::Sent() {
@@ -48,7 +48,7 @@ void BridgeStats::NotSent(const absl::Status& s) {
   ++not_sent_;
   ++period_errors_;
   link_down_ = true;
-  last_error_ = std::string(s.message());
+  last_error_ = s.ToString();  // with the code: UNAUTHENTICATED, ...
 }
 
 void BridgeStats::Reply(const client::Result& r) {
@@ -56,7 +56,7 @@ void BridgeStats::Reply(const client::Result& r) {
   if (!r.ok()) {
     ++frame_errors_;
     ++period_errors_;
-    last_error_ = std::string(r.status.message());
+    last_error_ = r.status.ToString();
     return;
   }
   ++clouds_;

@@ -291,6 +291,73 @@ class RosBridgeTest(unittest.TestCase):
         launch.stop()
 
 
+    def test_5_tls_and_a_bearer_token(self):
+        """A server with TLS and tokens: the bridge with ~tls/ca, ~tls/server_name and
+        ~token_file gets its clouds; with a wrong token its frames are refused and
+        /diagnostics says so."""
+        from sensor_msgs.msg import PointCloud2
+        ca, cert, key = self.make_pki()
+        token, wrong = "a" * 32 + "-robot", "b" * 32 + "-other"
+        tokens = self.h.path("tokens.json")
+        with open(tokens, "w") as f:
+            f.write('{"tenants": [{"name": "robots", "tokens": ["%s"]}]}' % token)
+        for name, value in (("token", token), ("wrong_token", wrong)):
+            with open(self.h.path(name), "w") as f:
+                f.write(value + "\n")
+        server = self.h.start_server(["--tls-cert", cert, "--tls-key", key,
+                                      "--tokens-file", tokens])
+        secure = {"server": server, "tls/ca": ca, "tls/server_name": "cloudcast.test",
+                  "delivery": "all", "diagnostics_period": 0.5}
+        good = Collector("/secure/points2", PointCloud2)
+        _, good_node = self.h.start_bridge(
+            "secure_bridge", dict(secure, token_file=self.h.path("token")),
+            {"points2": "/secure/points2"})
+        _, bad_node = self.h.start_bridge(
+            "wrong_token_bridge", dict(secure, token_file=self.h.path("wrong_token")),
+            {"points2": "/wrong/points2"})
+        for node in (good_node, bad_node):
+            self.h.wait_for_subscriber("/stereo/disparity", node)
+        ros_harness.wait_until(lambda: good.sub.get_num_connections() > 0, 20,
+                               "a connection to /secure/points2")
+        base = 4000
+        self.publish(FRAMES[:1], base, extra_subscribers=2, extra_right=0)
+        (cloud,) = good.wait_for([stamp_ns(base, 0)], 30)
+        self.assertGreater(cloud.width, 0)
+
+        def refused():
+            with self.diagnostics.lock:
+                for m in self.diagnostics.all:
+                    st = m.status[0]
+                    values = {kv.key: kv.value for kv in st.values}
+                    if st.name.startswith(bad_node) and st.level >= 1 and \
+                            "bearer token is not valid" in values.get("last_error", ""):
+                        return True
+            return False
+        try:
+            ros_harness.wait_until(refused, 20, "diagnostics of the wrong token's refusal")
+        except TimeoutError:
+            self.fail("no refusal in /diagnostics:\n" + self.h.logs())
+
+    def make_pki(self):
+        """A CA and a server certificate for the name cloudcast.test, by openssl."""
+        d = self.h.path("pki")
+        os.makedirs(d, exist_ok=True)
+        ca, ca_key = f"{d}/ca.pem", f"{d}/ca.key"
+        cert, key, csr = f"{d}/server.pem", f"{d}/server.key", f"{d}/server.csr"
+        ext = f"{d}/ext.cnf"
+        with open(ext, "w") as f:
+            f.write("subjectAltName=DNS:cloudcast.test\n")
+        for argv in (
+                ["openssl", "req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", ca_key,
+                 "-out", ca, "-days", "2", "-subj", "/CN=cloudcast test CA"],
+                ["openssl", "req", "-newkey", "rsa:2048", "-nodes", "-keyout", key, "-out", csr,
+                 "-subj", "/CN=cloudcast.test"],
+                ["openssl", "x509", "-req", "-in", csr, "-CA", ca, "-CAkey", ca_key,
+                 "-CAcreateserial", "-out", cert, "-days", "2", "-extfile", ext]):
+            subprocess.run(argv, check=True, capture_output=True, timeout=60)
+        return ca, cert, key
+
+
 def main():
     global ARGS
     ap = argparse.ArgumentParser()
