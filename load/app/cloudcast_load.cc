@@ -235,8 +235,9 @@ std::unique_ptr<cloudcast::cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
       ->group(frames);
   app.add_option("--encoding", f.encoding,
                  "How images travel: raw pixels; zstd (lossless: row deltas + zstd, cheap for "
-                 "the server); png (lossless); jpeg (colour JPEG, disparity PNG)")
-      ->check(CLI::IsMember({"raw", "zstd", "png", "jpeg"}))
+                 "the server); png (lossless: PNG, float disparities TIFF); jpeg (colour JPEG, "
+                 "disparity as png)")
+      ->check(CLI::IsMember(cloudcast::sources::UplinkNames()))
       ->capture_default_str()
       ->group(frames);
   app.add_option("--jpeg-quality", f.jpeg_quality, "JPEG quality with --encoding jpeg")
@@ -278,7 +279,8 @@ std::unique_ptr<cloudcast::cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
       ->group(soak);
   app.add_option("--soak-max-growth-mb", f.soak_max_growth_mb,
                  "Allowed rise of the server's memory after the warm-up, MB")
-      ->check(NumberCheck("a number of MB in [0, 1e6]", [](double v) { return v >= 0 && v <= 1e6; }))
+      ->check(
+          NumberCheck("a number of MB in [0, 1e6]", [](double v) { return v >= 0 && v <= 1e6; }))
       ->capture_default_str()
       ->group(soak);
 
@@ -360,8 +362,9 @@ int main(int argc, char** argv) {
     return usage("--reconnect-timeout needs --resilient");
   }
   if (f.soak && f.watch_memory.empty()) {
-    return usage("--soak needs --watch-memory URL (the server's /metrics, e.g. "
-                 "http://127.0.0.1:9464/metrics)");
+    return usage(
+        "--soak needs --watch-memory URL (the server's /metrics, e.g. "
+        "http://127.0.0.1:9464/metrics)");
   }
   for (const char* flag : {"--memory-interval", "--soak-warmup", "--soak-max-growth-mb"}) {
     const bool needs_soak = std::string(flag) != "--memory-interval";
@@ -380,16 +383,18 @@ int main(int argc, char** argv) {
   }
 
   load::FrameSourceOptions source;
-  source.tsukuba_dir = f.tsukuba;
-  source.illumination = f.illumination;
-  source.disparity_glob = f.disparity_glob;
-  source.colour_glob = f.colour_glob;
+  source.source.tsukuba_dir = f.tsukuba;
+  source.source.illumination = f.illumination;
+  using cloudcast::sources::ImageRole;
+  if (!f.disparity_glob.empty()) source.source.globs[ImageRole::kDisparity] = f.disparity_glob;
+  if (!f.colour_glob.empty()) source.source.globs[ImageRole::kColour] = f.colour_glob;
   if (!f.synthetic.empty()) {
-    cloudcast::cli::ParseSize(f.synthetic, &source.synthetic_width, &source.synthetic_height);
+    cloudcast::cli::ParseSize(f.synthetic, &source.source.synthetic_width,
+                              &source.source.synthetic_height);
   }
   source.synthetic_frames = f.synthetic_frames;
-  load::ParseUplink(f.encoding, &source.uplink);
-  source.jpeg_quality = f.jpeg_quality;
+  cloudcast::sources::ParseUplink(f.encoding, &source.uplink.encoding);
+  source.uplink.jpeg_quality = f.jpeg_quality;
 
   load::FleetOptions o;
   o.security = *security;
