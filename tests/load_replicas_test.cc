@@ -38,8 +38,8 @@ using testing::ServerProcess;
 const load::FrameStore& Store() {
   static const load::FrameStore store = [] {
     load::FrameSourceOptions o;
-    o.synthetic_width = 160;
-    o.synthetic_height = 120;
+    o.source.synthetic_width = 160;
+    o.source.synthetic_height = 120;
     o.synthetic_frames = 4;
     return load::FrameStore::Prepare(o).value();
   }();
