@@ -10,6 +10,7 @@
 
 #include <CLI/CLI.hpp>
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -27,6 +28,7 @@
 #include "cloudcast/load/probe.h"
 #include "cloudcast/load/report.h"
 #include "cloudcast/proto/convert.h"
+#include "cloudcast/v1/cloudcast.grpc.pb.h"
 
 namespace {
 
@@ -41,37 +43,52 @@ constexpr int kExitSoakFailed = 3;
 constexpr double kMaxDurationS = 3600;
 constexpr double kMaxFrames = 1e8;
 
+// The defaults of the flags: those of the options structs they fill, so each is written once.
+const load::FleetOptions& FleetDefaults() {
+  static const load::FleetOptions o;
+  return o;
+}
+const load::FrameSourceOptions& FrameDefaults() {
+  static const load::FrameSourceOptions o;
+  return o;
+}
+
+double Seconds(std::chrono::nanoseconds d) { return std::chrono::duration<double>(d).count(); }
+
 struct Flags {
-  std::string server = "localhost:50051";
-  double connect_timeout_s = 5;
+  std::string server = FleetDefaults().server;
+  double connect_timeout_s = Seconds(FleetDefaults().connect_timeout);
   bool probe = false;
-  std::string probe_service = "cloudcast.v1.CloudCast";
-  std::string lb;
-  bool resilient = false;
-  double reconnect_timeout_s = 30;
-  int streams = 1;
-  int connections = 0;
-  double fps = 30;
-  int in_flight = 1;
-  std::string schedule = "const";
-  double load_start = 0, load_step = 0, load_end = 0, load_step_duration_s = 1;
-  double duration_s = 10;
-  double frames = 0;
-  double drain_timeout_s = 5;
-  std::uint64_t seed = 1;
-  int scheduler_threads = 1;
+  std::string probe_service = cloudcast::v1::CloudCast::service_full_name();
+  std::string lb = FleetDefaults().lb_policy;
+  bool resilient = FleetDefaults().resilient;
+  double reconnect_timeout_s = Seconds(FleetDefaults().reconnect_timeout);
+  int streams = FleetDefaults().streams;
+  int connections = FleetDefaults().connections;
+  double fps = FleetDefaults().schedule.start;
+  int in_flight = FleetDefaults().in_flight;
+  std::string schedule = std::string(load::Name(FleetDefaults().schedule.kind));
+  double load_start = 0;  // unset: --fps
+  double load_step = FleetDefaults().schedule.step, load_end = FleetDefaults().schedule.end;
+  double load_step_duration_s = Seconds(FleetDefaults().schedule.step_duration);
+  double duration_s = Seconds(FleetDefaults().duration);
+  double frames = static_cast<double>(FleetDefaults().frames);
+  double drain_timeout_s = Seconds(FleetDefaults().drain_timeout);
+  std::uint64_t seed = FleetDefaults().seed;
+  int scheduler_threads = FleetDefaults().scheduler_threads;
   // Frames
-  std::string tsukuba, illumination = "daylight", disparity_glob, colour_glob, synthetic;
-  int synthetic_frames = 10;
-  std::string encoding = "raw";
-  int jpeg_quality = 90;
+  std::string tsukuba, disparity_glob, colour_glob, synthetic;
+  std::string illumination = FrameDefaults().source.illumination;
+  int synthetic_frames = FrameDefaults().synthetic_frames;
+  std::string encoding = cloudcast::sources::Name(FrameDefaults().uplink.encoding);
+  int jpeg_quality = FrameDefaults().uplink.jpeg_quality;
   bool lossless = false;
   // Server memory and the soak
   std::string watch_memory;
   double memory_interval_s = 5;
   bool soak = false;
-  double soak_warmup_s = 15;
-  double soak_max_growth_mb = 64;
+  double soak_warmup_s = load::SoakBounds{}.warmup_s;
+  double soak_max_growth_mb = load::SoakBounds{}.max_growth_bytes / 1e6;
   // Output
   std::string json, html;
   double progress_s = 1;

@@ -610,7 +610,8 @@ absl::StatusOr<std::unique_ptr<Fleet>> Fleet::Connect(const FleetOptions& o,
     args.SetMaxReceiveMessageSize(-1);
     args.SetMaxSendMessageSize(-1);
     // As the client library: a lost replica is retried within seconds, not gRPC's 2 minutes.
-    args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, 5000);
+    args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS,
+                static_cast<int>(client::ClientOptions{}.max_reconnect_backoff.count()));
     if (lb == "round_robin") {
       // Health checking makes round_robin pass over replicas that are draining (NOT_SERVING).
       args.SetServiceConfigJSON(

@@ -59,10 +59,22 @@ extern "C" void OnSignal(int signal_number) {
   std::signal(signal_number, SIG_DFL);
 }
 
+// The defaults of the flags: those of the options structs they fill, so each is written once.
+const SessionOptions& SessionDefaults() {
+  static const SessionOptions o;
+  return o;
+}
+const ViewerOptions& ViewerDefaults() {
+  static const ViewerOptions o;
+  return o;
+}
+
+double Seconds(std::chrono::milliseconds d) { return std::chrono::duration<double>(d).count(); }
+
 struct Flags {
   // Source
   std::string tsukuba;
-  std::string illumination = "daylight";
+  std::string illumination = sources::SourceSpec{}.illumination;
   std::string disparity_glob, colour_glob;
   std::string disparity_video, colour_video;
   std::string synthetic;
@@ -71,13 +83,13 @@ struct Flags {
   std::uint64_t frames = 0;
 
   // Streaming
-  std::string server = "localhost:50051";
-  double connect_timeout_s = 5;
-  double fps = 0;
-  int in_flight = 2;
+  std::string server = SessionDefaults().server;
+  double connect_timeout_s = Seconds(SessionDefaults().connect_timeout);
+  double fps = SessionDefaults().fps;
+  int in_flight = SessionDefaults().max_in_flight;
   bool lossless = false;
-  std::string encoding = "raw";
-  int jpeg_quality = 90;
+  std::string encoding = sources::Name(SessionDefaults().uplink.encoding);
+  int jpeg_quality = SessionDefaults().uplink.jpeg_quality;
 
   // TLS and the bearer token (cli::ConnectionFlags), read after parsing.
   client::ChannelSecurity security;
@@ -87,11 +99,12 @@ struct Flags {
   // Viewer
   bool no_window = false;
   std::vector<std::string> open;
-  std::string window = "1280x720";
+  std::string window = std::to_string(ViewerDefaults().window.width) + "x" +
+                       std::to_string(ViewerDefaults().window.height);
   bool hidden = false;
-  float point_size = 2.0f;
+  float point_size = ViewerDefaults().window.point_size;
   std::string snapshot;
-  std::uint64_t snapshot_after = 10;
+  std::uint64_t snapshot_after = ViewerDefaults().snapshot_after;
   bool exit_at_end = false;
 
   // Output
@@ -179,8 +192,10 @@ std::unique_ptr<cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
       ->expected(1, -1)
       ->group(source);
   app.add_flag("--loop", f.loop,
-               "Start finite sources (folder, globs, videos) again at their end; decoded images "
-               "are kept in memory (up to 512 MB) so later passes cost no decoding")
+               fmt::format("Start finite sources (folder, globs, videos) again at their end; "
+                           "decoded images are kept in memory (up to {} MB) so later passes cost "
+                           "no decoding",
+                           sources::SourceOptions{}.cache_bytes >> 20))
       ->group(source);
   app.add_option("--frames", f.frames, "Send at most N frames; 0 = all (endless sources: forever)")
       ->capture_default_str()
@@ -420,13 +435,13 @@ class ProgressReporter {
 
 ViewerOptions MakeViewerOptions(const Flags& f, bool exit_at_end) {
   ViewerOptions v;
-  std::uint32_t w = 1280, h = 720;
-  ParseSize(f.window, &w, &h);
-  v.window.width = static_cast<int>(w);
-  v.window.height = static_cast<int>(h);
+  std::uint32_t w = 0, h = 0;
+  if (ParseSize(f.window, &w, &h)) {  // checked by --window's SizeCheck
+    v.window.width = static_cast<int>(w);
+    v.window.height = static_cast<int>(h);
+  }
   v.window.visible = !f.hidden;
   v.window.point_size = f.point_size;
-  v.window.title = "cloudcast";
   v.snapshot_path = f.snapshot;
   v.snapshot_after = f.snapshot_after;
   v.exit_at_end = exit_at_end;

@@ -24,10 +24,10 @@
 namespace cloudcast::client::app {
 
 struct SessionOptions {
-  std::string server = "localhost:50051";
+  std::string server = kDefaultTarget;
   // TLS and the bearer token (cloudcast/client/security.h).
   ChannelSecurity security;
-  std::chrono::milliseconds connect_timeout{5000};
+  std::chrono::milliseconds connect_timeout = ClientOptions{}.connect_timeout;
   // Sent as the stream's first message.
   StreamConfig config;
   // Frames per second; 0: send whenever fewer than max_in_flight frames await their reply.

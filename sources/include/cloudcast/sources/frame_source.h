@@ -65,7 +65,7 @@ struct SourceOptions {
   // cache_bytes), so later passes cost no decoding.
   std::uint64_t cache_bytes = std::uint64_t{512} << 20;
   // Focal length (pixels) of the suggested camera for file and video sources.
-  double focal = 615.0;
+  double focal = CameraModel{}.fx;
 };
 
 // A New Tsukuba folder (the original layout), each role's images from its folder
