@@ -37,11 +37,11 @@
 #include "cloudcast/datasets/synthetic.h"
 #include "cloudcast/io/cloud_io.h"
 #include "cloudcast/sources/frame_source.h"
-#include "program_support.h"
+#include "support/program_support.h"
 #include "support/mats.h"
 #include "support/server_fixture.h"
-#include "test_support.h"
-#include "xvfb_support.h"
+#include "support/test_support.h"
+#include "support/xvfb_support.h"
 
 namespace cloudcast::client::app {
 namespace {

@@ -43,7 +43,7 @@
 #include "gtest/gtest.h"
 #include "support/server_fixture.h"
 #include "support/waiting.h"
-#include "test_support.h"
+#include "support/test_support.h"
 
 namespace cloudcast::client {
 namespace {

@@ -21,10 +21,10 @@
 
 #include "cloudcast/core/draco_codec.h"
 #include "cloudcast/core/point.h"
-#include "program_support.h"
+#include "support/program_support.h"
 #include "support/cloud_match.h"
 #include "support/image_files.h"
-#include "test_support.h"
+#include "support/test_support.h"
 
 namespace cloudcast {
 namespace {

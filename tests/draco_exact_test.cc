@@ -28,8 +28,8 @@
 #include "cloudcast/core/point.h"
 #include "cloudcast/datasets/synthetic.h"
 #include "cloudcast/datasets/tsukuba.h"
-#include "program_support.h"
-#include "test_support.h"
+#include "support/program_support.h"
+#include "support/test_support.h"
 
 // Every allocation of the test program is counted, to check that a warm encoder allocates
 // nothing.

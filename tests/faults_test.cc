@@ -29,7 +29,7 @@
 #include "cloudcast/client/client.h"
 #include "cloudcast/datasets/synthetic.h"
 #include "cloudcast/testing/metrics_scrape.h"
-#include "replica_support.h"
+#include "support/replica_support.h"
 #include "support/robot.h"
 #include "support/small_frames.h"
 #include "support/waiting.h"

@@ -23,7 +23,7 @@
 #include "cloudcast/load/fleet.h"
 #include "cloudcast/load/frame_store.h"
 #include "cloudcast/load/report.h"
-#include "replica_support.h"
+#include "support/replica_support.h"
 #include "support/waiting.h"
 
 namespace cloudcast {

@@ -11,7 +11,7 @@
 #include "cloudcast/core/pipeline.h"
 #include "cloudcast/io/image_io.h"
 #include "cloudcast/reference/pcl_reference.h"
-#include "test_support.h"
+#include "support/test_support.h"
 
 namespace cloudcast {
 namespace {

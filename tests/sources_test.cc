@@ -20,9 +20,9 @@
 #include "cloudcast/sources/files.h"
 #include "cloudcast/sources/frame_source.h"
 #include "cloudcast/sources/uplink.h"
-#include "program_support.h"
+#include "support/program_support.h"
 #include "support/mats.h"
-#include "test_support.h"
+#include "support/test_support.h"
 
 namespace cloudcast::sources {
 namespace {

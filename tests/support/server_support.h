@@ -35,7 +35,7 @@
 #include "support/cloud_match.h"
 #include "support/server_fixture.h"
 #include "support/waiting.h"
-#include "test_support.h"
+#include "support/test_support.h"
 
 namespace cloudcast::server {
 
