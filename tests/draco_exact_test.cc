@@ -21,13 +21,13 @@
 #include <string>
 #include <vector>
 
-#include "cloudcast/io/cloud_io.h"
 #include "cloudcast/core/draco_codec.h"
-#include "cloudcast/io/image_io.h"
 #include "cloudcast/core/pipeline.h"
 #include "cloudcast/core/point.h"
 #include "cloudcast/datasets/synthetic.h"
 #include "cloudcast/datasets/tsukuba.h"
+#include "cloudcast/io/cloud_io.h"
+#include "cloudcast/io/image_io.h"
 #include "support/program_support.h"
 #include "support/test_support.h"
 

@@ -12,8 +12,8 @@
 
 #include "cloudcast/core/image.h"
 #include "cloudcast/core/limits.h"
-#include "support/program_support.h"
 #include "support/image_files.h"
+#include "support/program_support.h"
 #include "support/test_support.h"
 
 namespace cloudcast {

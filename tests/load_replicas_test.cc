@@ -49,10 +49,9 @@ const load::FrameStore& Store() {
 class LoadReplicasTest : public testing::ScratchDirTest {
  public:
   void StartReplicas(int n) {
-    replicas_ = testing::StartReplicaSet(n, {"--threads", "1"},
-                                         [this](const std::string& id) {
-                                           return Path("replica" + id + ".log");
-                                         });
+    replicas_ = testing::StartReplicaSet(n, {"--threads", "1"}, [this](const std::string& id) {
+      return Path("replica" + id + ".log");
+    });
     ASSERT_EQ(replicas_.size(), static_cast<std::size_t>(n)) << "replicas did not start";
   }
 

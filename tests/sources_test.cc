@@ -20,8 +20,8 @@
 #include "cloudcast/sources/files.h"
 #include "cloudcast/sources/frame_source.h"
 #include "cloudcast/sources/uplink.h"
-#include "support/program_support.h"
 #include "support/mats.h"
+#include "support/program_support.h"
 #include "support/test_support.h"
 
 namespace cloudcast::sources {
