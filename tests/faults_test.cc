@@ -277,7 +277,9 @@ TEST_P(ServerStopTest, ResilientStreamLosesNothingAcrossAServerRestart) {
   ASSERT_GE(robot->reconnects.size(), 1u);
   EXPECT_EQ(robot->reconnects.front().cause.code(), absl::StatusCode::kUnavailable)
       << robot->reconnects.front().cause;
-  if (signal_number == SIGTERM) EXPECT_EQ(status, std::optional<int>(0));
+  if (signal_number == SIGTERM) {
+    EXPECT_EQ(status, std::optional<int>(0));
+  }
 }
 
 INSTANTIATE_TEST_SUITE_P(Signals, ServerStopTest, ::testing::Values(SIGKILL, SIGTERM),

@@ -231,7 +231,9 @@ TEST_F(ReplicasTest, ConnectionAgeMovesLongStreamsToNewConnectionsLosingNothing)
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
   std::size_t frames = 0;
   for (; frames < kMaxFrames && std::chrono::steady_clock::now() < deadline; ++frames) {
-    if (frames >= 2) ASSERT_TRUE(robot->WaitForAnswers(frames - 1)) << "frame " << frames - 2;
+    if (frames >= 2) {
+      ASSERT_TRUE(robot->WaitForAnswers(frames - 1)) << "frame " << frames - 2;
+    }
     {
       std::lock_guard<std::mutex> lock(robot->mu);
       if (robot->reconnects.size() >= kMoves) break;
