@@ -3,12 +3,19 @@
 // evicted before each run (as in cloudcast-bench, where PCL runs in between). Under callgrind
 // (--callgrind) only the measured runs are counted, so instruction counts compare versions
 // exactly. --key-order measures what emitting voxels in key order (PCL's order) does to the
-// Draco bytes and times.
+// Draco bytes and times. The "depth ms" column runs the same frame as a depth camera would send
+// it (16-bit millimetres of the same z, depth_image_proc's formula): the depth path's cost beside
+// the disparity path's, and "u16 ms" the same frame as a matcher's 16-bit fixed-point disparity
+// (1/16 pixel), the disparity path at the depth image's sample width.
 #include <CLI/CLI.hpp>
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
+#include <cstring>
+#include <fstream>
 #include <iostream>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
@@ -54,6 +61,45 @@ void Check(const absl::Status& s, const char* what) {
     std::cerr << what << " failed: " << s << "\n";
     std::exit(1);
   }
+}
+
+// The frame as a depth camera would send it: z = 615 / d (the paper's conversion) in 16-bit
+// millimetres, 0 where the disparity is invalid.
+OwnedDepth AsDepth(const tsukuba::Frame& f) {
+  OwnedDepth out;
+  out.width = f.disparity.width;
+  out.height = f.disparity.height;
+  out.encoding = DepthEncoding::kU16;
+  out.pixels.resize(std::size_t{out.width} * out.height * 2);
+  const DisparityView d = f.disparity.view();
+  for (std::uint32_t v = 0; v < out.height; ++v) {
+    for (std::uint32_t u = 0; u < out.width; ++u) {
+      const std::uint8_t disparity = d.row(v)[u];
+      // Beyond 65.535 m (disparities under 10) a 16-bit camera has no reading either.
+      const long mm = disparity == 0 ? 0 : std::lround(615000.0 / disparity);
+      const auto sample = static_cast<std::uint16_t>(mm > 65535 ? 0 : mm);
+      std::memcpy(&out.pixels[2 * (std::size_t{v} * out.width + u)], &sample, 2);
+    }
+  }
+  return out;
+}
+
+// The frame as a stereo matcher's 16-bit fixed point (OpenCV's 1/16 pixel): the same points as
+// the 8-bit map, at the depth image's sample width.
+OwnedDisparity AsFixedPoint(const tsukuba::Frame& f) {
+  OwnedDisparity out;
+  out.width = f.disparity.width;
+  out.height = f.disparity.height;
+  out.encoding = DisparityEncoding::kU16;
+  out.pixels.resize(std::size_t{out.width} * out.height * 2);
+  const DisparityView d = f.disparity.view();
+  for (std::uint32_t v = 0; v < out.height; ++v) {
+    for (std::uint32_t u = 0; u < out.width; ++u) {
+      const auto sample = static_cast<std::uint16_t>(d.row(v)[u] * 16);
+      std::memcpy(&out.pixels[2 * (std::size_t{v} * out.width + u)], &sample, 2);
+    }
+  }
+  return out;
 }
 
 // First-seen order against key (PCL's) order, per frame: the chain's time, and the Draco bytes and
@@ -122,6 +168,7 @@ int Main(int argc, char** argv) {
   int iterations = 51;
   int warmup = 3;
   bool callgrind = false, key_order = false;
+  std::string json_path;
   app.add_option("--data", data_dir, "New Tsukuba folder")->capture_default_str();
   app.add_option("--frame", only, "only this frame id (e.g. 00001)");
   app.add_option("--iterations", iterations, "timed runs per frame")
@@ -136,6 +183,7 @@ int Main(int argc, char** argv) {
   app.add_flag("--key-order", key_order,
                "compare first-seen and key (PCL) order: chain time, Draco bytes and encode time "
                "(with --callgrind: count the chain in key order)");
+  app.add_option("--json", json_path, "also write the table as JSON to this file");
   CLI11_PARSE(app, argc, argv);
 
   auto loaded = tsukuba::LoadAll(data_dir);
@@ -152,7 +200,7 @@ int Main(int argc, char** argv) {
     return 1;
   }
 
-  Pipeline pipeline;
+  Pipeline pipeline, depth_pipeline;
   PipelineOptions options;  // paper parameters
   PointCloud out;
   StageCounts counts;
@@ -182,16 +230,25 @@ int Main(int argc, char** argv) {
 
   if (key_order) return KeyOrderTable(frames, iterations, warmup);
 
-  std::printf("%-6s %8s %8s %9s %9s %9s\n", "frame", "passed", "voxels", "warm ms", "cold ms",
-              "scan ms");
-  double sum_warm = 0, sum_cold = 0, sum_scan = 0;
+  std::printf("%-6s %8s %8s %9s %9s %9s | %9s | %9s %8s %8s %6s %6s\n", "frame", "passed", "voxels",
+              "warm ms", "cold ms", "scan ms", "u16 ms", "depth ms", "passed", "voxels", "/u8",
+              "/u16");
+  double sum_warm = 0, sum_cold = 0, sum_scan = 0, sum_depth = 0, sum_u16 = 0;
+  Pipeline u16_pipeline;
   PipelineOptions scan_only = options;
   scan_only.voxel.enabled = false;
+  nlohmann::json rows = nlohmann::json::array();
   for (const tsukuba::Frame& f : frames) {
     options.camera = CameraModel::PclCompatible(f.disparity.width, f.disparity.height);
     scan_only.camera = options.camera;
-    std::vector<double> warm, cold, scan;
-    PointCloud passed;
+    const OwnedDepth depth = AsDepth(f);
+    const OwnedDisparity fixed = AsFixedPoint(f);
+    PipelineOptions fixed_options = options;
+    fixed_options.camera.disparity_scale = 1.0 / 16;
+    fixed_options.camera.invalid_disparities = {0};
+    std::vector<double> warm, cold, scan, depth_ms, u16_ms;
+    PointCloud passed, depth_out;
+    StageCounts depth_counts;
     for (int i = -warmup; i < iterations; ++i) {
       const double tw = TimeMs([&] {
         Check(pipeline.Run(options, f.disparity.view(), f.colour.view(), &out, &counts), "chain");
@@ -203,17 +260,51 @@ int Main(int argc, char** argv) {
       const double ts = TimeMs([&] {
         Check(pipeline.Run(scan_only, f.disparity.view(), f.colour.view(), &passed), "scan");
       });
-      if (i >= 0) warm.push_back(tw), cold.push_back(tc), scan.push_back(ts);
+      const double td = TimeMs([&] {
+        Check(depth_pipeline.Run(options, depth.view(), f.colour.view(), &depth_out, &depth_counts),
+              "depth chain");
+      });
+      const double tu = TimeMs([&] {
+        Check(u16_pipeline.Run(fixed_options, fixed.view(), f.colour.view(), &depth_out),
+              "u16 chain");
+      });
+      if (i >= 0) {
+        warm.push_back(tw), cold.push_back(tc), scan.push_back(ts), depth_ms.push_back(td);
+        u16_ms.push_back(tu);
+      }
     }
-    const double mw = Median(warm), mc = Median(cold), ms = Median(scan);
-    sum_warm += mw, sum_cold += mc, sum_scan += ms;
-    std::printf("%-6s %8llu %8llu %9.3f %9.3f %9.3f\n", f.id.c_str(),
-                static_cast<unsigned long long>(counts.after_passthrough),
-                static_cast<unsigned long long>(counts.after_voxel), mw, mc, ms);
+    const double mw = Median(warm), mc = Median(cold), ms = Median(scan), md = Median(depth_ms);
+    const double mu = Median(u16_ms);
+    sum_warm += mw, sum_cold += mc, sum_scan += ms, sum_depth += md, sum_u16 += mu;
+    std::printf("%-6s %8llu %8llu %9.3f %9.3f %9.3f | %9.3f | %9.3f %8llu %8llu %5.2fx %5.2fx\n",
+                f.id.c_str(), static_cast<unsigned long long>(counts.after_passthrough),
+                static_cast<unsigned long long>(counts.after_voxel), mw, mc, ms, mu, md,
+                static_cast<unsigned long long>(depth_counts.after_passthrough),
+                static_cast<unsigned long long>(depth_counts.after_voxel), md / mw, md / mu);
+    rows.push_back({{"frame", f.id},
+                    {"passed", counts.after_passthrough},
+                    {"voxels", counts.after_voxel},
+                    {"warm_ms", mw},
+                    {"cold_ms", mc},
+                    {"scan_ms", ms},
+                    {"depth_ms", md},
+                    {"u16_disparity_ms", mu},
+                    {"depth_passed", depth_counts.after_passthrough},
+                    {"depth_voxels", depth_counts.after_voxel}});
   }
   const double n = static_cast<double>(frames.size());
-  std::printf("%-6s %8s %8s %9.3f %9.3f %9.3f\n", "mean", "", "", sum_warm / n, sum_cold / n,
-              sum_scan / n);
+  std::printf("%-6s %8s %8s %9.3f %9.3f %9.3f | %9.3f | %9.3f %8s %8s %5.2fx %5.2fx\n", "mean", "",
+              "", sum_warm / n, sum_cold / n, sum_scan / n, sum_u16 / n, sum_depth / n, "", "",
+              sum_depth / sum_warm, sum_depth / sum_u16);
+  std::printf(
+      "(warm: the 8-bit disparity map; u16: the same as 1/16-pixel fixed point; depth: the "
+      "same as 16-bit millimetres, z = 615 / d; /u8, /u16: depth against each; medians of "
+      "%d runs, all warm)\n",
+      iterations);
+  if (!json_path.empty()) {
+    std::ofstream(json_path) << nlohmann::json{{"iterations", iterations}, {"frames", rows}}.dump(2)
+                             << "\n";
+  }
   return 0;
 }
 

@@ -201,8 +201,7 @@ struct Stream::Impl {
     return pending.Answer(sequence);
   }
 
-  absl::Status Send(const DisparityInput& disparity, const ColorInput& colour,
-                    const FrameMeta& meta) {
+  absl::Status Send(const FrameInput& input, const FrameMeta& meta) {
     std::lock_guard<std::timed_mutex> lock(write_mu);
     if (writes_closed) {
       return absl::FailedPreconditionError(
@@ -210,7 +209,7 @@ struct Stream::Impl {
     }
     const std::uint64_t sequence = meta.sequence.value_or(next_sequence);
     grpc::ByteBuffer bytes;
-    if (absl::Status s = frames.Write(disparity, colour, meta, sequence, &bytes); !s.ok()) {
+    if (absl::Status s = frames.Write(input, meta, sequence, &bytes); !s.ok()) {
       return s;
     }
     const std::uint64_t image_bytes = frames.image_bytes();
@@ -494,9 +493,13 @@ Stream::~Stream() {
   impl_->Finish().IgnoreError();
 }
 
+absl::Status Stream::Send(const FrameInput& input, const FrameMeta& meta) {
+  return impl_->Send(input, meta);
+}
+
 absl::Status Stream::Send(const DisparityInput& disparity, const ColorInput& colour,
                           const FrameMeta& meta) {
-  return impl_->Send(disparity, colour, meta);
+  return impl_->Send(DisparityFrame{disparity, colour}, meta);
 }
 
 absl::Status Stream::Reconfigure(const StreamConfig& config) { return impl_->Reconfigure(config); }
@@ -600,10 +603,13 @@ absl::StatusOr<v1::ServerInfo> Client::GetInfo() {
 
 absl::StatusOr<Result> Client::Process(const DisparityInput& disparity, const ColorInput& colour,
                                        const StreamConfig& config, const FrameMeta& meta) {
+  return Process(DisparityFrame{disparity, colour}, config, meta);
+}
+
+absl::StatusOr<Result> Client::Process(const FrameInput& input, const StreamConfig& config,
+                                       const FrameMeta& meta) {
   v1::ProcessRequest request;
-  if (absl::Status s = internal::FillImages(disparity, colour, request.mutable_frame()); !s.ok()) {
-    return s;
-  }
+  if (absl::Status s = internal::FillImages(input, request.mutable_frame()); !s.ok()) return s;
   internal::FillMeta(meta, meta.sequence.value_or(0), request.mutable_frame());
   *request.mutable_config() = config;
 

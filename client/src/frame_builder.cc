@@ -21,9 +21,26 @@ DisparityInput CompressRaw(const DisparityInput& input, const convert::Compressi
   return input;
 }
 
+DepthInput CompressRaw(const DepthInput& input, const convert::Compression& compression) {
+  if (const auto* view = std::get_if<DepthView>(&input)) return Compressed(*view, compression);
+  return input;
+}
+
 ColorInput CompressRaw(const ColorInput& input, const convert::Compression& compression) {
   if (const auto* view = std::get_if<ColorView>(&input)) return Compressed(*view, compression);
   return input;
+}
+
+FrameInput CompressRaw(const FrameInput& input, const convert::Compression& compression) {
+  if (const auto* f = std::get_if<DisparityFrame>(&input)) {
+    return DisparityFrame{CompressRaw(f->disparity, compression),
+                          CompressRaw(f->colour, compression)};
+  }
+  if (const auto* f = std::get_if<DepthFrame>(&input)) {
+    return DepthFrame{CompressRaw(f->depth, compression), CompressRaw(f->colour, compression)};
+  }
+  const auto& f = std::get<StereoFrame>(input);
+  return StereoFrame{CompressRaw(f.left, compression), CompressRaw(f.right, compression)};
 }
 
 namespace internal {
@@ -56,39 +73,76 @@ absl::Status FillDisparity(const DisparityInput& disparity, v1::DisparityImage* 
   return absl::OkStatus();
 }
 
-absl::Status FillColour(const ColorInput& colour, v1::ColorImage* c) {
+absl::Status FillDepth(const DepthInput& depth, v1::DepthImage* d) {
+  if (const auto* view = std::get_if<DepthView>(&depth)) {
+    return convert::ToProto(*view, "depth", d->mutable_raw());
+  }
+  if (const auto* c = std::get_if<CompressedDepthView>(&depth)) {
+    return convert::ToProto(c->view, c->compression, "depth", d->mutable_compressed());
+  }
+  if (const auto* p = std::get_if<PrecompressedDepth>(&depth)) {
+    if (p->message == nullptr) return absl::InvalidArgumentError("depth message is null");
+    *d->mutable_compressed() = *p->message;
+    return absl::OkStatus();
+  }
+  const auto& encoded = std::get<EncodedImage>(depth);
+  if (absl::Status s = CheckEncoded(encoded, "depth"); !s.ok()) return s;
+  d->set_encoded(encoded.bytes.data(), encoded.bytes.size());
+  return absl::OkStatus();
+}
+
+absl::Status FillColour(const ColorInput& colour, v1::ColorImage* c, const char* field) {
   if (const auto* view = std::get_if<ColorView>(&colour)) {
-    return convert::ToProto(*view, "colour", c->mutable_raw());
+    return convert::ToProto(*view, field, c->mutable_raw());
   }
   if (const auto* cv = std::get_if<CompressedColorView>(&colour)) {
-    return convert::ToProto(cv->view, cv->compression, "colour", c->mutable_compressed());
+    return convert::ToProto(cv->view, cv->compression, field, c->mutable_compressed());
   }
   if (const auto* p = std::get_if<PrecompressedColor>(&colour)) {
-    if (p->message == nullptr) return absl::InvalidArgumentError("colour message is null");
+    if (p->message == nullptr) {
+      return absl::InvalidArgumentError(absl::StrCat(field, " message is null"));
+    }
     *c->mutable_compressed() = *p->message;
     return absl::OkStatus();
   }
   if (const auto* view = std::get_if<BgraView>(&colour)) {
     return convert::BgraToProto(view->data, view->size_bytes, view->width, view->height,
-                                view->stride_bytes, "colour", c->mutable_raw());
+                                view->stride_bytes, field, c->mutable_raw());
   }
   const auto& encoded = std::get<EncodedImage>(colour);
-  if (absl::Status s = CheckEncoded(encoded, "colour"); !s.ok()) return s;
+  if (absl::Status s = CheckEncoded(encoded, field); !s.ok()) return s;
   c->set_encoded(encoded.bytes.data(), encoded.bytes.size());
   return absl::OkStatus();
 }
 
-absl::Status FillImages(const DisparityInput& disparity, const ColorInput& colour,
-                        v1::Frame* frame) {
-  if (absl::Status s = FillDisparity(disparity, frame->mutable_disparity()); !s.ok()) return s;
-  return FillColour(colour, frame->mutable_colour());
+absl::Status FillImages(const FrameInput& input, v1::Frame* frame) {
+  if (const auto* f = std::get_if<DisparityFrame>(&input)) {
+    if (absl::Status s = FillDisparity(f->disparity, frame->mutable_disparity()); !s.ok()) {
+      return s;
+    }
+    return FillColour(f->colour, frame->mutable_colour());
+  }
+  if (const auto* f = std::get_if<DepthFrame>(&input)) {
+    if (absl::Status s = FillDepth(f->depth, frame->mutable_depth()); !s.ok()) return s;
+    return FillColour(f->colour, frame->mutable_colour());
+  }
+  const auto& f = std::get<StereoFrame>(input);
+  if (absl::Status s = FillColour(f.left, frame->mutable_colour(), "left"); !s.ok()) return s;
+  return FillColour(f.right, frame->mutable_right(), "right");
 }
 
+namespace {
+
+template <typename Image>
+std::uint64_t BytesOf(const Image& image) {
+  return image.raw().pixels().size() + image.encoded().size() + image.compressed().payload().size();
+}
+
+}  // namespace
+
 std::uint64_t ImageBytes(const v1::Frame& frame) {
-  const v1::DisparityImage& d = frame.disparity();
-  const v1::ColorImage& c = frame.colour();
-  return d.raw().pixels().size() + d.encoded().size() + d.compressed().payload().size() +
-         c.raw().pixels().size() + c.encoded().size() + c.compressed().payload().size();
+  return BytesOf(frame.disparity()) + BytesOf(frame.depth()) + BytesOf(frame.colour()) +
+         BytesOf(frame.right());
 }
 
 void FillMeta(const FrameMeta& meta, std::uint64_t sequence, v1::Frame* frame) {
@@ -122,46 +176,88 @@ grpc::Slice PixelSlice(const View& view) {
 
 }  // namespace
 
-absl::Status RequestWriter::Write(const DisparityInput& disparity, const ColorInput& colour,
-                                  const FrameMeta& meta, std::uint64_t sequence,
-                                  grpc::ByteBuffer* out) {
+namespace {
+
+// An image of the frame whose raw pixels go in a slice of their own: its field number in the
+// Frame and its view; field 0 when the image is not raw.
+struct RawPlane {
+  int field = 0;
+  std::variant<DisparityView, DepthView, ColorView> view;
+};
+
+// Fills one image message, or only its header when it is raw (the pixels go apart), noting the
+// raw plane.
+template <typename View, typename Input, typename Image, typename Raw, typename Fill>
+absl::Status FillOrHeader(const Input& input, int field, const char* name, Image* image,
+                          Raw* (Image::*mutable_raw)(), Fill fill, RawPlane* plane) {
+  if (const auto* view = std::get_if<View>(&input)) {
+    *plane = RawPlane{field, *view};
+    return convert::ToProtoWithoutPixels(*view, name, (image->*mutable_raw)());
+  }
+  return fill(input, image);
+}
+
+}  // namespace
+
+absl::Status RequestWriter::Write(const FrameInput& input, const FrameMeta& meta,
+                                  std::uint64_t sequence, grpc::ByteBuffer* out) {
   v1::Frame* frame = request_.mutable_frame();
-  // Raw views get every field but their pixels, which go in slices of their own below.
-  const auto* disparity_view = std::get_if<DisparityView>(&disparity);
-  const auto* colour_view = std::get_if<ColorView>(&colour);
-  if (absl::Status s =
-          disparity_view != nullptr
-              ? convert::ToProtoWithoutPixels(*disparity_view, "disparity",
-                                              frame->mutable_disparity()->mutable_raw())
-              : FillDisparity(disparity, frame->mutable_disparity());
-      !s.ok()) {
-    return s;
+  // Raw views get every field but their pixels, which go in slices of their own below. The
+  // geometry is written first, then the colour: their order on the wire is the proto's
+  // field order either way.
+  RawPlane planes[2];
+  absl::Status s;
+  const auto fill_colour = [](const char* name) {
+    return
+        [name](const ColorInput& c, v1::ColorImage* image) { return FillColour(c, image, name); };
+  };
+  if (const auto* f = std::get_if<DisparityFrame>(&input)) {
+    s = FillOrHeader<DisparityView>(f->disparity, v1::Frame::kDisparityFieldNumber, "disparity",
+                                    frame->mutable_disparity(), &v1::DisparityImage::mutable_raw,
+                                    FillDisparity, &planes[0]);
+    if (s.ok()) {
+      s = FillOrHeader<ColorView>(f->colour, v1::Frame::kColourFieldNumber, "colour",
+                                  frame->mutable_colour(), &v1::ColorImage::mutable_raw,
+                                  fill_colour("colour"), &planes[1]);
+    }
+  } else if (const auto* f = std::get_if<DepthFrame>(&input)) {
+    s = FillOrHeader<DepthView>(f->depth, v1::Frame::kDepthFieldNumber, "depth",
+                                frame->mutable_depth(), &v1::DepthImage::mutable_raw, FillDepth,
+                                &planes[0]);
+    if (s.ok()) {
+      s = FillOrHeader<ColorView>(f->colour, v1::Frame::kColourFieldNumber, "colour",
+                                  frame->mutable_colour(), &v1::ColorImage::mutable_raw,
+                                  fill_colour("colour"), &planes[1]);
+    }
+  } else {
+    const auto& pair = std::get<StereoFrame>(input);
+    s = FillOrHeader<ColorView>(pair.left, v1::Frame::kColourFieldNumber, "left",
+                                frame->mutable_colour(), &v1::ColorImage::mutable_raw,
+                                fill_colour("left"), &planes[0]);
+    if (s.ok()) {
+      s = FillOrHeader<ColorView>(pair.right, v1::Frame::kRightFieldNumber, "right",
+                                  frame->mutable_right(), &v1::ColorImage::mutable_raw,
+                                  fill_colour("right"), &planes[1]);
+    }
   }
-  if (absl::Status s = colour_view != nullptr
-                           ? convert::ToProtoWithoutPixels(*colour_view, "colour",
-                                                           frame->mutable_colour()->mutable_raw())
-                           : FillColour(colour, frame->mutable_colour());
-      !s.ok()) {
-    return s;
-  }
+  if (!s.ok()) return s;
   FillMeta(meta, sequence, frame);
   image_bytes_ = ImageBytes(*frame);
 
   head_.clear();
   request_.AppendToString(&head_);
-  grpc::Slice slices[5];  // at most: head, disparity pixels, their header, colour pixels, tail
+  grpc::Slice slices[5];  // at most: head, pixels, their header, pixels, tail
   std::size_t n = 0;
   // The bytes so far, the pixels' headers, then the pixels in a slice of their own.
-  auto add_pixels = [&](const auto& view, int image_field) {
-    grpc::Slice pixels = PixelSlice(view);
-    PutPixelsHeader(image_field, pixels.size(), &head_);
+  for (const RawPlane& plane : planes) {
+    if (plane.field == 0) continue;
+    grpc::Slice pixels = std::visit([](const auto& view) { return PixelSlice(view); }, plane.view);
+    PutPixelsHeader(plane.field, pixels.size(), &head_);
     slices[n++] = grpc::Slice(head_);
     head_.clear();
     image_bytes_ += pixels.size();
     slices[n++] = std::move(pixels);
-  };
-  if (disparity_view != nullptr) add_pixels(*disparity_view, v1::Frame::kDisparityFieldNumber);
-  if (colour_view != nullptr) add_pixels(*colour_view, v1::Frame::kColourFieldNumber);
+  }
   if (!head_.empty()) slices[n++] = grpc::Slice(head_);
   grpc::ByteBuffer bytes(slices, n);
   out->Swap(&bytes);

@@ -12,15 +12,16 @@
 
 namespace cloudcast::client::internal {
 
-// Writes both images into `frame`, each pixel byte copied once (or compressed once). Raw rows are
-// packed tightly (row_stride 0): padding and ROI surroundings are never sent. Reusing `frame`
-// across calls reuses its pixel buffers, so same-sized frames allocate nothing. Checks only what
-// memory safety needs (the server judges sizes and limits); on error `frame` is unspecified.
-absl::Status FillImages(const DisparityInput& disparity, const ColorInput& colour,
-                        v1::Frame* frame);
-// One image each, as FillImages fills them.
+// Writes the frame's images into `frame`, each pixel byte copied once (or compressed once). Raw
+// rows are packed tightly (row_stride 0): padding and ROI surroundings are never sent. Reusing
+// `frame` across calls reuses its pixel buffers, so same-sized frames allocate nothing. Checks only
+// what memory safety needs (the server judges sizes and limits); on error `frame` is unspecified.
+absl::Status FillImages(const FrameInput& input, v1::Frame* frame);
+// One image each, as FillImages fills them; `field` names it in errors.
 absl::Status FillDisparity(const DisparityInput& disparity, v1::DisparityImage* image);
-absl::Status FillColour(const ColorInput& colour, v1::ColorImage* image);
+absl::Status FillDepth(const DepthInput& depth, v1::DepthImage* image);
+absl::Status FillColour(const ColorInput& colour, v1::ColorImage* image,
+                        const char* field = "colour");
 
 // The image bytes `frame` carries: raw pixels, compressed payloads or encoded files.
 std::uint64_t ImageBytes(const v1::Frame& frame);
@@ -38,8 +39,8 @@ void FillMeta(const FrameMeta& meta, std::uint64_t sequence, v1::Frame* frame);
 class RequestWriter {
  public:
   // Fills `out` (see FillImages for the checks; on error `out` is unspecified).
-  absl::Status Write(const DisparityInput& disparity, const ColorInput& colour,
-                     const FrameMeta& meta, std::uint64_t sequence, grpc::ByteBuffer* out);
+  absl::Status Write(const FrameInput& input, const FrameMeta& meta, std::uint64_t sequence,
+                     grpc::ByteBuffer* out);
   // The last frame written, but for the raw pixels, which are only in the bytes.
   const v1::Frame& frame() const { return request_.frame(); }
   // The image bytes of the last frame written (as ImageBytes, raw pixels included).

@@ -64,8 +64,47 @@ absl::StatusOr<DisparityInput> DisparityFromMat(const cv::Mat& disparity) {
   return DisparityInput(view);
 }
 
+absl::StatusOr<DepthInput> DepthFromMat(const cv::Mat& depth) {
+  if (absl::Status s = CheckShape(depth, "depth"); !s.ok()) return s;
+  DepthView view;
+  switch (depth.type()) {
+    case CV_16UC1:
+      view.encoding = DepthEncoding::kU16;
+      break;
+    case CV_32FC1:
+      view.encoding = DepthEncoding::kF32;
+      break;
+    default:
+      return absl::InvalidArgumentError(absl::StrCat(
+          "depth Mat has type ", cv::typeToString(depth.type()),
+          "; supported: CV_16UC1 (ROS 16UC1, millimetres), CV_32FC1 (ROS 32FC1, metres)"));
+  }
+  FillView(depth, &view);
+  return DepthInput(view);
+}
+
+absl::StatusOr<FrameInput> DepthFrameFromMats(const cv::Mat& depth, const cv::Mat& colour) {
+  absl::StatusOr<DepthInput> d = DepthFromMat(depth);
+  if (!d.ok()) return d.status();
+  absl::StatusOr<ColorInput> c = ColorFromMat(colour);
+  if (!c.ok()) return c.status();
+  return FrameInput(DepthFrame{*d, *c});
+}
+
+absl::StatusOr<FrameInput> StereoFrameFromMats(const cv::Mat& left, const cv::Mat& right) {
+  absl::StatusOr<ColorInput> l = ColorFromMat(left, "left");
+  if (!l.ok()) return l.status();
+  absl::StatusOr<ColorInput> r = ColorFromMat(right, "right");
+  if (!r.ok()) return r.status();
+  return FrameInput(StereoFrame{*l, *r});
+}
+
 absl::StatusOr<ColorInput> ColorFromMat(const cv::Mat& colour) {
-  if (absl::Status s = CheckShape(colour, "colour"); !s.ok()) return s;
+  return ColorFromMat(colour, "colour");
+}
+
+absl::StatusOr<ColorInput> ColorFromMat(const cv::Mat& colour, const char* what) {
+  if (absl::Status s = CheckShape(colour, what); !s.ok()) return s;
   switch (colour.type()) {
     case CV_8UC3:
     case CV_8UC1: {
@@ -81,7 +120,7 @@ absl::StatusOr<ColorInput> ColorFromMat(const cv::Mat& colour) {
     }
     default:
       return absl::InvalidArgumentError(
-          absl::StrCat("colour Mat has type ", cv::typeToString(colour.type()),
+          absl::StrCat(what, " Mat has type ", cv::typeToString(colour.type()),
                        "; supported: CV_8UC3 (BGR), CV_8UC4 (BGRA), CV_8UC1 (grey)"));
   }
 }

@@ -33,6 +33,9 @@ absl::Status CameraModel::Validate(std::string_view field) const {
                                        kMaxInvalidDisparities)}) {
     if (!s.ok()) return s;
   }
+  if (depth_scale.has_value()) {
+    if (auto s = check::Positive(f + ".depth_scale", *depth_scale); !s.ok()) return s;
+  }
   for (std::size_t i = 0; i < invalid_disparities.size(); ++i) {
     if (!std::isfinite(invalid_disparities[i])) {
       return absl::InvalidArgumentError(absl::StrCat(
@@ -42,10 +45,18 @@ absl::Status CameraModel::Validate(std::string_view field) const {
   return absl::OkStatus();
 }
 
+double CameraModel::DepthScale(DepthEncoding encoding) const {
+  if (depth_scale.has_value()) return *depth_scale;
+  // REP 118: 16UC1 in millimetres, 32FC1 in metres. depth_image_proc's DepthTraits<uint16_t>
+  // converts with 0.001f, a float: the same value as float(0.001).
+  return encoding == DepthEncoding::kU16 ? 0.001 : 1.0;
+}
+
 std::string CameraModel::ToString() const {
   return absl::StrCat("fx=", fx, " fy=", fy, " cx=", cx, " cy=", cy, " baseline=", baseline,
                       " disparity_scale=", disparity_scale, " disparity_offset=", disparity_offset,
-                      " invalid={", absl::StrJoin(invalid_disparities, ","), "}");
+                      " invalid={", absl::StrJoin(invalid_disparities, ","), "}",
+                      depth_scale ? absl::StrCat(" depth_scale=", *depth_scale) : "");
 }
 
 }  // namespace cloudcast

@@ -78,7 +78,24 @@ DepthConstants::DepthConstants(const CameraModel& c)
   }
 }
 
+DepthConstants DepthConstants::ForDepth(const CameraModel& c, DepthEncoding encoding) {
+  DepthConstants k(c);
+  k.depth_image = true;
+  k.invalid_count = 0;
+  k.fxb = 0;
+  k.scale = 1;
+  k.offset = 0;
+  // depth_image_proc: unit_scaling = toMeters(T(1)) in double (for 16 bits, 1 * 0.001f), then
+  // constant_x = unit_scaling / fx in double, stored as float; z = D * 0.001f.
+  const float s = static_cast<float>(c.DepthScale(encoding));
+  k.inv_fx = static_cast<float>(static_cast<double>(s) / c.fx);
+  k.inv_fy = static_cast<float>(static_cast<double>(s) / c.fy);
+  k.sz = s;
+  return k;
+}
+
 bool DepthConstants::SameAs(const DepthConstants& o) const {
+  if (depth_image != o.depth_image || sz != o.sz) return false;
   if (fxb != o.fxb || scale != o.scale || offset != o.offset || invalid_count != o.invalid_count) {
     return false;
   }
@@ -106,9 +123,11 @@ void DepthTable::Prepare(const DepthConstants& c, int sample_bits) {
 
 namespace {
 
+// `disparity`: a disparity map or a depth image (DepthConstants says which).
+template <typename Values>
 struct OrganizedKernel {
   const DepthConstants& c;
-  const DisparityView& disparity;
+  const Values& disparity;
   const ColorView& colour;
   Point* out;
 
@@ -124,7 +143,7 @@ struct OrganizedKernel {
         for (std::uint32_t u = 0; u < w; ++u) {
           float z;
           if (c.Depth(LoadSample<float>(drow, u), &z)) {
-            o[u] = Point{c.X(u, z), c.Y(v, z), z, PackPixel<C>(crow, u)};
+            o[u] = Point{c.X(u, z), c.Y(v, z), c.Z(z), PackPixel<C>(crow, u)};
           } else {
             o[u] = NanPoint();
           }
@@ -145,8 +164,8 @@ struct OrganizedKernel {
           const float z = zt[d];
           // Invalid pixels compute NaN coordinates from z = NaN; only the colour needs a choice.
           const std::uint32_t rgba = valid[d] ? PackPixel<C>(crow, u) : 0u;
-          o[u] =
-              Point{((static_cast<float>(u) - c.cx) * z) * c.inv_fx, (yc * z) * c.inv_fy, z, rgba};
+          o[u] = Point{((static_cast<float>(u) - c.cx) * z) * c.inv_fx, (yc * z) * c.inv_fy, c.Z(z),
+                       rgba};
         }
       }
     }
@@ -156,18 +175,36 @@ struct OrganizedKernel {
 }  // namespace
 }  // namespace internal
 
+namespace {
+
+template <typename Values>
+absl::Status Organize(const internal::DepthConstants& c, const Values& values,
+                      const ColorView& colour, PointCloud* out) {
+  out->points.resize(static_cast<std::size_t>(values.width) * values.height);
+  out->width = values.width;
+  out->height = values.height;
+  internal::DispatchEncodings(
+      values.encoding, colour.encoding,
+      internal::OrganizedKernel<Values>{c, values, colour, out->points.data()});
+  return absl::OkStatus();
+}
+
+}  // namespace
+
 absl::Status ConvertToOrganized(const CameraModel& camera, const DisparityView& disparity,
                                 const ColorView& colour, PointCloud* out, const Limits& limits) {
   if (out == nullptr) return absl::InvalidArgumentError("output cloud is null");
   if (auto s = camera.Validate(); !s.ok()) return s;
   if (auto s = ValidateFrame(disparity, colour, limits); !s.ok()) return s;
-  const internal::DepthConstants c(camera);
-  out->points.resize(static_cast<std::size_t>(disparity.width) * disparity.height);
-  out->width = disparity.width;
-  out->height = disparity.height;
-  internal::DispatchEncodings(disparity.encoding, colour.encoding,
-                              internal::OrganizedKernel{c, disparity, colour, out->points.data()});
-  return absl::OkStatus();
+  return Organize(internal::DepthConstants(camera), disparity, colour, out);
+}
+
+absl::Status ConvertToOrganized(const CameraModel& camera, const DepthView& depth,
+                                const ColorView& colour, PointCloud* out, const Limits& limits) {
+  if (out == nullptr) return absl::InvalidArgumentError("output cloud is null");
+  if (auto s = camera.Validate(); !s.ok()) return s;
+  if (auto s = ValidateFrame(depth, colour, limits); !s.ok()) return s;
+  return Organize(internal::DepthConstants::ForDepth(camera, depth.encoding), depth, colour, out);
 }
 
 namespace {

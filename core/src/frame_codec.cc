@@ -120,11 +120,20 @@ PlaneLayout LayoutOf(DisparityEncoding encoding, std::uint32_t width, std::uint3
   return PlaneLayout{width, height, bpp, bpp};
 }
 
+PlaneLayout LayoutOf(DepthEncoding encoding, std::uint32_t width, std::uint32_t height) {
+  const std::size_t bpp = BytesPerPixel(encoding);
+  return PlaneLayout{width, height, bpp, bpp};
+}
+
 PlaneLayout LayoutOf(ColorEncoding encoding, std::uint32_t width, std::uint32_t height) {
   return PlaneLayout{width, height, BytesPerPixel(encoding), 1};
 }
 
 PlaneLayout LayoutOf(const DisparityView& view) {
+  return LayoutOf(view.encoding, view.width, view.height);
+}
+
+PlaneLayout LayoutOf(const DepthView& view) {
   return LayoutOf(view.encoding, view.width, view.height);
 }
 
@@ -181,6 +190,12 @@ PlaneCompressor::PlaneCompressor() : impl_(std::make_unique<Impl>()) {}
 PlaneCompressor::~PlaneCompressor() = default;
 
 absl::Status PlaneCompressor::Compress(const DisparityView& view, Predictor predictor, int level,
+                                       std::string_view field, std::string* out) {
+  if (absl::Status s = CheckView(view, field); !s.ok()) return s;
+  return Compress(view.data, view.stride_bytes, LayoutOf(view), predictor, level, out);
+}
+
+absl::Status PlaneCompressor::Compress(const DepthView& view, Predictor predictor, int level,
                                        std::string_view field, std::string* out) {
   if (absl::Status s = CheckView(view, field); !s.ok()) return s;
   return Compress(view.data, view.stride_bytes, LayoutOf(view), predictor, level, out);

@@ -19,6 +19,16 @@ std::size_t BytesPerPixel(DisparityEncoding e) {
   return 0;
 }
 
+std::size_t BytesPerPixel(DepthEncoding e) {
+  switch (e) {
+    case DepthEncoding::kU16:
+      return 2;
+    case DepthEncoding::kF32:
+      return 4;
+  }
+  return 0;
+}
+
 std::size_t BytesPerPixel(ColorEncoding e) {
   switch (e) {
     case ColorEncoding::kBGR8:
@@ -45,6 +55,16 @@ std::string_view Name(DisparityEncoding e) {
   return "?";
 }
 
+std::string_view Name(DepthEncoding e) {
+  switch (e) {
+    case DepthEncoding::kU16:
+      return "u16";
+    case DepthEncoding::kF32:
+      return "f32";
+  }
+  return "?";
+}
+
 std::string_view Name(ColorEncoding e) {
   switch (e) {
     case ColorEncoding::kBGR8:
@@ -61,6 +81,16 @@ std::string_view Name(ColorEncoding e) {
 
 bool ParseDisparityEncoding(std::string_view name, DisparityEncoding* out) {
   for (auto e : {DisparityEncoding::kU8, DisparityEncoding::kU16, DisparityEncoding::kF32}) {
+    if (Name(e) == name) {
+      *out = e;
+      return true;
+    }
+  }
+  return false;
+}
+
+bool ParseDepthEncoding(std::string_view name, DepthEncoding* out) {
+  for (auto e : {DepthEncoding::kU16, DepthEncoding::kF32}) {
     if (Name(e) == name) {
       *out = e;
       return true;
@@ -118,17 +148,23 @@ absl::Status ValidateView(const DisparityView& view, const Limits& limits, std::
   return ValidateAny(view, limits, field, names);
 }
 
+absl::Status ValidateView(const DepthView& view, const Limits& limits, std::string_view field,
+                          const ImageFieldNames& names) {
+  return ValidateAny(view, limits, field, names);
+}
+
 absl::Status ValidateView(const ColorView& view, const Limits& limits, std::string_view field,
                           const ImageFieldNames& names) {
   return ValidateAny(view, limits, field, names);
 }
 
-absl::Status CheckSameSize(const DisparityView& disparity, std::string_view disparity_field,
-                           const ColorView& colour, std::string_view colour_field) {
-  if (disparity.width != colour.width || disparity.height != colour.height) {
+absl::Status CheckSameSize(std::uint32_t first_width, std::uint32_t first_height,
+                           std::string_view first_field, std::uint32_t second_width,
+                           std::uint32_t second_height, std::string_view second_field) {
+  if (first_width != second_width || first_height != second_height) {
     return absl::InvalidArgumentError(
-        absl::StrCat(std::string(colour_field), " is ", colour.width, "x", colour.height, " but ",
-                     std::string(disparity_field), " is ", disparity.width, "x", disparity.height,
+        absl::StrCat(std::string(second_field), " is ", second_width, "x", second_height, " but ",
+                     std::string(first_field), " is ", first_width, "x", first_height,
                      "; they must be the same size"));
   }
   return absl::OkStatus();
@@ -139,6 +175,12 @@ absl::Status ValidateFrame(const DisparityView& disparity, const ColorView& colo
   if (auto s = ValidateView(disparity, limits, "disparity"); !s.ok()) return s;
   if (auto s = ValidateView(colour, limits, "colour"); !s.ok()) return s;
   return CheckSameSize(disparity, "disparity", colour, "colour");
+}
+
+absl::Status ValidateFrame(const DepthView& depth, const ColorView& colour, const Limits& limits) {
+  if (auto s = ValidateView(depth, limits, "depth"); !s.ok()) return s;
+  if (auto s = ValidateView(colour, limits, "colour"); !s.ok()) return s;
+  return CheckSameSize(depth, "depth", colour, "colour");
 }
 
 }  // namespace cloudcast

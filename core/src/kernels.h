@@ -33,24 +33,38 @@ inline Point NanPoint() {
   return Point{nan, nan, nan, 0u};  // PCL sets rgb = 0.0f on bad points
 }
 
-// The camera model reduced to the float constants the per-pixel arithmetic uses, computed the way
-// PCL computes its own (fl_const = 1.0f / focal), so that results match bit for bit.
+// The camera model reduced to the float constants the per-pixel arithmetic uses. Every pixel
+// becomes ((u - cx, v - cy, 1) * m) * (sx, sy, sz), m a function of its raw value:
+//   disparity maps  m = z = fx * baseline / (d * scale + offset), (sx, sy, sz) = (1/fx, 1/fy, 1),
+//                   PCL's order (fl_const = 1.0f / focal), so results match PCL bit for bit;
+//   depth images    m = D, the raw depth, (sx, sy, sz) = (s/fx, s/fy, s) for the depth scale s,
+//                   depth_image_proc's order, so results match it bit for bit.
 struct DepthConstants {
-  float fxb = 0;     // fx * baseline: the numerator of z
-  float scale = 1;   // disparity scale
-  float offset = 0;  // disparity offset
-  float inv_fx = 0;  // 1.0f / fx
-  float inv_fy = 0;  // 1.0f / fy
+  bool depth_image = false;  // m is the raw depth (else z from a disparity)
+  float fxb = 0;             // fx * baseline: the numerator of z
+  float scale = 1;           // disparity scale
+  float offset = 0;          // disparity offset
+  float inv_fx = 0;          // sx: 1.0f / fx, or the depth's s / fx
+  float inv_fy = 0;          // sy
+  float sz = 1;              // 1, or the depth scale
   float cx = 0;
   float cy = 0;
   float invalid[16] = {};
   int invalid_count = 0;
 
+  // A disparity map's constants.
   explicit DepthConstants(const CameraModel& camera);
+  // A depth image's.
+  static DepthConstants ForDepth(const CameraModel& camera, DepthEncoding encoding);
 
-  // z for a raw disparity value, or false if the pixel has no valid depth.
-  bool Depth(float raw, float* z) const {
+  // m for a raw value, or false if the pixel has no valid point.
+  bool Depth(float raw, float* m) const {
     if (!IsFinite(raw)) return false;
+    if (depth_image) {
+      if (raw == 0.0f) return false;
+      *m = raw;
+      return true;
+    }
     for (int i = 0; i < invalid_count; ++i) {
       if (raw == invalid[i]) return false;
     }
@@ -58,18 +72,20 @@ struct DepthConstants {
     if (!(denominator > 0.0f)) return false;
     const float depth = fxb / denominator;
     if (!IsFinite(depth)) return false;
-    *z = depth;
+    *m = depth;
     return true;
   }
-  // x = ((u - cx) * z) * (1 / fx): PCL's order of operations.
-  float X(std::uint32_t u, float z) const { return ((static_cast<float>(u) - cx) * z) * inv_fx; }
-  float Y(std::uint32_t v, float z) const { return ((static_cast<float>(v) - cy) * z) * inv_fy; }
+  // x = ((u - cx) * m) * sx: PCL's (and depth_image_proc's) order of operations.
+  float X(std::uint32_t u, float m) const { return ((static_cast<float>(u) - cx) * m) * inv_fx; }
+  float Y(std::uint32_t v, float m) const { return ((static_cast<float>(v) - cy) * m) * inv_fy; }
+  // z = (1 * m) * sz, as the vector kernels compute it (exactly m for disparities).
+  float Z(float m) const { return m * sz; }
 
   bool SameAs(const DepthConstants& o) const;
 };
 
-// z per raw value of an 8- or 16-bit disparity: a table look-up replaces a division per pixel.
-// `valid[d]` is 0 for invalid values; z is NaN there.
+// m per raw value of an 8- or 16-bit disparity or depth (DepthConstants): a table look-up replaces
+// a division per pixel. `valid[d]` is 0 for invalid values; z (holding m) is NaN there.
 struct DepthTable {
   std::vector<float> z;
   std::vector<std::uint8_t> valid;
@@ -105,31 +121,36 @@ inline std::uint32_t PackPixel(const std::uint8_t* row, std::uint32_t u) {
 }
 
 // Calls f.template operator()<Sample, C>() with the types of a frame's encodings.
+template <typename S, typename F>
+decltype(auto) DispatchColour(ColorEncoding c, F&& f) {
+  switch (c) {
+    case ColorEncoding::kBGR8:
+      return f.template operator()<S, ColorEncoding::kBGR8>();
+    case ColorEncoding::kRGB8:
+      return f.template operator()<S, ColorEncoding::kRGB8>();
+    case ColorEncoding::kRGBA8:
+      return f.template operator()<S, ColorEncoding::kRGBA8>();
+    case ColorEncoding::kMono8:
+      break;
+  }
+  return f.template operator()<S, ColorEncoding::kMono8>();
+}
 template <typename F>
 decltype(auto) DispatchEncodings(DisparityEncoding d, ColorEncoding c, F&& f) {
-  auto with_colour = [&](auto sample_tag) -> decltype(auto) {
-    using S = decltype(sample_tag);
-    switch (c) {
-      case ColorEncoding::kBGR8:
-        return f.template operator()<S, ColorEncoding::kBGR8>();
-      case ColorEncoding::kRGB8:
-        return f.template operator()<S, ColorEncoding::kRGB8>();
-      case ColorEncoding::kRGBA8:
-        return f.template operator()<S, ColorEncoding::kRGBA8>();
-      case ColorEncoding::kMono8:
-        break;
-    }
-    return f.template operator()<S, ColorEncoding::kMono8>();
-  };
   switch (d) {
     case DisparityEncoding::kU8:
-      return with_colour(std::uint8_t{});
+      return DispatchColour<std::uint8_t>(c, f);
     case DisparityEncoding::kU16:
-      return with_colour(std::uint16_t{});
+      return DispatchColour<std::uint16_t>(c, f);
     case DisparityEncoding::kF32:
       break;
   }
-  return with_colour(float{});
+  return DispatchColour<float>(c, f);
+}
+template <typename F>
+decltype(auto) DispatchEncodings(DepthEncoding d, ColorEncoding c, F&& f) {
+  if (d == DepthEncoding::kU16) return DispatchColour<std::uint16_t>(c, f);
+  return DispatchColour<float>(c, f);
 }
 
 // True when p passes the passthrough (non-finite points never pass).

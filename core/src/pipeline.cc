@@ -55,13 +55,6 @@ struct BandSink {
   std::size_t band;
 };
 
-// (x, y, z) of pixel (u, v) as PCL computes it: x = ((u - cx) * z) * (1 / fx), same for y, and
-// z * 1 * 1 == z exactly.
-inline __m128 PixelPoint(const DepthConstants& c, std::uint32_t u, float yc, float z) {
-  const __m128 a = _mm_setr_ps(static_cast<float>(u) - c.cx, yc, z, 0.0f);
-  return _mm_mul_ps(_mm_mul_ps(a, _mm_setr_ps(z, z, 1.0f, 0.0f)),
-                    _mm_setr_ps(c.inv_fx, c.inv_fy, 1.0f, 0.0f));
-}
 // x and y finite (z is known to be).
 inline bool XyFinite(__m128 p) {
   const float big = std::numeric_limits<float>::max();
@@ -88,8 +81,9 @@ struct ScanPlan {
   std::uint32_t valid_lo = 1, valid_hi = 0;
   std::uint32_t holes[4] = {0, 0, 0, 0};
   int hole_count = 0;
-  bool pass_exact = false;     // every value in [pass_lo, pass_hi] passes: no flag look-up needed
-  float z_min = 0, z_max = 0;  // the smallest and largest z that pass
+  bool pass_exact = false;  // every value in [pass_lo, pass_hi] passes: no flag look-up needed
+  // The smallest and largest multiplier m (DepthConstants: z, or a raw depth) that pass.
+  float z_min = 0, z_max = 0;
   // Some passing pixel's x or y may overflow to infinity (set per frame by the caller).
   bool x_y_may_overflow = true;
 
@@ -207,11 +201,12 @@ inline std::uint32_t PackPixelWide(const std::uint8_t* row, std::uint32_t u) {
 // table and (z, z, z, z) from a per-value one (8-bit samples), so the point is two loads, an or
 // and PCL's two products; its colour one load. The sink's state lives in locals, which the
 // stores of points cannot alias.
-template <typename Sample, ColorEncoding C, typename Sink>
+//
+// `disparity` is the frame's disparity map or depth image (DepthConstants says which).
+template <typename Sample, ColorEncoding C, typename Sink, typename Values>
 void RunTableKernel(const DepthConstants& c, const float* zt, const Float4* z4,
                     const Float4* column, const std::uint8_t* flags, const ScanPlan& plan,
-                    const DisparityView& disparity, const ColorView& colour, Sink* sink,
-                    Tally* tally) {
+                    const Values& disparity, const ColorView& colour, Sink* sink, Tally* tally) {
   const std::uint32_t w = disparity.width;
   std::uint32_t h = disparity.height;
   constexpr std::uint32_t kLanes = 16 / sizeof(Sample);
@@ -229,7 +224,7 @@ void RunTableKernel(const DepthConstants& c, const float* zt, const Float4* z4,
   const RangeTest<Sample> pass_range(plan.pass_lo, plan.pass_hi);
   __m128i hole[4];
   for (int k = 0; k < 4; ++k) hole[k] = Splat<Sample>(plan.holes[k]);
-  const __m128 scale = _mm_setr_ps(c.inv_fx, c.inv_fy, 1.0f, 0.0f);
+  const __m128 scale = _mm_setr_ps(c.inv_fx, c.inv_fy, c.sz, 0.0f);
   Point* const first = sink->out + sink->count;
   Point* o = first;
   internal::Bounds bounds = sink->bounds;
@@ -256,7 +251,11 @@ void RunTableKernel(const DepthConstants& c, const float* zt, const Float4* z4,
             : w;
     auto pixel = [&](std::uint32_t u, Sample d) {
       __m128 zz;
-      if constexpr (sizeof(Sample) == 1) {
+      if constexpr (std::is_same_v<Values, DepthView>) {
+        // A depth's multiplier is the raw value itself (the table holds float(d)): a convert
+        // instead of a load from a 256 KB table.
+        zz = _mm_set1_ps(static_cast<float>(d));
+      } else if constexpr (sizeof(Sample) == 1) {
         zz = _mm_load_ps(z4[d].f);
       } else {
         zz = _mm_set1_ps(zt[d]);
@@ -275,7 +274,8 @@ void RunTableKernel(const DepthConstants& c, const float* zt, const Float4* z4,
       if constexpr (Sink::kTrackBounds) bounds.Add(p);
     };
     // The passing pixels of one vector of samples.
-    auto visit = [&](std::uint32_t at, __m128i pass) {
+    // Inlined by force: gcc leaves it out of line for 16-bit samples, a call per vector.
+    auto visit = [&](std::uint32_t at, __m128i pass) __attribute__((always_inline)) {
       for (unsigned mask = LaneBits<Sample>(pass); mask != 0; mask &= mask - 1) {
         const auto j = static_cast<std::uint32_t>(__builtin_ctz(mask));
         const Sample s = internal::LoadSample<Sample>(drow, at + j);
@@ -373,10 +373,10 @@ void RunTableKernel(const DepthConstants& c, const float* zt, const Float4* z4,
   tally->passed = passed;
 }
 
-// Any disparity encoding and any passthrough axis: each pixel becomes a point, then is tested.
-template <typename Sample, ColorEncoding C, typename Sink>
+// Any encoding and any passthrough axis: each pixel becomes a point, then is tested.
+template <typename Sample, ColorEncoding C, typename Sink, typename Values>
 void RunGenericKernel(const DepthConstants& c, const DepthTable* table,
-                      const PassThroughParams& passthrough, const DisparityView& disparity,
+                      const PassThroughParams& passthrough, const Values& disparity,
                       const ColorView& colour, Sink* sink, Tally* tally) {
   const std::uint32_t w = disparity.width;
   const std::uint32_t h = disparity.height;
@@ -394,7 +394,7 @@ void RunGenericKernel(const DepthConstants& c, const DepthTable* table,
         z = table->z[d];
       }
       const std::uint32_t rgba = internal::PackPixel<C>(crow, u);
-      const Point p{c.X(u, z), c.Y(v, z), z, rgba};
+      const Point p{c.X(u, z), c.Y(v, z), c.Z(z), rgba};
       if (!internal::IsFinite(p.x) || !internal::IsFinite(p.y)) continue;
       ++valid;
       if (!internal::Passes(p, passthrough)) continue;
@@ -463,7 +463,7 @@ struct Pipeline::Impl {
     flags.assign(n, 0);
     for (std::size_t d = 0; d < n; ++d) {
       if (!table.valid[d]) continue;
-      const float z = table.z[d];
+      const float z = c.Z(table.z[d]);
       const bool inside = z >= pt.min && z <= pt.max;
       flags[d] = kValid | ((!pt.enabled || inside != pt.negative) ? kPasses : 0);
     }
@@ -493,7 +493,7 @@ struct Pipeline::Impl {
   bool StreamBox(const DepthConstants& c, std::uint32_t w, std::uint32_t h,
                  internal::Bounds* box) const {
     if (plan.pass_lo > plan.pass_hi || plan.x_y_may_overflow) return false;
-    const __m128 scale = _mm_setr_ps(c.inv_fx, c.inv_fy, 1.0f, 0.0f);
+    const __m128 scale = _mm_setr_ps(c.inv_fx, c.inv_fy, c.sz, 0.0f);
     for (const float u : {0.0f, static_cast<float>(w - 1)}) {
       for (const float v : {0.0f, static_cast<float>(h - 1)}) {
         for (const float z : {plan.z_min, plan.z_max}) {
@@ -505,16 +505,22 @@ struct Pipeline::Impl {
     return true;
   }
 
+  template <typename Values>
+  absl::Status RunFused(const PipelineOptions& options, const DepthConstants& c,
+                        const Values& values, const ColorView& colour, PointCloud* out,
+                        StageCounts* counts);
+
   // Set by the kernel when it voxelised the points band by band (the Pipeline then has
   // nothing left to do but count).
   bool streamed = false;
 
-  template <typename Sink>
+  // `disparity`: the frame's disparity map or depth image.
+  template <typename Sink, typename Values>
   struct Kernel {
     Impl* impl;
     const DepthConstants& c;
     const PassThroughParams& passthrough;
-    const DisparityView& disparity;
+    const Values& disparity;
     const ColorView& colour;
     Sink* sink;
     Tally* tally;
@@ -559,30 +565,25 @@ Pipeline::~Pipeline() = default;
 Pipeline::Pipeline(Pipeline&&) noexcept = default;
 Pipeline& Pipeline::operator=(Pipeline&&) noexcept = default;
 
-absl::Status Pipeline::Run(const PipelineOptions& options, const DisparityView& disparity,
-                           const ColorView& colour, PointCloud* out, StageCounts* counts) {
-  if (out == nullptr) return absl::InvalidArgumentError("output cloud is null");
-  out->points.clear();
-  out->width = 0;
-  out->height = 1;
-  if (auto s = options.Validate(); !s.ok()) return s;
-  if (auto s = ValidateFrame(disparity, colour, options.limits); !s.ok()) return s;
-
-  const DepthConstants c(options.camera);
+// Both kinds of frame: `values` is a disparity map or a depth image, `c` its constants.
+template <typename Values>
+absl::Status Pipeline::Impl::RunFused(const PipelineOptions& options, const DepthConstants& c,
+                                      const Values& values, const ColorView& colour,
+                                      PointCloud* out, StageCounts* counts) {
   Tally tally;
-  const std::size_t pixels = std::size_t{disparity.width} * disparity.height;
+  const std::size_t pixels = std::size_t{values.width} * values.height;
   if (options.voxel.enabled) {
-    if (impl_->passed.size() < pixels) impl_->passed.resize(pixels);
-    PointSink<true> sink{impl_->passed.data(), 0, {}};
-    impl_->streamed = false;
+    if (passed.size() < pixels) passed.resize(pixels);
+    PointSink<true> sink{passed.data(), 0, {}};
+    streamed = false;
     internal::DispatchEncodings(
-        disparity.encoding, colour.encoding,
-        Impl::Kernel<PointSink<true>>{impl_.get(), c, options.passthrough, disparity, colour, &sink,
-                                      &tally, &options.voxel, &out->points});
-    if (impl_->streamed) {
+        values.encoding, colour.encoding,
+        Kernel<PointSink<true>, Values>{this, c, options.passthrough, values, colour, &sink, &tally,
+                                        &options.voxel, &out->points});
+    if (streamed) {
       // Voxelised band by band.
-    } else if (auto s = impl_->accumulator.Run(impl_->passed.data(), sink.count, options.voxel,
-                                               &out->points, &sink.bounds);
+    } else if (auto s = accumulator.Run(passed.data(), sink.count, options.voxel, &out->points,
+                                        &sink.bounds);
                !s.ok()) {
       out->points.clear();
       out->width = 0;
@@ -591,20 +592,47 @@ absl::Status Pipeline::Run(const PipelineOptions& options, const DisparityView& 
   } else {
     out->points.resize(pixels);
     PointSink<false> sink{out->points.data(), 0, {}};
-    internal::DispatchEncodings(disparity.encoding, colour.encoding,
-                                Impl::Kernel<PointSink<false>>{impl_.get(), c, options.passthrough,
-                                                               disparity, colour, &sink, &tally});
+    internal::DispatchEncodings(values.encoding, colour.encoding,
+                                Kernel<PointSink<false>, Values>{this, c, options.passthrough,
+                                                                 values, colour, &sink, &tally});
     out->points.resize(sink.count);
   }
   out->width = static_cast<std::uint32_t>(out->points.size());
   out->height = 1;
   if (counts != nullptr) {
-    counts->pixels = std::uint64_t{disparity.width} * disparity.height;
+    counts->pixels = pixels;
     counts->valid_points = tally.valid;
     counts->after_passthrough = tally.passed;
     counts->after_voxel = out->points.size();
   }
   return absl::OkStatus();
+}
+
+namespace {
+
+absl::Status StartRun(const PipelineOptions& options, PointCloud* out) {
+  if (out == nullptr) return absl::InvalidArgumentError("output cloud is null");
+  out->points.clear();
+  out->width = 0;
+  out->height = 1;
+  return options.Validate();
+}
+
+}  // namespace
+
+absl::Status Pipeline::Run(const PipelineOptions& options, const DisparityView& disparity,
+                           const ColorView& colour, PointCloud* out, StageCounts* counts) {
+  if (auto s = StartRun(options, out); !s.ok()) return s;
+  if (auto s = ValidateFrame(disparity, colour, options.limits); !s.ok()) return s;
+  return impl_->RunFused(options, DepthConstants(options.camera), disparity, colour, out, counts);
+}
+
+absl::Status Pipeline::Run(const PipelineOptions& options, const DepthView& depth,
+                           const ColorView& colour, PointCloud* out, StageCounts* counts) {
+  if (auto s = StartRun(options, out); !s.ok()) return s;
+  if (auto s = ValidateFrame(depth, colour, options.limits); !s.ok()) return s;
+  return impl_->RunFused(options, DepthConstants::ForDepth(options.camera, depth.encoding), depth,
+                         colour, out, counts);
 }
 
 }  // namespace cloudcast

@@ -25,7 +25,8 @@ absl::Status FrameSettings::Validate(std::string_view field) const {
   const std::string prefix = field.empty() ? "" : std::string(field) + ".";
   // The principal point is checked as given; an unset one is the centre of a valid frame.
   if (auto s = PipelineFor(2, 2).Validate(field); !s.ok()) return s;
-  return Draco().Validate(prefix + "draco");
+  if (auto s = Draco().Validate(prefix + "draco"); !s.ok()) return s;
+  return stereo.Validate(prefix + "stereo");
 }
 
 }  // namespace cloudcast

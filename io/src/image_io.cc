@@ -148,6 +148,24 @@ absl::StatusOr<OwnedDisparity> ToDisparity(const cv::Mat& image, const std::stri
                    "; a disparity map must be 8-bit, 16-bit unsigned or 32-bit float"));
 }
 
+absl::StatusOr<OwnedDepth> ToDepth(const cv::Mat& image, const std::string& what) {
+  if (auto s = CheckSize(image, what); !s.ok()) return s;
+  if (image.channels() != 1) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(what, ": has ", image.channels(),
+                     " channels; a depth image must have one (16UC1 or 32FC1)"));
+  }
+  switch (image.depth()) {
+    case CV_16U:
+      return CopyPacked(image, DepthEncoding::kU16);
+    case CV_32F:
+      return CopyPacked(image, DepthEncoding::kF32);
+  }
+  return absl::InvalidArgumentError(
+      absl::StrCat(what, ": is ", DepthName(image.depth()),
+                   "; a depth image must be 16-bit unsigned (millimetres) or 32-bit float"));
+}
+
 absl::StatusOr<OwnedColor> ToColor(const cv::Mat& image, const std::string& what) {
   if (auto s = CheckSize(image, what); !s.ok()) return s;
   cv::Mat eight_bit;
@@ -213,6 +231,24 @@ absl::StatusOr<OwnedDisparity> DecodeDisparity(std::string_view bytes, std::stri
     auto image = DecodeBytes(bytes, what);
     if (!image.ok()) return image.status();
     return ToDisparity(*image, what);
+  });
+}
+
+absl::StatusOr<OwnedDepth> LoadDepth(const std::string& path) {
+  const std::string what = absl::StrCat("depth file '", path, "'");
+  return Guarded(what, [&]() -> absl::StatusOr<OwnedDepth> {
+    auto image = ReadFile(path, what);
+    if (!image.ok()) return image.status();
+    return ToDepth(*image, what);
+  });
+}
+
+absl::StatusOr<OwnedDepth> DecodeDepth(std::string_view bytes, std::string_view field) {
+  const std::string what(field);
+  return Guarded(what, [&]() -> absl::StatusOr<OwnedDepth> {
+    auto image = DecodeBytes(bytes, what);
+    if (!image.ok()) return image.status();
+    return ToDepth(*image, what);
   });
 }
 

@@ -92,6 +92,10 @@ absl::Status ResolveCamera(const v1::CameraModel& c, std::string_view p, FrameSe
     }
     cam.invalid_disparities.assign(values.begin(), values.end());
   }
+  if (c.has_depth_scale()) {
+    if (auto st = check::Positive(Path(p, "depth_scale"), c.depth_scale()); !st.ok()) return st;
+    cam.depth_scale = c.depth_scale();
+  }
   return absl::OkStatus();
 }
 
@@ -168,6 +172,58 @@ absl::Status ResolveDraco(const v1::DracoConfig& c, std::string_view p, FrameSet
   return d.Validate(p);
 }
 
+absl::Status ResolveCalibration(const v1::StereoCalibration& c, std::string_view p,
+                                StereoCalibration* out) {
+  auto matrix = [&](const google::protobuf::RepeatedField<double>& values, std::string_view name,
+                    std::size_t n, double* to) -> absl::Status {
+    if (static_cast<std::size_t>(values.size()) != n) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(Path(p, name), " has ", values.size(), " values; it must have ", n));
+    }
+    for (std::size_t i = 0; i < n; ++i) to[i] = values[static_cast<int>(i)];
+    return absl::OkStatus();
+  };
+  out->width = c.width();
+  out->height = c.height();
+  for (absl::Status st :
+       {matrix(c.left_k(), "left_k", 9, out->left_k.data()),
+        matrix(c.right_k(), "right_k", 9, out->right_k.data()),
+        matrix(c.r(), "r", 9, out->r.data()), matrix(c.t(), "t", 3, out->t.data())}) {
+    if (!st.ok()) return st;
+  }
+  out->left_d.assign(c.left_d().begin(), c.left_d().end());
+  out->right_d.assign(c.right_d().begin(), c.right_d().end());
+  return out->Validate(p);
+}
+
+absl::Status ResolveStereo(const v1::StereoConfig& c, std::string_view p, FrameSettings* s) {
+  // The proto's fields are named as StereoParams' members, so its Validate names them right
+  // under the proto path.
+  StereoParams& st = s->stereo;
+  if (auto e = FromProto(c.matcher(), Path(p, "matcher"), &st.matcher); !e.ok()) return e;
+  if (c.has_min_disparity()) st.min_disparity = c.min_disparity();
+  if (c.has_num_disparities()) st.num_disparities = c.num_disparities();
+  if (c.has_block_size()) st.block_size = c.block_size();
+  if (c.has_p1()) st.p1 = c.p1();
+  if (c.has_p2()) st.p2 = c.p2();
+  if (c.has_uniqueness_ratio()) st.uniqueness_ratio = c.uniqueness_ratio();
+  if (c.has_speckle_window_size()) st.speckle_window_size = c.speckle_window_size();
+  if (c.has_speckle_range()) st.speckle_range = c.speckle_range();
+  if (c.has_disp12_max_diff()) st.disp12_max_diff = c.disp12_max_diff();
+  if (c.has_paths()) st.paths = c.paths();
+  if (c.has_return_disparity()) st.return_disparity = c.return_disparity();
+  if (c.has_calibration()) {
+    if (auto e = ResolveCalibration(c.calibration(), Path(p, "calibration"), &st.calibration);
+        !e.ok()) {
+      return e;
+    }
+    st.has_calibration = true;
+  }
+  StereoParams checked = st;
+  checked.has_calibration = false;  // checked above, naming its own fields
+  return checked.Validate(p);
+}
+
 template <typename View, typename Raw, typename Encoding>
 absl::Status ViewAny(const Raw& raw, std::string_view pixels, std::string_view field,
                      const Limits& limits, Encoding encoding, const std::string& encoding_name,
@@ -221,6 +277,74 @@ v1::DisparityEncoding ToProto(DisparityEncoding encoding) {
       return v1::DISPARITY_F32;
   }
   return v1::DISPARITY_ENCODING_UNSPECIFIED;
+}
+
+v1::DepthEncoding ToProto(DepthEncoding encoding) {
+  switch (encoding) {
+    case DepthEncoding::kU16:
+      return v1::DEPTH_U16;
+    case DepthEncoding::kF32:
+      return v1::DEPTH_F32;
+  }
+  return v1::DEPTH_ENCODING_UNSPECIFIED;
+}
+
+v1::StereoMatcher ToProto(StereoMatcher matcher) {
+  switch (matcher) {
+    case StereoMatcher::kSgm:
+      return v1::STEREO_MATCHER_SGM;
+    case StereoMatcher::kOpenCvSgbm:
+      return v1::STEREO_MATCHER_OPENCV_SGBM;
+    case StereoMatcher::kOpenCvSgbm3Way:
+      return v1::STEREO_MATCHER_OPENCV_SGBM_3WAY;
+    case StereoMatcher::kOpenCvHH:
+      return v1::STEREO_MATCHER_OPENCV_HH;
+    case StereoMatcher::kOpenCvBm:
+      return v1::STEREO_MATCHER_OPENCV_BM;
+  }
+  return v1::STEREO_MATCHER_UNSPECIFIED;
+}
+
+absl::Status FromProto(v1::StereoMatcher matcher, std::string_view field, StereoMatcher* out) {
+  switch (matcher) {
+    case v1::STEREO_MATCHER_UNSPECIFIED:
+      return absl::OkStatus();
+    case v1::STEREO_MATCHER_SGM:
+      *out = StereoMatcher::kSgm;
+      return absl::OkStatus();
+    case v1::STEREO_MATCHER_OPENCV_SGBM:
+      *out = StereoMatcher::kOpenCvSgbm;
+      return absl::OkStatus();
+    case v1::STEREO_MATCHER_OPENCV_SGBM_3WAY:
+      *out = StereoMatcher::kOpenCvSgbm3Way;
+      return absl::OkStatus();
+    case v1::STEREO_MATCHER_OPENCV_HH:
+      *out = StereoMatcher::kOpenCvHH;
+      return absl::OkStatus();
+    case v1::STEREO_MATCHER_OPENCV_BM:
+      *out = StereoMatcher::kOpenCvBm;
+      return absl::OkStatus();
+    default:
+      return NotOneOf(field, matcher,
+                      "STEREO_MATCHER_SGM, STEREO_MATCHER_OPENCV_SGBM, "
+                      "STEREO_MATCHER_OPENCV_SGBM_3WAY, STEREO_MATCHER_OPENCV_HH, "
+                      "STEREO_MATCHER_OPENCV_BM");
+  }
+}
+
+absl::Status FromProto(v1::DepthEncoding encoding, std::string_view field, DepthEncoding* out) {
+  switch (encoding) {
+    case v1::DEPTH_U16:
+      *out = DepthEncoding::kU16;
+      return absl::OkStatus();
+    case v1::DEPTH_F32:
+      *out = DepthEncoding::kF32;
+      return absl::OkStatus();
+    default:
+      return absl::InvalidArgumentError(absl::StrCat(S(field), " is ",
+                                                     EnumName(&v1::DepthEncoding_Name, encoding),
+                                                     "; it must be one of DEPTH_U16, DEPTH_F32"));
+  }
 }
 
 v1::ColorEncoding ToProto(ColorEncoding encoding) {
@@ -333,6 +457,9 @@ absl::StatusOr<StreamSettings> Resolve(const v1::StreamConfig& config,
     return st;
   }
   if (auto st = ResolveDraco(config.draco(), Path(field, "draco"), &s.frame); !st.ok()) return st;
+  if (auto st = ResolveStereo(config.stereo(), Path(field, "stereo"), &s.frame); !st.ok()) {
+    return st;
+  }
   if (auto st = FromProto(config.delivery(), Path(field, "delivery"), &s.delivery); !st.ok()) {
     return st;
   }
@@ -361,6 +488,7 @@ v1::StreamConfig ToProto(const StreamSettings& settings) {
   SetDraco(f.Draco(), &c);
   c.mutable_draco()->set_max_position_error(f.Draco().max_position_error);
   c.set_delivery(ToProto(settings.delivery));
+  SetStereo(f.stereo, &c);
   return c;
 }
 
@@ -377,6 +505,39 @@ void SetCamera(const CameraModel& camera, v1::StreamConfig* config) {
   v1::InvalidDisparities* invalid = c->mutable_invalid_disparities();
   invalid->clear_values();
   for (double v : camera.invalid_disparities) invalid->add_values(v);
+  if (camera.depth_scale.has_value()) {
+    c->set_depth_scale(*camera.depth_scale);
+  } else {
+    c->clear_depth_scale();
+  }
+}
+
+void SetStereo(const StereoParams& params, v1::StreamConfig* config) {
+  v1::StereoConfig* c = config->mutable_stereo();
+  c->set_matcher(ToProto(params.matcher));
+  c->set_min_disparity(params.min_disparity);
+  c->set_num_disparities(params.num_disparities);
+  c->set_block_size(params.block_size);
+  c->set_p1(params.p1);
+  c->set_p2(params.p2);
+  c->set_uniqueness_ratio(params.uniqueness_ratio);
+  c->set_speckle_window_size(params.speckle_window_size);
+  c->set_speckle_range(params.speckle_range);
+  c->set_disp12_max_diff(params.disp12_max_diff);
+  c->set_paths(params.paths);
+  c->set_return_disparity(params.return_disparity);
+  c->clear_calibration();
+  if (!params.has_calibration) return;
+  const StereoCalibration& k = params.calibration;
+  v1::StereoCalibration* out = c->mutable_calibration();
+  out->set_width(k.width);
+  out->set_height(k.height);
+  for (double v : k.left_k) out->add_left_k(v);
+  for (double v : k.left_d) out->add_left_d(v);
+  for (double v : k.right_k) out->add_right_k(v);
+  for (double v : k.right_d) out->add_right_d(v);
+  for (double v : k.r) out->add_r(v);
+  for (double v : k.t) out->add_t(v);
 }
 
 void SetPassThrough(const PassThroughParams& params, v1::StreamConfig* config) {
@@ -467,12 +628,22 @@ absl::Status ToProto(const DisparityView& view, std::string_view field, v1::RawD
   return FillRaw(view, field, raw);
 }
 
+absl::Status ToProto(const DepthView& view, std::string_view field, v1::RawDepth* raw) {
+  return FillRaw(view, field, raw);
+}
+
 absl::Status ToProto(const ColorView& view, std::string_view field, v1::RawColor* raw) {
   return FillRaw(view, field, raw);
 }
 
 absl::Status ToProtoWithoutPixels(const DisparityView& view, std::string_view field,
                                   v1::RawDisparity* raw) {
+  raw->clear_pixels();
+  return FillRawHeader(view, field, raw);
+}
+
+absl::Status ToProtoWithoutPixels(const DepthView& view, std::string_view field,
+                                  v1::RawDepth* raw) {
   raw->clear_pixels();
   return FillRawHeader(view, field, raw);
 }
@@ -484,8 +655,10 @@ absl::Status ToProtoWithoutPixels(const ColorView& view, std::string_view field,
 }
 
 std::size_t PackedBytes(const DisparityView& view) { return PackedSize(view); }
+std::size_t PackedBytes(const DepthView& view) { return PackedSize(view); }
 std::size_t PackedBytes(const ColorView& view) { return PackedSize(view); }
 void PackRows(const DisparityView& view, void* out) { CopyRows(view, out); }
+void PackRows(const DepthView& view, void* out) { CopyRows(view, out); }
 void PackRows(const ColorView& view, void* out) { CopyRows(view, out); }
 
 absl::Status BgraToProto(const void* data, std::size_t size_bytes, std::uint32_t width,
@@ -523,6 +696,14 @@ absl::Status ViewRaw(const v1::RawDisparity& raw, std::string_view pixels, std::
                  view);
 }
 
+absl::Status ViewRaw(const v1::RawDepth& raw, std::string_view pixels, std::string_view field,
+                     const Limits& limits, DepthView* view) {
+  DepthEncoding encoding;
+  if (auto s = FromProto(raw.encoding(), Path(field, "encoding"), &encoding); !s.ok()) return s;
+  return ViewAny(raw, pixels, field, limits, encoding, v1::DepthEncoding_Name(raw.encoding()),
+                 view);
+}
+
 absl::Status ViewRaw(const v1::RawColor& raw, std::string_view pixels, std::string_view field,
                      const Limits& limits, ColorView* view) {
   ColorEncoding encoding;
@@ -533,6 +714,11 @@ absl::Status ViewRaw(const v1::RawColor& raw, std::string_view pixels, std::stri
 
 absl::Status ViewRaw(const v1::RawDisparity& raw, std::string_view field, const Limits& limits,
                      DisparityView* view) {
+  return ViewRaw(raw, raw.pixels(), field, limits, view);
+}
+
+absl::Status ViewRaw(const v1::RawDepth& raw, std::string_view field, const Limits& limits,
+                     DepthView* view) {
   return ViewRaw(raw, raw.pixels(), field, limits, view);
 }
 
@@ -629,6 +815,11 @@ absl::Status ToProto(const DisparityView& view, const Compression& compression,
   return CompressAny(view, compression, field, out, compressor);
 }
 
+absl::Status ToProto(const DepthView& view, const Compression& compression, std::string_view field,
+                     v1::CompressedDepth* out, PlaneCompressor* compressor) {
+  return CompressAny(view, compression, field, out, compressor);
+}
+
 absl::Status ToProto(const ColorView& view, const Compression& compression, std::string_view field,
                      v1::CompressedColor* out, PlaneCompressor* compressor) {
   return CompressAny(view, compression, field, out, compressor);
@@ -643,6 +834,17 @@ absl::Status DecodeCompressed(const v1::CompressedDisparity& compressed, std::st
   }
   return DecodeAny(compressed, field, limits, encoding,
                    v1::DisparityEncoding_Name(compressed.encoding()), decompressor, view);
+}
+
+absl::Status DecodeCompressed(const v1::CompressedDepth& compressed, std::string_view field,
+                              const Limits& limits, PlaneDecompressor* decompressor,
+                              DepthView* view) {
+  DepthEncoding encoding;
+  if (auto s = FromProto(compressed.encoding(), Path(field, "encoding"), &encoding); !s.ok()) {
+    return s;
+  }
+  return DecodeAny(compressed, field, limits, encoding,
+                   v1::DepthEncoding_Name(compressed.encoding()), decompressor, view);
 }
 
 absl::Status DecodeCompressed(const v1::CompressedColor& compressed, std::string_view field,

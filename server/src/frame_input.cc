@@ -21,8 +21,8 @@ absl::Status DecodeChecked(std::string_view bytes, const char* field, const Limi
   if (lossless && std::string_view(format) == "JPEG") {
     return absl::InvalidArgumentError(absl::StrCat(
         field,
-        " is a JPEG: its lossy compression changes disparity values; send it raw or as "
-        "PNG, TIFF, PNM or PFM"));
+        " is a JPEG: its lossy compression changes the values (disparities and depths must "
+        "stay exact); send it raw, compressed, or as PNG, TIFF, PNM or PFM"));
   }
   auto decoded = decode(bytes, field);
   if (!decoded.ok()) return decoded.status();
@@ -88,87 +88,123 @@ absl::Status ViewRawImage(const Raw& raw, const ScatteredBytes* in_place, const 
 
 }  // namespace
 
+namespace {
+
+const ScatteredBytes* Plane(const InPlacePixels* in_place, const ScatteredBytes InPlacePixels::*p) {
+  return in_place != nullptr ? &(in_place->*p) : nullptr;
+}
+
+// One image message of any kind (DisparityImage, DepthImage, ColorImage) into a view: raw pixels
+// in place, compressed ones decompressed, encoded files decoded. `field` is its proto path
+// ("frame.depth"); `decode` decodes a file of its kind.
+template <typename Image, typename View, typename Owned, typename Decode>
+absl::Status PrepareImage(const Image& image, const char* field, const Limits& limits,
+                          const ScatteredBytes* in_place, bool lossless, Decode decode,
+                          RowTable* rows, Owned* owned, PlaneDecompressor* codec, View* view,
+                          bool* decoded) {
+  const std::string f(field);
+  switch (image.data_case()) {
+    case Image::kRaw:
+      return ViewRawImage(image.raw(), in_place, (f + ".raw").c_str(), limits, rows, view);
+    case Image::kEncoded:
+      *decoded = true;
+      return DecodeChecked(image.encoded(), (f + ".encoded").c_str(), limits, lossless, decode,
+                           owned, view);
+    case Image::kCompressed:
+      *decoded = true;
+      return convert::DecodeCompressed(image.compressed(), f + ".compressed", limits, codec, view);
+    default:
+      return absl::InvalidArgumentError(
+          absl::StrCat(f, " is missing: set ", f, ".raw, .compressed or .encoded"));
+  }
+}
+
+}  // namespace
+
 absl::Status PrepareFrameImages(const v1::Frame& frame, const Limits& limits,
                                 DecodeScratch* scratch, FrameImages* out,
                                 const InPlacePixels* in_place) {
   out->decoded = false;
-  switch (frame.disparity().data_case()) {
-    case v1::DisparityImage::kRaw:
-      if (auto s = ViewRawImage(
-              frame.disparity().raw(), in_place != nullptr ? &in_place->disparity : nullptr,
-              "frame.disparity.raw", limits, &scratch->disparity_rows, &out->disparity);
-          !s.ok()) {
-        return s;
-      }
+  const auto decode_colour = [](std::string_view b, const char* f) { return DecodeColor(b, f); };
+  absl::Status s;
+  const char* geometry_field = "frame.disparity";
+  switch (frame.geometry_case()) {
+    case v1::Frame::kDisparity:
+      out->kind = FrameKind::kDisparity;
+      s = PrepareImage(
+          frame.disparity(), "frame.disparity", limits, Plane(in_place, &InPlacePixels::disparity),
+          /*lossless=*/true,
+          [](std::string_view b, const char* f) { return DecodeDisparity(b, f); },
+          &scratch->disparity_rows, &scratch->disparity, &scratch->disparity_codec, &out->disparity,
+          &out->decoded);
       break;
-    case v1::DisparityImage::kEncoded:
-      if (auto s = DecodeChecked(
-              frame.disparity().encoded(), "frame.disparity.encoded", limits, /*lossless=*/true,
-              [](std::string_view b, const char* f) { return DecodeDisparity(b, f); },
-              &scratch->disparity, &out->disparity);
-          !s.ok()) {
-        return s;
-      }
-      out->decoded = true;
+    case v1::Frame::kDepth:
+      out->kind = FrameKind::kDepth;
+      geometry_field = "frame.depth";
+      s = PrepareImage(
+          frame.depth(), "frame.depth", limits, Plane(in_place, &InPlacePixels::depth),
+          /*lossless=*/true, [](std::string_view b, const char* f) { return DecodeDepth(b, f); },
+          &scratch->depth_rows, &scratch->depth, &scratch->depth_codec, &out->depth, &out->decoded);
       break;
-    case v1::DisparityImage::kCompressed:
-      if (auto s = convert::DecodeCompressed(frame.disparity().compressed(),
-                                             "frame.disparity.compressed", limits,
-                                             &scratch->disparity_codec, &out->disparity);
-          !s.ok()) {
-        return s;
-      }
-      out->decoded = true;
-      break;
-    default:
-      return absl::InvalidArgumentError(
-          "frame.disparity is missing: set frame.disparity.raw, .compressed or .encoded");
-  }
-  switch (frame.colour().data_case()) {
-    case v1::ColorImage::kRaw:
-      if (auto s =
-              ViewRawImage(frame.colour().raw(), in_place != nullptr ? &in_place->colour : nullptr,
-                           "frame.colour.raw", limits, &scratch->colour_rows, &out->colour);
-          !s.ok()) {
-        return s;
-      }
-      break;
-    case v1::ColorImage::kEncoded:
-      if (auto s = DecodeChecked(
-              frame.colour().encoded(), "frame.colour.encoded", limits, /*lossless=*/false,
-              [](std::string_view b, const char* f) { return DecodeColor(b, f); }, &scratch->colour,
-              &out->colour);
-          !s.ok()) {
-        return s;
-      }
-      out->decoded = true;
-      break;
-    case v1::ColorImage::kCompressed:
-      if (auto s = convert::DecodeCompressed(frame.colour().compressed(), "frame.colour.compressed",
-                                             limits, &scratch->colour_codec, &out->colour);
-          !s.ok()) {
-        return s;
-      }
-      out->decoded = true;
+    case v1::Frame::kRight:
+      out->kind = FrameKind::kStereo;
+      geometry_field = "frame.right";
+      s = PrepareImage(frame.right(), "frame.right", limits, Plane(in_place, &InPlacePixels::right),
+                       /*lossless=*/false, decode_colour, &scratch->right_rows, &scratch->right,
+                       &scratch->right_codec, &out->right, &out->decoded);
       break;
     default:
       return absl::InvalidArgumentError(
-          "frame.colour is missing: set frame.colour.raw, .compressed or .encoded");
+          "frame.disparity is missing, and so are frame.depth and frame.right: set one (a "
+          "disparity map, a depth image, or the right image of a stereo pair whose left is "
+          "frame.colour)");
   }
-  return CheckSameSize(out->disparity, "frame.disparity", out->colour, "frame.colour");
+  if (!s.ok()) return s;
+  s = PrepareImage(frame.colour(), "frame.colour", limits, Plane(in_place, &InPlacePixels::colour),
+                   /*lossless=*/false, decode_colour, &scratch->colour_rows, &scratch->colour,
+                   &scratch->colour_codec, &out->colour, &out->decoded);
+  if (!s.ok()) return s;
+  switch (out->kind) {
+    case FrameKind::kDisparity:
+      return CheckSameSize(out->disparity, geometry_field, out->colour, "frame.colour");
+    case FrameKind::kDepth:
+      return CheckSameSize(out->depth, geometry_field, out->colour, "frame.colour");
+    case FrameKind::kStereo:
+      break;
+  }
+  return CheckSameSize(out->colour, "frame.colour", out->right, geometry_field);
 }
 
-std::uint64_t FramePixels(const v1::Frame& frame) {
-  const v1::DisparityImage& d = frame.disparity();
-  std::uint64_t pixels = 0;
-  if (d.has_raw()) {
-    pixels = std::uint64_t{d.raw().width()} * d.raw().height();
-  } else if (d.has_compressed()) {
-    pixels = std::uint64_t{d.compressed().width()} * d.compressed().height();
-  } else if (d.has_encoded()) {
+namespace {
+
+// width x height as an image message states it, without decoding; 0 when it cannot tell.
+template <typename Image>
+std::uint64_t StatedPixels(const Image& image) {
+  if (image.has_raw()) return std::uint64_t{image.raw().width()} * image.raw().height();
+  if (image.has_compressed()) {
+    return std::uint64_t{image.compressed().width()} * image.compressed().height();
+  }
+  if (image.has_encoded()) {
     std::uint32_t w = 0, h = 0;
     const char* format = nullptr;
-    if (SniffImageSize(d.encoded(), &w, &h, &format)) pixels = std::uint64_t{w} * h;
+    if (SniffImageSize(image.encoded(), &w, &h, &format)) return std::uint64_t{w} * h;
+  }
+  return 0;
+}
+
+}  // namespace
+
+std::uint64_t FramePixels(const v1::Frame& frame) {
+  std::uint64_t pixels = 0;
+  switch (frame.geometry_case()) {
+    case v1::Frame::kDepth:
+      pixels = StatedPixels(frame.depth());
+      break;
+    case v1::Frame::kRight:
+      pixels = StatedPixels(frame.right());
+      break;
+    default:
+      pixels = StatedPixels(frame.disparity());
   }
   return pixels > 0 ? pixels : 1;
 }

@@ -13,10 +13,20 @@
 
 namespace cloudcast::server {
 
+// What gives a frame's points their depth (the proto's Frame.geometry).
+enum class FrameKind : std::uint8_t {
+  kDisparity,  // a disparity map
+  kDepth,      // a depth image
+  kStereo,     // the right image of a stereo pair; `colour` is the left one
+};
+
 // The images of one frame as the core reads them.
 struct FrameImages {
-  DisparityView disparity;
-  ColorView colour;
+  FrameKind kind = FrameKind::kDisparity;
+  DisparityView disparity;  // kDisparity
+  DepthView depth;          // kDepth
+  ColorView colour;         // the reference (left) camera's image, always
+  ColorView right;          // kStereo
   // at least one image came encoded (PNG, JPEG, ...) or compressed, and was decoded
   bool decoded = false;
 };
@@ -30,12 +40,12 @@ struct RowTable {
 
 // Decoded pixels, kept by a worker from frame to frame.
 struct DecodeScratch {
-  RowTable disparity_rows, colour_rows;
+  RowTable disparity_rows, depth_rows, colour_rows, right_rows;
   OwnedDisparity disparity;
-  OwnedColor colour;
+  OwnedDepth depth;
+  OwnedColor colour, right;
   // Compressed images: buffers that grow to the largest frame seen and are then reused.
-  PlaneDecompressor disparity_codec;
-  PlaneDecompressor colour_codec;
+  PlaneDecompressor disparity_codec, depth_codec, colour_codec, right_codec;
 };
 
 // Fills `out` from `frame`. Raw images are viewed in place, without a copy: the views point into

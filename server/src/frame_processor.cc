@@ -47,11 +47,21 @@ absl::Status FrameProcessor::Process(const v1::Frame& frame, const InPlacePixels
   costs->decoded = images.decoded;
   costs->decode_seconds = images.decoded ? Seconds(t1 - t0) : 0.0;
 
-  const PipelineOptions options =
-      settings.PipelineFor(images.disparity.width, images.disparity.height);
+  const PipelineOptions options = settings.PipelineFor(images.colour.width, images.colour.height);
   StageCounts counts;
   const double cpu0 = ThreadCpuSeconds();
-  absl::Status status = pipeline_.Run(options, images.disparity, images.colour, &cloud_, &counts);
+  absl::Status status;
+  switch (images.kind) {
+    case FrameKind::kDisparity:
+      status = pipeline_.Run(options, images.disparity, images.colour, &cloud_, &counts);
+      break;
+    case FrameKind::kDepth:
+      status = pipeline_.Run(options, images.depth, images.colour, &cloud_, &counts);
+      break;
+    case FrameKind::kStereo:
+      status = absl::UnimplementedError("frame.right: stereo pairs are not matched yet");
+      break;
+  }
   const Clock::time_point t2 = Clock::now();
   DracoEncodeInfo info;
   if (status.ok()) {

@@ -10,8 +10,9 @@
 namespace cloudcast::server {
 namespace {
 
-// The path to the two pixel fields. StreamRequest and ProcessRequest share their frame's number,
-// and the disparity and colour images share theirs, so one walk serves all four.
+// The path to the pixel fields. StreamRequest and ProcessRequest share their frame's number, and
+// the image messages (disparity, depth, colour) and their raw messages share their numbers, so one
+// walk serves them all.
 constexpr int N(int number) { return number; }  // the generated constants are distinct enums
 static_assert(N(v1::StreamRequest::kFrameFieldNumber) == N(v1::ProcessRequest::kFrameFieldNumber));
 static_assert(N(v1::DisparityImage::kRawFieldNumber) == N(v1::ColorImage::kRawFieldNumber));
@@ -19,9 +20,30 @@ static_assert(N(v1::DisparityImage::kEncodedFieldNumber) == N(v1::ColorImage::kE
 static_assert(N(v1::DisparityImage::kCompressedFieldNumber) ==
               N(v1::ColorImage::kCompressedFieldNumber));
 static_assert(N(v1::RawDisparity::kPixelsFieldNumber) == N(v1::RawColor::kPixelsFieldNumber));
+static_assert(N(v1::DepthImage::kRawFieldNumber) == N(v1::ColorImage::kRawFieldNumber));
+static_assert(N(v1::DepthImage::kEncodedFieldNumber) == N(v1::ColorImage::kEncodedFieldNumber));
+static_assert(N(v1::DepthImage::kCompressedFieldNumber) ==
+              N(v1::ColorImage::kCompressedFieldNumber));
+static_assert(N(v1::RawDepth::kPixelsFieldNumber) == N(v1::RawColor::kPixelsFieldNumber));
 
 enum class Level { kRequest, kFrame, kImage, kRaw };
-enum class Plane { kNone, kDisparity, kColour };
+enum class Plane { kNone, kDisparity, kDepth, kColour, kRight };
+
+// The plane a frame's field holds, or kNone for a field off the path.
+Plane PlaneOf(std::uint64_t number) {
+  switch (number) {
+    case v1::Frame::kDisparityFieldNumber:
+      return Plane::kDisparity;
+    case v1::Frame::kDepthFieldNumber:
+      return Plane::kDepth;
+    case v1::Frame::kColourFieldNumber:
+      return Plane::kColour;
+    case v1::Frame::kRightFieldNumber:
+      return Plane::kRight;
+    default:
+      return Plane::kNone;
+  }
+}
 
 using wire::kWireFixed32;
 using wire::kWireFixed64;
@@ -43,9 +65,7 @@ Role RoleOf(Level level, std::uint64_t number, int oneof_sibling) {
       if (number == v1::StreamRequest::kFrameFieldNumber) return Role::kDescend;
       return static_cast<int>(number) == oneof_sibling ? Role::kClears : Role::kOther;
     case Level::kFrame:
-      return number == v1::Frame::kDisparityFieldNumber || number == v1::Frame::kColourFieldNumber
-                 ? Role::kDescend
-                 : Role::kOther;
+      return PlaneOf(number) != Plane::kNone ? Role::kDescend : Role::kOther;
     case Level::kImage:
       if (number == v1::DisparityImage::kRawFieldNumber) return Role::kDescend;
       return number == v1::DisparityImage::kEncodedFieldNumber ||
@@ -218,10 +238,14 @@ class RequestReader::Walk {
           path_[depth_++] = number;
           Emit(pos, pos, true);  // the path's message is set here, even if nothing else is
           const Level next = static_cast<Level>(static_cast<int>(level) + 1);
-          const Plane child = level == Level::kFrame
-                                  ? (number == v1::Frame::kDisparityFieldNumber ? Plane::kDisparity
-                                                                                : Plane::kColour)
-                                  : plane;
+          const Plane child = level == Level::kFrame ? PlaneOf(number) : plane;
+          // disparity, depth and right are one oneof (Frame.geometry): setting one clears the
+          // others, as protobuf's parse does.
+          if (child != Plane::kNone && child != Plane::kColour) {
+            for (Plane other : {Plane::kDisparity, Plane::kDepth, Plane::kRight}) {
+              if (other != child) Pixels(other)->Clear();
+            }
+          }
           if (!Fields(next, child, pos, pos + len)) return false;
           --depth_;
         }
@@ -234,8 +258,7 @@ class RequestReader::Walk {
         // planes) or an image's raw (its plane). (All those members are messages or bytes; with
         // another wire type the field is unknown to protobuf and replaces nothing.)
         if (plane == Plane::kNone) {
-          reader_->pixels_.disparity.Clear();
-          reader_->pixels_.colour.Clear();
+          reader_->pixels_.Clear();
         } else {
           Pixels(plane)->Clear();
         }
@@ -247,7 +270,16 @@ class RequestReader::Walk {
   }
 
   ScatteredBytes* Pixels(Plane plane) {
-    return plane == Plane::kDisparity ? &reader_->pixels_.disparity : &reader_->pixels_.colour;
+    switch (plane) {
+      case Plane::kDisparity:
+        return &reader_->pixels_.disparity;
+      case Plane::kDepth:
+        return &reader_->pixels_.depth;
+      case Plane::kRight:
+        return &reader_->pixels_.right;
+      default:
+        return &reader_->pixels_.colour;
+    }
   }
 
   void Record(Plane plane, std::size_t from, std::size_t to) {
@@ -312,15 +344,20 @@ void RequestReader::PutPixelsBack(v1::Frame* frame) const {
   if (pixels_.disparity.size > 0) {
     frame->mutable_disparity()->mutable_raw()->set_pixels(Joined(pixels_.disparity));
   }
+  if (pixels_.depth.size > 0) {
+    frame->mutable_depth()->mutable_raw()->set_pixels(Joined(pixels_.depth));
+  }
   if (pixels_.colour.size > 0) {
     frame->mutable_colour()->mutable_raw()->set_pixels(Joined(pixels_.colour));
+  }
+  if (pixels_.right.size > 0) {
+    frame->mutable_right()->mutable_raw()->set_pixels(Joined(pixels_.right));
   }
 }
 
 void RequestReader::Clear() {
   slices_.clear();
-  pixels_.disparity.Clear();
-  pixels_.colour.Clear();
+  pixels_.Clear();
   headers_.clear();
   rest_.clear();
   walked_ = false;
@@ -337,7 +374,7 @@ bool RequestReader::ParseWith(grpc::ByteBuffer* bytes, google::protobuf::Message
       if (message->ParseFromZeroCopyStream(&input)) {
         // Nothing left in place (a config, an encoded or compressed frame): let the slices go
         // now, as protobuf's own parse would, rather than while the frame waits and runs.
-        if (pixels_.disparity.size == 0 && pixels_.colour.size == 0) {
+        if (pixels_.empty()) {
           slices_.clear();
           rest_.clear();
         }

@@ -4,8 +4,9 @@
 // DATA frame (clients may send 256 KB frames: server.cc).
 // Protobuf's parser would copy every pixel out of them into the message's `pixels` strings: 11%
 // of the server's CPU per frame. RequestReader walks the message's wire format instead, records
-// where frame.disparity.raw.pixels and frame.colour.raw.pixels lie in the slices, and gives
-// protobuf the rest of the message (everything but those two fields) to parse as usual.
+// where the raw images' pixels (frame.disparity / depth / colour / right .raw.pixels) lie in the
+// slices, and gives protobuf the rest of the message (everything but those fields) to parse as
+// usual.
 #pragma once
 
 #include <cstddef>
@@ -34,7 +35,19 @@ struct ScatteredBytes {
 // image's pixels (if any) are in the message itself, as protobuf parsed them.
 struct InPlacePixels {
   ScatteredBytes disparity;  // frame.disparity.raw.pixels
+  ScatteredBytes depth;      // frame.depth.raw.pixels
   ScatteredBytes colour;     // frame.colour.raw.pixels
+  ScatteredBytes right;      // frame.right.raw.pixels
+
+  bool empty() const {
+    return disparity.size == 0 && depth.size == 0 && colour.size == 0 && right.size == 0;
+  }
+  void Clear() {
+    disparity.Clear();
+    depth.Clear();
+    colour.Clear();
+    right.Clear();
+  }
 };
 
 // One per request slot, reused from message to message. Not thread-safe.

@@ -644,6 +644,10 @@ grpc::ServerUnaryReactor* CloudCastService::GetInfo(grpc::CallbackServerContext*
   // What core/image_io decodes through OpenCV's imgcodecs.
   for (const char* f : {"png", "jpeg", "tiff", "pnm", "pfm"}) info->add_image_formats(f);
   for (v1::Compression c : convert::AcceptedCompressions()) info->add_compressions(c);
+  for (auto e : {DepthEncoding::kU16, DepthEncoding::kF32}) {
+    info->add_depth_encodings(convert::ToProto(e));
+  }
+  for (StereoMatcher m : AllStereoMatchers()) info->add_stereo_matchers(convert::ToProto(m));
   info->set_worker_threads(static_cast<std::uint32_t>(pool_.size()));
   info->set_draco_version(draco::kDracoVersion);
   info->set_instance(runner_.instance());

@@ -46,6 +46,8 @@ class Stream {
   // smaller than its rows, a stride under the row size); FAILED_PRECONDITION after CloseSend;
   // UNAVAILABLE when the call has ended (Finish says why). Everything else (sizes that differ,
   // limits, undecodable files) is judged by the server and comes back as a Result with an error.
+  absl::Status Send(const FrameInput& input, const FrameMeta& meta = {});
+  // A disparity map and its colour image: Send(DisparityFrame{disparity, colour}, meta).
   absl::Status Send(const DisparityInput& disparity, const ColorInput& colour,
                     const FrameMeta& meta = {});
 
@@ -106,6 +108,8 @@ class Client {
 
   // One frame, one reply, without a stream. A frame the server rejects gives its error status
   // (INVALID_ARGUMENT / RESOURCE_EXHAUSTED naming the field). config.delivery is ignored.
+  absl::StatusOr<Result> Process(const FrameInput& input, const StreamConfig& config = {},
+                                 const FrameMeta& meta = {});
   absl::StatusOr<Result> Process(const DisparityInput& disparity, const ColorInput& colour,
                                  const StreamConfig& config = {}, const FrameMeta& meta = {});
 

@@ -1,6 +1,12 @@
-// What a client sends: a disparity map and a colour image of the same size, as raw pixels in
-// memory (core views, not copied until Send), raw pixels to compress losslessly, or encoded image
-// files, plus the frame's metadata. OpenCV users: see opencv.h for cv::Mat adapters.
+// What a client sends: a colour image and what gives it depth, all of the same size:
+//   DisparityFrame  a disparity map from the robot's own matcher, and the colour image;
+//   DepthFrame      a depth image (a depth camera's 16-bit millimetres or float metres), and the
+//                   colour image;
+//   StereoFrame     a rectified stereo pair (left and right, mono or colour), which the server
+//                   matches (StreamConfig.stereo); the points take the left image's colour.
+// Each image is raw pixels in memory (core views, not copied until Send), raw pixels to compress
+// losslessly, or an encoded image file; plus the frame's metadata. OpenCV users: see opencv.h for
+// cv::Mat adapters.
 #pragma once
 
 #include <cstddef>
@@ -43,12 +49,20 @@ struct CompressedDisparityView {
   DisparityView view;
   convert::Compression compression;
 };
+struct CompressedDepthView {
+  DepthView view;
+  convert::Compression compression;
+};
 struct CompressedColorView {
   ColorView view;
   convert::Compression compression;
 };
 inline CompressedDisparityView Compressed(const DisparityView& view,
                                           const convert::Compression& compression = {}) {
+  return {view, compression};
+}
+inline CompressedDepthView Compressed(const DepthView& view,
+                                      const convert::Compression& compression = {}) {
   return {view, compression};
 }
 inline CompressedColorView Compressed(const ColorView& view,
@@ -62,20 +76,44 @@ inline CompressedColorView Compressed(const ColorView& view,
 struct PrecompressedDisparity {
   const v1::CompressedDisparity* message = nullptr;
 };
+struct PrecompressedDepth {
+  const v1::CompressedDepth* message = nullptr;
+};
 struct PrecompressedColor {
   const v1::CompressedColor* message = nullptr;
 };
 
 using DisparityInput =
     std::variant<DisparityView, EncodedImage, CompressedDisparityView, PrecompressedDisparity>;
+// Depth files: PNG 16-bit (millimetres, as depth cameras record them), TIFF, PFM.
+using DepthInput = std::variant<DepthView, EncodedImage, CompressedDepthView, PrecompressedDepth>;
 using ColorInput =
     std::variant<ColorView, BgraView, EncodedImage, CompressedColorView, PrecompressedColor>;
+
+// The images of one frame, by what gives its points their depth.
+struct DisparityFrame {
+  DisparityInput disparity;
+  ColorInput colour;
+};
+struct DepthFrame {
+  DepthInput depth;
+  ColorInput colour;
+};
+// A rectified stereo pair (or one the server rectifies: StreamConfig.stereo.calibration).
+struct StereoFrame {
+  ColorInput left;  // also the colour of the points
+  ColorInput right;
+};
+using FrameInput = std::variant<DisparityFrame, DepthFrame, StereoFrame>;
 
 // `input` with its raw view, if it holds one, to be compressed; other kinds as they are (a
 // BgraView stays raw: the protocol has no BGRA encoding to compress it as).
 DisparityInput CompressRaw(const DisparityInput& input,
                            const convert::Compression& compression = {});
+DepthInput CompressRaw(const DepthInput& input, const convert::Compression& compression = {});
 ColorInput CompressRaw(const ColorInput& input, const convert::Compression& compression = {});
+// Every raw view of the frame compressed.
+FrameInput CompressRaw(const FrameInput& input, const convert::Compression& compression = {});
 
 // A frame's metadata, echoed by the server in its reply.
 struct FrameMeta {

@@ -19,8 +19,15 @@ namespace cloudcast::client {
 // Disparity: one channel, CV_8U, CV_16U or CV_32F. CV_16S (StereoSGBM's output, 16 x disparity,
 // negative where invalid) is refused: convert it, e.g. sgbm.convertTo(d, CV_32F, 1.0 / 16).
 absl::StatusOr<DisparityInput> DisparityFromMat(const cv::Mat& disparity);
+// Depth: CV_16UC1 (ROS 16UC1, millimetres) or CV_32FC1 (ROS 32FC1, metres), as cv_bridge gives.
+absl::StatusOr<DepthInput> DepthFromMat(const cv::Mat& depth);
 // Colour, 8-bit: CV_8UC3 (BGR, OpenCV's order), CV_8UC4 (BGRA; sent as BGR), CV_8UC1 (grey).
+// `what` names the image in errors ("colour", "left", "right").
 absl::StatusOr<ColorInput> ColorFromMat(const cv::Mat& colour);
+absl::StatusOr<ColorInput> ColorFromMat(const cv::Mat& colour, const char* what);
+// Whole frames: a depth image and its colour image; a stereo pair (left, right).
+absl::StatusOr<FrameInput> DepthFrameFromMats(const cv::Mat& depth, const cv::Mat& colour);
+absl::StatusOr<FrameInput> StereoFrameFromMats(const cv::Mat& left, const cv::Mat& right);
 
 // Stream::Send / Client::Process with Mats: the adapters above, then the call.
 absl::Status SendMats(Stream& stream, const cv::Mat& disparity, const cv::Mat& colour,

@@ -61,6 +61,11 @@ struct VoxelGridParams {
 absl::Status ConvertToOrganized(const CameraModel& camera, const DisparityView& disparity,
                                 const ColorView& colour, PointCloud* out,
                                 const Limits& limits = Limits{});
+// Depth + colour -> organized cloud, as ROS depth_image_proc's point_cloud_xyzrgb computes it
+// (camera.h), with NaN points where there is no measurement.
+absl::Status ConvertToOrganized(const CameraModel& camera, const DepthView& depth,
+                                const ColorView& colour, PointCloud* out,
+                                const Limits& limits = Limits{});
 
 // Keeps the points of `in` that pass; `out` becomes an unorganized cloud in input order.
 // `out` must not alias `in`.

@@ -4,9 +4,9 @@
 //
 // The compressed bytes of an image of width x height pixels of `bpp` bytes each are one zstd
 // frame that declares its content size, width x height x bpp, and carries zstd's content checksum:
-// the rows packed tightly, after the predictor. Predictors work on whole samples of the encoding (8 bits for U8 disparity and every
-// colour encoding, 16 for U16, the 32 bits of an F32 as an unsigned integer), modulo 2^bits, so
-// they are exact for any value, NaN included:
+// the rows packed tightly, after the predictor. Predictors work on whole samples of the encoding (8
+// bits for U8 disparity and every colour encoding, 16 for U16, the 32 bits of an F32 as an unsigned
+// integer), modulo 2^bits, so they are exact for any value, NaN included:
 //   kNone  the samples as they are;
 //   kUp    each sample minus the same sample one row up (the first row as it is);
 //   kLeft  each sample minus the same channel of the pixel on its left (the first column as it is).
@@ -42,8 +42,10 @@ struct PlaneLayout {
   std::uint64_t bytes() const { return std::uint64_t{width} * height * bpp; }
 };
 PlaneLayout LayoutOf(const DisparityView& view);
+PlaneLayout LayoutOf(const DepthView& view);
 PlaneLayout LayoutOf(const ColorView& view);
 PlaneLayout LayoutOf(DisparityEncoding encoding, std::uint32_t width, std::uint32_t height);
+PlaneLayout LayoutOf(DepthEncoding encoding, std::uint32_t width, std::uint32_t height);
 PlaneLayout LayoutOf(ColorEncoding encoding, std::uint32_t width, std::uint32_t height);
 
 // Compresses views. Keeps zstd's context and the predictor's row buffer, so same-sized frames
@@ -58,6 +60,8 @@ class PlaneCompressor {
   // Replaces `out` with the compressed view (its capacity is kept). The view is checked for
   // memory safety only (ValidateView without limits); errors name it under `field`.
   absl::Status Compress(const DisparityView& view, Predictor predictor, int level,
+                        std::string_view field, std::string* out);
+  absl::Status Compress(const DepthView& view, Predictor predictor, int level,
                         std::string_view field, std::string* out);
   absl::Status Compress(const ColorView& view, Predictor predictor, int level,
                         std::string_view field, std::string* out);

@@ -1,4 +1,5 @@
-// Non-owning views of the two input images of a frame: a disparity map and a colour image.
+// Non-owning views of the input images of a frame: a disparity map or a depth image, and a colour
+// image.
 #pragma once
 
 #include <cstddef>
@@ -23,12 +24,23 @@ enum class ColorEncoding : std::uint8_t {
   kMono8,  // grey: r = g = b
 };
 
+// A depth image as ROS REP 118 has it (depth cameras: RealSense, Kinect, OAK-D). 0 (and, for
+// floats, NaN or an infinity) means no measurement. The unit is the camera's depth_scale
+// (camera.h): millimetres for kU16 and metres for kF32 unless it says otherwise.
+enum class DepthEncoding : std::uint8_t {
+  kU16,  // 16-bit unsigned (host order), ROS 16UC1
+  kF32,  // 32-bit float, ROS 32FC1
+};
+
 std::size_t BytesPerPixel(DisparityEncoding e);
+std::size_t BytesPerPixel(DepthEncoding e);
 std::size_t BytesPerPixel(ColorEncoding e);
 std::string_view Name(DisparityEncoding e);
+std::string_view Name(DepthEncoding e);
 std::string_view Name(ColorEncoding e);
-// Parses the names above ("u8", "u16", "f32"; "bgr8", "rgb8", "rgba8", "mono8").
+// Parses the names above ("u8", "u16", "f32"; "u16", "f32"; "bgr8", "rgb8", "rgba8", "mono8").
 bool ParseDisparityEncoding(std::string_view name, DisparityEncoding* out);
+bool ParseDepthEncoding(std::string_view name, DepthEncoding* out);
 bool ParseColorEncoding(std::string_view name, ColorEncoding* out);
 
 // A view of pixel rows in memory. `stride_bytes` is the distance between row starts; `size_bytes`
@@ -54,6 +66,7 @@ struct ImageView {
   }
 };
 using DisparityView = ImageView<DisparityEncoding>;
+using DepthView = ImageView<DepthEncoding>;
 using ColorView = ImageView<ColorEncoding>;
 
 // What the caller calls a view's stride, buffer and encoding in its messages: the core's names by
@@ -69,13 +82,23 @@ struct ImageFieldNames {
 // every row. Errors name the field under `field` (e.g. "disparity.stride_bytes").
 absl::Status ValidateView(const DisparityView& view, const Limits& limits,
                           std::string_view field = "disparity", const ImageFieldNames& names = {});
+absl::Status ValidateView(const DepthView& view, const Limits& limits,
+                          std::string_view field = "depth", const ImageFieldNames& names = {});
 absl::Status ValidateView(const ColorView& view, const Limits& limits,
                           std::string_view field = "colour", const ImageFieldNames& names = {});
-// The two images of a frame must have the same size.
-absl::Status CheckSameSize(const DisparityView& disparity, std::string_view disparity_field,
-                           const ColorView& colour, std::string_view colour_field);
+// The images of a frame must have the same size: `second` is named as the one that differs.
+absl::Status CheckSameSize(std::uint32_t first_width, std::uint32_t first_height,
+                           std::string_view first_field, std::uint32_t second_width,
+                           std::uint32_t second_height, std::string_view second_field);
+template <typename A, typename B>
+absl::Status CheckSameSize(const ImageView<A>& first, std::string_view first_field,
+                           const ImageView<B>& second, std::string_view second_field) {
+  return CheckSameSize(first.width, first.height, first_field, second.width, second.height,
+                       second_field);
+}
 // Checks both views and that their sizes agree.
 absl::Status ValidateFrame(const DisparityView& disparity, const ColorView& colour,
                            const Limits& limits);
+absl::Status ValidateFrame(const DepthView& depth, const ColorView& colour, const Limits& limits);
 
 }  // namespace cloudcast

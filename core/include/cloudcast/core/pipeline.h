@@ -1,6 +1,7 @@
-// The fused pipeline: disparity + colour -> passthrough -> voxel grid in one pass over the
-// pixels, without materialising the organized or the passthrough cloud. Its output equals the
-// three stand-alone stages (and stock PCL's three-stage chain) up to point order.
+// The fused pipeline: disparity (or depth) + colour -> passthrough -> voxel grid in one pass over
+// the pixels, without materialising the organized or the passthrough cloud. Its output equals the
+// three stand-alone stages (and stock PCL's three-stage chain) up to point order. A depth image
+// becomes points by ROS depth_image_proc's formula (camera.h), then takes the same filters.
 #pragma once
 
 #include <cstdint>
@@ -45,6 +46,8 @@ class Pipeline {
   // Validates everything, then runs. On error `out` is left empty and nothing else changes.
   absl::Status Run(const PipelineOptions& options, const DisparityView& disparity,
                    const ColorView& colour, PointCloud* out, StageCounts* counts = nullptr);
+  absl::Status Run(const PipelineOptions& options, const DepthView& depth, const ColorView& colour,
+                   PointCloud* out, StageCounts* counts = nullptr);
 
  private:
   struct Impl;

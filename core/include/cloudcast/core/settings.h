@@ -11,6 +11,7 @@
 #include "absl/status/status.h"
 #include "cloudcast/core/draco_codec.h"
 #include "cloudcast/core/pipeline.h"
+#include "cloudcast/core/stereo.h"
 
 namespace cloudcast {
 
@@ -19,6 +20,8 @@ struct FrameSettings {
   PipelineOptions pipeline;
   // draco.max_position_error is ignored: see max_position_error below.
   DracoOptions draco;
+  // Frames that are stereo pairs: how they are matched (and rectified).
+  StereoParams stereo;
   // Unset: (width / 2, height / 2) of each frame in integer division, where PCL puts it.
   std::optional<double> cx;
   std::optional<double> cy;

@@ -34,6 +34,7 @@ struct OwnedImage {
   }
 };
 using OwnedDisparity = OwnedImage<DisparityEncoding>;
+using OwnedDepth = OwnedImage<DepthEncoding>;
 using OwnedColor = OwnedImage<ColorEncoding>;
 
 // A disparity map from a file: 8-bit -> kU8, 16-bit unsigned -> kU16, 32-bit float (TIFF, PFM)
@@ -46,6 +47,12 @@ using OwnedColor = OwnedImage<ColorEncoding>;
 absl::StatusOr<OwnedDisparity> LoadDisparity(const std::string& path);
 absl::StatusOr<OwnedDisparity> DecodeDisparity(std::string_view bytes,
                                                std::string_view field = "disparity bytes");
+// A depth image from a file: 16-bit unsigned (PNG, TIFF, PGM: what depth cameras record) ->
+// kU16, 32-bit float (TIFF, PFM) -> kF32, values unchanged; other types and several channels
+// are refused. Errors as for LoadDisparity.
+absl::StatusOr<OwnedDepth> LoadDepth(const std::string& path);
+absl::StatusOr<OwnedDepth> DecodeDepth(std::string_view bytes,
+                                       std::string_view field = "depth bytes");
 // A colour image as BGR8, or mono8 when the file is grey. Alpha is dropped, not composited (New
 // Tsukuba's colour PNGs are RGBA with alpha down to 0); 16-bit samples become v / 257, rounded.
 // Errors as for LoadDisparity.
@@ -63,7 +70,7 @@ bool SniffImageSize(std::string_view bytes, std::uint32_t* width, std::uint32_t*
 // header gives the size (a decoder allocates whatever an unchecked header claims, and OpenCV
 // allows 2^30 pixels), and that size within `limits` (RESOURCE_EXHAUSTED). Errors name `field`.
 // `format`, when given, gets the format's name as SniffImageSize gives it.
-absl::Status CheckEncodedImage(std::string_view bytes, std::string_view field,
-                               const Limits& limits, const char** format = nullptr);
+absl::Status CheckEncodedImage(std::string_view bytes, std::string_view field, const Limits& limits,
+                               const char** format = nullptr);
 
 }  // namespace cloudcast

@@ -21,6 +21,7 @@
 #include "cloudcast/core/limits.h"
 #include "cloudcast/core/pipeline.h"
 #include "cloudcast/core/settings.h"
+#include "cloudcast/core/stereo.h"
 #include "cloudcast/v1/cloudcast.pb.h"
 
 namespace cloudcast::convert {
@@ -42,13 +43,17 @@ bool ParseDelivery(std::string_view name, Delivery* out);
 
 v1::Axis ToProto(Axis axis);
 v1::DisparityEncoding ToProto(DisparityEncoding encoding);
+v1::DepthEncoding ToProto(DepthEncoding encoding);
 v1::ColorEncoding ToProto(ColorEncoding encoding);
 v1::DeliveryMode ToProto(Delivery delivery);
+v1::StereoMatcher ToProto(StereoMatcher matcher);
 absl::Status FromProto(v1::Axis axis, std::string_view field, Axis* out);
 absl::Status FromProto(v1::DisparityEncoding encoding, std::string_view field,
                        DisparityEncoding* out);
+absl::Status FromProto(v1::DepthEncoding encoding, std::string_view field, DepthEncoding* out);
 absl::Status FromProto(v1::ColorEncoding encoding, std::string_view field, ColorEncoding* out);
 absl::Status FromProto(v1::DeliveryMode mode, std::string_view field, Delivery* out);
+absl::Status FromProto(v1::StereoMatcher matcher, std::string_view field, StereoMatcher* out);
 
 // ---------------------------------------------------------------------------------------------
 // Stream configuration.
@@ -81,6 +86,8 @@ void SetVoxelGrid(const VoxelGridParams& params, v1::StreamConfig* config);
 // max_position_error 0 (the DracoOptions default) stays unset: the server then uses a quarter of
 // the voxel leaf, as the core does.
 void SetDraco(const DracoOptions& options, v1::StreamConfig* config);
+// Every matcher field, return_disparity, and the calibration when it has one.
+void SetStereo(const StereoParams& params, v1::StreamConfig* config);
 // Camera, passthrough and voxel grid of `options` (its limits are the server's business).
 // Draco and delivery stay at the server defaults.
 v1::StreamConfig MakeStreamConfig(const PipelineOptions& options);
@@ -92,6 +99,7 @@ v1::StreamConfig MakeStreamConfig(const PipelineOptions& options);
 // view is checked for memory safety only (sizes and limits are the server's to judge); errors
 // name it under `field`. `raw`'s pixel buffer keeps its capacity from frame to frame.
 absl::Status ToProto(const DisparityView& view, std::string_view field, v1::RawDisparity* raw);
+absl::Status ToProto(const DepthView& view, std::string_view field, v1::RawDepth* raw);
 absl::Status ToProto(const ColorView& view, std::string_view field, v1::RawColor* raw);
 // The same, in two steps, for a sender that writes the pixels itself (the client library, straight
 // into a gRPC slice, so that they are copied once): ToProtoWithoutPixels checks the view and fills
@@ -99,10 +107,13 @@ absl::Status ToProto(const ColorView& view, std::string_view field, v1::RawColor
 // tightly packed rows to `out`.
 absl::Status ToProtoWithoutPixels(const DisparityView& view, std::string_view field,
                                   v1::RawDisparity* raw);
+absl::Status ToProtoWithoutPixels(const DepthView& view, std::string_view field, v1::RawDepth* raw);
 absl::Status ToProtoWithoutPixels(const ColorView& view, std::string_view field, v1::RawColor* raw);
 std::size_t PackedBytes(const DisparityView& view);
+std::size_t PackedBytes(const DepthView& view);
 std::size_t PackedBytes(const ColorView& view);
 void PackRows(const DisparityView& view, void* out);
+void PackRows(const DepthView& view, void* out);
 void PackRows(const ColorView& view, void* out);
 // Four-channel B, G, R, A rows (an OpenCV CV_8UC4 Mat) sent as BGR8, dropping the alpha while the
 // rows are copied: the protocol has no BGRA encoding, and the server ignores alpha anyway.
@@ -115,6 +126,8 @@ absl::Status BgraToProto(const void* data, std::size_t size_bytes, std::uint32_t
 // less than width x 1 = 640"): INVALID_ARGUMENT when malformed, RESOURCE_EXHAUSTED over a limit.
 absl::Status ViewRaw(const v1::RawDisparity& raw, std::string_view field, const Limits& limits,
                      DisparityView* view);
+absl::Status ViewRaw(const v1::RawDepth& raw, std::string_view field, const Limits& limits,
+                     DepthView* view);
 absl::Status ViewRaw(const v1::RawColor& raw, std::string_view field, const Limits& limits,
                      ColorView* view);
 // The same for an image whose pixel bytes were kept apart from the message (the server leaves
@@ -123,6 +136,8 @@ absl::Status ViewRaw(const v1::RawColor& raw, std::string_view field, const Limi
 // view->rows at the rows (ImageView::rows); view->data is only the first piece.
 absl::Status ViewRaw(const v1::RawDisparity& raw, std::string_view pixels, std::string_view field,
                      const Limits& limits, DisparityView* view);
+absl::Status ViewRaw(const v1::RawDepth& raw, std::string_view pixels, std::string_view field,
+                     const Limits& limits, DepthView* view);
 absl::Status ViewRaw(const v1::RawColor& raw, std::string_view pixels, std::string_view field,
                      const Limits& limits, ColorView* view);
 
@@ -143,6 +158,8 @@ const std::vector<v1::Compression>& AcceptedCompressions();
 absl::Status ToProto(const DisparityView& view, const Compression& compression,
                      std::string_view field, v1::CompressedDisparity* out,
                      PlaneCompressor* compressor = nullptr);
+absl::Status ToProto(const DepthView& view, const Compression& compression, std::string_view field,
+                     v1::CompressedDepth* out, PlaneCompressor* compressor = nullptr);
 absl::Status ToProto(const ColorView& view, const Compression& compression, std::string_view field,
                      v1::CompressedColor* out, PlaneCompressor* compressor = nullptr);
 
@@ -154,6 +171,9 @@ absl::Status ToProto(const ColorView& view, const Compression& compression, std:
 absl::Status DecodeCompressed(const v1::CompressedDisparity& compressed, std::string_view field,
                               const Limits& limits, PlaneDecompressor* decompressor,
                               DisparityView* view);
+absl::Status DecodeCompressed(const v1::CompressedDepth& compressed, std::string_view field,
+                              const Limits& limits, PlaneDecompressor* decompressor,
+                              DepthView* view);
 absl::Status DecodeCompressed(const v1::CompressedColor& compressed, std::string_view field,
                               const Limits& limits, PlaneDecompressor* decompressor,
                               ColorView* view);

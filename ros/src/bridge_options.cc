@@ -1,0 +1,375 @@
+#include "bridge_options.h"
+
+#include <ros/ros.h>
+
+#include <algorithm>
+#include <cmath>
+#include <optional>
+#include <sstream>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_join.h"
+#include "cloudcast/proto/convert.h"
+
+namespace cloudcast::ros_bridge {
+namespace {
+
+const std::vector<ParamDoc>& Docs() {
+  static const std::vector<ParamDoc> docs = {
+      {"server", "string", "127.0.0.1:50051",
+       "gRPC target of the cloudcast server (host:port, dns:///name:port, unix:///path)"},
+      {"input", "string", "disparity",
+       "what the camera gives: disparity (stereo_msgs/DisparityImage + colour + camera_info); "
+       "depth and stereo are reserved for the depth-image and stereo-pair inputs"},
+      {"queue_size", "int", "5", "message_filters synchronizer queue, per input topic"},
+      {"approximate_sync", "bool", "false",
+       "pair the input topics with ApproximateTime instead of ExactTime"},
+      {"delivery", "string", "(server's)",
+       "latest: the server skips frames it cannot keep up with (real time); all: every frame "
+       "is answered, the bridge waits for the server"},
+      {"resilient", "bool", "true",
+       "reopen the stream after a lost connection (and resend unanswered frames with "
+       "delivery all)"},
+      {"reconnect_timeout", "double", "30",
+       "seconds a resilient stream keeps reconnecting before it gives up (the bridge then "
+       "opens a new one on the next frame)"},
+      {"connect_timeout", "double", "5", "seconds to wait for the server when opening a stream"},
+      {"compress", "bool", "false",
+       "send the pixels losslessly compressed (row deltas + zstd, about a third of the bytes) "
+       "for a thin uplink"},
+      {"passthrough/enabled", "bool", "(server's)", "keep only points with z in [min, max]"},
+      {"passthrough/min", "double", "(server's)",
+       "passthrough lower bound on z, in the camera's unit (metres for a baseline T in metres)"},
+      {"passthrough/max", "double", "(server's)", "passthrough upper bound on z"},
+      {"voxel/enabled", "bool", "(server's)", "downsample on a voxel grid (PCL VoxelGrid)"},
+      {"voxel/leaf", "double", "(server's)", "voxel edge, in the camera's unit"},
+      {"voxel/min_points", "int", "(server's)", "voxels with fewer points give no point"},
+      {"draco/position_bits", "int", "(server's)",
+       "Draco position quantization bits, 1..30 (the server raises them to keep "
+       "draco/max_position_error)"},
+      {"draco/max_position_error", "double", "(server's)",
+       "largest per-coordinate position error Draco may add; 0: no bound"},
+      {"draco/encode_speed", "int", "(server's)", "Draco encode speed 0 (smallest) .. 10"},
+      {"draco/decode_speed", "int", "(server's)", "Draco decode speed 0 .. 10"},
+      {"tls/enabled", "bool", "false",
+       "connect with TLS, trusting the system's CAs (implied by every other tls/ parameter)"},
+      {"tls/ca", "string", "", "PEM file of the CA certificates to trust for the server"},
+      {"tls/cert", "string", "", "mutual TLS: this client's PEM certificate chain (with tls/key)"},
+      {"tls/key", "string", "", "mutual TLS: the PEM private key of tls/cert"},
+      {"tls/server_name", "string", "",
+       "the name the server's certificate must carry, when ~server is an address"},
+      {"token_file", "string", "",
+       "send the bearer token in this file with every call (a file, so that the token stays "
+       "out of the parameter server)"},
+      {"diagnostics_period", "double", "1", "seconds between two diagnostics messages"},
+  };
+  return docs;
+}
+
+// Reads one parameter by its type, with errors that name it. Unset parameters are nullopt.
+class Params {
+ public:
+  explicit Params(const ros::NodeHandle& nh) : nh_(nh) {}
+
+  absl::StatusOr<std::optional<std::string>> String(const std::string& name) const {
+    XmlRpc::XmlRpcValue v;
+    if (!nh_.getParam(name, v)) return std::optional<std::string>();
+    if (v.getType() != XmlRpc::XmlRpcValue::TypeString) return WrongType(name, v, "a string");
+    return std::optional<std::string>(static_cast<std::string&>(v));
+  }
+  absl::StatusOr<std::optional<bool>> Bool(const std::string& name) const {
+    XmlRpc::XmlRpcValue v;
+    if (!nh_.getParam(name, v)) return std::optional<bool>();
+    if (v.getType() != XmlRpc::XmlRpcValue::TypeBoolean) return WrongType(name, v, "true or false");
+    return std::optional<bool>(static_cast<bool&>(v));
+  }
+  absl::StatusOr<std::optional<int>> Int(const std::string& name) const {
+    XmlRpc::XmlRpcValue v;
+    if (!nh_.getParam(name, v)) return std::optional<int>();
+    if (v.getType() != XmlRpc::XmlRpcValue::TypeInt) return WrongType(name, v, "an integer");
+    return std::optional<int>(static_cast<int&>(v));
+  }
+  // Integers are numbers too ("leaf: 1" in YAML).
+  absl::StatusOr<std::optional<double>> Double(const std::string& name) const {
+    XmlRpc::XmlRpcValue v;
+    if (!nh_.getParam(name, v)) return std::optional<double>();
+    if (v.getType() == XmlRpc::XmlRpcValue::TypeInt) {
+      return std::optional<double>(static_cast<int&>(v));
+    }
+    if (v.getType() != XmlRpc::XmlRpcValue::TypeDouble) return WrongType(name, v, "a number");
+    return std::optional<double>(static_cast<double&>(v));
+  }
+
+ private:
+  static absl::Status WrongType(const std::string& name, XmlRpc::XmlRpcValue& v,
+                                const char* wanted) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("~", name, " is ", v.toXml(), "; must be ", wanted));
+  }
+  const ros::NodeHandle& nh_;
+};
+
+absl::Status OutOfRange(const std::string& name, double value, const std::string& rule) {
+  std::ostringstream os;
+  os << "~" << name << " is " << value << "; must be " << rule;
+  return absl::InvalidArgumentError(os.str());
+}
+
+// Every parameter under the node's private namespace must be one of ParamDocs.
+absl::Status CheckNoUnknownParams(const ros::NodeHandle& nh) {
+  std::vector<std::string> names;
+  if (!nh.getParamNames(names)) return absl::OkStatus();  // the master will fail louder
+  const std::string prefix = nh.getNamespace() + "/";
+  for (const std::string& full : names) {
+    if (full.rfind(prefix, 0) != 0) continue;
+    const std::string name = full.substr(prefix.size());
+    const bool known = std::any_of(Docs().begin(), Docs().end(),
+                                   [&](const ParamDoc& d) { return d.name == name; });
+    if (!known) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "~", name, " is not a parameter of cloudcast-ros-bridge (see --help for the list)"));
+    }
+  }
+  return absl::OkStatus();
+}
+
+#define CLOUDCAST_ASSIGN_OR_RETURN(lhs, expr)   \
+  auto lhs##_or = (expr);                       \
+  if (!lhs##_or.ok()) return lhs##_or.status(); \
+  auto lhs = *std::move(lhs##_or)
+
+absl::Status ReadConnection(const Params& p, BridgeOptions* o) {
+  CLOUDCAST_ASSIGN_OR_RETURN(server, p.String("server"));
+  if (server) {
+    if (server->empty()) return absl::InvalidArgumentError("~server is empty; give host:port");
+    o->server = *server;
+  }
+  CLOUDCAST_ASSIGN_OR_RETURN(connect, p.Double("connect_timeout"));
+  if (connect) {
+    if (!(std::isfinite(*connect) && *connect >= 0)) {
+      return OutOfRange("connect_timeout", *connect, "finite and >= 0 (seconds)");
+    }
+    o->client.connect_timeout = std::chrono::milliseconds(std::llround(*connect * 1000));
+  }
+  CLOUDCAST_ASSIGN_OR_RETURN(resilient, p.Bool("resilient"));
+  if (resilient) o->resilient = *resilient;
+  CLOUDCAST_ASSIGN_OR_RETURN(reconnect, p.Double("reconnect_timeout"));
+  if (reconnect) {
+    if (!(std::isfinite(*reconnect) && *reconnect > 0)) {
+      return OutOfRange("reconnect_timeout", *reconnect, "finite and > 0 (seconds)");
+    }
+    o->reconnect_timeout = std::chrono::milliseconds(std::llround(*reconnect * 1000));
+  }
+  CLOUDCAST_ASSIGN_OR_RETURN(compress, p.Bool("compress"));
+  if (compress) o->compress = *compress;
+
+  // TLS and the token: the same rules as the programs' --tls-* and --token-file flags.
+  CLOUDCAST_ASSIGN_OR_RETURN(tls, p.Bool("tls/enabled"));
+  client::TlsFiles files;
+  const std::pair<const char*, std::string*> tls_files[] = {
+      {"tls/ca", &files.ca_file},
+      {"tls/cert", &files.cert_file},
+      {"tls/key", &files.key_file},
+      {"tls/server_name", &files.server_name}};
+  bool any_tls = tls.value_or(false);
+  for (const auto& [name, out] : tls_files) {
+    CLOUDCAST_ASSIGN_OR_RETURN(value, p.String(name));
+    if (value && !value->empty()) {
+      *out = *value;
+      any_tls = true;
+    }
+  }
+  if (any_tls) {
+    if (files.cert_file.empty() != files.key_file.empty()) {
+      return absl::InvalidArgumentError(
+          files.cert_file.empty() ? "~tls/key needs ~tls/cert (the certificate it belongs to)"
+                                  : "~tls/cert needs ~tls/key (its private key)");
+    }
+    auto loaded = client::LoadTlsFiles(files);
+    if (!loaded.ok()) {
+      return absl::InvalidArgumentError(absl::StrCat("~tls/...: ", loaded.status().message()));
+    }
+    o->client.security.tls = *std::move(loaded);
+  }
+  CLOUDCAST_ASSIGN_OR_RETURN(token_file, p.String("token_file"));
+  if (token_file && !token_file->empty()) {
+    auto token = client::ReadTokenFile(*token_file);
+    if (!token.ok()) {
+      return absl::InvalidArgumentError(absl::StrCat("~token_file: ", token.status().message()));
+    }
+    o->client.security.bearer_token = *std::move(token);
+  }
+  return absl::OkStatus();
+}
+
+absl::Status ReadInput(const Params& p, BridgeOptions* o) {
+  CLOUDCAST_ASSIGN_OR_RETURN(input, p.String("input"));
+  if (input) {
+    if (*input == "disparity") {
+      o->input = InputKind::kDisparity;
+    } else if (*input == "depth") {
+      o->input = InputKind::kDepth;
+    } else if (*input == "stereo") {
+      o->input = InputKind::kStereo;
+    } else {
+      return absl::InvalidArgumentError(
+          absl::StrCat("~input is '", *input, "'; must be disparity, depth or stereo"));
+    }
+  }
+  CLOUDCAST_ASSIGN_OR_RETURN(queue, p.Int("queue_size"));
+  if (queue) {
+    if (*queue < 1 || *queue > 1000) return OutOfRange("queue_size", *queue, "in 1..1000");
+    o->sync.queue_size = *queue;
+  }
+  CLOUDCAST_ASSIGN_OR_RETURN(approx, p.Bool("approximate_sync"));
+  if (approx) o->sync.approximate_sync = *approx;
+  CLOUDCAST_ASSIGN_OR_RETURN(period, p.Double("diagnostics_period"));
+  if (period) {
+    if (!(std::isfinite(*period) && *period > 0)) {
+      return OutOfRange("diagnostics_period", *period, "finite and > 0 (seconds)");
+    }
+    o->diagnostics_period_s = *period;
+  }
+  return absl::OkStatus();
+}
+
+absl::Status ReadStages(const Params& p, BridgeOptions* o) {
+  v1::StreamConfig& c = o->config;
+  CLOUDCAST_ASSIGN_OR_RETURN(delivery, p.String("delivery"));
+  if (delivery && !delivery->empty()) {
+    convert::Delivery d;
+    if (!convert::ParseDelivery(*delivery, &d)) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("~delivery is '", *delivery, "'; must be latest or all"));
+    }
+    c.set_delivery(convert::ToProto(d));
+  }
+
+  CLOUDCAST_ASSIGN_OR_RETURN(pt_on, p.Bool("passthrough/enabled"));
+  if (pt_on) c.mutable_passthrough()->set_enabled(*pt_on);
+  CLOUDCAST_ASSIGN_OR_RETURN(pt_min, p.Double("passthrough/min"));
+  CLOUDCAST_ASSIGN_OR_RETURN(pt_max, p.Double("passthrough/max"));
+  if (pt_min) {
+    if (!std::isfinite(*pt_min)) return OutOfRange("passthrough/min", *pt_min, "finite");
+    c.mutable_passthrough()->set_min(static_cast<float>(*pt_min));
+  }
+  if (pt_max) {
+    if (!std::isfinite(*pt_max)) return OutOfRange("passthrough/max", *pt_max, "finite");
+    c.mutable_passthrough()->set_max(static_cast<float>(*pt_max));
+  }
+  if (pt_min && pt_max && *pt_min > *pt_max) {
+    return OutOfRange("passthrough/min", *pt_min,
+                      absl::StrCat("<= ~passthrough/max (", *pt_max, ")"));
+  }
+
+  CLOUDCAST_ASSIGN_OR_RETURN(voxel_on, p.Bool("voxel/enabled"));
+  if (voxel_on) c.mutable_voxel_grid()->set_enabled(*voxel_on);
+  CLOUDCAST_ASSIGN_OR_RETURN(leaf, p.Double("voxel/leaf"));
+  if (leaf) {
+    if (!(std::isfinite(*leaf) && *leaf > 0))
+      return OutOfRange("voxel/leaf", *leaf, "finite and > 0");
+    c.mutable_voxel_grid()->set_leaf(static_cast<float>(*leaf));
+  }
+  CLOUDCAST_ASSIGN_OR_RETURN(min_points, p.Int("voxel/min_points"));
+  if (min_points) {
+    if (*min_points < 0) return OutOfRange("voxel/min_points", *min_points, ">= 0");
+    c.mutable_voxel_grid()->set_min_points_per_voxel(static_cast<std::uint32_t>(*min_points));
+  }
+
+  CLOUDCAST_ASSIGN_OR_RETURN(bits, p.Int("draco/position_bits"));
+  if (bits) {
+    if (*bits < 1 || *bits > 30) return OutOfRange("draco/position_bits", *bits, "in 1..30");
+    c.mutable_draco()->set_position_bits(*bits);
+  }
+  CLOUDCAST_ASSIGN_OR_RETURN(max_error, p.Double("draco/max_position_error"));
+  if (max_error) {
+    if (!(std::isfinite(*max_error) && *max_error >= 0)) {
+      return OutOfRange("draco/max_position_error", *max_error, "finite and >= 0");
+    }
+    c.mutable_draco()->set_max_position_error(static_cast<float>(*max_error));
+  }
+  for (const char* name : {"draco/encode_speed", "draco/decode_speed"}) {
+    CLOUDCAST_ASSIGN_OR_RETURN(speed, p.Int(name));
+    if (!speed) continue;
+    if (*speed < 0 || *speed > 10) return OutOfRange(name, *speed, "in 0..10");
+    if (std::string(name) == "draco/encode_speed") {
+      c.mutable_draco()->set_encode_speed(*speed);
+    } else {
+      c.mutable_draco()->set_decode_speed(*speed);
+    }
+  }
+
+  // The proto boundary's own checks, as the server will make them (a safety net: every value
+  // above was checked already, so this names proto fields only for rules not repeated here).
+  if (auto resolved = convert::Resolve(c, convert::StreamSettings{}); !resolved.ok()) {
+    return absl::InvalidArgumentError(absl::StrCat("the parameters make an invalid stream config: ",
+                                                   resolved.status().message()));
+  }
+  return absl::OkStatus();
+}
+
+// `text` in lines of at most `width` characters, each after `indent`.
+std::string Wrapped(const std::string& text, std::size_t width, const std::string& indent) {
+  std::string out, line;
+  std::istringstream words(text);
+  std::string word;
+  while (words >> word) {
+    if (!line.empty() && line.size() + 1 + word.size() > width) {
+      out += indent + line + "\n";
+      line.clear();
+    }
+    line += (line.empty() ? "" : " ") + word;
+  }
+  if (!line.empty()) out += indent + line + "\n";
+  return out;
+}
+
+}  // namespace
+
+const std::vector<ParamDoc>& ParamDocs() { return Docs(); }
+
+std::string HelpText() {
+  std::ostringstream os;
+  os << "cloudcast-ros-bridge: turns a ROS camera's disparity into point clouds on a cloudcast\n"
+        "server and publishes them as sensor_msgs/PointCloud2.\n\n"
+        "Usage: cloudcast-ros-bridge [ROS remappings, e.g. disparity:=/stereo/disparity]\n"
+        "                            [_param:=value ...]\n\n"
+        "Subscribes (~input disparity; the names of stereo_image_proc's point_cloud2 nodelet):\n"
+        "  disparity               stereo_msgs/DisparityImage (32FC1; z = f T / d; d below\n"
+        "                          min_disparity, NaN or inf: no point)\n"
+        "  left/image_rect_color   sensor_msgs/Image, rgb8 bgr8 rgba8 bgra8 or mono8, same size\n"
+        "  left/camera_info        sensor_msgs/CameraInfo (P gives fx, fy, cx, cy)\n"
+        "Publishes:\n"
+        "  points2                 sensor_msgs/PointCloud2: x y z rgb (FLOAT32 at 0 4 8 12, PCL's\n"
+        "                          packed rgb), unorganized, dense, the disparity's header\n"
+        "  /diagnostics            diagnostic_msgs/DiagnosticArray: per-stage times (decode,\n"
+        "                          pipeline, encode, queue, round trip), frames, drops,\n"
+        "                          reconnects\n\n"
+        "Parameters (private, e.g. _server:=10.0.0.2:50051 or <param name=\"server\"> in a "
+        "launch file):\n";
+  for (const ParamDoc& d : Docs()) {
+    std::string head = "  ~" + d.name + " (" + d.type + ", default " +
+                       (d.default_value.empty() ? "none" : d.default_value) + ")";
+    os << head << "\n" << Wrapped(d.help, 84, "      ");
+  }
+  os << "\nExamples:\n"
+        "  cloudcast-ros-bridge _server:=127.0.0.1:50051 disparity:=/stereo/disparity \\\n"
+        "      left/image_rect_color:=/stereo/left/image_rect_color \\\n"
+        "      left/camera_info:=/stereo/left/camera_info\n"
+        "  roslaunch ros/launch/cloudcast_bridge.launch camera:=/stereo server:=robot-pc:50051\n"
+        "Documentation: docs/ros.md\n";
+  return os.str();
+}
+
+absl::StatusOr<BridgeOptions> ReadBridgeOptions(const ros::NodeHandle& private_nh) {
+  if (absl::Status s = CheckNoUnknownParams(private_nh); !s.ok()) return s;
+  const Params p(private_nh);
+  BridgeOptions o;
+  o.client.connect_timeout = std::chrono::milliseconds(5000);
+  if (absl::Status s = ReadConnection(p, &o); !s.ok()) return s;
+  if (absl::Status s = ReadInput(p, &o); !s.ok()) return s;
+  if (absl::Status s = ReadStages(p, &o); !s.ok()) return s;
+  return o;
+}
+
+}  // namespace cloudcast::ros_bridge

@@ -1,0 +1,186 @@
+#include "cloud_link.h"
+
+#include <ros/console.h>
+
+#include <condition_variable>
+#include <thread>
+#include <utility>
+
+#include "absl/strings/str_cat.h"
+
+namespace cloudcast::ros_bridge {
+
+client::StreamConfig ConfigFor(const client::StreamConfig& base, const CameraModel& camera) {
+  client::StreamConfig config = base;
+  client::SetCamera(camera, &config);
+  return config;
+}
+
+bool SameCamera(const CameraModel& a, const CameraModel& b) {
+  return a.fx == b.fx && a.fy == b.fy && a.cx == b.cx && a.cy == b.cy && a.baseline == b.baseline &&
+         a.disparity_scale == b.disparity_scale && a.disparity_offset == b.disparity_offset &&
+         a.invalid_disparities == b.invalid_disparities;
+}
+
+CloudLink::CloudLink(const BridgeOptions& options, BridgeStats* stats, CloudSink on_cloud)
+    : options_(options), stats_(stats), on_cloud_(std::move(on_cloud)) {}
+
+CloudLink::~CloudLink() { CloseStream(absl::OkStatus()); }
+
+absl::StatusOr<v1::ServerInfo> CloudLink::Probe() {
+  // A client that waits for the server at start, then one that never blocks the ROS thread: a
+  // frame's stream fails at once while the server is unreachable, and the next frame retries.
+  client::ClientOptions waiting = options_.client;
+  auto probe = client::Client::Connect(options_.server, waiting);
+  client::ClientOptions lazy = options_.client;
+  lazy.connect_timeout = std::chrono::milliseconds(0);
+  lazy.wait_for_ready = false;
+  auto connected = client::Client::Connect(options_.server, lazy);
+  if (!connected.ok()) return connected.status();  // a malformed target or TLS setting
+  client_ = *std::move(connected);
+  if (!probe.ok()) return probe.status();
+  return (*probe)->GetInfo();
+}
+
+absl::Status CloudLink::EnsureStream(const CameraModel& camera) {
+  if (client_ == nullptr) return absl::FailedPreconditionError("no client (Probe not called)");
+  if (stream_ != nullptr) {
+    if (camera_ && SameCamera(*camera_, camera)) return absl::OkStatus();
+    if (absl::Status s = stream_->Reconfigure(ConfigFor(options_.config, camera)); !s.ok()) {
+      return s;
+    }
+    camera_ = camera;
+    ROS_INFO("cloudcast: camera changed; stream reconfigured (%s)", camera.ToString().c_str());
+    return absl::OkStatus();
+  }
+  const auto now = std::chrono::steady_clock::now();
+  if (now - last_open_attempt_ < std::chrono::seconds(1)) {
+    return absl::UnavailableError("no stream to the server (retrying once a second)");
+  }
+  last_open_attempt_ = now;
+  client::StreamOptions so;
+  so.resilient = options_.resilient;
+  so.reconnect_timeout = options_.reconnect_timeout;
+  so.on_result = [this](client::Result&& r) { OnResult(std::move(r)); };
+  so.on_reconnect = [this](const client::Reconnect& r) {
+    stats_->Reconnected();
+    ROS_WARN(
+        "cloudcast: stream reconnected (attempt %d after %s, %lld ms; %llu frames resent, "
+        "%llu dropped)",
+        r.attempt, std::string(r.cause.message()).c_str(), static_cast<long long>(r.took.count()),
+        static_cast<unsigned long long>(r.frames_resent),
+        static_cast<unsigned long long>(r.frames_dropped));
+  };
+  auto opened = client_->OpenStream(ConfigFor(options_.config, camera), std::move(so));
+  if (!opened.ok()) return opened.status();
+  stream_ = *std::move(opened);
+  camera_ = camera;
+  ROS_INFO("cloudcast: stream open to %s (%s)", options_.server.c_str(), camera.ToString().c_str());
+  return absl::OkStatus();
+}
+
+void CloudLink::CloseStream(const absl::Status& why) {
+  if (stream_ == nullptr) return;
+  if (!why.ok()) {
+    ROS_ERROR("cloudcast: stream to %s lost: %s", options_.server.c_str(),
+              std::string(why.message()).c_str());
+  }
+  (void)stream_->CloseSend();
+  // Finish waits for the replies still due; a server that is gone could hold it for the whole
+  // reconnect timeout, so it gets two seconds before the call is cancelled.
+  std::mutex mu;
+  std::condition_variable cv;
+  bool done = false;
+  std::thread watchdog([&] {
+    std::unique_lock<std::mutex> lock(mu);
+    if (!cv.wait_for(lock, std::chrono::seconds(2), [&] { return done; })) stream_->Cancel();
+  });
+  const absl::Status finished = stream_->Finish();
+  {
+    std::lock_guard<std::mutex> lock(mu);
+    done = true;
+  }
+  cv.notify_one();
+  watchdog.join();
+  if (!finished.ok() && why.ok()) {
+    ROS_WARN("cloudcast: stream ended with %s", finished.ToString().c_str());
+  }
+  stats_->StreamClosed();
+  stream_.reset();
+  camera_.reset();
+}
+
+void CloudLink::Send(const OutgoingFrame& frame) {
+  if (absl::Status s = EnsureStream(frame.camera); !s.ok()) {
+    stats_->NotSent(s);
+    ROS_WARN_THROTTLE(5, "cloudcast: frame not sent: %s", std::string(s.message()).c_str());
+    return;
+  }
+  client::FrameMeta meta;
+  meta.sequence = next_sequence_++;
+  meta.frame_id = frame.header.frame_id;
+  {
+    std::lock_guard<std::mutex> lock(headers_mu_);
+    headers_[*meta.sequence] = frame.header;  // before Send: the reply may come first
+  }
+  absl::Status s;
+  if (options_.compress) {
+    s = stream_->Send(client::CompressRaw(frame.disparity), client::CompressRaw(frame.colour),
+                      meta);
+  } else {
+    s = stream_->Send(frame.disparity, frame.colour, meta);
+  }
+  if (s.ok()) {
+    stats_->Sent();
+    return;
+  }
+  {
+    std::lock_guard<std::mutex> lock(headers_mu_);
+    headers_.erase(*meta.sequence);
+  }
+  stats_->NotSent(s);
+  if (s.code() == absl::StatusCode::kInvalidArgument) {
+    ROS_ERROR_THROTTLE(5, "cloudcast: frame refused by the client library: %s",
+                       std::string(s.message()).c_str());
+    return;
+  }
+  // The call has ended (a non-resilient stream lost its connection, or a resilient one gave up).
+  CloseStream(s);
+}
+
+void CloudLink::OnResult(client::Result&& result) {
+  if (result.config_rejected) {
+    stats_->Reply(result);
+    ROS_ERROR("cloudcast: the server refused the stream config: %s",
+              std::string(result.status.message()).c_str());
+    return;
+  }
+  std_msgs::Header header;
+  bool known = false;
+  {
+    // Replies come in send order; frames the server skipped (delivery latest) are passed over.
+    std::lock_guard<std::mutex> lock(headers_mu_);
+    auto it = headers_.find(result.sequence);
+    if (it != headers_.end()) {
+      header = it->second;
+      known = true;
+      headers_.erase(headers_.begin(), std::next(it));
+    }
+  }
+  stats_->StreamDropped(result.frames_dropped);
+  stats_->Reply(result);
+  if (!result.ok()) {
+    ROS_WARN_THROTTLE(5, "cloudcast: frame %llu: %s",
+                      static_cast<unsigned long long>(result.sequence),
+                      std::string(result.status.message()).c_str());
+    return;
+  }
+  if (!known) {
+    ROS_WARN_THROTTLE(5, "cloudcast: a reply for frame %llu, which this bridge did not send",
+                      static_cast<unsigned long long>(result.sequence));
+    return;
+  }
+  on_cloud_(std::move(result), header);
+}
+
+}  // namespace cloudcast::ros_bridge

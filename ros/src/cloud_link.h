@@ -1,0 +1,66 @@
+// The bridge's side of the cloudcast stream: one Client, one Stream at a time (resilient by
+// default), opened on the first frame and again after a stream has ended; the camera sent as
+// the stream's config, and sent again when it changes; each reply matched to the ROS header of
+// its frame.
+#pragma once
+
+#include <std_msgs/Header.h>
+
+#include <chrono>
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <optional>
+
+#include "bridge_options.h"
+#include "cloudcast/client/client.h"
+#include "diagnostics.h"
+#include "input_source.h"
+
+namespace cloudcast::ros_bridge {
+
+class CloudLink {
+ public:
+  // Called on the stream's receiver thread for each cloud, with its frame's header.
+  using CloudSink = std::function<void(client::Result&&, const std_msgs::Header&)>;
+
+  CloudLink(const BridgeOptions& options, BridgeStats* stats, CloudSink on_cloud);
+  // Closes the stream: the replies still due are published for up to two seconds, then the
+  // stream is cancelled.
+  ~CloudLink();
+  CloudLink(const CloudLink&) = delete;
+  CloudLink& operator=(const CloudLink&) = delete;
+
+  // Waits up to ~connect_timeout for the server and says what it found (for the start-up log).
+  absl::StatusOr<v1::ServerInfo> Probe();
+
+  // Sends one frame (ROS callback thread). Failures are counted and logged, never thrown: a
+  // frame without a stream is dropped, and the next frame tries to open one (at most once a
+  // second).
+  void Send(const OutgoingFrame& frame);
+
+ private:
+  absl::Status EnsureStream(const CameraModel& camera);
+  void CloseStream(const absl::Status& why);
+  void OnResult(client::Result&& result);
+
+  const BridgeOptions options_;
+  BridgeStats* const stats_;
+  CloudSink on_cloud_;
+  std::unique_ptr<client::Client> client_;
+  std::unique_ptr<client::Stream> stream_;
+  std::optional<CameraModel> camera_;  // the camera of the stream's config
+  std::chrono::steady_clock::time_point last_open_attempt_{};
+  std::uint64_t next_sequence_ = 0;  // across streams, so that headers are never confused
+
+  std::mutex headers_mu_;
+  std::map<std::uint64_t, std_msgs::Header> headers_;  // frames sent and not answered
+};
+
+// The stream config a frame with `camera` is sent under: `base` (the parameters) plus the camera.
+client::StreamConfig ConfigFor(const client::StreamConfig& base, const CameraModel& camera);
+bool SameCamera(const CameraModel& a, const CameraModel& b);
+
+}  // namespace cloudcast::ros_bridge

@@ -1,0 +1,152 @@
+#include "diagnostics.h"
+
+#include <diagnostic_msgs/DiagnosticStatus.h>
+#include <diagnostic_msgs/KeyValue.h>
+
+#include <cstdio>
+#include <string>
+
+namespace cloudcast::ros_bridge {
+namespace {
+
+void Add(diagnostic_msgs::DiagnosticStatus* s, const std::string& key, const std::string& value) {
+  diagnostic_msgs::KeyValue kv;
+  kv.key = key;
+  kv.value = value;
+  s->values.push_back(std::move(kv));
+}
+
+std::string Fixed(double v, int digits = 3) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.*f", digits, v);
+  return buf;
+}
+
+}  // namespace
+
+void BridgeStats::FrameIn() {
+  std::lock_guard<std::mutex> lock(mu_);
+  ++frames_in_;
+}
+
+void BridgeStats::InputError(const absl::Status& s) {
+  std::lock_guard<std::mutex> lock(mu_);
+  ++input_errors_;
+  ++period_errors_;
+  last_error_ = s.ToString();  // with the code: UNAUTHENTICATED, ...
+}
+
+void BridgeStats::Sent() {
+  std::lock_guard<std::mutex> lock(mu_);
+  ++frames_sent_;
+  ++period_sent_;
+  link_down_ = false;
+}
+
+void BridgeStats::NotSent(const absl::Status& s) {
+  std::lock_guard<std::mutex> lock(mu_);
+  ++not_sent_;
+  ++period_errors_;
+  link_down_ = true;
+  last_error_ = s.ToString();  // with the code: UNAUTHENTICATED, ...
+}
+
+void BridgeStats::Reply(const client::Result& r) {
+  std::lock_guard<std::mutex> lock(mu_);
+  if (!r.ok()) {
+    ++frame_errors_;
+    ++period_errors_;
+    last_error_ = r.status.ToString();
+    return;
+  }
+  ++clouds_;
+  ++period_clouds_;
+  const auto& t = r.reply.times();
+  decode_.Add(t.decode_us() / 1000.0);
+  pipeline_.Add(t.pipeline_us() / 1000.0);
+  encode_.Add(t.encode_us() / 1000.0);
+  queue_.Add(t.queue_us() / 1000.0);
+  round_trip_.Add(std::chrono::duration<double, std::milli>(r.round_trip()).count());
+  bridge_decode_.Add(r.times.decode_us / 1000.0);
+  points_.Add(r.reply.point_count());
+  draco_bytes_.Add(static_cast<double>(r.draco_bytes()));
+  position_error_bound_ = r.reply.position_error_bound();
+}
+
+void BridgeStats::StreamDropped(std::uint64_t frames_dropped) {
+  std::lock_guard<std::mutex> lock(mu_);
+  dropped_now_ = frames_dropped;
+}
+
+void BridgeStats::Reconnected() {
+  std::lock_guard<std::mutex> lock(mu_);
+  ++reconnects_;
+}
+
+void BridgeStats::StreamClosed() {
+  std::lock_guard<std::mutex> lock(mu_);
+  dropped_before_ += dropped_now_;
+  dropped_now_ = 0;
+}
+
+void BridgeStats::Published() {
+  std::lock_guard<std::mutex> lock(mu_);
+  ++published_;
+}
+
+diagnostic_msgs::DiagnosticArray BridgeStats::Report(const ros::Time& stamp,
+                                                     const std::string& name,
+                                                     const std::string& hardware_id) {
+  std::lock_guard<std::mutex> lock(mu_);
+  diagnostic_msgs::DiagnosticArray array;
+  array.header.stamp = stamp;
+  diagnostic_msgs::DiagnosticStatus s;
+  s.name = name;
+  s.hardware_id = hardware_id;
+  if (link_down_) {
+    s.level = diagnostic_msgs::DiagnosticStatus::ERROR;
+    s.message = "no stream to the server: " + last_error_;
+  } else if (period_errors_ > 0) {
+    s.level = diagnostic_msgs::DiagnosticStatus::WARN;
+    s.message = "errors in this period; last: " + last_error_;
+  } else if (period_sent_ > 0 && period_clouds_ == 0) {
+    s.level = diagnostic_msgs::DiagnosticStatus::WARN;
+    s.message = "frames sent, no cloud back in this period";
+  } else {
+    s.level = diagnostic_msgs::DiagnosticStatus::OK;
+    s.message = period_clouds_ > 0 ? "streaming" : "waiting for frames";
+  }
+  const double seconds = period_start_.isZero() ? 0.0 : (stamp - period_start_).toSec();
+  Add(&s, "clouds_per_s", Fixed(seconds > 0 ? period_clouds_ / seconds : 0.0, 2));
+  Add(&s, "frames_in", std::to_string(frames_in_));
+  Add(&s, "input_errors", std::to_string(input_errors_));
+  Add(&s, "frames_sent", std::to_string(frames_sent_));
+  Add(&s, "frames_not_sent", std::to_string(not_sent_));
+  Add(&s, "clouds", std::to_string(clouds_));
+  Add(&s, "frame_errors", std::to_string(frame_errors_));
+  Add(&s, "clouds_published", std::to_string(published_));
+  Add(&s, "frames_dropped", std::to_string(dropped_before_ + dropped_now_));
+  Add(&s, "reconnects", std::to_string(reconnects_));
+  const double n = static_cast<double>(period_clouds_);
+  const std::pair<const char*, Stage*> stages[] = {
+      {"decode_ms", &decode_},         {"pipeline_ms", &pipeline_},
+      {"encode_ms", &encode_},         {"queue_ms", &queue_},
+      {"round_trip_ms", &round_trip_}, {"bridge_decode_ms", &bridge_decode_}};
+  for (const auto& [key, stage] : stages) {
+    Add(&s, std::string(key) + "_mean", Fixed(n > 0 ? stage->sum / n : 0.0));
+    Add(&s, std::string(key) + "_max", Fixed(stage->max));
+  }
+  Add(&s, "points_mean", Fixed(n > 0 ? points_.sum / n : 0.0, 0));
+  Add(&s, "draco_bytes_mean", Fixed(n > 0 ? draco_bytes_.sum / n : 0.0, 0));
+  Add(&s, "position_error_bound", Fixed(position_error_bound_, 6));
+  if (!last_error_.empty()) Add(&s, "last_error", last_error_);
+  array.status.push_back(std::move(s));
+
+  period_clouds_ = period_errors_ = period_sent_ = 0;
+  decode_ = pipeline_ = encode_ = queue_ = round_trip_ = bridge_decode_ = points_ = draco_bytes_ =
+      Stage{};
+  period_start_ = stamp;
+  return array;
+}
+
+}  // namespace cloudcast::ros_bridge

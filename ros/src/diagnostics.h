@@ -1,0 +1,60 @@
+// What the bridge reports on /diagnostics: its counters and the per-stage times of the replies
+// (the server's decode, pipeline, encode and queue times, the round trip, the bridge's own Draco
+// decode), as means and maxima over each diagnostics period.
+#pragma once
+
+#include <diagnostic_msgs/DiagnosticArray.h>
+#include <ros/time.h>
+
+#include <cstdint>
+#include <mutex>
+#include <string>
+
+#include "absl/status/status.h"
+#include "cloudcast/client/result.h"
+
+namespace cloudcast::ros_bridge {
+
+// Thread-safe: the ROS thread counts inputs and sends, the stream's receiver thread the replies.
+class BridgeStats {
+ public:
+  void FrameIn();                          // a synchronized set of input messages
+  void InputError(const absl::Status& s);  // ... that could not become a frame
+  void Sent();                             // a frame handed to the stream
+  void NotSent(const absl::Status& s);     // no stream to send it on, or Send failed
+  void Reply(const client::Result& r);     // a reply (cloud or frame error)
+  // Frames dropped so far on the current stream (a reply's count), and one more reconnect of it.
+  void StreamDropped(std::uint64_t frames_dropped);
+  void Reconnected();
+  void StreamClosed();  // the stream ended: its drops are added to those of the streams before
+  void Published();     // a PointCloud2 went out
+
+  // The report for the period since the previous one (which it starts anew). `name` is the
+  // status's name, `hardware_id` the server target.
+  diagnostic_msgs::DiagnosticArray Report(const ros::Time& stamp, const std::string& name,
+                                          const std::string& hardware_id);
+
+ private:
+  struct Stage {
+    double sum = 0, max = 0;
+    void Add(double v) {
+      sum += v;
+      if (v > max) max = v;
+    }
+  };
+  std::mutex mu_;
+  // Totals since start.
+  std::uint64_t frames_in_ = 0, input_errors_ = 0, frames_sent_ = 0, not_sent_ = 0;
+  std::uint64_t clouds_ = 0, frame_errors_ = 0, published_ = 0;
+  std::uint64_t dropped_before_ = 0, dropped_now_ = 0;
+  std::uint64_t reconnects_ = 0;
+  std::string last_error_;
+  bool link_down_ = false;  // the last send found no stream
+  // This period.
+  std::uint64_t period_clouds_ = 0, period_errors_ = 0, period_sent_ = 0;
+  Stage decode_, pipeline_, encode_, queue_, round_trip_, bridge_decode_, points_, draco_bytes_;
+  float position_error_bound_ = 0;
+  ros::Time period_start_;
+};
+
+}  // namespace cloudcast::ros_bridge

@@ -1,0 +1,308 @@
+// The bridge's conversions, without a master: DisparityImage + CameraInfo to the camera model,
+// the invalid-disparity mask, colour views, the PointCloud2 layout, the stream config, the
+// diagnostics and the --help text. The node against a real master: ros_bridge_test.py.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <functional>
+#include <limits>
+#include <map>
+#include <string>
+#include <variant>
+#include <vector>
+
+#include "bridge_options.h"
+#include "cloud_link.h"
+#include "diagnostics.h"
+#include "disparity_input.h"
+#include "point_cloud2.h"
+
+namespace cloudcast::ros_bridge {
+namespace {
+
+sensor_msgs::CameraInfo TsukubaInfo() {
+  sensor_msgs::CameraInfo info;
+  info.width = 4;
+  info.height = 2;
+  info.P = {615, 0, 320, 0, 0, 610, 240, 0, 0, 0, 1, 0};
+  return info;
+}
+
+// A 4x2 disparity image with these values, rows `step` bytes apart (step >= 16).
+stereo_msgs::DisparityImage Disparity(const std::vector<float>& values, std::uint32_t step = 16,
+                                      float min_disparity = 4) {
+  stereo_msgs::DisparityImage d;
+  d.f = 615;
+  d.T = 0.1f;
+  d.min_disparity = min_disparity;
+  d.max_disparity = 255;
+  d.image.width = 4;
+  d.image.height = 2;
+  d.image.encoding = "32FC1";
+  d.image.step = step;
+  d.image.data.assign(step * 2, 0xEE);
+  for (int v = 0; v < 2; ++v) {
+    std::memcpy(d.image.data.data() + v * step, values.data() + v * 4, 4 * sizeof(float));
+  }
+  return d;
+}
+
+TEST(CameraFromDisparity, TakesPrincipalPointAndFocalsFromPAndDepthFromFAndT) {
+  auto camera = CameraFromDisparity(Disparity(std::vector<float>(8, 10)), TsukubaInfo());
+  ASSERT_TRUE(camera.ok()) << camera.status();
+  EXPECT_EQ(camera->fx, 615);
+  EXPECT_EQ(camera->fy, 610);
+  EXPECT_EQ(camera->cx, 320);
+  EXPECT_EQ(camera->cy, 240);
+  // z = fx * baseline / d = f T / d.
+  EXPECT_NEAR(camera->fx * camera->baseline, 615 * 0.1, 1e-5);
+  EXPECT_EQ(camera->disparity_scale, 1);
+  EXPECT_EQ(camera->disparity_offset, 0);
+  EXPECT_TRUE(camera->invalid_disparities.empty());
+}
+
+TEST(CameraFromDisparity, KeepsZEqualToFTOverDWhenFDiffersFromPsFx) {
+  auto d = Disparity(std::vector<float>(8, 10));
+  d.f = 600;  // stereo_image_proc writes the right camera's fx here
+  auto camera = CameraFromDisparity(d, TsukubaInfo());
+  ASSERT_TRUE(camera.ok()) << camera.status();
+  EXPECT_NEAR(camera->fx * camera->baseline, 600 * 0.1, 1e-5);
+}
+
+TEST(CameraFromDisparity, ErrorsNameTheField) {
+  const auto d = Disparity(std::vector<float>(8, 10));
+  const std::map<std::string,
+                 std::function<void(stereo_msgs::DisparityImage*, sensor_msgs::CameraInfo*)>>
+      cases = {
+          {"left/camera_info.P is all zero", [](auto*, auto* i) { i->P = {}; }},
+          {"disparity.T is -0.1", [](auto* d, auto*) { d->T = -0.1f; }},
+          {"disparity.f is 0", [](auto* d, auto*) { d->f = 0; }},
+          {"left/camera_info is 8x2 but disparity.image is 4x2",
+           [](auto*, auto* i) { i->width = 8; }},
+          {"binning and regions of interest are not supported",
+           [](auto*, auto* i) { i->binning_x = 2; }},
+      };
+  for (const auto& [message, mutate] : cases) {
+    auto dd = d;
+    auto info = TsukubaInfo();
+    mutate(&dd, &info);
+    auto camera = CameraFromDisparity(dd, info);
+    ASSERT_FALSE(camera.ok()) << message;
+    EXPECT_EQ(camera.status().code(), absl::StatusCode::kInvalidArgument);
+    EXPECT_NE(camera.status().message().find(message), std::string::npos)
+        << camera.status().message();
+  }
+}
+
+TEST(MaskedDisparity, BelowMinDisparityNanAndInfinityBecomeNan) {
+  const float inf = std::numeric_limits<float>::infinity();
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  // Rows 19 bytes apart: not float-aligned, as a ROS message may lay them out.
+  auto d = Disparity({3, 4, 77.5f, nan, inf, -inf, 0, 146}, 19);
+  std::vector<float> buffer;
+  auto view = MaskedDisparity(d, &buffer);
+  ASSERT_TRUE(view.ok()) << view.status();
+  EXPECT_EQ(view->encoding, DisparityEncoding::kF32);
+  EXPECT_EQ(view->stride_bytes, 16u);
+  ASSERT_EQ(buffer.size(), 8u);
+  EXPECT_TRUE(std::isnan(buffer[0]));  // 3 = min_disparity - 1: stereo_image_proc's invalid
+  EXPECT_EQ(buffer[1], 4);             // min_disparity itself is valid (the message's rule)
+  EXPECT_EQ(buffer[2], 77.5f);
+  for (int i : {3, 4, 5, 6}) EXPECT_TRUE(std::isnan(buffer[i])) << i;
+  EXPECT_EQ(buffer[7], 146);
+}
+
+TEST(MaskedDisparity, NonPositiveMinDisparityKeepsZeroForTheServerToDrop) {
+  auto d = Disparity({-1, 0, 1, 2, 3, 4, 5, 6}, 16, /*min_disparity=*/0);
+  std::vector<float> buffer;
+  ASSERT_TRUE(MaskedDisparity(d, &buffer).ok());
+  EXPECT_TRUE(std::isnan(buffer[0]));
+  EXPECT_EQ(buffer[1], 0);  // d' <= 0: no point, by cloudcast's camera model
+}
+
+TEST(MaskedDisparity, RefusesOtherEncodingsAndShortData) {
+  std::vector<float> buffer;
+  auto d = Disparity(std::vector<float>(8, 10));
+  d.image.encoding = "16UC1";
+  auto v = MaskedDisparity(d, &buffer);
+  ASSERT_FALSE(v.ok());
+  EXPECT_NE(v.status().message().find("disparity.image.encoding is '16UC1'; must be 32FC1"),
+            std::string::npos);
+  d = Disparity(std::vector<float>(8, 10));
+  d.image.data.resize(20);
+  v = MaskedDisparity(d, &buffer);
+  ASSERT_FALSE(v.ok());
+  EXPECT_NE(v.status().message().find("disparity.image.data holds 20 bytes"), std::string::npos)
+      << v.status().message();
+}
+
+sensor_msgs::Image Colour(const std::string& encoding, std::uint32_t bytes_per_pixel) {
+  sensor_msgs::Image image;
+  image.width = 4;
+  image.height = 2;
+  image.encoding = encoding;
+  image.step = 4 * bytes_per_pixel;
+  image.data.assign(image.step * 2, 7);
+  return image;
+}
+
+TEST(ColourFromImage, MapsTheEightBitEncodings) {
+  const std::pair<const char*, ColorEncoding> encodings[] = {{"rgb8", ColorEncoding::kRGB8},
+                                                             {"bgr8", ColorEncoding::kBGR8},
+                                                             {"rgba8", ColorEncoding::kRGBA8},
+                                                             {"mono8", ColorEncoding::kMono8}};
+  for (const auto& [name, encoding] : encodings) {
+    const auto image = Colour(name, BytesPerPixel(encoding));
+    auto input = ColourFromImage(image, "left/image_rect_color");
+    ASSERT_TRUE(input.ok()) << name << ": " << input.status();
+    const auto* view = std::get_if<ColorView>(&*input);
+    ASSERT_NE(view, nullptr) << name;
+    EXPECT_EQ(view->encoding, encoding);
+    EXPECT_EQ(view->data, image.data.data());
+    EXPECT_EQ(view->stride_bytes, image.step);
+  }
+  const auto bgra = Colour("bgra8", 4);
+  auto input = ColourFromImage(bgra, "left/image_rect_color");
+  ASSERT_TRUE(input.ok());
+  EXPECT_NE(std::get_if<client::BgraView>(&*input), nullptr);
+}
+
+TEST(ColourFromImage, RefusesOtherEncodingsNamingTheTopic) {
+  auto input = ColourFromImage(Colour("yuv422", 2), "left/image_rect_color");
+  ASSERT_FALSE(input.ok());
+  EXPECT_EQ(input.status().message(),
+            "left/image_rect_color.encoding is 'yuv422'; the bridge takes rgb8, bgr8, rgba8, "
+            "bgra8 or mono8");
+}
+
+TEST(ToFrame, RefusesAColourImageOfAnotherSize) {
+  auto colour = Colour("bgr8", 3);
+  colour.width = 2;
+  colour.step = 6;
+  std::vector<float> buffer;
+  OutgoingFrame frame;
+  auto s = ToFrame(Disparity(std::vector<float>(8, 10)), colour, TsukubaInfo(), &buffer, &frame);
+  EXPECT_EQ(s.message(),
+            "left/image_rect_color is 2x2 but disparity.image is 4x2; they must be the same size");
+}
+
+TEST(ToFrame, KeepsTheDisparitysHeader) {
+  auto d = Disparity(std::vector<float>(8, 10));
+  d.header.frame_id = "left_optical";
+  d.header.stamp = ros::Time(1234, 5678);
+  std::vector<float> buffer;
+  OutgoingFrame frame;
+  ASSERT_TRUE(ToFrame(d, Colour("rgb8", 3), TsukubaInfo(), &buffer, &frame).ok());
+  EXPECT_EQ(frame.header.frame_id, "left_optical");
+  EXPECT_EQ(frame.header.stamp, ros::Time(1234, 5678));
+  EXPECT_NE(std::get_if<DisparityView>(&frame.disparity), nullptr);
+}
+
+TEST(ToPointCloud2, IsCloudcastsPointWithPclsPackedRgbAndNoAlpha) {
+  PointCloud cloud;
+  cloud.ResizeUnorganized(2);
+  cloud.points[0] = {1.5f, -2.0f, 3.25f, PackRgba(10, 20, 30)};
+  cloud.points[1] = {0.0f, 0.5f, 8.0f, PackRgba(255, 0, 128)};
+  std_msgs::Header header;
+  header.frame_id = "cam";
+  header.stamp = ros::Time(7, 8);
+  sensor_msgs::PointCloud2 msg;
+  ToPointCloud2(cloud, header, &msg);
+  EXPECT_EQ(msg.header.frame_id, "cam");
+  EXPECT_EQ(msg.header.stamp, ros::Time(7, 8));
+  EXPECT_EQ(msg.height, 1u);
+  EXPECT_EQ(msg.width, 2u);
+  EXPECT_TRUE(msg.is_dense);
+  EXPECT_EQ(msg.point_step, 16u);
+  EXPECT_EQ(msg.row_step, 32u);
+  ASSERT_EQ(msg.fields.size(), 4u);
+  const char* names[] = {"x", "y", "z", "rgb"};
+  for (int i = 0; i < 4; ++i) {
+    EXPECT_EQ(msg.fields[i].name, names[i]);
+    EXPECT_EQ(msg.fields[i].offset, 4u * i);
+    EXPECT_EQ(msg.fields[i].datatype, sensor_msgs::PointField::FLOAT32);
+    EXPECT_EQ(msg.fields[i].count, 1u);
+  }
+  ASSERT_EQ(msg.data.size(), 32u);
+  float xyz[3];
+  std::uint32_t rgb;
+  std::memcpy(xyz, msg.data.data() + 16, 12);
+  std::memcpy(&rgb, msg.data.data() + 28, 4);
+  EXPECT_EQ(xyz[2], 8.0f);
+  EXPECT_EQ(rgb, 0x00FF0080u);  // 0x00RRGGBB, as stereo_image_proc packs it
+}
+
+TEST(ConfigFor, AddsTheCameraToTheParameters) {
+  client::StreamConfig base;
+  base.mutable_voxel_grid()->set_leaf(0.05f);
+  CameraModel camera;
+  camera.fx = 500;
+  camera.cx = 300.5;
+  camera.baseline = 0.12;
+  camera.invalid_disparities = {};
+  const client::StreamConfig config = ConfigFor(base, camera);
+  EXPECT_EQ(config.voxel_grid().leaf(), 0.05f);
+  EXPECT_EQ(config.camera().fx(), 500);
+  EXPECT_EQ(config.camera().cx(), 300.5);
+  EXPECT_EQ(config.camera().baseline(), 0.12);
+  ASSERT_TRUE(config.camera().has_invalid_disparities());
+  EXPECT_EQ(config.camera().invalid_disparities().values_size(), 0);
+  CameraModel other = camera;
+  EXPECT_TRUE(SameCamera(camera, other));
+  other.cy += 1;
+  EXPECT_FALSE(SameCamera(camera, other));
+}
+
+TEST(BridgeStats, ReportsTheReplysStageTimesAndCounters) {
+  BridgeStats stats;
+  stats.FrameIn();
+  stats.Sent();
+  client::Result r;
+  r.reply.mutable_times()->set_decode_us(1000);
+  r.reply.mutable_times()->set_pipeline_us(2500);
+  r.reply.mutable_times()->set_encode_us(500);
+  r.reply.mutable_times()->set_queue_us(250);
+  r.reply.set_point_count(1234);
+  r.reply.set_position_error_bound(0.0075f);
+  r.times.send = std::chrono::steady_clock::time_point(std::chrono::milliseconds(100));
+  r.times.receive = std::chrono::steady_clock::time_point(std::chrono::milliseconds(112));
+  stats.Reply(r);
+  stats.StreamDropped(3);
+  stats.Reconnected();
+  stats.StreamClosed();
+  stats.StreamDropped(2);
+  auto array = stats.Report(ros::Time(10, 0), "bridge", "127.0.0.1:50051");
+  ASSERT_EQ(array.status.size(), 1u);
+  const auto& s = array.status[0];
+  EXPECT_EQ(s.level, diagnostic_msgs::DiagnosticStatus::OK);
+  EXPECT_EQ(s.hardware_id, "127.0.0.1:50051");
+  std::map<std::string, std::string> v;
+  for (const auto& kv : s.values) v[kv.key] = kv.value;
+  EXPECT_EQ(v["decode_ms_mean"], "1.000");
+  EXPECT_EQ(v["pipeline_ms_mean"], "2.500");
+  EXPECT_EQ(v["encode_ms_mean"], "0.500");
+  EXPECT_EQ(v["queue_ms_mean"], "0.250");
+  EXPECT_EQ(v["round_trip_ms_mean"], "12.000");
+  EXPECT_EQ(v["points_mean"], "1234");
+  EXPECT_EQ(v["frames_dropped"], "5");  // 3 on the closed stream, 2 on the current one
+  EXPECT_EQ(v["reconnects"], "1");
+  EXPECT_EQ(v["clouds"], "1");
+  // The next period starts anew; the failed send makes it an ERROR.
+  stats.NotSent(absl::UnavailableError("no stream"));
+  auto next = stats.Report(ros::Time(11, 0), "bridge", "x");
+  EXPECT_EQ(next.status[0].level, diagnostic_msgs::DiagnosticStatus::ERROR);
+  EXPECT_NE(next.status[0].message.find("no stream"), std::string::npos);
+}
+
+TEST(HelpText, ListsEveryParameter) {
+  const std::string help = HelpText();
+  for (const ParamDoc& d : ParamDocs()) {
+    EXPECT_NE(help.find("~" + d.name + " ("), std::string::npos) << d.name;
+  }
+  EXPECT_NE(help.find("points2"), std::string::npos);
+  EXPECT_NE(help.find("/diagnostics"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace cloudcast::ros_bridge
