@@ -583,6 +583,7 @@ TEST(UplinkTest, EachEncodingGivesTheInputsAndProtoImagesItPromises) {
   UplinkFrame uplink;
 
   ASSERT_TRUE(uplink.Encode(u16, {Uplink::kRaw}).ok());
+  EXPECT_TRUE(std::holds_alternative<client::DisparityFrame>(uplink.input()));
   EXPECT_TRUE(std::holds_alternative<DisparityView>(uplink.disparity()));
   EXPECT_TRUE(std::holds_alternative<ColorView>(uplink.colour()));
   v1::Frame raw;

@@ -120,6 +120,10 @@ absl::Status UplinkFrame::Encode(const SourceFrame& frame, const UplinkOptions& 
   return absl::OkStatus();
 }
 
+client::FrameInput UplinkFrame::input() const {
+  return client::DisparityFrame{disparity(), colour()};
+}
+
 client::DisparityInput UplinkFrame::disparity() const {
   if (encoding_ == Uplink::kPng || encoding_ == Uplink::kJpeg) {
     return client::EncodedImage{disparity_file_};

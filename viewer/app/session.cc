@@ -175,7 +175,7 @@ void Session::SendLoop() {
       spdlog::info("float disparities are sent as TIFF (PNG has no float samples)");
     }
     const std::uint64_t bytes_before = stream_->image_bytes_sent();
-    const absl::Status status = stream_->Send(uplink.disparity(), uplink.colour(), meta);
+    const absl::Status status = stream_->Send(uplink.input(), meta);
     if (!status.ok()) {
       // A failed write means the call ended; Finish below says why. Bad inputs are ours.
       if (status.code() != absl::StatusCode::kUnavailable) {

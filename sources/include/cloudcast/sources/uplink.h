@@ -43,6 +43,8 @@ class UplinkFrame {
   absl::Status Encode(const SourceFrame& frame, const UplinkOptions& options);
 
   // As client inputs, for Stream::Send. They view this object: keep it until Send returns.
+  // input() is the whole frame (the kind's client::FrameInput alternative).
+  client::FrameInput input() const;
   client::DisparityInput disparity() const;
   client::ColorInput colour() const;
   // Writes the images into `frame`'s image fields (cloudcast-load's prepared requests).
