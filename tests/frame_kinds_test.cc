@@ -17,7 +17,7 @@
 #include "cloudcast/client/opencv.h"
 #include "cloudcast/core/pipeline.h"
 #include "support/server_fixture.h"
-#include "test_support.h"
+#include "support/test_support.h"
 
 namespace cloudcast {
 namespace {
