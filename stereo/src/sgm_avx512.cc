@@ -1,0 +1,69 @@
+// The AVX-512BW kernels (compiled with -mavx512f -mavx512bw -mavx512vl -mbmi2 -mpopcnt; chosen at
+// run time only on a CPU that has them): sgm_simd.h over 64-byte vectors (the matcher pads the
+// disparities to a multiple of 64 for them).
+// GCC 12 warns inside its own AVX-512 headers (_mm512_extracti64x4_epi64, _mm512_broadcast_i32x4:
+// their _mm*_undefined_* source operand, GCC bug 105593); nothing in this file is uninitialized.
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#include <immintrin.h>
+
+#include "sgm_simd.h"
+
+namespace cloudcast::stereo::sgm {
+namespace {
+
+// The smallest byte of 32 (V512::HMin ends here).
+std::uint8_t HMin256(__m256i v) {
+  __m128i m = _mm_min_epu8(_mm256_castsi256_si128(v), _mm256_extracti128_si256(v, 1));
+  m = _mm_min_epu8(m, _mm_srli_epi16(m, 8));
+  m = _mm_minpos_epu16(_mm_and_si128(m, _mm_set1_epi16(0xFF)));
+  return static_cast<std::uint8_t>(_mm_cvtsi128_si32(m));
+}
+
+struct V512 {
+  using T = __m512i;
+  static constexpr int kLanes = 64;
+  static T Zero() { return _mm512_setzero_si512(); }
+  static T Set1(std::uint8_t v) { return _mm512_set1_epi8(static_cast<char>(v)); }
+  static T Load(const void* p) { return _mm512_loadu_si512(p); }
+  static void Store(void* p, T v) { _mm512_storeu_si512(p, v); }
+  static T AddSat(T a, T b) { return _mm512_adds_epu8(a, b); }
+  static T SubSat(T a, T b) { return _mm512_subs_epu8(a, b); }
+  static T Min(T a, T b) { return _mm512_min_epu8(a, b); }
+  static T Max(T a, T b) { return _mm512_max_epu8(a, b); }
+  static T Add8(T a, T b) { return _mm512_add_epi8(a, b); }
+  static T Xor(T a, T b) { return _mm512_xor_si512(a, b); }
+  static T Lookup(T table, T index) { return _mm512_shuffle_epi8(table, index); }
+  static T NibbleCounts() {
+    return _mm512_broadcast_i32x4(_mm_setr_epi8(0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4));
+  }
+  static T PushBit(T acc, T a, T b) {
+    const T twice = _mm512_add_epi8(acc, acc);
+    return _mm512_mask_add_epi8(twice, _mm512_cmpgt_epi8_mask(a, b), twice, _mm512_set1_epi8(1));
+  }
+  static std::uint8_t HMin(T v) {
+    return HMin256(_mm256_min_epu8(_mm512_castsi512_si256(v), _mm512_extracti64x4_epi64(v, 1)));
+  }
+  // Lane i: i == 0 ? a[63] : b[i - 1], and i == 63 ? b[0] : a[i + 1] (alignr works per 128-bit
+  // lane; valignq brings the neighbouring lane in).
+  static T ShiftInBelow(T a, T b) {
+    return _mm512_alignr_epi8(b, _mm512_alignr_epi64(b, a, 6), 15);
+  }
+  static T ShiftInAbove(T a, T b) { return _mm512_alignr_epi8(_mm512_alignr_epi64(b, a, 2), a, 1); }
+  static T HalveUp(T a) { return _mm512_avg_epu8(a, _mm512_setzero_si512()); }
+  static std::uint64_t EqMask(T a, T b) { return _mm512_cmpeq_epi8_mask(a, b); }
+  static std::uint64_t LessEqMask(T a, T b) { return _mm512_cmple_epu8_mask(a, b); }
+};
+
+void Census(const CensusArgs& a) { simd::Census<V512>(a); }
+void Forward(const RowArgs& a) { simd::Row<V512, true>(a); }
+void Backward(const RowArgs& a) { simd::Row<V512, false>(a); }
+void Wta(const WtaArgs& a) { simd::Wta<V512>(a); }
+
+}  // namespace
+
+const Kernels* Avx512Kernels() {
+  static const Kernels k{"avx512", 64, Census, Forward, Backward, Wta};
+  return &k;
+}
+
+}  // namespace cloudcast::stereo::sgm

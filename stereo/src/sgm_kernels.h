@@ -1,0 +1,203 @@
+// The hot loops of our semi-global matcher, behind one table of function pointers per instruction
+// set (scalar, AVX2, AVX-512BW). This header and the kernel files include no OpenCV, PCL or Eigen
+// header: the SIMD files are compiled with AVX flags (see stereo/CMakeLists.txt).
+//
+// The algorithm (Hirschmueller's SGM, in the form of fixstars' libSGM and OpenCV's StereoSGBM):
+//   cost      C(x, y, k): the Hamming distance of the centre-symmetric census codes of left pixel
+//             (x, y) and right pixel (x - dmin - k, y), halved (rounding up) for the 24-bit codes
+//             of a 7x7 window, so C <= max_cost <= 12; a right pixel outside the image costs
+//             max_cost;
+//   paths     L_r(p, k) = C(p, k) + min(L_r(p-r, k), L_r(p-r, k+-1) + P1, min_j L_r(p-r, j) + P2)
+//                        - min_j L_r(p-r, j), in bytes;
+//   passes    forward (rows top to bottom): left-to-right and down, with 8 paths also both down
+//             diagonals; their sum S1 is kept for the frame. Backward (rows bottom to top):
+//             right-to-left and up (and both up diagonals), summed with S1 into one row of totals;
+//   choice    per pixel the smallest total (the lowest k of equal ones), refused when another k
+//             more than 1 away costs less than (100 + uniqueness) % of it; then OpenCV's parabola
+//             for the sub-pixel part, its left-right check and cv::filterSpeckles (sgm_matcher.cc).
+//
+// Everything stays in bytes, exactly: L <= C + P2 <= max_cost + P2 <= 31 (MatcherParams bounds
+// P2 so), hence a sum of 8 paths <= 248. The adds saturate only for the padding indices, which
+// hold 255 throughout and never win.
+//
+// Every kernel computes exactly this, so all instruction sets give the same output bit for bit
+// (tests/stereo_test.cc checks it).
+//
+// The inline helpers here are `static`, and use no std:: templates: a file compiled with AVX
+// flags must not emit a shared (COMDAT) copy of a function that the linker could then hand to
+// code running on a CPU without AVX.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+namespace cloudcast::stereo::sgm {
+
+// Census planes: the census code of a pixel, 4 bits at a time (plane j holds bits 4j..4j+3 in the
+// low nibble of one byte), so a Hamming distance is one table look-up per plane (pshufb).
+inline constexpr int kMaxPlanes = 6;  // a 7x7 window: 24 bits
+inline constexpr int kMaxRadius = 3;
+inline constexpr int kMaxDp = 2048;  // kMaxDisparity (matcher.h), a multiple of 32
+
+// Census bits of a square window of side 2 * radius + 1: one per pair of pixels mirrored through
+// the centre.
+static constexpr int CensusBits(int radius) { return 2 * radius * (radius + 1); }
+
+// The geometry of one frame's matching.
+struct Shape {
+  int width = 0;
+  int height = 0;
+  int d = 0;  // disparities searched
+  int dp =
+      0;  // d rounded up to the kernels' lanes (32 or 64): every per-pixel cost vector's length
+  int dmin = 0;  // disparity of index k = 0
+  int planes = 0;
+  std::uint8_t max_cost = 0;  // census bits: the cost of a right pixel outside the image
+  std::size_t block = 0;      // bytes per pixel in a path row: dp costs, then >= 1 guard byte
+};
+
+static constexpr std::size_t BlockBytes(int dp) {
+  return (static_cast<std::size_t>(dp) + 1 + 63) / 64 * 64;
+}
+
+// Largest path cost the bytes hold exactly: max_cost + P2 must not exceed it (8 paths: 248).
+inline constexpr int kMaxPathCost = 31;
+
+// Floors raise the cost of indices a pixel must not match: pad[k] is 255 for k >= d (the padding
+// up to dp: such indices then always carry 255 and never win or lower a neighbour; null when
+// dp == d); left and right
+// are tables of 2 * dp bytes that, offset per pixel (FloorsFor), give max_cost for the indices
+// whose right pixel falls off the image's left or right edge.
+struct Floors {
+  const std::uint8_t* pad = nullptr;
+  const std::uint8_t* left = nullptr;   // left[i] = i >= dp ? max_cost : 0
+  const std::uint8_t* right = nullptr;  // right[i] = i < dp ? max_cost : 0
+};
+
+static inline int MinInt(int a, int b) { return a < b ? a : b; }
+static inline int MaxInt(int a, int b) { return a > b ? a : b; }
+
+// Indices k in [lo, hi] have their right pixel x - dmin - k inside the image (none when lo > hi).
+static inline void ValidRange(const Shape& s, int x, int* lo, int* hi) {
+  const int shift = x - s.dmin;  // the k whose right pixel is column 0
+  *hi = MinInt(s.d - 1, shift);
+  *lo = MaxInt(0, shift - (s.width - 1));
+}
+
+// Per pixel: null when every index is inside the image; else the tables to max with.
+struct PixelFloors {
+  const std::uint8_t* left = nullptr;
+  const std::uint8_t* right = nullptr;
+};
+static inline PixelFloors FloorsFor(const Shape& s, const Floors& f, int x) {
+  int lo, hi;
+  ValidRange(s, x, &lo, &hi);
+  PixelFloors p;
+  if (hi < s.d - 1) p.left = f.left + (s.dp - 1 - MaxInt(hi, -1));  // k > hi: max_cost
+  if (lo > 0) p.right = f.right + (s.dp - MinInt(lo, s.dp));        // k < lo: max_cost
+  return p;
+}
+
+// The census of a padded image (border pixels replicated, `radius` on each side) whose bytes are
+// biased (value ^ 0x80, so a signed byte compare orders them as the unsigned pixels). Bits, most
+// significant first: for dy = -radius..0, dx = -radius..radius while (dy, dx) < (0, 0), the bit
+// P(y + dy, x + e) > P(y - dy, x - e) with e = dx, or e = -dx when `mirrored` (the image was
+// flipped left to right: the codes then equal the unflipped image's, column for column mirrored).
+struct CensusArgs {
+  const std::int8_t* padded =
+      nullptr;  // pixel (x, y) of the image at padded[(y + r) * stride + x + r]
+  std::size_t stride = 0;
+  int width = 0;
+  int height = 0;
+  int radius = 0;
+  bool mirrored = false;
+  std::uint8_t* planes[kMaxPlanes] =
+      {};  // plane j, pixel (x, y) at planes[j][y * plane_stride + x]
+  std::size_t plane_stride = 0;
+};
+
+// One row's aggregation paths: pixel x's dp costs at costs + x * block, for x in [-1, width]:
+// pixels -1 and width are the zero predecessors (0 for k < d, 255 above) the kernels never write,
+// so a path enters the image with L = C. minima[x] (x in [-1, width]) is each block's minimum.
+// The byte before and the dp bytes after every pixel's costs read as 255 (guards).
+struct PathRow {
+  std::uint8_t* costs = nullptr;
+  std::uint8_t* minima = nullptr;
+};
+
+// Directions: 0 down (from the pixel above / below in the backward pass), 1 down-right diagonal
+// (predecessor x - 1 forward, x + 1 backward), 2 the other diagonal.
+struct RowArgs {
+  const Shape* shape = nullptr;
+  Floors floors;
+  std::uint8_t p1 = 0;
+  std::uint8_t p2 = 0;
+  bool eight_paths = true;
+  // Census planes of this row: left pixel x at left[j][x]; the right row reversed, right column
+  // xr at right[j][width - 1 - xr] (readable, as zeros, for xr from -dp - dmin to width - dmin).
+  const std::uint8_t* left[kMaxPlanes] = {};
+  const std::uint8_t* right[kMaxPlanes] = {};
+  PathRow prev[3];     // the previous row's paths (the zero row for the first)
+  PathRow cur[3];      // this row's, written
+  PathRow horizontal;  // this row's left-to-right (forward) or right-to-left (backward) path
+  std::uint8_t* s1 = nullptr;      // forward: written, backward: read; width * dp bytes
+  std::uint8_t* totals = nullptr;  // backward: written, width * dp
+};
+
+// Per pixel x of a row of totals (width * stride values, d of them used; the rest 255): best[x]
+// = the lowest k of the smallest total, or -1 when uniqueness refuses it; fraction[x] = the
+// sub-pixel offset (SubPixel) where both neighbours of best are valid, else 0; min_cost[x] = the
+// smallest total. Totals of indices outside a pixel's valid range must have been set to
+// kMaskedTotal (so "valid" is "not kMaskedTotal").
+inline constexpr std::uint8_t kMaskedTotal = 255;
+struct WtaArgs {
+  const std::uint8_t* totals = nullptr;
+  int width = 0;
+  int stride = 0;
+  int d = 0;
+  const std::int16_t* limits = nullptr;  // UniquenessLimit(m, ratio) for m in [0, 255]
+  std::int16_t* best = nullptr;
+  std::int8_t* fraction = nullptr;
+  std::uint8_t* min_cost = nullptr;
+};
+
+// Uniqueness: another k more than 1 away with total * (100 - ratio) < best * 100 refuses the
+// pixel. As a bound on totals: total <= UniquenessLimit(best, ratio) (-1: none can refuse; at
+// most 254, so masked totals never count).
+static inline int UniquenessLimit(int best_total, int ratio) {
+  if (best_total <= 0) return -1;
+  const int limit = (best_total * 100 - 1) / (100 - ratio);
+  return MinInt(limit, static_cast<int>(kMaskedTotal) - 1);
+}
+
+// OpenCV's parabola through the smallest total `here` and its neighbours, in 1/16 px:
+// ((before - after) * 16 + denom2) / (2 * denom2), truncated, denom2 = max(before + after -
+// 2 * here, 1). Float division is exact for it: |quotient| <= 8.5 lies at least 1 / (2 * denom2)
+// >= 2^-10 from any integer it is not, far beyond float's 2^-20 rounding error there.
+static inline int SubPixel(int before, int here, int after) {
+  const int denom2 = MaxInt(before + after - 2 * here, 1);
+  return static_cast<int>(static_cast<float>((before - after) * 16 + denom2) /
+                          static_cast<float>(2 * denom2));
+}
+
+// The sub-pixel step of pixel total row t with best index b (d indices).
+static inline int FractionAt(const std::uint8_t* t, int b, int d) {
+  if (b <= 0 || b >= d - 1 || t[b - 1] == kMaskedTotal || t[b + 1] == kMaskedTotal) return 0;
+  return SubPixel(t[b - 1], t[b], t[b + 1]);
+}
+
+struct Kernels {
+  const char* name;
+  int lanes;  // Shape::dp must be a multiple of this (32 or 64)
+  void (*census)(const CensusArgs& args);
+  void (*forward_row)(const RowArgs& args);
+  void (*backward_row)(const RowArgs& args);
+  void (*wta_row)(const WtaArgs& args);
+};
+
+const Kernels& ScalarKernels();
+// Null when the build has no such kernels (not x86-64 / no compiler support).
+const Kernels* Avx2Kernels();
+const Kernels* Avx512Kernels();
+
+}  // namespace cloudcast::stereo::sgm

@@ -1,0 +1,352 @@
+// Our semi-global matcher: the frame-level steps around the kernels (sgm_kernels.h has the
+// algorithm): padding and census, the forward and the backward pass row by row, then per row the
+// choice of disparity (sub-pixel parabola and left-right check as OpenCV's StereoSGBM does them),
+// and cv::filterSpeckles on the frame.
+//
+// Memory per frame: S1 (width * height * dp bytes: 39 MB at 640x480 with 128 disparities) plus
+// about 1.5 MB of rows, kept between frames.
+#include <algorithm>
+#include <climits>
+#include <cstdlib>
+#include <cstring>
+#include <memory>
+
+#include "absl/strings/str_cat.h"
+#include "matcher_internal.h"
+#include "sgm_kernels.h"
+#include "speckle.h"
+
+namespace cloudcast::stereo {
+namespace {
+
+// Zero-filled bytes aligned to 64 (a cache line, an AVX-512 vector). Grows to what a frame needs
+// and gives memory back when a frame needs less than a quarter of it.
+class Scratch {
+ public:
+  // `bytes` usable bytes; true when (re)allocated, zero-filled.
+  bool Reserve(std::size_t bytes) {
+    if (bytes <= capacity_ && bytes >= capacity_ / 4) return false;
+    const std::size_t rounded = (bytes + 63) / 64 * 64;
+    data_.reset(
+        static_cast<std::uint8_t*>(std::aligned_alloc(64, std::max<std::size_t>(rounded, 64))));
+    std::memset(data_.get(), 0, rounded);
+    capacity_ = rounded;
+    return true;
+  }
+  std::uint8_t* data() const { return data_.get(); }
+
+ private:
+  struct Free {
+    void operator()(std::uint8_t* p) const { std::free(p); }
+  };
+  std::unique_ptr<std::uint8_t, Free> data_;
+  std::size_t capacity_ = 0;
+};
+
+std::size_t RoundUp(std::size_t v, std::size_t to) { return (v + to - 1) / to * to; }
+
+const sgm::Kernels* KernelsFor(SimdLevel level) {
+  switch (level) {
+    case SimdLevel::kScalar:
+      return &sgm::ScalarKernels();
+    case SimdLevel::kAvx2:
+      return sgm::Avx2Kernels();
+    case SimdLevel::kAvx512:
+      return sgm::Avx512Kernels();
+    case SimdLevel::kAuto:
+      break;
+  }
+  return KernelsFor(BestSimdLevel());
+}
+
+class SgmMatcher final : public Matcher {
+ public:
+  SgmMatcher(const MatcherParams& params, const sgm::Kernels* kernels)
+      : params_(params), kernels_(kernels) {
+    for (int m = 0; m < 256; ++m) {
+      limits_[m] = static_cast<std::int16_t>(sgm::UniquenessLimit(m, params.uniqueness_ratio));
+    }
+  }
+
+  const MatcherParams& params() const override { return params_; }
+
+  absl::Status Compute(const GreyView& left, const GreyView& right, DisparityMap16* out) override {
+    if (absl::Status s = CheckPair(left, right); !s.ok()) return s;
+    if (absl::Status s = CheckVolume(left.width, left.height, RoundUpDp(), 1, "the sgm matcher");
+        !s.ok()) {
+      return s;
+    }
+    Prepare(static_cast<int>(left.width), static_cast<int>(left.height));
+    out->width = left.width;
+    out->height = left.height;
+    out->values.resize(static_cast<std::size_t>(left.width) * left.height);
+    Pad(left, /*mirrored=*/false, padded_left_.data());
+    Pad(right, /*mirrored=*/true, padded_right_.data());
+    Census(padded_left_.data(), false, left_planes_.data(), 0, left_stride_);
+    Census(padded_right_.data(), true, right_planes_.data(), right_origin_, right_stride_);
+    ForwardPass();
+    BackwardPass(out);
+    if (params_.speckle_window_size > 0) {
+      speckle_.Apply(out->values.data(), shape_.width, shape_.height, params_.speckle_window_size,
+                     16 * params_.speckle_range);
+    }
+    return absl::OkStatus();
+  }
+
+ private:
+  int RoundUpDp() const {
+    return static_cast<int>(RoundUp(params_.num_disparities, kernels_->lanes));
+  }
+
+  // Sizes every buffer for a frame; tables and path-row borders are built when the shape changes.
+  void Prepare(int width, int height) {
+    const int radius = CensusRadius(params_.block_size);
+    sgm::Shape s;
+    s.width = width;
+    s.height = height;
+    s.d = params_.num_disparities;
+    s.dp = RoundUpDp();
+    s.dmin = params_.min_disparity;
+    s.planes = sgm::CensusBits(radius) / 4;
+    s.max_cost = static_cast<std::uint8_t>(MaxCensusCost(params_.block_size));
+    s.block = sgm::BlockBytes(s.dp);
+    radius_ = radius;
+
+    // Padded images: radius on each side, room for a 64-byte vector read past the last column.
+    padded_stride_ = RoundUp(width + 2 * radius + 64, 64);
+    const std::size_t padded = padded_stride_ * (height + 2 * radius) + 64;
+    padded_left_.Reserve(padded);
+    padded_right_.Reserve(padded);
+    // Census planes; the right image's reversed rows (sgm_kernels.h, RowArgs::right) are read
+    // from -dmin to width - 1 + dmin + dp - 1: margins on both sides.
+    left_stride_ = RoundUp(width, 64);
+    right_origin_ = RoundUp(std::max(0, -s.dmin), 64);
+    right_stride_ = RoundUp(
+        right_origin_ +
+            std::max<std::size_t>(RoundUp(width, 64), width + std::max(0, s.dmin) + s.dp) + 64,
+        64);
+    left_planes_.Reserve(left_stride_ * height * s.planes);
+    right_planes_.Reserve(right_stride_ * height * s.planes);
+    s1_.Reserve(static_cast<std::size_t>(width) * height * s.dp);
+    totals_.Reserve(static_cast<std::size_t>(width) * s.dp);
+    const std::size_t row_bytes = 64 + (width + 2) * s.block;
+    const bool new_rows = rows_.Reserve(kRows * row_bytes);
+    const bool new_minima = minima_.Reserve(kRows * (width + 2));
+    const bool same = s.width == shape_.width && s.d == shape_.d && s.dp == shape_.dp &&
+                      s.dmin == shape_.dmin && s.planes == shape_.planes;
+    shape_ = s;
+    best_.resize(width);
+    fraction_.resize(width);
+    min_cost_.resize(width);
+    disp1_.resize(width);
+    disp2_.resize(width + 1);
+    disp2_cost_.resize(width + 1);
+    if (same && !new_rows && !new_minima) return;
+
+    // Floors (sgm_kernels.h).
+    floor_table_.assign(5 * s.dp, 0);
+    std::uint8_t* pad = floor_table_.data();
+    std::uint8_t* left = pad + s.dp;
+    std::uint8_t* right = left + 2 * s.dp;
+    for (int k = s.d; k < s.dp; ++k) pad[k] = 255;
+    for (int i = s.dp; i < 2 * s.dp; ++i) left[i] = s.max_cost;
+    for (int i = 0; i < s.dp; ++i) right[i] = s.max_cost;
+    floors_ = {s.dp > s.d ? pad : nullptr, left, right};
+
+    // Path rows: guards and padding 255, pixels -1 and width zero predecessors; the last row is
+    // the zero row (every pixel a zero predecessor) that the first row of a pass comes from.
+    std::memset(rows_.data(), 255, kRows * row_bytes);
+    std::memset(minima_.data(), 0, kRows * (width + 2));
+    for (int r = 0; r < kRows; ++r) {
+      path_rows_[r].costs = rows_.data() + r * row_bytes + 64 + s.block;
+      path_rows_[r].minima = minima_.data() + r * (width + 2) + 1;
+      for (int x = -1; x <= width; ++x) {
+        if (r != kZeroRow && x != -1 && x != width) continue;
+        std::memset(path_rows_[r].costs + x * static_cast<std::ptrdiff_t>(s.block), 0, s.d);
+      }
+    }
+  }
+
+  // Biased (value ^ 0x80), border-replicated copy of a view, mirrored left to right for the right
+  // image (sgm_kernels.h, CensusArgs).
+  void Pad(const GreyView& view, bool mirrored, std::uint8_t* padded) const {
+    const int w = shape_.width, h = shape_.height, r = radius_;
+    for (int y = -r; y < h + r; ++y) {
+      const std::uint8_t* src = view.row(static_cast<std::uint32_t>(std::clamp(y, 0, h - 1)));
+      std::uint8_t* dst = padded + (y + r) * padded_stride_ + r;
+      if (mirrored) {
+        for (int x = 0; x < w; ++x) dst[x] = src[w - 1 - x] ^ 0x80;
+      } else {
+        for (int x = 0; x < w; ++x) dst[x] = src[x] ^ 0x80;
+      }
+      for (int x = 1; x <= r; ++x) {
+        dst[-x] = dst[0];
+        dst[w - 1 + x] = dst[w - 1];
+      }
+    }
+  }
+
+  void Census(const std::uint8_t* padded, bool mirrored, std::uint8_t* planes, std::size_t origin,
+              std::size_t stride) const {
+    sgm::CensusArgs a;
+    a.padded = reinterpret_cast<const std::int8_t*>(padded);
+    a.stride = padded_stride_;
+    a.width = shape_.width;
+    a.height = shape_.height;
+    a.radius = radius_;
+    a.mirrored = mirrored;
+    for (int j = 0; j < shape_.planes; ++j)
+      a.planes[j] = planes + j * stride * shape_.height + origin;
+    a.plane_stride = stride;
+    kernels_->census(a);
+  }
+
+  sgm::RowArgs RowArgsFor(int y) const {
+    sgm::RowArgs a;
+    a.shape = &shape_;
+    a.floors = floors_;
+    a.p1 = static_cast<std::uint8_t>(params_.EffectiveP1());
+    a.p2 = static_cast<std::uint8_t>(params_.EffectiveP2());
+    a.eight_paths = params_.paths == 8;
+    for (int j = 0; j < shape_.planes; ++j) {
+      a.left[j] = left_planes_.data() + (j * shape_.height + y) * left_stride_;
+      a.right[j] = right_planes_.data() + (j * shape_.height + y) * right_stride_ + right_origin_;
+    }
+    a.horizontal = path_rows_[kHorizontalRow];
+    a.s1 = s1_.data() + static_cast<std::size_t>(y) * shape_.width * shape_.dp;
+    return a;
+  }
+
+  // Rows 0-2 and 3-5 take turns as the previous and this row's vertical and diagonal paths.
+  void ForwardPass() {
+    int prev = -1;
+    for (int y = 0; y < shape_.height; ++y) {
+      sgm::RowArgs a = RowArgsFor(y);
+      const int cur = (y % 2) * 3;
+      for (int i = 0; i < 3; ++i) {
+        a.prev[i] = prev < 0 ? path_rows_[kZeroRow] : path_rows_[prev + i];
+        a.cur[i] = path_rows_[cur + i];
+      }
+      kernels_->forward_row(a);
+      prev = cur;
+    }
+  }
+
+  void BackwardPass(DisparityMap16* out) {
+    std::uint8_t* totals = totals_.data();
+    int prev = -1;
+    for (int y = shape_.height - 1; y >= 0; --y) {
+      sgm::RowArgs a = RowArgsFor(y);
+      const int cur = (y % 2) * 3;
+      for (int i = 0; i < 3; ++i) {
+        a.prev[i] = prev < 0 ? path_rows_[kZeroRow] : path_rows_[prev + i];
+        a.cur[i] = path_rows_[cur + i];
+      }
+      a.totals = totals;
+      kernels_->backward_row(a);
+      prev = cur;
+      MaskBorders(totals);
+      sgm::WtaArgs w;
+      w.totals = totals;
+      w.width = shape_.width;
+      w.stride = shape_.dp;
+      w.d = shape_.d;
+      w.limits = limits_;
+      w.best = best_.data();
+      w.fraction = fraction_.data();
+      w.min_cost = min_cost_.data();
+      kernels_->wta_row(w);
+      Choose(out->values.data() + static_cast<std::size_t>(y) * shape_.width);
+    }
+  }
+
+  // Indices whose right pixel is off the image must not win (sgm_kernels.h, WtaArgs).
+  void MaskBorders(std::uint8_t* totals) const {
+    for (int x = 0; x < shape_.width; ++x) {
+      int lo, hi;
+      sgm::ValidRange(shape_, x, &lo, &hi);
+      if (lo == 0 && hi == shape_.d - 1) continue;
+      std::uint8_t* t = totals + static_cast<std::size_t>(x) * shape_.dp;
+      lo = std::clamp(lo, 0, shape_.d);
+      hi = std::clamp(hi, -1, shape_.d - 1);
+      std::fill(t, t + lo, sgm::kMaskedTotal);
+      std::fill(t + std::max(hi + 1, lo), t + shape_.d, sgm::kMaskedTotal);
+    }
+  }
+
+  // One row's disparities from the winners, as OpenCV's StereoSGBM: the parabola through the
+  // best total and its neighbours, then its left-right check (a right pixel's disparity is that of
+  // the left pixel with the lowest total matching it). Written with selects rather than branches
+  // on the data (which branch a pixel takes is a coin toss; mispredictions cost more than both).
+  void Choose(std::uint16_t* out) {
+    const sgm::Shape& s = shape_;
+    constexpr int kNone = INT_MIN;
+    const int w = s.width;
+    // Columns with no valid index at all (x < dmin, or past the right edge for dmin < 0).
+    const int x_begin = std::clamp(s.dmin, 0, w);
+    const int x_end = std::clamp(w - 1 + s.dmin + s.d, x_begin, w);
+    std::fill(disp2_.begin(), disp2_.end(), kNone);
+    std::fill(disp2_cost_.begin(), disp2_cost_.end(), INT_MAX);
+    for (int x = x_end - 1; x >= x_begin; --x) {
+      const int b = best_[x];
+      if (b < 0) {
+        disp1_[x] = kNone;
+        continue;
+      }
+      const int m = min_cost_[x];
+      const int xr = x - s.dmin - b;
+      if (disp2_cost_[xr] > m) {
+        disp2_cost_[xr] = m;
+        disp2_[xr] = b + s.dmin;
+      }
+      disp1_[x] = (b + s.dmin) * 16 + fraction_[x];
+    }
+    std::fill(out, out + x_begin, 0);
+    std::fill(out + x_end, out + w, 0);
+    const int tolerance = params_.disp12_max_diff;
+    for (int x = x_begin; x < x_end; ++x) {
+      const int d1 = disp1_[x];
+      bool keep = d1 > 0;  // kNone too
+      if (tolerance >= 0 && keep) {
+        // Both roundings of the sub-pixel disparity get a chance, as in OpenCV. disp2_[w] is
+        // kNone: a column off the image has no right match to disagree with.
+        const int d_lo = d1 >> 4, d_hi = (d1 + 15) >> 4;
+        const int x_lo = x - d_lo, x_hi = x - d_hi;
+        const int r_lo = disp2_[x_lo >= 0 && x_lo < w ? x_lo : w];
+        const int r_hi = disp2_[x_hi >= 0 && x_hi < w ? x_hi : w];
+        const bool bad_lo = r_lo != kNone && std::abs(r_lo - d_lo) > tolerance;
+        const bool bad_hi = r_hi != kNone && std::abs(r_hi - d_hi) > tolerance;
+        keep = !(bad_lo && bad_hi);
+      }
+      out[x] = static_cast<std::uint16_t>(keep ? d1 : 0);
+    }
+  }
+
+  static constexpr int kHorizontalRow = 6;
+  static constexpr int kZeroRow = 7;
+  static constexpr int kRows = 8;
+
+  const MatcherParams params_;
+  const sgm::Kernels* const kernels_;
+  sgm::Shape shape_;
+  int radius_ = 0;
+  std::size_t padded_stride_ = 0, left_stride_ = 0, right_stride_ = 0, right_origin_ = 0;
+  Scratch padded_left_, padded_right_, left_planes_, right_planes_, s1_, totals_, rows_, minima_;
+  sgm::PathRow path_rows_[kRows];
+  std::vector<std::uint8_t> floor_table_;
+  sgm::Floors floors_;
+  std::vector<std::int16_t> best_;
+  std::vector<std::int8_t> fraction_;
+  std::vector<std::uint8_t> min_cost_;
+  std::int16_t limits_[256];
+  std::vector<int> disp1_, disp2_, disp2_cost_;
+  SpeckleFilter speckle_;
+};
+
+}  // namespace
+
+std::unique_ptr<Matcher> MakeSgmMatcher(const MatcherParams& params, SimdLevel level) {
+  return std::make_unique<SgmMatcher>(params, KernelsFor(level));
+}
+
+}  // namespace cloudcast::stereo

@@ -1,0 +1,153 @@
+// The scalar kernels: the reference the SIMD ones must equal bit for bit, and the fallback for a
+// CPU without AVX2. Written to read like the formulas in sgm_kernels.h.
+#include <algorithm>
+#include <cstdlib>
+
+#include "sgm_kernels.h"
+
+namespace cloudcast::stereo::sgm {
+namespace {
+
+inline std::uint8_t AddSat(int a, int b) { return static_cast<std::uint8_t>(std::min(a + b, 255)); }
+
+void Census(const CensusArgs& a) {
+  const int r = a.radius;
+  const int planes = CensusBits(r) / 4;
+  const std::ptrdiff_t stride = static_cast<std::ptrdiff_t>(a.stride);
+  for (int y = 0; y < a.height; ++y) {
+    for (int x = 0; x < a.width; ++x) {
+      const std::int8_t* c = a.padded + (y + r) * stride + x + r;
+      std::uint32_t code = 0;
+      for (int dy = -r; dy <= 0; ++dy) {
+        for (int dx = -r; dx <= r; ++dx) {
+          if (dy == 0 && dx >= 0) break;
+          const int e = a.mirrored ? -dx : dx;
+          code = (code << 1) | (c[dy * stride + e] > c[-dy * stride - e] ? 1u : 0u);
+        }
+      }
+      for (int j = 0; j < planes; ++j) {
+        a.planes[j][static_cast<std::size_t>(y) * a.plane_stride + x] =
+            static_cast<std::uint8_t>((code >> (4 * j)) & 15u);
+      }
+    }
+  }
+}
+
+// Pixel x's costs C(x, k) for k in [0, dp), floors applied.
+void Costs(const RowArgs& a, int x, std::uint8_t* c) {
+  const Shape& s = *a.shape;
+  const int base = s.width - 1 - x + s.dmin;
+  const PixelFloors f = FloorsFor(s, a.floors, x);
+  for (int k = 0; k < s.dp; ++k) {
+    int v = 0;
+    for (int j = 0; j < s.planes; ++j) {
+      v += __builtin_popcount(static_cast<unsigned>(a.left[j][x] ^ a.right[j][base + k]));
+    }
+    if (s.planes == 6) v = (v + 1) >> 1;  // 24 bits: halved, rounding up
+    if (a.floors.pad != nullptr) v = std::max<int>(v, a.floors.pad[k]);
+    if (f.left != nullptr) v = std::max<int>(v, f.left[k]);
+    if (f.right != nullptr) v = std::max<int>(v, f.right[k]);
+    c[k] = static_cast<std::uint8_t>(v);
+  }
+}
+
+// One path step: costs `c` of this pixel, its predecessor's path costs `pred` (pred[-1] and
+// pred[dp] are guards of 255) with minimum `pred_min`, into `out`; returns out's minimum.
+std::uint8_t PathStep(const std::uint8_t* c, const std::uint8_t* pred, std::uint8_t pred_min,
+                      int dp, int p1, int p2, std::uint8_t* out) {
+  const int jump = AddSat(pred_min, p2);
+  std::uint8_t m = 255;
+  for (int k = 0; k < dp; ++k) {
+    int v = std::min<int>(pred[k], AddSat(std::min(pred[k - 1], pred[k + 1]), p1));
+    v = std::min(v, jump);
+    out[k] = AddSat(c[k], v - pred_min);
+    m = std::min(m, out[k]);
+  }
+  return m;
+}
+
+struct Paths {
+  const RowArgs& a;
+  std::uint8_t* costs(const PathRow& row, int x) const {
+    return row.costs + x * static_cast<std::ptrdiff_t>(a.shape->block);
+  }
+  // One step of a path at pixel x, from its predecessor at column px of `from`, into `into`.
+  const std::uint8_t* Step(const std::uint8_t* c, const PathRow& from, int px, const PathRow& into,
+                           int x) const {
+    into.minima[x] =
+        PathStep(c, costs(from, px), from.minima[px], a.shape->dp, a.p1, a.p2, costs(into, x));
+    return costs(into, x);
+  }
+};
+
+void ForwardRow(const RowArgs& a) {
+  const Shape& s = *a.shape;
+  const Paths p{a};
+  std::uint8_t c[kMaxDp];
+  for (int x = 0; x < s.width; ++x) {
+    Costs(a, x, c);
+    const std::uint8_t* h = p.Step(c, a.horizontal, x - 1, a.horizontal, x);
+    const std::uint8_t* v = p.Step(c, a.prev[0], x, a.cur[0], x);
+    std::uint8_t* s1 = a.s1 + static_cast<std::size_t>(x) * s.dp;
+    if (a.eight_paths) {
+      const std::uint8_t* d1 = p.Step(c, a.prev[1], x - 1, a.cur[1], x);
+      const std::uint8_t* d2 = p.Step(c, a.prev[2], x + 1, a.cur[2], x);
+      for (int k = 0; k < s.dp; ++k) s1[k] = AddSat(AddSat(h[k], v[k]), AddSat(d1[k], d2[k]));
+    } else {
+      for (int k = 0; k < s.dp; ++k) s1[k] = AddSat(h[k], v[k]);
+    }
+  }
+}
+
+void BackwardRow(const RowArgs& a) {
+  const Shape& s = *a.shape;
+  const Paths p{a};
+  std::uint8_t c[kMaxDp];
+  for (int x = s.width - 1; x >= 0; --x) {
+    Costs(a, x, c);
+    const std::uint8_t* h = p.Step(c, a.horizontal, x + 1, a.horizontal, x);
+    const std::uint8_t* v = p.Step(c, a.prev[0], x, a.cur[0], x);
+    const std::uint8_t* s1 = a.s1 + static_cast<std::size_t>(x) * s.dp;
+    std::uint8_t* t = a.totals + static_cast<std::size_t>(x) * s.dp;
+    if (a.eight_paths) {
+      const std::uint8_t* d1 = p.Step(c, a.prev[1], x + 1, a.cur[1], x);
+      const std::uint8_t* d2 = p.Step(c, a.prev[2], x - 1, a.cur[2], x);
+      for (int k = 0; k < s.dp; ++k) {
+        t[k] = AddSat(AddSat(s1[k], h[k]), AddSat(AddSat(v[k], d1[k]), d2[k]));
+      }
+    } else {
+      for (int k = 0; k < s.dp; ++k) t[k] = AddSat(AddSat(s1[k], h[k]), v[k]);
+    }
+  }
+}
+
+void WtaRow(const WtaArgs& a) {
+  for (int x = 0; x < a.width; ++x) {
+    const std::uint8_t* t = a.totals + static_cast<std::size_t>(x) * a.stride;
+    int best = 0;
+    int m = t[0];
+    for (int k = 1; k < a.d; ++k) {
+      if (t[k] < m) {
+        m = t[k];
+        best = k;
+      }
+    }
+    const int limit = a.limits[m];
+    bool unique = true;
+    for (int k = 0; k < a.d && unique; ++k) {
+      if (std::abs(k - best) > 1 && t[k] <= limit) unique = false;
+    }
+    a.best[x] = static_cast<std::int16_t>(unique ? best : -1);
+    a.fraction[x] = static_cast<std::int8_t>(FractionAt(t, best, a.d));
+    a.min_cost[x] = static_cast<std::uint8_t>(m);
+  }
+}
+
+}  // namespace
+
+const Kernels& ScalarKernels() {
+  static const Kernels k{"scalar", 32, Census, ForwardRow, BackwardRow, WtaRow};
+  return k;
+}
+
+}  // namespace cloudcast::stereo::sgm

@@ -1,0 +1,301 @@
+// The SIMD kernels, written once over a vector policy and instantiated by sgm_avx2.cc (32-byte
+// vectors) and sgm_avx512.cc (64-byte vectors). Each computes exactly what sgm_scalar.cc does
+// (sgm_kernels.h has the formulas).
+//
+// The vector policy V (bytes) provides: T, kLanes, Zero, Set1, Load, Store, AddSat, SubSat, Min,
+// Max, Add8, Xor, Lookup (pshufb with a 16-byte table in each 128-bit lane), NibbleCounts (that
+// table for popcounts), PushBit (acc * 2 + (a > b) per signed byte), HalveUp ((a + 1) >> 1), HMin
+// (the smallest byte), ShiftInBelow(a, b) (b moved up one lane, a's last lane in lane 0),
+// ShiftInAbove(a, b) (a moved down one lane, b's lane 0 in the last), EqMask(a, b) and
+// LessEqMask(a, b) (unsigned a <= b): one bit per lane, lane 0 lowest.
+//
+// Include only from a file compiled with the matching instruction-set flags. Everything here has
+// internal linkage (the anonymous namespace), so no AVX code is shared with other files (see
+// sgm_kernels.h).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+#include "sgm_kernels.h"
+
+namespace cloudcast::stereo::sgm::simd {
+namespace {  // NOLINT(google-build-namespaces): per instruction set, by design
+
+// ---- census -------------------------------------------------------------------------------------
+
+template <class V, int kRadius>
+void CensusT(const CensusArgs& a) {
+  using T = typename V::T;
+  constexpr int kBits = CensusBits(kRadius);
+  constexpr int kPlanes = kBits / 4;
+  const std::ptrdiff_t stride = static_cast<std::ptrdiff_t>(a.stride);
+  // The pixel pairs in the scalar kernel's order, as offsets from the centre.
+  std::ptrdiff_t first[kBits], second[kBits];
+  int n = 0;
+  for (int dy = -kRadius; dy <= 0; ++dy) {
+    for (int dx = -kRadius; dx <= kRadius; ++dx) {
+      if (dy == 0 && dx >= 0) break;
+      const int e = a.mirrored ? -dx : dx;
+      first[n] = dy * stride + e;
+      second[n] = -dy * stride - e;
+      ++n;
+    }
+  }
+  // Columns are computed a vector at a time, the last vector past the width: the padded image and
+  // the planes have room for it (sgm_matcher.cc).
+  for (int y = 0; y < a.height; ++y) {
+    const std::int8_t* row = a.padded + (y + kRadius) * stride + kRadius;
+    const std::size_t out = static_cast<std::size_t>(y) * a.plane_stride;
+    for (int x = 0; x < a.width; x += V::kLanes) {
+      const std::int8_t* c = row + x;
+      T acc[kPlanes];
+      for (int j = 0; j < kPlanes; ++j) acc[j] = V::Zero();
+      for (int i = 0; i < kBits; ++i) {
+        // Bit kBits - 1 - i of the code: plane (kBits - 1 - i) / 4, pushed most significant first.
+        const int plane = (kBits - 1 - i) / 4;
+        acc[plane] = V::PushBit(acc[plane], V::Load(c + first[i]), V::Load(c + second[i]));
+      }
+      for (int j = 0; j < kPlanes; ++j) V::Store(a.planes[j] + out + x, acc[j]);
+    }
+  }
+}
+
+// ---- aggregation --------------------------------------------------------------------------------
+
+// One pixel's view of a row: the predecessors and outputs of its paths, in the order horizontal,
+// vertical, diagonal 1, diagonal 2.
+template <int kPaths>
+struct PixelPaths {
+  const std::uint8_t* pred[kPaths];
+  std::uint8_t pred_min[kPaths];
+  std::uint8_t* out[kPaths];
+  std::uint8_t min[kPaths];
+};
+
+template <class V, int kPlanes>
+inline typename V::T Cost(const RowArgs& a, const typename V::T* left, int base, int k,
+                          const PixelFloors& f, typename V::T counts) {
+  using T = typename V::T;
+  T c = V::Zero();
+  for (int j = 0; j < kPlanes; ++j) {
+    c = V::Add8(c, V::Lookup(counts, V::Xor(V::Load(a.right[j] + base + k), left[j])));
+  }
+  if constexpr (kPlanes == 6) c = V::HalveUp(c);  // 24 bits: (c + 1) >> 1
+  if (a.floors.pad != nullptr) c = V::Max(c, V::Load(a.floors.pad + k));
+  if (f.left != nullptr) c = V::Max(c, V::Load(f.left + k));
+  if (f.right != nullptr) c = V::Max(c, V::Load(f.right + k));
+  return c;
+}
+
+template <class V>
+inline typename V::T Step(typename V::T c, const std::uint8_t* pred, int k, typename V::T p1,
+                          typename V::T pred_min, typename V::T jump, std::uint8_t* out,
+                          typename V::T* min) {
+  using T = typename V::T;
+  const T here = V::Load(pred + k);
+  const T below = V::Load(pred + k - 1);
+  const T above = V::Load(pred + k + 1);
+  T v = V::Min(here, V::AddSat(V::Min(below, above), p1));
+  v = V::Min(v, jump);
+  const T l = V::AddSat(c, V::SubSat(v, pred_min));
+  V::Store(out + k, l);
+  *min = V::Min(*min, l);
+  return l;
+}
+
+// Per pixel, the vectors of its disparities: kChunks when the count is known at compile time (the
+// loops then unroll and the edge tests vanish), else dp / kLanes.
+template <class V, int kChunks>
+inline int Chunks(const Shape& s) {
+  return kChunks > 0 ? kChunks : s.dp / V::kLanes;
+}
+
+// The horizontal path's predecessor is the pixel just done, whose costs were stored a moment ago:
+// loading them at k - 1 and k + 1 (unaligned) would wait for the stores to reach the cache (a
+// blocked store forward, measured at a third of the forward pass). So its neighbours come from
+// aligned loads of the whole vectors, shifted by one lane in registers.
+template <class V>
+inline typename V::T HorizontalStep(typename V::T c, const std::uint8_t* pred, int chunk,
+                                    int chunks, typename V::T p1, typename V::T pred_min,
+                                    typename V::T jump, std::uint8_t* out, typename V::T* min) {
+  using T = typename V::T;
+  const int k = chunk * V::kLanes;
+  const T guard = V::Set1(255);
+  const T here = V::Load(pred + k);
+  const T before = chunk > 0 ? V::Load(pred + k - V::kLanes) : guard;
+  const T after = chunk + 1 < chunks ? V::Load(pred + k + V::kLanes) : guard;
+  const T below = V::ShiftInBelow(before, here);  // lane i: pred[k + i - 1]
+  const T above = V::ShiftInAbove(here, after);   // lane i: pred[k + i + 1]
+  T v = V::Min(here, V::AddSat(V::Min(below, above), p1));
+  v = V::Min(v, jump);
+  const T l = V::AddSat(c, V::SubSat(v, pred_min));
+  V::Store(out + k, l);
+  *min = V::Min(*min, l);
+  return l;
+}
+
+// One pixel, all its disparities. Forward: S1 = the paths' sum. Backward: totals = S1 + the
+// paths.
+template <class V, int kPlanes, int kPaths, bool kForward, int kChunks>
+inline void Pixel(const RowArgs& a, int x, const PixelFloors& f, typename V::T p1, typename V::T p2,
+                  PixelPaths<kPaths>* p) {
+  using T = typename V::T;
+  const Shape& s = *a.shape;
+  const int chunks = Chunks<V, kChunks>(s);
+  const int base = s.width - 1 - x + s.dmin;
+  T left[kPlanes];
+  for (int j = 0; j < kPlanes; ++j) left[j] = V::Set1(a.left[j][x]);
+  const T counts = V::NibbleCounts();
+  T pred_min[kPaths], jump[kPaths], min[kPaths];
+  for (int i = 0; i < kPaths; ++i) {
+    pred_min[i] = V::Set1(p->pred_min[i]);
+    jump[i] = V::AddSat(pred_min[i], p2);
+    min[i] = V::Set1(255);
+  }
+  std::uint8_t* s1 = a.s1 + static_cast<std::size_t>(x) * s.dp;
+  for (int chunk = 0; chunk < chunks; ++chunk) {
+    const int k = chunk * V::kLanes;
+    const T c = Cost<V, kPlanes>(a, left, base, k, f, counts);
+    T l[kPaths];
+    l[0] = HorizontalStep<V>(c, p->pred[0], chunk, chunks, p1, pred_min[0], jump[0], p->out[0],
+                             &min[0]);
+    for (int i = 1; i < kPaths; ++i) {
+      l[i] = Step<V>(c, p->pred[i], k, p1, pred_min[i], jump[i], p->out[i], &min[i]);
+    }
+    T sum = V::AddSat(l[0], l[1]);
+    if constexpr (kPaths == 4) sum = V::AddSat(sum, V::AddSat(l[2], l[3]));
+    if constexpr (kForward) {
+      V::Store(s1 + k, sum);
+    } else {
+      V::Store(a.totals + static_cast<std::size_t>(x) * s.dp + k, V::AddSat(sum, V::Load(s1 + k)));
+    }
+  }
+  for (int i = 0; i < kPaths; ++i) p->min[i] = V::HMin(min[i]);
+}
+
+// A row in either direction; dp is a multiple of V's lanes.
+template <class V, int kPlanes, int kPaths, bool kForward, int kChunks>
+void RowT(const RowArgs& a) {
+  const Shape& s = *a.shape;
+  const typename V::T p1 = V::Set1(a.p1), p2 = V::Set1(a.p2);
+  const std::ptrdiff_t block = static_cast<std::ptrdiff_t>(s.block);
+  const int step = kForward ? 1 : -1;  // predecessor of the horizontal path: x - step
+  const PathRow* rows_in[4] = {&a.horizontal, &a.prev[0], &a.prev[1], &a.prev[2]};
+  const PathRow* rows_out[4] = {&a.horizontal, &a.cur[0], &a.cur[1], &a.cur[2]};
+  // Predecessor columns relative to x: horizontal x - step, vertical x, diagonal 1 x - step,
+  // diagonal 2 x + step.
+  const int offset[4] = {-step, 0, -step, step};
+  for (int i = 0; i < s.width; ++i) {
+    const int x = kForward ? i : s.width - 1 - i;
+    PixelPaths<kPaths> p;
+    for (int j = 0; j < kPaths; ++j) {
+      const int px = x + offset[j];
+      p.pred[j] = rows_in[j]->costs + px * block;
+      p.pred_min[j] = rows_in[j]->minima[px];
+      p.out[j] = rows_out[j]->costs + x * block;
+    }
+    Pixel<V, kPlanes, kPaths, kForward, kChunks>(a, x, FloorsFor(s, a.floors, x), p1, p2, &p);
+    for (int j = 0; j < kPaths; ++j) rows_out[j]->minima[x] = p.min[j];
+  }
+}
+
+template <class V, int kPlanes, int kPaths, bool kForward>
+void RowForChunks(const RowArgs& a) {
+  switch (a.shape->dp / V::kLanes) {
+    case 1:
+      return RowT<V, kPlanes, kPaths, kForward, 1>(a);
+    case 2:
+      return RowT<V, kPlanes, kPaths, kForward, 2>(a);
+    case 3:
+      return RowT<V, kPlanes, kPaths, kForward, 3>(a);
+    case 4:
+      return RowT<V, kPlanes, kPaths, kForward, 4>(a);
+    default:
+      return RowT<V, kPlanes, kPaths, kForward, 0>(a);
+  }
+}
+
+template <class V, bool kForward>
+void Row(const RowArgs& a) {
+  const bool eight = a.eight_paths;
+  switch (a.shape->planes) {
+    case 1:
+      return eight ? RowForChunks<V, 1, 4, kForward>(a) : RowForChunks<V, 1, 2, kForward>(a);
+    case 3:
+      return eight ? RowForChunks<V, 3, 4, kForward>(a) : RowForChunks<V, 3, 2, kForward>(a);
+    default:
+      return eight ? RowForChunks<V, 6, 4, kForward>(a) : RowForChunks<V, 6, 2, kForward>(a);
+  }
+}
+
+template <class V>
+void Census(const CensusArgs& a) {
+  switch (a.radius) {
+    case 1:
+      return CensusT<V, 1>(a);
+    case 2:
+      return CensusT<V, 2>(a);
+    default:
+      return CensusT<V, 3>(a);
+  }
+}
+
+// ---- winner takes all ---------------------------------------------------------------------------
+
+// Over dp (its padding holds 255: never the minimum, never under a limit), with selects instead of
+// branches on the data: where the minimum lies is a coin toss for the branch predictor.
+template <class V, int kChunks>
+void WtaT(const WtaArgs& a) {
+  using T = typename V::T;
+  const int chunks = kChunks > 0 ? kChunks : a.stride / V::kLanes;
+  for (int x = 0; x < a.width; ++x) {
+    const std::uint8_t* t = a.totals + static_cast<std::size_t>(x) * a.stride;
+    T v = V::Load(t);
+    for (int c = 1; c < chunks; ++c) v = V::Min(v, V::Load(t + c * V::kLanes));
+    const int m = V::HMin(v);
+    const int limit = a.limits[m];
+    const T mb = V::Set1(static_cast<std::uint8_t>(m));
+    // The lowest index holding m: the first chunk with a bit, scanned from the end.
+    int best = 0;
+    for (int c = chunks - 1; c >= 0; --c) {
+      const std::uint64_t e = V::EqMask(V::Load(t + c * V::kLanes), mb);
+      // (bit 63 set keeps ctz defined; it changes nothing where a lower bit is set)
+      const int first = static_cast<int>(__builtin_ctzll(e | (std::uint64_t{1} << 63)));
+      best = e != 0 ? c * V::kLanes + first : best;
+    }
+    // Any total <= limit, the best and its two neighbours aside (limit < 0: none).
+    const T lb = V::Set1(static_cast<std::uint8_t>(MaxInt(limit, 0)));
+    std::uint64_t any = 0;
+    for (int c = 0; c < chunks; ++c) {
+      const std::uint64_t under = V::LessEqMask(V::Load(t + c * V::kLanes), lb);
+      const int shift = best - 1 - c * V::kLanes;  // bit of best - 1 in this chunk
+      const std::uint64_t exempt = shift >= 0 ? (shift < 64 ? std::uint64_t{7} << shift : 0)
+                                              : (shift >= -2 ? std::uint64_t{7} >> -shift : 0);
+      any |= under & ~exempt;
+    }
+    const bool unique = limit < 0 || any == 0;
+    a.best[x] = static_cast<std::int16_t>(unique ? best : -1);
+    a.fraction[x] = static_cast<std::int8_t>(FractionAt(t, best, a.d));
+    a.min_cost[x] = static_cast<std::uint8_t>(m);
+  }
+}
+
+template <class V>
+void Wta(const WtaArgs& a) {
+  switch (a.stride / V::kLanes) {
+    case 1:
+      return WtaT<V, 1>(a);
+    case 2:
+      return WtaT<V, 2>(a);
+    case 3:
+      return WtaT<V, 3>(a);
+    case 4:
+      return WtaT<V, 4>(a);
+    default:
+      return WtaT<V, 0>(a);
+  }
+}
+
+}  // namespace
+}  // namespace cloudcast::stereo::sgm::simd
