@@ -50,6 +50,40 @@ struct V512 {
   }
   static T ShiftInAbove(T a, T b) { return _mm512_alignr_epi8(_mm512_alignr_epi64(b, a, 2), a, 1); }
   static T HalveUp(T a) { return _mm512_avg_epu8(a, _mm512_setzero_si512()); }
+  // 64 pixels at a time, by a tree that halves each pixel's bytes while it merges vectors (three
+  // instructions per pair), so a pixel costs about 3 instructions instead of a reduction of its
+  // own. Comments give the pixels (of the group of 64) each vector holds, in order.
+  static void RowMinima(const std::uint8_t* vectors, int n, std::uint8_t* minima) {
+    // After the tree, byte j of a group of 16 holds pixel j / 4 + 4 * (j % 4).
+    const __m128i order = _mm_setr_epi8(0, 4, 8, 12, 1, 5, 9, 13, 2, 6, 10, 14, 3, 7, 11, 15);
+    for (int g = 0; g < n; g += 64) {
+      const std::uint8_t* v = vectors + static_cast<std::size_t>(g) * 64;
+      T l1[32], l2[16], l3[8], l4[4];
+      for (int i = 0; i < 32; ++i) {  // 32 bytes each of pixels 2i, 2i + 1
+        const T a = Load(v + 128 * i), b = Load(v + 128 * i + 64);
+        l1[i] = Min(_mm512_shuffle_i64x2(a, b, 0x44), _mm512_shuffle_i64x2(a, b, 0xEE));
+      }
+      for (int i = 0; i < 16; ++i) {  // 16 bytes each of pixels 4i .. 4i + 3
+        l2[i] = Min(_mm512_shuffle_i64x2(l1[2 * i], l1[2 * i + 1], 0x88),
+                    _mm512_shuffle_i64x2(l1[2 * i], l1[2 * i + 1], 0xDD));
+      }
+      for (int i = 0; i < 8; ++i) {  // 8 bytes each: lane L pixels 8i + L, 8i + 4 + L
+        l3[i] = Min(_mm512_unpacklo_epi64(l2[2 * i], l2[2 * i + 1]),
+                    _mm512_unpackhi_epi64(l2[2 * i], l2[2 * i + 1]));
+      }
+      for (int i = 0; i < 4; ++i) {  // 4 bytes each: lane L pixels 16i + L + 0, 4, 8, 12
+        const __m512 a = _mm512_castsi512_ps(l3[2 * i]), b = _mm512_castsi512_ps(l3[2 * i + 1]);
+        l4[i] = Min(_mm512_castps_si512(_mm512_shuffle_ps(a, b, 0x88)),
+                    _mm512_castps_si512(_mm512_shuffle_ps(a, b, 0xDD)));
+      }
+      for (int i = 0; i < 4; ++i) {
+        T m = Min(l4[i], _mm512_srli_epi32(l4[i], 16));
+        m = Min(m, _mm512_srli_epi32(m, 8));  // byte 0 of each 4: their minimum
+        const __m128i out = _mm_shuffle_epi8(_mm512_cvtepi32_epi8(m), order);
+        _mm_storeu_si128(reinterpret_cast<__m128i*>(minima + g + 16 * i), out);
+      }
+    }
+  }
   static std::uint64_t EqMask(T a, T b) { return _mm512_cmpeq_epi8_mask(a, b); }
   static std::uint64_t LessEqMask(T a, T b) { return _mm512_cmple_epu8_mask(a, b); }
 };
@@ -57,12 +91,11 @@ struct V512 {
 void Census(const CensusArgs& a) { simd::Census<V512>(a); }
 void Forward(const RowArgs& a) { simd::Row<V512, true>(a); }
 void Backward(const RowArgs& a) { simd::Row<V512, false>(a); }
-void Wta(const WtaArgs& a) { simd::Wta<V512>(a); }
 
 }  // namespace
 
 const Kernels* Avx512Kernels() {
-  static const Kernels k{"avx512", 64, Census, Forward, Backward, Wta};
+  static const Kernels k{"avx512", 64, Census, Forward, Backward};
   return &k;
 }
 

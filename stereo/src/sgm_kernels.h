@@ -28,6 +28,7 @@
 // code running on a CPU without AVX.
 #pragma once
 
+#include <climits>
 #include <cstddef>
 #include <cstdint>
 
@@ -65,13 +66,14 @@ inline constexpr int kMaxPathCost = 31;
 
 // Floors raise the cost of indices a pixel must not match: pad[k] is 255 for k >= d (the padding
 // up to dp: such indices then always carry 255 and never win or lower a neighbour; null when
-// dp == d); left and right
-// are tables of 2 * dp bytes that, offset per pixel (FloorsFor), give max_cost for the indices
-// whose right pixel falls off the image's left or right edge.
+// dp == d); left and right are tables of 2 * dp bytes that, offset per pixel (FloorsFor), give
+// max_cost for the indices whose right pixel falls off the image's left or right edge. Their
+// twins at + total_offset hold kMaskedTotal instead, for the totals: such indices must not win.
 struct Floors {
   const std::uint8_t* pad = nullptr;
   const std::uint8_t* left = nullptr;   // left[i] = i >= dp ? max_cost : 0
   const std::uint8_t* right = nullptr;  // right[i] = i < dp ? max_cost : 0
+  std::ptrdiff_t total_offset = 0;
 };
 
 static inline int MinInt(int a, int b) { return a < b ? a : b; }
@@ -125,6 +127,32 @@ struct PathRow {
   std::uint8_t* minima = nullptr;
 };
 
+// A pixel's totals hold kMaskedTotal at the indices it must not match (right pixel off the image,
+// padding): real totals never reach it (8 paths <= 248).
+inline constexpr std::uint8_t kMaskedTotal = 255;
+
+// The backward pass's choice, pixel by pixel as it walks each row from right to left (the order
+// of OpenCV's StereoSGBM, which the right matches depend on): the lowest index k of the smallest
+// total, unless uniqueness refuses it or no index is valid; then
+//   disparity[x]        = (k + dmin) * 16 + SubPixel (where both neighbours of k are valid),
+//                         else kNoMatch;
+//   right_disparity[xr] = k + dmin and right_cost[xr] = the total, for the right pixel
+//                         xr = x - dmin - k, when the total is below right_cost[xr] (the caller
+//                         fills right_cost with INT32_MAX and right_disparity with kNoMatch).
+inline constexpr std::int32_t kNoMatch = INT32_MIN;
+struct Choice {
+  const std::int16_t* limits = nullptr;  // UniquenessLimit(m, ratio) for m in [0, 255]
+  std::int32_t* disparity = nullptr;
+  std::int32_t* right_disparity = nullptr;
+  std::int32_t* right_cost = nullptr;
+};
+
+// The SIMD kernels reduce the minima of the vertical and diagonal paths a row at a time: their
+// scratch holds kMinimaLanes bytes per pixel for RoundUp(width, kMinimaLanes) pixels, and they
+// write minima up to that rounded width (so minima rows have room for it; pixel width's entry,
+// a zero predecessor's 0, is restored).
+inline constexpr int kMinimaLanes = 64;
+
 // Directions: 0 down (from the pixel above / below in the backward pass), 1 down-right diagonal
 // (predecessor x - 1 forward, x + 1 backward), 2 the other diagonal.
 struct RowArgs {
@@ -142,23 +170,11 @@ struct RowArgs {
   PathRow horizontal;  // this row's left-to-right (forward) or right-to-left (backward) path
   std::uint8_t* s1 = nullptr;      // forward: written, backward: read; width * dp bytes
   std::uint8_t* totals = nullptr;  // backward: written, width * dp
-};
-
-// Per pixel x of a row of totals (width * stride values, d of them used; the rest 255): best[x]
-// = the lowest k of the smallest total, or -1 when uniqueness refuses it; fraction[x] = the
-// sub-pixel offset (SubPixel) where both neighbours of best are valid, else 0; min_cost[x] = the
-// smallest total. Totals of indices outside a pixel's valid range must have been set to
-// kMaskedTotal (so "valid" is "not kMaskedTotal").
-inline constexpr std::uint8_t kMaskedTotal = 255;
-struct WtaArgs {
-  const std::uint8_t* totals = nullptr;
-  int width = 0;
-  int stride = 0;
-  int d = 0;
-  const std::int16_t* limits = nullptr;  // UniquenessLimit(m, ratio) for m in [0, 255]
-  std::int16_t* best = nullptr;
-  std::int8_t* fraction = nullptr;
-  std::uint8_t* min_cost = nullptr;
+  // Backward: the choice per pixel (Choose).
+  Choice choice;
+  // SIMD scratch: per pixel and vertical or diagonal path, the lane-wise minimum of its costs
+  // (kMinimaLanes bytes), reduced to the minima a row at a time. kMinimaRowPixels per path.
+  std::uint8_t* min_vectors[3] = {};
 };
 
 // Uniqueness: another k more than 1 away with total * (100 - ratio) < best * 100 refuses the
@@ -180,10 +196,22 @@ static inline int SubPixel(int before, int here, int after) {
                           static_cast<float>(2 * denom2));
 }
 
-// The sub-pixel step of pixel total row t with best index b (d indices).
-static inline int FractionAt(const std::uint8_t* t, int b, int d) {
-  if (b <= 0 || b >= d - 1 || t[b - 1] == kMaskedTotal || t[b + 1] == kMaskedTotal) return 0;
-  return SubPixel(t[b - 1], t[b], t[b + 1]);
+// The choice at pixel x (Choice) from its totals t, their minimum m, its lowest index best and
+// whether uniqueness keeps it: the part every kernel shares, in scalar code.
+static inline void Choose(const Shape& s, const Choice& c, int x, const std::uint8_t* t, int m,
+                          int best, bool unique) {
+  if (!unique || m == kMaskedTotal) {
+    c.disparity[x] = kNoMatch;
+    return;
+  }
+  const int xr = x - s.dmin - best;
+  if (c.right_cost[xr] > m) {
+    c.right_cost[xr] = m;
+    c.right_disparity[xr] = best + s.dmin;
+  }
+  const bool inner =
+      best > 0 && best < s.d - 1 && t[best - 1] != kMaskedTotal && t[best + 1] != kMaskedTotal;
+  c.disparity[x] = (best + s.dmin) * 16 + (inner ? SubPixel(t[best - 1], m, t[best + 1]) : 0);
 }
 
 struct Kernels {
@@ -191,8 +219,7 @@ struct Kernels {
   int lanes;  // Shape::dp must be a multiple of this (32 or 64)
   void (*census)(const CensusArgs& args);
   void (*forward_row)(const RowArgs& args);
-  void (*backward_row)(const RowArgs& args);
-  void (*wta_row)(const WtaArgs& args);
+  void (*backward_row)(const RowArgs& args);  // with the choice
 };
 
 const Kernels& ScalarKernels();

@@ -131,35 +131,42 @@ class SgmMatcher final : public Matcher {
     totals_.Reserve(static_cast<std::size_t>(width) * s.dp);
     const std::size_t row_bytes = 64 + (width + 2) * s.block;
     const bool new_rows = rows_.Reserve(kRows * row_bytes);
-    const bool new_minima = minima_.Reserve(kRows * (width + 2));
+    // Minima rows: pixels -1 .. width, and room for the SIMD kernels' rounding (sgm_kernels.h).
+    minima_stride_ = RoundUp(width + 2 + sgm::kMinimaLanes, 64);
+    const bool new_minima = minima_.Reserve(kRows * minima_stride_);
+    min_vectors_.Reserve(3 * RoundUp(width, sgm::kMinimaLanes) * sgm::kMinimaLanes);
     const bool same = s.width == shape_.width && s.d == shape_.d && s.dp == shape_.dp &&
                       s.dmin == shape_.dmin && s.planes == shape_.planes;
     shape_ = s;
-    best_.resize(width);
-    fraction_.resize(width);
-    min_cost_.resize(width);
-    disp1_.resize(width);
-    disp2_.resize(width + 1);
-    disp2_cost_.resize(width + 1);
+    disparity_.resize(width);
+    right_disparity_.resize(width + 1);
+    right_cost_.resize(width + 1);
     if (same && !new_rows && !new_minima) return;
 
-    // Floors (sgm_kernels.h).
-    floor_table_.assign(5 * s.dp, 0);
+    // Floors (sgm_kernels.h): pad, left, right, and the twins of left and right for the totals.
+    floor_table_.assign(9 * s.dp, 0);
     std::uint8_t* pad = floor_table_.data();
     std::uint8_t* left = pad + s.dp;
     std::uint8_t* right = left + 2 * s.dp;
+    const std::ptrdiff_t twins = 4 * s.dp;
     for (int k = s.d; k < s.dp; ++k) pad[k] = 255;
-    for (int i = s.dp; i < 2 * s.dp; ++i) left[i] = s.max_cost;
-    for (int i = 0; i < s.dp; ++i) right[i] = s.max_cost;
-    floors_ = {s.dp > s.d ? pad : nullptr, left, right};
+    for (int i = s.dp; i < 2 * s.dp; ++i) {
+      left[i] = s.max_cost;
+      left[i + twins] = sgm::kMaskedTotal;
+    }
+    for (int i = 0; i < s.dp; ++i) {
+      right[i] = s.max_cost;
+      right[i + twins] = sgm::kMaskedTotal;
+    }
+    floors_ = {s.dp > s.d ? pad : nullptr, left, right, twins};
 
     // Path rows: guards and padding 255, pixels -1 and width zero predecessors; the last row is
     // the zero row (every pixel a zero predecessor) that the first row of a pass comes from.
     std::memset(rows_.data(), 255, kRows * row_bytes);
-    std::memset(minima_.data(), 0, kRows * (width + 2));
+    std::memset(minima_.data(), 0, kRows * minima_stride_);
     for (int r = 0; r < kRows; ++r) {
       path_rows_[r].costs = rows_.data() + r * row_bytes + 64 + s.block;
-      path_rows_[r].minima = minima_.data() + r * (width + 2) + 1;
+      path_rows_[r].minima = minima_.data() + r * minima_stride_ + 1;
       for (int x = -1; x <= width; ++x) {
         if (r != kZeroRow && x != -1 && x != width) continue;
         std::memset(path_rows_[r].costs + x * static_cast<std::ptrdiff_t>(s.block), 0, s.d);
@@ -213,6 +220,8 @@ class SgmMatcher final : public Matcher {
       a.right[j] = right_planes_.data() + (j * shape_.height + y) * right_stride_ + right_origin_;
     }
     a.horizontal = path_rows_[kHorizontalRow];
+    const std::size_t vectors = RoundUp(shape_.width, sgm::kMinimaLanes) * sgm::kMinimaLanes;
+    for (int i = 0; i < 3; ++i) a.min_vectors[i] = min_vectors_.data() + i * vectors;
     a.s1 = s1_.data() + static_cast<std::size_t>(y) * shape_.width * shape_.dp;
     return a;
   }
@@ -233,7 +242,6 @@ class SgmMatcher final : public Matcher {
   }
 
   void BackwardPass(DisparityMap16* out) {
-    std::uint8_t* totals = totals_.data();
     int prev = -1;
     for (int y = shape_.height - 1; y >= 0; --y) {
       sgm::RowArgs a = RowArgsFor(y);
@@ -242,80 +250,35 @@ class SgmMatcher final : public Matcher {
         a.prev[i] = prev < 0 ? path_rows_[kZeroRow] : path_rows_[prev + i];
         a.cur[i] = path_rows_[cur + i];
       }
-      a.totals = totals;
+      a.totals = totals_.data();
+      std::fill(right_disparity_.begin(), right_disparity_.end(), sgm::kNoMatch);
+      std::fill(right_cost_.begin(), right_cost_.end(), INT32_MAX);
+      a.choice.limits = limits_;
+      a.choice.disparity = disparity_.data();
+      a.choice.right_disparity = right_disparity_.data();
+      a.choice.right_cost = right_cost_.data();
       kernels_->backward_row(a);
       prev = cur;
-      MaskBorders(totals);
-      sgm::WtaArgs w;
-      w.totals = totals;
-      w.width = shape_.width;
-      w.stride = shape_.dp;
-      w.d = shape_.d;
-      w.limits = limits_;
-      w.best = best_.data();
-      w.fraction = fraction_.data();
-      w.min_cost = min_cost_.data();
-      kernels_->wta_row(w);
-      Choose(out->values.data() + static_cast<std::size_t>(y) * shape_.width);
+      CheckLeftRight(out->values.data() + static_cast<std::size_t>(y) * shape_.width);
     }
   }
 
-  // Indices whose right pixel is off the image must not win (sgm_kernels.h, WtaArgs).
-  void MaskBorders(std::uint8_t* totals) const {
-    for (int x = 0; x < shape_.width; ++x) {
-      int lo, hi;
-      sgm::ValidRange(shape_, x, &lo, &hi);
-      if (lo == 0 && hi == shape_.d - 1) continue;
-      std::uint8_t* t = totals + static_cast<std::size_t>(x) * shape_.dp;
-      lo = std::clamp(lo, 0, shape_.d);
-      hi = std::clamp(hi, -1, shape_.d - 1);
-      std::fill(t, t + lo, sgm::kMaskedTotal);
-      std::fill(t + std::max(hi + 1, lo), t + shape_.d, sgm::kMaskedTotal);
-    }
-  }
-
-  // One row's disparities from the winners, as OpenCV's StereoSGBM: the parabola through the
-  // best total and its neighbours, then its left-right check (a right pixel's disparity is that of
-  // the left pixel with the lowest total matching it). Written with selects rather than branches
-  // on the data (which branch a pixel takes is a coin toss; mispredictions cost more than both).
-  void Choose(std::uint16_t* out) {
-    const sgm::Shape& s = shape_;
-    constexpr int kNone = INT_MIN;
-    const int w = s.width;
-    // Columns with no valid index at all (x < dmin, or past the right edge for dmin < 0).
-    const int x_begin = std::clamp(s.dmin, 0, w);
-    const int x_end = std::clamp(w - 1 + s.dmin + s.d, x_begin, w);
-    std::fill(disp2_.begin(), disp2_.end(), kNone);
-    std::fill(disp2_cost_.begin(), disp2_cost_.end(), INT_MAX);
-    for (int x = x_end - 1; x >= x_begin; --x) {
-      const int b = best_[x];
-      if (b < 0) {
-        disp1_[x] = kNone;
-        continue;
-      }
-      const int m = min_cost_[x];
-      const int xr = x - s.dmin - b;
-      if (disp2_cost_[xr] > m) {
-        disp2_cost_[xr] = m;
-        disp2_[xr] = b + s.dmin;
-      }
-      disp1_[x] = (b + s.dmin) * 16 + fraction_[x];
-    }
-    std::fill(out, out + x_begin, 0);
-    std::fill(out + x_end, out + w, 0);
-    const int tolerance = params_.disp12_max_diff;
-    for (int x = x_begin; x < x_end; ++x) {
-      const int d1 = disp1_[x];
-      bool keep = d1 > 0;  // kNone too
+  // OpenCV's StereoSGBM left-right check on one row: a match is dropped when the right pixel it
+  // lands on has a right match (the left pixel of lowest total that landed there) more than
+  // disp12_max_diff away; both roundings of the sub-pixel disparity get a chance.
+  void CheckLeftRight(std::uint16_t* out) const {
+    const int w = shape_.width, tolerance = params_.disp12_max_diff;
+    const std::int32_t* disparity = disparity_.data();
+    const std::int32_t* right = right_disparity_.data();  // [w] is kNoMatch: off the image
+    for (int x = 0; x < w; ++x) {
+      const int d1 = disparity[x];
+      bool keep = d1 > 0;  // kNoMatch too
       if (tolerance >= 0 && keep) {
-        // Both roundings of the sub-pixel disparity get a chance, as in OpenCV. disp2_[w] is
-        // kNone: a column off the image has no right match to disagree with.
         const int d_lo = d1 >> 4, d_hi = (d1 + 15) >> 4;
         const int x_lo = x - d_lo, x_hi = x - d_hi;
-        const int r_lo = disp2_[x_lo >= 0 && x_lo < w ? x_lo : w];
-        const int r_hi = disp2_[x_hi >= 0 && x_hi < w ? x_hi : w];
-        const bool bad_lo = r_lo != kNone && std::abs(r_lo - d_lo) > tolerance;
-        const bool bad_hi = r_hi != kNone && std::abs(r_hi - d_hi) > tolerance;
+        const int r_lo = right[x_lo >= 0 ? x_lo : w], r_hi = right[x_hi >= 0 ? x_hi : w];
+        const bool bad_lo = r_lo != sgm::kNoMatch && std::abs(r_lo - d_lo) > tolerance;
+        const bool bad_hi = r_hi != sgm::kNoMatch && std::abs(r_hi - d_hi) > tolerance;
         keep = !(bad_lo && bad_hi);
       }
       out[x] = static_cast<std::uint16_t>(keep ? d1 : 0);
@@ -331,15 +294,14 @@ class SgmMatcher final : public Matcher {
   sgm::Shape shape_;
   int radius_ = 0;
   std::size_t padded_stride_ = 0, left_stride_ = 0, right_stride_ = 0, right_origin_ = 0;
-  Scratch padded_left_, padded_right_, left_planes_, right_planes_, s1_, totals_, rows_, minima_;
+  Scratch padded_left_, padded_right_, left_planes_, right_planes_, s1_, totals_, rows_, minima_,
+      min_vectors_;
+  std::size_t minima_stride_ = 0;
   sgm::PathRow path_rows_[kRows];
   std::vector<std::uint8_t> floor_table_;
   sgm::Floors floors_;
-  std::vector<std::int16_t> best_;
-  std::vector<std::int8_t> fraction_;
-  std::vector<std::uint8_t> min_cost_;
   std::int16_t limits_[256];
-  std::vector<int> disp1_, disp2_, disp2_cost_;
+  std::vector<std::int32_t> disparity_, right_disparity_, right_cost_;
   SpeckleFilter speckle_;
 };
 

@@ -99,6 +99,30 @@ void ForwardRow(const RowArgs& a) {
   }
 }
 
+// The winner of pixel x's totals t (Choice).
+void ChooseAt(const RowArgs& a, int x, std::uint8_t* t) {
+  const Shape& s = *a.shape;
+  const PixelFloors f = FloorsFor(s, a.floors, x);
+  for (int k = 0; k < s.d; ++k) {
+    if (f.left != nullptr) t[k] = std::max(t[k], f.left[k + a.floors.total_offset]);
+    if (f.right != nullptr) t[k] = std::max(t[k], f.right[k + a.floors.total_offset]);
+  }
+  int best = 0;
+  int m = t[0];
+  for (int k = 1; k < s.d; ++k) {
+    if (t[k] < m) {
+      m = t[k];
+      best = k;
+    }
+  }
+  const int limit = a.choice.limits[m];
+  bool unique = true;
+  for (int k = 0; k < s.d && unique; ++k) {
+    if (std::abs(k - best) > 1 && t[k] <= limit) unique = false;
+  }
+  Choose(s, a.choice, x, t, m, best, unique);
+}
+
 void BackwardRow(const RowArgs& a) {
   const Shape& s = *a.shape;
   const Paths p{a};
@@ -118,35 +142,14 @@ void BackwardRow(const RowArgs& a) {
     } else {
       for (int k = 0; k < s.dp; ++k) t[k] = AddSat(AddSat(s1[k], h[k]), v[k]);
     }
-  }
-}
-
-void WtaRow(const WtaArgs& a) {
-  for (int x = 0; x < a.width; ++x) {
-    const std::uint8_t* t = a.totals + static_cast<std::size_t>(x) * a.stride;
-    int best = 0;
-    int m = t[0];
-    for (int k = 1; k < a.d; ++k) {
-      if (t[k] < m) {
-        m = t[k];
-        best = k;
-      }
-    }
-    const int limit = a.limits[m];
-    bool unique = true;
-    for (int k = 0; k < a.d && unique; ++k) {
-      if (std::abs(k - best) > 1 && t[k] <= limit) unique = false;
-    }
-    a.best[x] = static_cast<std::int16_t>(unique ? best : -1);
-    a.fraction[x] = static_cast<std::int8_t>(FractionAt(t, best, a.d));
-    a.min_cost[x] = static_cast<std::uint8_t>(m);
+    ChooseAt(a, x, t);
   }
 }
 
 }  // namespace
 
 const Kernels& ScalarKernels() {
-  static const Kernels k{"scalar", 32, Census, ForwardRow, BackwardRow, WtaRow};
+  static const Kernels k{"scalar", 32, Census, ForwardRow, BackwardRow};
   return k;
 }
 

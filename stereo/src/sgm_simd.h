@@ -7,7 +7,9 @@
 // table for popcounts), PushBit (acc * 2 + (a > b) per signed byte), HalveUp ((a + 1) >> 1), HMin
 // (the smallest byte), ShiftInBelow(a, b) (b moved up one lane, a's last lane in lane 0),
 // ShiftInAbove(a, b) (a moved down one lane, b's lane 0 in the last), EqMask(a, b) and
-// LessEqMask(a, b) (unsigned a <= b): one bit per lane, lane 0 lowest.
+// LessEqMask(a, b) (unsigned a <= b): one bit per lane, lane 0 lowest; RowMinima(vectors, n,
+// minima): minima[x] = the smallest byte of vector x (kLanes bytes at vectors + x * kLanes) for
+// x in [0, RoundUp(n, kLanes)).
 //
 // Include only from a file compiled with the matching instruction-set flags. Everything here has
 // internal linkage (the anonymous namespace), so no AVX code is shared with other files (see
@@ -135,6 +137,36 @@ inline typename V::T HorizontalStep(typename V::T c, const std::uint8_t* pred, i
   return l;
 }
 
+// The winner of pixel x's totals t, whose minimum is m (Choice), with selects instead of branches
+// on the data: where the minimum lies is a coin toss for the branch predictor. Over dp (its
+// padding holds 255: never the minimum, never under a limit).
+template <class V, int kChunks>
+inline void ChoosePixel(const RowArgs& a, int x, const std::uint8_t* t, int m) {
+  using T = typename V::T;
+  const int chunks = Chunks<V, kChunks>(*a.shape);
+  const int limit = a.choice.limits[m];
+  const T mb = V::Set1(static_cast<std::uint8_t>(m));
+  // The lowest index holding m: the first chunk with a bit, scanned from the end.
+  int best = 0;
+  for (int c = chunks - 1; c >= 0; --c) {
+    const std::uint64_t e = V::EqMask(V::Load(t + c * V::kLanes), mb);
+    // (bit 63 set keeps ctz defined; it changes nothing where a lower bit is set)
+    const int first = static_cast<int>(__builtin_ctzll(e | (std::uint64_t{1} << 63)));
+    best = e != 0 ? c * V::kLanes + first : best;
+  }
+  // Any total <= limit, the best and its two neighbours aside (limit < 0: none).
+  const T lb = V::Set1(static_cast<std::uint8_t>(MaxInt(limit, 0)));
+  std::uint64_t any = 0;
+  for (int c = 0; c < chunks; ++c) {
+    const std::uint64_t under = V::LessEqMask(V::Load(t + c * V::kLanes), lb);
+    const int shift = best - 1 - c * V::kLanes;  // bit of best - 1 in this chunk
+    const std::uint64_t exempt = shift >= 0 ? (shift < 64 ? std::uint64_t{7} << shift : 0)
+                                            : (shift >= -2 ? std::uint64_t{7} >> -shift : 0);
+    any |= under & ~exempt;
+  }
+  Choose(*a.shape, a.choice, x, t, m, best, limit < 0 || any == 0);
+}
+
 // One pixel, all its disparities. Forward: S1 = the paths' sum. Backward: totals = S1 + the
 // paths.
 template <class V, int kPlanes, int kPaths, bool kForward, int kChunks>
@@ -154,6 +186,8 @@ inline void Pixel(const RowArgs& a, int x, const PixelFloors& f, typename V::T p
     min[i] = V::Set1(255);
   }
   std::uint8_t* s1 = a.s1 + static_cast<std::size_t>(x) * s.dp;
+  std::uint8_t* totals = a.totals + static_cast<std::size_t>(x) * s.dp;
+  T total_min = V::Set1(255);
   for (int chunk = 0; chunk < chunks; ++chunk) {
     const int k = chunk * V::kLanes;
     const T c = Cost<V, kPlanes>(a, left, base, k, f, counts);
@@ -168,10 +202,18 @@ inline void Pixel(const RowArgs& a, int x, const PixelFloors& f, typename V::T p
     if constexpr (kForward) {
       V::Store(s1 + k, sum);
     } else {
-      V::Store(a.totals + static_cast<std::size_t>(x) * s.dp + k, V::AddSat(sum, V::Load(s1 + k)));
+      T total = V::AddSat(sum, V::Load(s1 + k));
+      if (f.left != nullptr) total = V::Max(total, V::Load(f.left + a.floors.total_offset + k));
+      if (f.right != nullptr) total = V::Max(total, V::Load(f.right + a.floors.total_offset + k));
+      V::Store(totals + k, total);
+      total_min = V::Min(total_min, total);
     }
   }
-  for (int i = 0; i < kPaths; ++i) p->min[i] = V::HMin(min[i]);
+  if constexpr (!kForward) ChoosePixel<V, kChunks>(a, x, totals, V::HMin(total_min));
+  // The horizontal path's minimum is needed by the next pixel; the others' by the next row, so
+  // those are reduced a row at a time (RowMinima), far cheaper than one by one.
+  p->min[0] = V::HMin(min[0]);
+  for (int i = 1; i < kPaths; ++i) V::Store(a.min_vectors[i - 1] + x * V::kLanes, min[i]);
 }
 
 // A row in either direction; dp is a multiple of V's lanes.
@@ -196,7 +238,11 @@ void RowT(const RowArgs& a) {
       p.out[j] = rows_out[j]->costs + x * block;
     }
     Pixel<V, kPlanes, kPaths, kForward, kChunks>(a, x, FloorsFor(s, a.floors, x), p1, p2, &p);
-    for (int j = 0; j < kPaths; ++j) rows_out[j]->minima[x] = p.min[j];
+    a.horizontal.minima[x] = p.min[0];
+  }
+  for (int j = 1; j < kPaths; ++j) {
+    V::RowMinima(a.min_vectors[j - 1], s.width, rows_out[j]->minima);
+    rows_out[j]->minima[s.width] = 0;  // the zero predecessor's, overwritten by the rounding
   }
 }
 
@@ -238,62 +284,6 @@ void Census(const CensusArgs& a) {
       return CensusT<V, 2>(a);
     default:
       return CensusT<V, 3>(a);
-  }
-}
-
-// ---- winner takes all ---------------------------------------------------------------------------
-
-// Over dp (its padding holds 255: never the minimum, never under a limit), with selects instead of
-// branches on the data: where the minimum lies is a coin toss for the branch predictor.
-template <class V, int kChunks>
-void WtaT(const WtaArgs& a) {
-  using T = typename V::T;
-  const int chunks = kChunks > 0 ? kChunks : a.stride / V::kLanes;
-  for (int x = 0; x < a.width; ++x) {
-    const std::uint8_t* t = a.totals + static_cast<std::size_t>(x) * a.stride;
-    T v = V::Load(t);
-    for (int c = 1; c < chunks; ++c) v = V::Min(v, V::Load(t + c * V::kLanes));
-    const int m = V::HMin(v);
-    const int limit = a.limits[m];
-    const T mb = V::Set1(static_cast<std::uint8_t>(m));
-    // The lowest index holding m: the first chunk with a bit, scanned from the end.
-    int best = 0;
-    for (int c = chunks - 1; c >= 0; --c) {
-      const std::uint64_t e = V::EqMask(V::Load(t + c * V::kLanes), mb);
-      // (bit 63 set keeps ctz defined; it changes nothing where a lower bit is set)
-      const int first = static_cast<int>(__builtin_ctzll(e | (std::uint64_t{1} << 63)));
-      best = e != 0 ? c * V::kLanes + first : best;
-    }
-    // Any total <= limit, the best and its two neighbours aside (limit < 0: none).
-    const T lb = V::Set1(static_cast<std::uint8_t>(MaxInt(limit, 0)));
-    std::uint64_t any = 0;
-    for (int c = 0; c < chunks; ++c) {
-      const std::uint64_t under = V::LessEqMask(V::Load(t + c * V::kLanes), lb);
-      const int shift = best - 1 - c * V::kLanes;  // bit of best - 1 in this chunk
-      const std::uint64_t exempt = shift >= 0 ? (shift < 64 ? std::uint64_t{7} << shift : 0)
-                                              : (shift >= -2 ? std::uint64_t{7} >> -shift : 0);
-      any |= under & ~exempt;
-    }
-    const bool unique = limit < 0 || any == 0;
-    a.best[x] = static_cast<std::int16_t>(unique ? best : -1);
-    a.fraction[x] = static_cast<std::int8_t>(FractionAt(t, best, a.d));
-    a.min_cost[x] = static_cast<std::uint8_t>(m);
-  }
-}
-
-template <class V>
-void Wta(const WtaArgs& a) {
-  switch (a.stride / V::kLanes) {
-    case 1:
-      return WtaT<V, 1>(a);
-    case 2:
-      return WtaT<V, 2>(a);
-    case 3:
-      return WtaT<V, 3>(a);
-    case 4:
-      return WtaT<V, 4>(a);
-    default:
-      return WtaT<V, 0>(a);
   }
 }
 
