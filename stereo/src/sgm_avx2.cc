@@ -14,12 +14,21 @@ struct V256 {
   static T Set1(std::uint8_t v) { return _mm256_set1_epi8(static_cast<char>(v)); }
   static T Load(const void* p) { return _mm256_loadu_si256(static_cast<const __m256i*>(p)); }
   static void Store(void* p, T v) { _mm256_storeu_si256(static_cast<__m256i*>(p), v); }
+  // S1, written once a frame and read back a pass later: past the caches (no read for ownership).
+  // p is aligned: dp is a multiple of the lanes.
+  static void StoreStream(void* p, T v) { _mm256_stream_si256(static_cast<__m256i*>(p), v); }
+  static void StreamFence() { _mm_sfence(); }
   static T AddSat(T a, T b) { return _mm256_adds_epu8(a, b); }
   static T SubSat(T a, T b) { return _mm256_subs_epu8(a, b); }
   static T Min(T a, T b) { return _mm256_min_epu8(a, b); }
   static T Max(T a, T b) { return _mm256_max_epu8(a, b); }
   static T Add8(T a, T b) { return _mm256_add_epi8(a, b); }
   static T Xor(T a, T b) { return _mm256_xor_si256(a, b); }
+  static T Or(T a, T b) { return _mm256_or_si256(a, b); }
+  static T FirstLane255() { return _mm256_setr_epi64x(0xFF, 0, 0, 0); }
+  static T LastLane255() {
+    return _mm256_setr_epi64x(0, 0, 0, static_cast<long long>(0xFF00000000000000ull));
+  }
   static T Lookup(T table, T index) { return _mm256_shuffle_epi8(table, index); }
   static T NibbleCounts() {
     return _mm256_setr_epi8(0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4, 0, 1, 1, 2, 1, 2, 2, 3,

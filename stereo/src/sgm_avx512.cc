@@ -1,7 +1,7 @@
 // The AVX-512BW kernels (compiled with -mavx512f -mavx512bw -mavx512vl -mbmi2 -mpopcnt; chosen at
 // run time only on a CPU that has them): sgm_simd.h over 64-byte vectors (the matcher pads the
 // disparities to a multiple of 64 for them).
-// GCC 12 warns inside its own AVX-512 headers (_mm512_extracti64x4_epi64, _mm512_broadcast_i32x4:
+// GCC 12 warns inside its own AVX-512 headers (_mm512_extracti64x4_epi64 and the like:
 // their _mm*_undefined_* source operand, GCC bug 105593); nothing in this file is uninitialized.
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include <immintrin.h>
@@ -26,16 +26,29 @@ struct V512 {
   static T Set1(std::uint8_t v) { return _mm512_set1_epi8(static_cast<char>(v)); }
   static T Load(const void* p) { return _mm512_loadu_si512(p); }
   static void Store(void* p, T v) { _mm512_storeu_si512(p, v); }
+  // S1, written once a frame and read back a pass later: past the caches (no read for ownership).
+  // p is aligned: dp is a multiple of the lanes.
+  static void StoreStream(void* p, T v) { _mm512_stream_si512(static_cast<__m512i*>(p), v); }
+  static void StreamFence() { _mm_sfence(); }
   static T AddSat(T a, T b) { return _mm512_adds_epu8(a, b); }
   static T SubSat(T a, T b) { return _mm512_subs_epu8(a, b); }
   static T Min(T a, T b) { return _mm512_min_epu8(a, b); }
   static T Max(T a, T b) { return _mm512_max_epu8(a, b); }
   static T Add8(T a, T b) { return _mm512_add_epi8(a, b); }
   static T Xor(T a, T b) { return _mm512_xor_si512(a, b); }
-  static T Lookup(T table, T index) { return _mm512_shuffle_epi8(table, index); }
-  static T NibbleCounts() {
-    return _mm512_broadcast_i32x4(_mm_setr_epi8(0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4));
+  static T Or(T a, T b) { return _mm512_or_si512(a, b); }
+  static T FirstLane255() { return _mm512_setr_epi64(0xFF, 0, 0, 0, 0, 0, 0, 0); }
+  static T LastLane255() {
+    return _mm512_setr_epi64(0, 0, 0, 0, 0, 0, 0, static_cast<long long>(0xFF00000000000000ull));
   }
+  static T Lookup(T table, T index) { return _mm512_shuffle_epi8(table, index); }
+  // Bits set in 0..15, in every 128-bit lane (a constant: _mm512_broadcast_i32x4 trips GCC 12's
+  // uninitialized warning in its own header).
+  static T NibbleCounts() {
+    const long long lo = 0x0302020102010100LL, hi = 0x0403030203020201LL;
+    return _mm512_set_epi64(hi, lo, hi, lo, hi, lo, hi, lo);
+  }
+
   static T PushBit(T acc, T a, T b) {
     const T twice = _mm512_add_epi8(acc, acc);
     return _mm512_mask_add_epi8(twice, _mm512_cmpgt_epi8_mask(a, b), twice, _mm512_set1_epi8(1));

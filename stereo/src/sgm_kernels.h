@@ -54,12 +54,9 @@ struct Shape {
   int dmin = 0;  // disparity of index k = 0
   int planes = 0;
   std::uint8_t max_cost = 0;  // census bits: the cost of a right pixel outside the image
-  std::size_t block = 0;      // bytes per pixel in a path row: dp costs, then >= 1 guard byte
+  int paths = 4;              // path vectors per pixel in a path row (PathRow)
+  std::size_t block = 0;      // bytes per pixel in a path row: paths * dp
 };
-
-static constexpr std::size_t BlockBytes(int dp) {
-  return (static_cast<std::size_t>(dp) + 1 + 63) / 64 * 64;
-}
 
 // Largest path cost the bytes hold exactly: max_cost + P2 must not exceed it (8 paths: 248).
 inline constexpr int kMaxPathCost = 31;
@@ -118,13 +115,16 @@ struct CensusArgs {
   std::size_t plane_stride = 0;
 };
 
-// One row's aggregation paths: pixel x's dp costs at costs + x * block, for x in [-1, width]:
-// pixels -1 and width are the zero predecessors (0 for k < d, 255 above) the kernels never write,
-// so a path enters the image with L = C. minima[x] (x in [-1, width]) is each block's minimum.
-// The byte before and the dp bytes after every pixel's costs read as 255 (guards).
+// One row of aggregation paths: per pixel x in [-1, width] a block of `paths` vectors of dp costs
+// (Shape::block bytes), path j at block + j * dp: 0 horizontal, 1 vertical, 2 the diagonal from
+// x - 1 in the forward pass (x + 1 backward), 3 the other. One block per pixel keeps every path's
+// address a constant offset from one pointer. Pixels -1 and width are the zero predecessors
+// (0 for k < d, 255 above) the kernels never write, so a path enters the image with L = C. The
+// 64 bytes before pixel -1 and after pixel width are readable. minima[j][x] (x in [-1, width]) is
+// the minimum of path j's costs at pixel x.
 struct PathRow {
-  std::uint8_t* costs = nullptr;
-  std::uint8_t* minima = nullptr;
+  std::uint8_t* costs = nullptr;  // pixel 0's block
+  std::uint8_t* minima[4] = {};
 };
 
 // A pixel's totals hold kMaskedTotal at the indices it must not match (right pixel off the image,
@@ -153,28 +153,29 @@ struct Choice {
 // a zero predecessor's 0, is restored).
 inline constexpr int kMinimaLanes = 64;
 
-// Directions: 0 down (from the pixel above / below in the backward pass), 1 down-right diagonal
-// (predecessor x - 1 forward, x + 1 backward), 2 the other diagonal.
 struct RowArgs {
   const Shape* shape = nullptr;
   Floors floors;
   std::uint8_t p1 = 0;
   std::uint8_t p2 = 0;
-  bool eight_paths = true;
+  int paths = 4;  // per pass: 4 (8 in all) or 2 (4 in all)
   // Census planes of this row: left pixel x at left[j][x]; the right row reversed, right column
   // xr at right[j][width - 1 - xr] (readable, as zeros, for xr from -dp - dmin to width - dmin).
   const std::uint8_t* left[kMaxPlanes] = {};
   const std::uint8_t* right[kMaxPlanes] = {};
-  PathRow prev[3];     // the previous row's paths (the zero row for the first)
-  PathRow cur[3];      // this row's, written
-  PathRow horizontal;  // this row's left-to-right (forward) or right-to-left (backward) path
+  // The previous row's paths (the zero row for the first), and this row's (written; its path 0,
+  // the horizontal one, is also read: its predecessor is the pixel just done).
+  PathRow prev;
+  PathRow cur;
   std::uint8_t* s1 = nullptr;      // forward: written, backward: read; width * dp bytes
   std::uint8_t* totals = nullptr;  // backward: written, width * dp
   // Backward: the choice per pixel (Choose).
   Choice choice;
-  // SIMD scratch: per pixel and vertical or diagonal path, the lane-wise minimum of its costs
-  // (kMinimaLanes bytes), reduced to the minima a row at a time. kMinimaRowPixels per path.
-  std::uint8_t* min_vectors[3] = {};
+  // SIMD scratch: per pixel and vertical or diagonal path (1 to 3), the lane-wise minimum of its
+  // costs (kMinimaLanes bytes), reduced to the minima a row at a time: path j's at
+  // min_vectors + (j - 1) * min_vectors_stride.
+  std::uint8_t* min_vectors = nullptr;
+  std::size_t min_vectors_stride = 0;
 };
 
 // Uniqueness: another k more than 1 away with total * (100 - ratio) < best * 100 refuses the

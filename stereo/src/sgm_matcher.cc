@@ -109,7 +109,8 @@ class SgmMatcher final : public Matcher {
     s.dmin = params_.min_disparity;
     s.planes = sgm::CensusBits(radius) / 4;
     s.max_cost = static_cast<std::uint8_t>(MaxCensusCost(params_.block_size));
-    s.block = sgm::BlockBytes(s.dp);
+    s.paths = params_.paths / 2;
+    s.block = static_cast<std::size_t>(s.paths) * s.dp;
     radius_ = radius;
 
     // Padded images: radius on each side, room for a 64-byte vector read past the last column.
@@ -129,14 +130,15 @@ class SgmMatcher final : public Matcher {
     right_planes_.Reserve(right_stride_ * height * s.planes);
     s1_.Reserve(static_cast<std::size_t>(width) * height * s.dp);
     totals_.Reserve(static_cast<std::size_t>(width) * s.dp);
-    const std::size_t row_bytes = 64 + (width + 2) * s.block;
+    const std::size_t row_bytes = 64 + (width + 2) * s.block + 64;
     const bool new_rows = rows_.Reserve(kRows * row_bytes);
     // Minima rows: pixels -1 .. width, and room for the SIMD kernels' rounding (sgm_kernels.h).
     minima_stride_ = RoundUp(width + 2 + sgm::kMinimaLanes, 64);
-    const bool new_minima = minima_.Reserve(kRows * minima_stride_);
-    min_vectors_.Reserve(3 * RoundUp(width, sgm::kMinimaLanes) * sgm::kMinimaLanes);
+    const bool new_minima = minima_.Reserve(kRows * 4 * minima_stride_);
+    min_vectors_stride_ = RoundUp(width, sgm::kMinimaLanes) * sgm::kMinimaLanes;
+    min_vectors_.Reserve(3 * min_vectors_stride_);
     const bool same = s.width == shape_.width && s.d == shape_.d && s.dp == shape_.dp &&
-                      s.dmin == shape_.dmin && s.planes == shape_.planes;
+                      s.dmin == shape_.dmin && s.planes == shape_.planes && s.paths == shape_.paths;
     shape_ = s;
     disparity_.resize(width);
     right_disparity_.resize(width + 1);
@@ -160,16 +162,21 @@ class SgmMatcher final : public Matcher {
     }
     floors_ = {s.dp > s.d ? pad : nullptr, left, right, twins};
 
-    // Path rows: guards and padding 255, pixels -1 and width zero predecessors; the last row is
-    // the zero row (every pixel a zero predecessor) that the first row of a pass comes from.
+    // Path rows (sgm_kernels.h): padding 255, pixels -1 and width zero predecessors; the zero
+    // row (every pixel a zero predecessor) is what the first row of a pass comes from.
     std::memset(rows_.data(), 255, kRows * row_bytes);
-    std::memset(minima_.data(), 0, kRows * minima_stride_);
+    std::memset(minima_.data(), 0, kRows * 4 * minima_stride_);
     for (int r = 0; r < kRows; ++r) {
       path_rows_[r].costs = rows_.data() + r * row_bytes + 64 + s.block;
-      path_rows_[r].minima = minima_.data() + r * minima_stride_ + 1;
+      for (int j = 0; j < 4; ++j) {
+        path_rows_[r].minima[j] = minima_.data() + (r * 4 + j) * minima_stride_ + 1;
+      }
       for (int x = -1; x <= width; ++x) {
         if (r != kZeroRow && x != -1 && x != width) continue;
-        std::memset(path_rows_[r].costs + x * static_cast<std::ptrdiff_t>(s.block), 0, s.d);
+        for (int j = 0; j < s.paths; ++j) {
+          std::memset(path_rows_[r].costs + x * static_cast<std::ptrdiff_t>(s.block) + j * s.dp, 0,
+                      s.d);
+        }
       }
     }
   }
@@ -214,42 +221,32 @@ class SgmMatcher final : public Matcher {
     a.floors = floors_;
     a.p1 = static_cast<std::uint8_t>(params_.EffectiveP1());
     a.p2 = static_cast<std::uint8_t>(params_.EffectiveP2());
-    a.eight_paths = params_.paths == 8;
+    a.paths = shape_.paths;
     for (int j = 0; j < shape_.planes; ++j) {
       a.left[j] = left_planes_.data() + (j * shape_.height + y) * left_stride_;
       a.right[j] = right_planes_.data() + (j * shape_.height + y) * right_stride_ + right_origin_;
     }
-    a.horizontal = path_rows_[kHorizontalRow];
-    const std::size_t vectors = RoundUp(shape_.width, sgm::kMinimaLanes) * sgm::kMinimaLanes;
-    for (int i = 0; i < 3; ++i) a.min_vectors[i] = min_vectors_.data() + i * vectors;
+    a.min_vectors = min_vectors_.data();
+    a.min_vectors_stride = min_vectors_stride_;
     a.s1 = s1_.data() + static_cast<std::size_t>(y) * shape_.width * shape_.dp;
     return a;
   }
 
-  // Rows 0-2 and 3-5 take turns as the previous and this row's vertical and diagonal paths.
+  // Path rows 0 and 1 take turns as the previous row and this one.
   void ForwardPass() {
-    int prev = -1;
     for (int y = 0; y < shape_.height; ++y) {
       sgm::RowArgs a = RowArgsFor(y);
-      const int cur = (y % 2) * 3;
-      for (int i = 0; i < 3; ++i) {
-        a.prev[i] = prev < 0 ? path_rows_[kZeroRow] : path_rows_[prev + i];
-        a.cur[i] = path_rows_[cur + i];
-      }
+      a.prev = y == 0 ? path_rows_[kZeroRow] : path_rows_[(y + 1) % 2];
+      a.cur = path_rows_[y % 2];
       kernels_->forward_row(a);
-      prev = cur;
     }
   }
 
   void BackwardPass(DisparityMap16* out) {
-    int prev = -1;
     for (int y = shape_.height - 1; y >= 0; --y) {
       sgm::RowArgs a = RowArgsFor(y);
-      const int cur = (y % 2) * 3;
-      for (int i = 0; i < 3; ++i) {
-        a.prev[i] = prev < 0 ? path_rows_[kZeroRow] : path_rows_[prev + i];
-        a.cur[i] = path_rows_[cur + i];
-      }
+      a.prev = y == shape_.height - 1 ? path_rows_[kZeroRow] : path_rows_[(y + 1) % 2];
+      a.cur = path_rows_[y % 2];
       a.totals = totals_.data();
       std::fill(right_disparity_.begin(), right_disparity_.end(), sgm::kNoMatch);
       std::fill(right_cost_.begin(), right_cost_.end(), INT32_MAX);
@@ -258,7 +255,6 @@ class SgmMatcher final : public Matcher {
       a.choice.right_disparity = right_disparity_.data();
       a.choice.right_cost = right_cost_.data();
       kernels_->backward_row(a);
-      prev = cur;
       CheckLeftRight(out->values.data() + static_cast<std::size_t>(y) * shape_.width);
     }
   }
@@ -285,9 +281,8 @@ class SgmMatcher final : public Matcher {
     }
   }
 
-  static constexpr int kHorizontalRow = 6;
-  static constexpr int kZeroRow = 7;
-  static constexpr int kRows = 8;
+  static constexpr int kZeroRow = 2;
+  static constexpr int kRows = 3;
 
   const MatcherParams params_;
   const sgm::Kernels* const kernels_;
@@ -296,7 +291,7 @@ class SgmMatcher final : public Matcher {
   std::size_t padded_stride_ = 0, left_stride_ = 0, right_stride_ = 0, right_origin_ = 0;
   Scratch padded_left_, padded_right_, left_planes_, right_planes_, s1_, totals_, rows_, minima_,
       min_vectors_;
-  std::size_t minima_stride_ = 0;
+  std::size_t minima_stride_ = 0, min_vectors_stride_ = 0;
   sgm::PathRow path_rows_[kRows];
   std::vector<std::uint8_t> floor_table_;
   sgm::Floors floors_;

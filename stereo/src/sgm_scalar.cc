@@ -51,14 +51,15 @@ void Costs(const RowArgs& a, int x, std::uint8_t* c) {
   }
 }
 
-// One path step: costs `c` of this pixel, its predecessor's path costs `pred` (pred[-1] and
-// pred[dp] are guards of 255) with minimum `pred_min`, into `out`; returns out's minimum.
+// One path step: costs `c` of this pixel, its predecessor's path costs `pred` with minimum
+// `pred_min`, into `out`; returns out's minimum. Index -1 and dp count as 255 (no neighbour).
 std::uint8_t PathStep(const std::uint8_t* c, const std::uint8_t* pred, std::uint8_t pred_min,
                       int dp, int p1, int p2, std::uint8_t* out) {
   const int jump = AddSat(pred_min, p2);
   std::uint8_t m = 255;
   for (int k = 0; k < dp; ++k) {
-    int v = std::min<int>(pred[k], AddSat(std::min(pred[k - 1], pred[k + 1]), p1));
+    const int below = k > 0 ? pred[k - 1] : 255, above = k + 1 < dp ? pred[k + 1] : 255;
+    int v = std::min<int>(pred[k], AddSat(std::min(below, above), p1));
     v = std::min(v, jump);
     out[k] = AddSat(c[k], v - pred_min);
     m = std::min(m, out[k]);
@@ -66,36 +67,43 @@ std::uint8_t PathStep(const std::uint8_t* c, const std::uint8_t* pred, std::uint
   return m;
 }
 
+// Path j at pixel x of a row (PathRow).
 struct Paths {
   const RowArgs& a;
-  std::uint8_t* costs(const PathRow& row, int x) const {
-    return row.costs + x * static_cast<std::ptrdiff_t>(a.shape->block);
+  std::uint8_t* costs(const PathRow& row, int x, int j) const {
+    return row.costs + x * static_cast<std::ptrdiff_t>(a.shape->block) + j * a.shape->dp;
   }
-  // One step of a path at pixel x, from its predecessor at column px of `from`, into `into`.
-  const std::uint8_t* Step(const std::uint8_t* c, const PathRow& from, int px, const PathRow& into,
-                           int x) const {
-    into.minima[x] =
-        PathStep(c, costs(from, px), from.minima[px], a.shape->dp, a.p1, a.p2, costs(into, x));
-    return costs(into, x);
+  // One step of path j at pixel x, from its predecessor at column px of `from`, into this row.
+  const std::uint8_t* Step(const std::uint8_t* c, const PathRow& from, int px, int j, int x) const {
+    std::uint8_t* out = costs(a.cur, x, j);
+    a.cur.minima[j][x] =
+        PathStep(c, costs(from, px, j), from.minima[j][px], a.shape->dp, a.p1, a.p2, out);
+    return out;
   }
 };
 
-void ForwardRow(const RowArgs& a) {
+// The paths of one pixel in a pass walking x in direction `step` (1 forward, -1 backward), their
+// sum in `sum`.
+void PixelPaths(const RowArgs& a, int x, int step, const std::uint8_t* c, std::uint8_t* sum) {
   const Shape& s = *a.shape;
   const Paths p{a};
+  const std::uint8_t* h = p.Step(c, a.cur, x - step, 0, x);
+  const std::uint8_t* v = p.Step(c, a.prev, x, 1, x);
+  if (a.paths == 4) {
+    const std::uint8_t* d1 = p.Step(c, a.prev, x - step, 2, x);
+    const std::uint8_t* d2 = p.Step(c, a.prev, x + step, 3, x);
+    for (int k = 0; k < s.dp; ++k) sum[k] = AddSat(AddSat(h[k], v[k]), AddSat(d1[k], d2[k]));
+  } else {
+    for (int k = 0; k < s.dp; ++k) sum[k] = AddSat(h[k], v[k]);
+  }
+}
+
+void ForwardRow(const RowArgs& a) {
+  const Shape& s = *a.shape;
   std::uint8_t c[kMaxDp];
   for (int x = 0; x < s.width; ++x) {
     Costs(a, x, c);
-    const std::uint8_t* h = p.Step(c, a.horizontal, x - 1, a.horizontal, x);
-    const std::uint8_t* v = p.Step(c, a.prev[0], x, a.cur[0], x);
-    std::uint8_t* s1 = a.s1 + static_cast<std::size_t>(x) * s.dp;
-    if (a.eight_paths) {
-      const std::uint8_t* d1 = p.Step(c, a.prev[1], x - 1, a.cur[1], x);
-      const std::uint8_t* d2 = p.Step(c, a.prev[2], x + 1, a.cur[2], x);
-      for (int k = 0; k < s.dp; ++k) s1[k] = AddSat(AddSat(h[k], v[k]), AddSat(d1[k], d2[k]));
-    } else {
-      for (int k = 0; k < s.dp; ++k) s1[k] = AddSat(h[k], v[k]);
-    }
+    PixelPaths(a, x, 1, c, a.s1 + static_cast<std::size_t>(x) * s.dp);
   }
 }
 
@@ -125,23 +133,13 @@ void ChooseAt(const RowArgs& a, int x, std::uint8_t* t) {
 
 void BackwardRow(const RowArgs& a) {
   const Shape& s = *a.shape;
-  const Paths p{a};
-  std::uint8_t c[kMaxDp];
+  std::uint8_t c[kMaxDp], sum[kMaxDp];
   for (int x = s.width - 1; x >= 0; --x) {
     Costs(a, x, c);
-    const std::uint8_t* h = p.Step(c, a.horizontal, x + 1, a.horizontal, x);
-    const std::uint8_t* v = p.Step(c, a.prev[0], x, a.cur[0], x);
+    PixelPaths(a, x, -1, c, sum);
     const std::uint8_t* s1 = a.s1 + static_cast<std::size_t>(x) * s.dp;
     std::uint8_t* t = a.totals + static_cast<std::size_t>(x) * s.dp;
-    if (a.eight_paths) {
-      const std::uint8_t* d1 = p.Step(c, a.prev[1], x + 1, a.cur[1], x);
-      const std::uint8_t* d2 = p.Step(c, a.prev[2], x - 1, a.cur[2], x);
-      for (int k = 0; k < s.dp; ++k) {
-        t[k] = AddSat(AddSat(s1[k], h[k]), AddSat(AddSat(v[k], d1[k]), d2[k]));
-      }
-    } else {
-      for (int k = 0; k < s.dp; ++k) t[k] = AddSat(AddSat(s1[k], h[k]), v[k]);
-    }
+    for (int k = 0; k < s.dp; ++k) t[k] = AddSat(sum[k], s1[k]);
     ChooseAt(a, x, t);
   }
 }

@@ -65,39 +65,20 @@ void CensusT(const CensusArgs& a) {
 
 // ---- aggregation --------------------------------------------------------------------------------
 
-// One pixel's view of a row: the predecessors and outputs of its paths, in the order horizontal,
-// vertical, diagonal 1, diagonal 2.
-template <int kPaths>
-struct PixelPaths {
-  const std::uint8_t* pred[kPaths];
-  std::uint8_t pred_min[kPaths];
-  std::uint8_t* out[kPaths];
-  std::uint8_t min[kPaths];
-};
-
-template <class V, int kPlanes>
-inline typename V::T Cost(const RowArgs& a, const typename V::T* left, int base, int k,
-                          const PixelFloors& f, typename V::T counts) {
-  using T = typename V::T;
-  T c = V::Zero();
-  for (int j = 0; j < kPlanes; ++j) {
-    c = V::Add8(c, V::Lookup(counts, V::Xor(V::Load(a.right[j] + base + k), left[j])));
-  }
-  if constexpr (kPlanes == 6) c = V::HalveUp(c);  // 24 bits: (c + 1) >> 1
-  if (a.floors.pad != nullptr) c = V::Max(c, V::Load(a.floors.pad + k));
-  if (f.left != nullptr) c = V::Max(c, V::Load(f.left + k));
-  if (f.right != nullptr) c = V::Max(c, V::Load(f.right + k));
-  return c;
-}
-
+// A step from a predecessor stored long ago (the previous row): its neighbours come from loads at
+// k - 1 and k + 1, which read the next block's first and the previous block's last cost at the
+// ends; those lanes are made 255 (no neighbour there).
 template <class V>
-inline typename V::T Step(typename V::T c, const std::uint8_t* pred, int k, typename V::T p1,
-                          typename V::T pred_min, typename V::T jump, std::uint8_t* out,
-                          typename V::T* min) {
+inline typename V::T Step(typename V::T c, const std::uint8_t* pred, int chunk, int chunks,
+                          typename V::T p1, typename V::T pred_min, typename V::T jump,
+                          std::uint8_t* out, typename V::T* min, std::ptrdiff_t offset) {
   using T = typename V::T;
+  const std::ptrdiff_t k = chunk * V::kLanes + offset;
   const T here = V::Load(pred + k);
-  const T below = V::Load(pred + k - 1);
-  const T above = V::Load(pred + k + 1);
+  T below = V::Load(pred + k - 1);
+  T above = V::Load(pred + k + 1);
+  if (chunk == 0) below = V::Or(below, V::FirstLane255());
+  if (chunk + 1 == chunks) above = V::Or(above, V::LastLane255());
   T v = V::Min(here, V::AddSat(V::Min(below, above), p1));
   v = V::Min(v, jump);
   const T l = V::AddSat(c, V::SubSat(v, pred_min));
@@ -105,6 +86,9 @@ inline typename V::T Step(typename V::T c, const std::uint8_t* pred, int k, type
   *min = V::Min(*min, l);
   return l;
 }
+
+// How far ahead the backward pass asks for S1.
+constexpr int kPrefetchPixels = 8;
 
 // Per pixel, the vectors of its disparities: kChunks when the count is known at compile time (the
 // loops then unroll and the edge tests vanish), else dp / kLanes.
@@ -167,87 +151,142 @@ inline void ChoosePixel(const RowArgs& a, int x, const std::uint8_t* t, int m) {
   Choose(*a.shape, a.choice, x, t, m, best, limit < 0 || any == 0);
 }
 
-// One pixel, all its disparities. Forward: S1 = the paths' sum. Backward: totals = S1 + the
-// paths.
+// What a row's loop needs, copied out of RowArgs into locals: a byte store may alias anything
+// reached through a pointer, so the compiler would otherwise reload these after every store.
+template <int kPlanes>
+struct RowContext {
+  const std::uint8_t* left[kPlanes];
+  const std::uint8_t* right[kPlanes];
+  const std::uint8_t* pad;
+  Floors floors;
+  const Shape* shape;
+  int width, dmin, dp;
+  std::ptrdiff_t block;
+  const std::uint8_t* prev;
+  std::uint8_t* cur;
+  const std::uint8_t* prev_minima[4];
+  std::uint8_t* cur_minima0;
+  std::uint8_t* s1;
+  std::uint8_t* totals;
+  std::uint8_t* min_vectors;
+  std::size_t min_vectors_stride;
+  const RowArgs* args;
+};
+
+// One pixel, all its disparities, in a pass walking x in direction kStep: the costs, the paths
+// (path j's predecessor at pixel x - kStep for the horizontal (this row) and the first diagonal,
+// x for the vertical, x + kStep for the other diagonal, in the previous row), then forward S1 =
+// their sum, backward the totals = S1 + their sum and the choice.
 template <class V, int kPlanes, int kPaths, bool kForward, int kChunks>
-inline void Pixel(const RowArgs& a, int x, const PixelFloors& f, typename V::T p1, typename V::T p2,
-                  PixelPaths<kPaths>* p) {
+inline void Pixel(const RowContext<kPlanes>& c, int x, typename V::T p1, typename V::T p2,
+                  typename V::T counts) {
   using T = typename V::T;
-  const Shape& s = *a.shape;
-  const int chunks = Chunks<V, kChunks>(s);
-  const int base = s.width - 1 - x + s.dmin;
+  constexpr std::ptrdiff_t kStep = kForward ? 1 : -1;
+  const int chunks = kChunks > 0 ? kChunks : c.dp / V::kLanes;
+  const std::ptrdiff_t dp = chunks * V::kLanes;  // a constant when kChunks is
+  const std::ptrdiff_t block = kChunks > 0 ? kPaths * dp : c.block;
+  const PixelFloors f = FloorsFor(*c.shape, c.floors, x);
+  const int base = c.width - 1 - x + c.dmin;
+  std::uint8_t* out = c.cur + x * block;
+  const std::uint8_t* prev = c.prev + x * block;
+  // The blocks of the paths' predecessors; path i's costs are at + i * dp in them.
+  const std::uint8_t* pred[4] = {out - kStep * block, prev, prev - kStep * block,
+                                 prev + kStep * block};
+  const std::uint8_t pred_min_bytes[4] = {c.cur_minima0[x - kStep], c.prev_minima[1][x],
+                                          c.prev_minima[2][x - kStep], c.prev_minima[3][x + kStep]};
   T left[kPlanes];
-  for (int j = 0; j < kPlanes; ++j) left[j] = V::Set1(a.left[j][x]);
-  const T counts = V::NibbleCounts();
+  for (int j = 0; j < kPlanes; ++j) left[j] = V::Set1(c.left[j][x]);
   T pred_min[kPaths], jump[kPaths], min[kPaths];
   for (int i = 0; i < kPaths; ++i) {
-    pred_min[i] = V::Set1(p->pred_min[i]);
+    pred_min[i] = V::Set1(pred_min_bytes[i]);
     jump[i] = V::AddSat(pred_min[i], p2);
     min[i] = V::Set1(255);
   }
-  std::uint8_t* s1 = a.s1 + static_cast<std::size_t>(x) * s.dp;
-  std::uint8_t* totals = a.totals + static_cast<std::size_t>(x) * s.dp;
+  std::uint8_t* s1 = c.s1 + x * dp;
+  std::uint8_t* totals = c.totals + x * dp;
   T total_min = V::Set1(255);
+  if constexpr (!kForward) {
+    // S1 comes from memory (the frame's sums, 39 MB at 640x480 with 128 disparities), and the
+    // loads missed: ask for it kPrefetchPixels ahead of the row walk (right to left).
+    if (x >= kPrefetchPixels) {
+      const std::uint8_t* ahead = s1 - kPrefetchPixels * dp;
+      for (std::ptrdiff_t k = 0; k < dp; k += 64) __builtin_prefetch(ahead + k);
+    }
+  }
   for (int chunk = 0; chunk < chunks; ++chunk) {
     const int k = chunk * V::kLanes;
-    const T c = Cost<V, kPlanes>(a, left, base, k, f, counts);
+    T cost = V::Zero();
+    for (int j = 0; j < kPlanes; ++j) {
+      cost = V::Add8(cost, V::Lookup(counts, V::Xor(V::Load(c.right[j] + base + k), left[j])));
+    }
+    if constexpr (kPlanes == 6) cost = V::HalveUp(cost);  // 24 bits: (cost + 1) >> 1
+    if (c.pad != nullptr) cost = V::Max(cost, V::Load(c.pad + k));
+    if (f.left != nullptr) cost = V::Max(cost, V::Load(f.left + k));
+    if (f.right != nullptr) cost = V::Max(cost, V::Load(f.right + k));
     T l[kPaths];
-    l[0] = HorizontalStep<V>(c, p->pred[0], chunk, chunks, p1, pred_min[0], jump[0], p->out[0],
-                             &min[0]);
+    l[0] = HorizontalStep<V>(cost, pred[0], chunk, chunks, p1, pred_min[0], jump[0], out, &min[0]);
     for (int i = 1; i < kPaths; ++i) {
-      l[i] = Step<V>(c, p->pred[i], k, p1, pred_min[i], jump[i], p->out[i], &min[i]);
+      l[i] = Step<V>(cost, pred[i], chunk, chunks, p1, pred_min[i], jump[i], out, &min[i], i * dp);
     }
     T sum = V::AddSat(l[0], l[1]);
     if constexpr (kPaths == 4) sum = V::AddSat(sum, V::AddSat(l[2], l[3]));
     if constexpr (kForward) {
-      V::Store(s1 + k, sum);
+      V::StoreStream(s1 + k, sum);
     } else {
       T total = V::AddSat(sum, V::Load(s1 + k));
-      if (f.left != nullptr) total = V::Max(total, V::Load(f.left + a.floors.total_offset + k));
-      if (f.right != nullptr) total = V::Max(total, V::Load(f.right + a.floors.total_offset + k));
+      if (f.left != nullptr) total = V::Max(total, V::Load(f.left + c.floors.total_offset + k));
+      if (f.right != nullptr) total = V::Max(total, V::Load(f.right + c.floors.total_offset + k));
       V::Store(totals + k, total);
       total_min = V::Min(total_min, total);
     }
   }
-  if constexpr (!kForward) ChoosePixel<V, kChunks>(a, x, totals, V::HMin(total_min));
   // The horizontal path's minimum is needed by the next pixel; the others' by the next row, so
   // those are reduced a row at a time (RowMinima), far cheaper than one by one.
-  p->min[0] = V::HMin(min[0]);
-  for (int i = 1; i < kPaths; ++i) V::Store(a.min_vectors[i - 1] + x * V::kLanes, min[i]);
+  c.cur_minima0[x] = V::HMin(min[0]);
+  for (int i = 1; i < kPaths; ++i) {
+    V::Store(c.min_vectors + (i - 1) * c.min_vectors_stride + x * V::kLanes, min[i]);
+  }
+  if constexpr (!kForward) ChoosePixel<V, kChunks>(*c.args, x, totals, V::HMin(total_min));
 }
 
 // A row in either direction; dp is a multiple of V's lanes.
 template <class V, int kPlanes, int kPaths, bool kForward, int kChunks>
 void RowT(const RowArgs& a) {
-  const Shape& s = *a.shape;
-  const typename V::T p1 = V::Set1(a.p1), p2 = V::Set1(a.p2);
-  const std::ptrdiff_t block = static_cast<std::ptrdiff_t>(s.block);
-  const int step = kForward ? 1 : -1;  // predecessor of the horizontal path: x - step
-  const PathRow* rows_in[4] = {&a.horizontal, &a.prev[0], &a.prev[1], &a.prev[2]};
-  const PathRow* rows_out[4] = {&a.horizontal, &a.cur[0], &a.cur[1], &a.cur[2]};
-  // Predecessor columns relative to x: horizontal x - step, vertical x, diagonal 1 x - step,
-  // diagonal 2 x + step.
-  const int offset[4] = {-step, 0, -step, step};
-  for (int i = 0; i < s.width; ++i) {
-    const int x = kForward ? i : s.width - 1 - i;
-    PixelPaths<kPaths> p;
-    for (int j = 0; j < kPaths; ++j) {
-      const int px = x + offset[j];
-      p.pred[j] = rows_in[j]->costs + px * block;
-      p.pred_min[j] = rows_in[j]->minima[px];
-      p.out[j] = rows_out[j]->costs + x * block;
-    }
-    Pixel<V, kPlanes, kPaths, kForward, kChunks>(a, x, FloorsFor(s, a.floors, x), p1, p2, &p);
-    a.horizontal.minima[x] = p.min[0];
+  RowContext<kPlanes> c;
+  for (int j = 0; j < kPlanes; ++j) {
+    c.left[j] = a.left[j];
+    c.right[j] = a.right[j];
+  }
+  c.pad = a.floors.pad;
+  c.floors = a.floors;
+  c.shape = a.shape;
+  c.width = a.shape->width;
+  c.dmin = a.shape->dmin;
+  c.dp = a.shape->dp;
+  c.block = static_cast<std::ptrdiff_t>(a.shape->block);
+  c.prev = a.prev.costs;
+  c.cur = a.cur.costs;
+  for (int j = 0; j < 4; ++j) c.prev_minima[j] = a.prev.minima[j];
+  c.cur_minima0 = a.cur.minima[0];
+  c.s1 = a.s1;
+  c.totals = a.totals;
+  c.min_vectors = a.min_vectors;
+  c.min_vectors_stride = a.min_vectors_stride;
+  c.args = &a;
+  const typename V::T p1 = V::Set1(a.p1), p2 = V::Set1(a.p2), counts = V::NibbleCounts();
+  for (int i = 0; i < c.width; ++i) {
+    Pixel<V, kPlanes, kPaths, kForward, kChunks>(c, kForward ? i : c.width - 1 - i, p1, p2, counts);
   }
   for (int j = 1; j < kPaths; ++j) {
-    V::RowMinima(a.min_vectors[j - 1], s.width, rows_out[j]->minima);
-    rows_out[j]->minima[s.width] = 0;  // the zero predecessor's, overwritten by the rounding
+    V::RowMinima(a.min_vectors + (j - 1) * a.min_vectors_stride, c.width, a.cur.minima[j]);
+    a.cur.minima[j][c.width] = 0;  // the zero predecessor's, overwritten by the rounding
   }
+  if constexpr (kForward) V::StreamFence();
 }
 
 template <class V, int kPlanes, int kPaths, bool kForward>
 void RowForChunks(const RowArgs& a) {
+  // (kChunks > 0 makes dp, the block and every path's offset constants.)
   switch (a.shape->dp / V::kLanes) {
     case 1:
       return RowT<V, kPlanes, kPaths, kForward, 1>(a);
@@ -264,7 +303,7 @@ void RowForChunks(const RowArgs& a) {
 
 template <class V, bool kForward>
 void Row(const RowArgs& a) {
-  const bool eight = a.eight_paths;
+  const bool eight = a.paths == 4;
   switch (a.shape->planes) {
     case 1:
       return eight ? RowForChunks<V, 1, 4, kForward>(a) : RowForChunks<V, 1, 2, kForward>(a);
