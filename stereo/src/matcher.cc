@@ -83,6 +83,7 @@ bool CpuSupports(SimdLevel level) {
     case SimdLevel::kAvx512:
       return sgm::Avx512Kernels() != nullptr && __builtin_cpu_supports("avx512f") &&
              __builtin_cpu_supports("avx512bw") && __builtin_cpu_supports("avx512vl") &&
+             __builtin_cpu_supports("avx512vbmi") && __builtin_cpu_supports("avx512bitalg") &&
              __builtin_cpu_supports("bmi2") && __builtin_cpu_supports("popcnt");
   }
   return false;

@@ -10,6 +10,7 @@ namespace {
 struct V256 {
   using T = __m256i;
   static constexpr int kLanes = 32;
+  static constexpr int kPlaneBits = 4;
   static T Zero() { return _mm256_setzero_si256(); }
   static T Set1(std::uint8_t v) { return _mm256_set1_epi8(static_cast<char>(v)); }
   static T Load(const void* p) { return _mm256_loadu_si256(static_cast<const __m256i*>(p)); }
@@ -104,7 +105,7 @@ void Backward(const RowArgs& a) { simd::Row<V256, false>(a); }
 }  // namespace
 
 const Kernels* Avx2Kernels() {
-  static const Kernels k{"avx2", 32, Census, Forward, Backward};
+  static const Kernels k{"avx2", 32, 4, Census, Forward, Backward};
   return &k;
 }
 

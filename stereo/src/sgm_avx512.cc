@@ -1,8 +1,8 @@
-// The AVX-512BW kernels (compiled with -mavx512f -mavx512bw -mavx512vl -mbmi2 -mpopcnt; chosen at
-// run time only on a CPU that has them): sgm_simd.h over 64-byte vectors (the matcher pads the
-// disparities to a multiple of 64 for them).
-// GCC 12 warns inside its own AVX-512 headers (_mm512_extracti64x4_epi64 and the like:
-// their _mm*_undefined_* source operand, GCC bug 105593); nothing in this file is uninitialized.
+// The AVX-512 kernels (compiled with -mavx512f -mavx512bw -mavx512vl -mavx512vbmi -mavx512bitalg
+// -mbmi2 -mpopcnt; chosen at run time only on a CPU that has them: Ice Lake and later): sgm_simd.h
+// over 64-byte vectors (the matcher pads the disparities to a multiple of 64 for them). GCC 12
+// warns inside its own AVX-512 headers (_mm512_extracti64x4_epi64 and the like: their
+// _mm*_undefined_* source operand, GCC bug 105593); nothing in this file is uninitialized.
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include <immintrin.h>
 
@@ -22,6 +22,8 @@ std::uint8_t HMin256(__m256i v) {
 struct V512 {
   using T = __m512i;
   static constexpr int kLanes = 64;
+  static constexpr int kPlaneBits = 8;
+  static T PopCount(T a) { return _mm512_popcnt_epi8(a); }  // AVX512_BITALG
   static T Zero() { return _mm512_setzero_si512(); }
   static T Set1(std::uint8_t v) { return _mm512_set1_epi8(static_cast<char>(v)); }
   static T Load(const void* p) { return _mm512_loadu_si512(p); }
@@ -108,7 +110,7 @@ void Backward(const RowArgs& a) { simd::Row<V512, false>(a); }
 }  // namespace
 
 const Kernels* Avx512Kernels() {
-  static const Kernels k{"avx512", 64, Census, Forward, Backward};
+  static const Kernels k{"avx512", 64, 8, Census, Forward, Backward};
   return &k;
 }
 

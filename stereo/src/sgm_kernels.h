@@ -34,9 +34,11 @@
 
 namespace cloudcast::stereo::sgm {
 
-// Census planes: the census code of a pixel, 4 bits at a time (plane j holds bits 4j..4j+3 in the
-// low nibble of one byte), so a Hamming distance is one table look-up per plane (pshufb).
-inline constexpr int kMaxPlanes = 6;  // a 7x7 window: 24 bits
+// Census planes: the census code of a pixel in `plane_bits` (4 or 8) pieces, plane j holding bits
+// plane_bits * j and up in the low bits of one byte. The scalar and AVX2 kernels take nibbles (a
+// Hamming distance is then one table look-up per plane, pshufb); the AVX-512 ones bytes (one
+// vpopcntb per plane).
+inline constexpr int kMaxPlanes = 6;  // a 7x7 window: 24 bits in nibbles
 inline constexpr int kMaxRadius = 3;
 inline constexpr int kMaxDp = 2048;  // kMaxDisparity (matcher.h), a multiple of 32
 
@@ -48,12 +50,13 @@ static constexpr int CensusBits(int radius) { return 2 * radius * (radius + 1); 
 struct Shape {
   int width = 0;
   int height = 0;
-  int d = 0;  // disparities searched
-  int dp =
-      0;  // d rounded up to the kernels' lanes (32 or 64): every per-pixel cost vector's length
-  int dmin = 0;  // disparity of index k = 0
-  int planes = 0;
-  std::uint8_t max_cost = 0;  // census bits: the cost of a right pixel outside the image
+  int d = 0;            // disparities searched
+  int dp = 0;           // d rounded up to the kernels' lanes (32 or 64): each cost vector's length
+  int dmin = 0;         // disparity of index k = 0
+  int census_bits = 0;  // 4, 12 or 24; 24 are halved into costs (sgm_kernels.h, top)
+  int plane_bits = 4;   // the kernels' census planes: nibbles or bytes
+  int planes = 0;       // census_bits / plane_bits, rounded up
+  std::uint8_t max_cost = 0;  // the largest cost: that of a right pixel outside the image
   int paths = 4;              // path vectors per pixel in a path row (PathRow)
   std::size_t block = 0;      // bytes per pixel in a path row: paths * dp
 };
@@ -103,6 +106,7 @@ static inline PixelFloors FloorsFor(const Shape& s, const Floors& f, int x) {
 // P(y + dy, x + e) > P(y - dy, x - e) with e = dx, or e = -dx when `mirrored` (the image was
 // flipped left to right: the codes then equal the unflipped image's, column for column mirrored).
 struct CensusArgs {
+  int plane_bits = 4;
   const std::int8_t* padded =
       nullptr;  // pixel (x, y) of the image at padded[(y + r) * stride + x + r]
   std::size_t stride = 0;
@@ -217,7 +221,8 @@ static inline void Choose(const Shape& s, const Choice& c, int x, const std::uin
 
 struct Kernels {
   const char* name;
-  int lanes;  // Shape::dp must be a multiple of this (32 or 64)
+  int lanes;       // Shape::dp must be a multiple of this (32 or 64)
+  int plane_bits;  // the census planes they read and write (4 or 8)
   void (*census)(const CensusArgs& args);
   void (*forward_row)(const RowArgs& args);
   void (*backward_row)(const RowArgs& args);  // with the choice

@@ -107,7 +107,9 @@ class SgmMatcher final : public Matcher {
     s.d = params_.num_disparities;
     s.dp = RoundUpDp();
     s.dmin = params_.min_disparity;
-    s.planes = sgm::CensusBits(radius) / 4;
+    s.census_bits = sgm::CensusBits(radius);
+    s.plane_bits = kernels_->plane_bits;
+    s.planes = (s.census_bits + s.plane_bits - 1) / s.plane_bits;
     s.max_cost = static_cast<std::uint8_t>(MaxCensusCost(params_.block_size));
     s.paths = params_.paths / 2;
     s.block = static_cast<std::size_t>(s.paths) * s.dp;
@@ -209,6 +211,7 @@ class SgmMatcher final : public Matcher {
     a.height = shape_.height;
     a.radius = radius_;
     a.mirrored = mirrored;
+    a.plane_bits = shape_.plane_bits;
     for (int j = 0; j < shape_.planes; ++j)
       a.planes[j] = planes + j * stride * shape_.height + origin;
     a.plane_stride = stride;

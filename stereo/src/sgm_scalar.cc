@@ -12,7 +12,9 @@ inline std::uint8_t AddSat(int a, int b) { return static_cast<std::uint8_t>(std:
 
 void Census(const CensusArgs& a) {
   const int r = a.radius;
-  const int planes = CensusBits(r) / 4;
+  const int bits = CensusBits(r);
+  const int planes = (bits + a.plane_bits - 1) / a.plane_bits;
+  const std::uint32_t mask = (1u << a.plane_bits) - 1;
   const std::ptrdiff_t stride = static_cast<std::ptrdiff_t>(a.stride);
   for (int y = 0; y < a.height; ++y) {
     for (int x = 0; x < a.width; ++x) {
@@ -27,7 +29,7 @@ void Census(const CensusArgs& a) {
       }
       for (int j = 0; j < planes; ++j) {
         a.planes[j][static_cast<std::size_t>(y) * a.plane_stride + x] =
-            static_cast<std::uint8_t>((code >> (4 * j)) & 15u);
+            static_cast<std::uint8_t>((code >> (a.plane_bits * j)) & mask);
       }
     }
   }
@@ -43,7 +45,7 @@ void Costs(const RowArgs& a, int x, std::uint8_t* c) {
     for (int j = 0; j < s.planes; ++j) {
       v += __builtin_popcount(static_cast<unsigned>(a.left[j][x] ^ a.right[j][base + k]));
     }
-    if (s.planes == 6) v = (v + 1) >> 1;  // 24 bits: halved, rounding up
+    if (s.census_bits > 12) v = (v + 1) >> 1;  // 24 bits: halved, rounding up
     if (a.floors.pad != nullptr) v = std::max<int>(v, a.floors.pad[k]);
     if (f.left != nullptr) v = std::max<int>(v, f.left[k]);
     if (f.right != nullptr) v = std::max<int>(v, f.right[k]);
@@ -147,7 +149,7 @@ void BackwardRow(const RowArgs& a) {
 }  // namespace
 
 const Kernels& ScalarKernels() {
-  static const Kernels k{"scalar", 32, Census, ForwardRow, BackwardRow};
+  static const Kernels k{"scalar", 32, 4, Census, ForwardRow, BackwardRow};
   return k;
 }
 

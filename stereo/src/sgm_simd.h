@@ -30,7 +30,7 @@ template <class V, int kRadius>
 void CensusT(const CensusArgs& a) {
   using T = typename V::T;
   constexpr int kBits = CensusBits(kRadius);
-  constexpr int kPlanes = kBits / 4;
+  constexpr int kPlanes = (kBits + V::kPlaneBits - 1) / V::kPlaneBits;
   const std::ptrdiff_t stride = static_cast<std::ptrdiff_t>(a.stride);
   // The pixel pairs in the scalar kernel's order, as offsets from the centre.
   std::ptrdiff_t first[kBits], second[kBits];
@@ -54,8 +54,8 @@ void CensusT(const CensusArgs& a) {
       T acc[kPlanes];
       for (int j = 0; j < kPlanes; ++j) acc[j] = V::Zero();
       for (int i = 0; i < kBits; ++i) {
-        // Bit kBits - 1 - i of the code: plane (kBits - 1 - i) / 4, pushed most significant first.
-        const int plane = (kBits - 1 - i) / 4;
+        // Bit kBits - 1 - i of the code, pushed most significant first.
+        const int plane = (kBits - 1 - i) / V::kPlaneBits;
         acc[plane] = V::PushBit(acc[plane], V::Load(c + first[i]), V::Load(c + second[i]));
       }
       for (int j = 0; j < kPlanes; ++j) V::Store(a.planes[j] + out + x, acc[j]);
@@ -217,9 +217,15 @@ inline void Pixel(const RowContext<kPlanes>& c, int x, typename V::T p1, typenam
     const int k = chunk * V::kLanes;
     T cost = V::Zero();
     for (int j = 0; j < kPlanes; ++j) {
-      cost = V::Add8(cost, V::Lookup(counts, V::Xor(V::Load(c.right[j] + base + k), left[j])));
+      const T differ = V::Xor(V::Load(c.right[j] + base + k), left[j]);
+      if constexpr (V::kPlaneBits == 8) {
+        cost = V::Add8(cost, V::PopCount(differ));
+      } else {
+        cost = V::Add8(cost, V::Lookup(counts, differ));
+      }
     }
-    if constexpr (kPlanes == 6) cost = V::HalveUp(cost);  // 24 bits: (cost + 1) >> 1
+    // 24 bits (3 bytes or 6 nibbles): (c + 1) >> 1
+    if constexpr (kPlanes == (V::kPlaneBits == 8 ? 3 : 6)) cost = V::HalveUp(cost);
     if (c.pad != nullptr) cost = V::Max(cost, V::Load(c.pad + k));
     if (f.left != nullptr) cost = V::Max(cost, V::Load(f.left + k));
     if (f.right != nullptr) cost = V::Max(cost, V::Load(f.right + k));
@@ -301,16 +307,23 @@ void RowForChunks(const RowArgs& a) {
   }
 }
 
+template <class V, int kPlanes, bool kForward>
+void RowForPaths(const RowArgs& a) {
+  return a.paths == 4 ? RowForChunks<V, kPlanes, 4, kForward>(a)
+                      : RowForChunks<V, kPlanes, 2, kForward>(a);
+}
+
+// Census planes per block size: nibbles 1, 3, 6; bytes 1, 2, 3.
 template <class V, bool kForward>
 void Row(const RowArgs& a) {
-  const bool eight = a.paths == 4;
-  switch (a.shape->planes) {
-    case 1:
-      return eight ? RowForChunks<V, 1, 4, kForward>(a) : RowForChunks<V, 1, 2, kForward>(a);
-    case 3:
-      return eight ? RowForChunks<V, 3, 4, kForward>(a) : RowForChunks<V, 3, 2, kForward>(a);
+  constexpr bool kBytes = V::kPlaneBits == 8;
+  switch (a.shape->census_bits) {
+    case 4:
+      return RowForPaths<V, 1, kForward>(a);
+    case 12:
+      return RowForPaths < V, kBytes ? 2 : 3, kForward > (a);
     default:
-      return eight ? RowForChunks<V, 6, 4, kForward>(a) : RowForChunks<V, 6, 2, kForward>(a);
+      return RowForPaths < V, kBytes ? 3 : 6, kForward > (a);
   }
 }
 
