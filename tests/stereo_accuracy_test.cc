@@ -37,6 +37,7 @@ std::unique_ptr<Matcher> Make(MatcherParams p, MatcherKind kind, int paths) {
 }
 
 void Print(const Scores& s, int truth_offset, const char* data) {
+  // Printed for the record (docs/stereo.md has the full table from cloudcast-stereo-bench).
   for (auto [name, ours] : {std::pair{"4 paths", &s.ours4}, std::pair{"8 paths", &s.ours8}}) {
     std::printf(
         "%s, ours %s: bad-2.0 %.2f%% (counting misses %.2f%%), density %.1f%%; "
@@ -74,10 +75,10 @@ TEST(StereoAccuracy, NewTsukubaBad2NoWorseThanStereoSgbm) {
   }
   if (pairs == 0) GTEST_SKIP() << "New Tsukuba data not found at " << tsukuba::DefaultDir();
   // The truth reads 1 px low: the median of d - truth is +1.00 px for every matcher, ours and
-  // OpenCV's (docs/stereo.md). Scored against the truth + 1, the disparities the pairs have;
-  // against the truth as stored, only printed.
+  // OpenCV's (docs/stereo.md). Scored against the truth + 1, the disparities the pairs have, and
+  // against the truth as stored.
   ExpectNoWorse(s, 1, "New Tsukuba, truth + 1");
-  Print(s, 0, "New Tsukuba, truth as stored");
+  ExpectNoWorse(s, 0, "New Tsukuba, truth as stored");
 }
 
 TEST(StereoAccuracy, AloeBad2NoWorseThanStereoSgbm) {

@@ -138,7 +138,7 @@ TEST(MatcherParams, NamesRoundTrip) {
 
 TEST(MatcherParams, EffectivePenalties) {
   MatcherParams p;
-  EXPECT_EQ(p.EffectiveP1(), 3);
+  EXPECT_EQ(p.EffectiveP1(), 5);
   EXPECT_EQ(p.EffectiveP2(), 19);
   p.kind = MatcherKind::kOpenCvSgbm;
   EXPECT_EQ(p.EffectiveP1(), 8 * 25);

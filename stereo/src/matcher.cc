@@ -182,17 +182,17 @@ absl::Status MatcherParams::Validate(std::string_view field) const {
   return absl::OkStatus();
 }
 
-// Ours: chosen on New Tsukuba (docs/stereo.md, "Choosing the defaults").
+// Ours: chosen on New Tsukuba and Aloe (docs/stereo.md, "Choosing the defaults").
 int MatcherParams::EffectiveP1() const {
   if (p1 != 0) return p1;
   if (kind != MatcherKind::kSgm) return 8 * block_size * block_size;
-  return block_size == 3 ? 2 : 3;
+  return block_size == 3 ? 3 : block_size == 5 ? 5 : 4;
 }
 
 int MatcherParams::EffectiveP2() const {
   if (p2 != 0) return p2;
   if (kind != MatcherKind::kSgm) return 32 * block_size * block_size;
-  return block_size == 3 ? 12 : 19;
+  return block_size == 3 ? 16 : 19;
 }
 
 int MaxCensusCost(int block_size) {

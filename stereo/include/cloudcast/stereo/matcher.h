@@ -61,13 +61,15 @@ struct MatcherParams {
   int min_disparity = 0;
   int num_disparities = 128;  // > 0, a multiple of 16
   // OpenCV: its blockSize (SGBM: >= 1, BM: >= 5, odd). Ours: the side of the square window of the
-  // centre-symmetric census transform that is its matching cost: 3, 5 or 7 (4, 12 or 24 bits: each
-  // bit compares one pixel of the window with its mirror image through the centre).
+  // centre-symmetric census transform whose Hamming distance is its matching cost: 3, 5 or 7 (4,
+  // 12 or 24 bits, each comparing one pixel of the window with its mirror image through the
+  // centre; the 24-bit distance is halved, rounding up, so costs stay within 0..12).
   int block_size = 5;
   // Smoothness penalties for a disparity change of 1 (p1) and of more (p2). 0 picks the default:
-  // OpenCV's usual 8 * block^2 and 32 * block^2; ours scales with its census bits (census bits / 3
-  // and 10 / 3 * census bits: 4 and 40 for block 5). Ours keeps its path costs in bytes, so it
-  // takes p1 in [1, 64] and p2 in [p1 + 1, 255 - census bits].
+  // OpenCV's usual 8 * block^2 and 32 * block^2; ours, for its costs of 0 to 12 (4 for block 3),
+  // measured on New Tsukuba and Aloe: 5 and 19 for block 5, 4 and 19 for 7, 3 and 16 for 3. Ours
+  // sums its paths exactly in bytes, so it takes p2 in [p1 + 1, 31 - its largest cost] (19 for
+  // blocks 5 and 7, 27 for 3) and p1 below that.
   int p1 = 0;
   int p2 = 0;
   // A match is rejected when another disparity (not a neighbour of the best) costs less than
