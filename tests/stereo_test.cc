@@ -17,6 +17,7 @@
 #include "cloudcast/stereo/grey.h"
 #include "cloudcast/stereo/matcher.h"
 #include "cloudcast/stereo/rectifier.h"
+#include "speckle.h"  // stereo/src: the speckle filter, against cv::filterSpeckles
 #include "support/stereo_support.h"
 
 namespace cloudcast::stereo {
@@ -422,6 +423,60 @@ TEST(SgmMatcher, ReadsRowsInPieces) {
   DisparityMap16 got;
   ASSERT_TRUE(m->Compute(l, r, &got).ok());
   EXPECT_TRUE(got.values == want.values);
+}
+
+// ---- speckle filter
+// ------------------------------------------------------------------------------
+
+// Our filter and cv::filterSpeckles (newVal 0) on one map: equal, value for value.
+void ExpectSpecklesLikeOpenCv(const std::vector<std::uint16_t>& map, int width, int height,
+                              int max_size, int max_diff, const char* what) {
+  std::vector<std::uint16_t> ours = map;
+  SpeckleFilter filter;
+  filter.Apply(ours.data(), width, height, max_size, max_diff);
+  cv::Mat theirs(height, width, CV_16SC1);
+  std::memcpy(theirs.data, map.data(), map.size() * 2);
+  cv::filterSpeckles(theirs, 0, max_size, max_diff);
+  std::size_t differ = 0, removed = 0;
+  for (std::size_t i = 0; i < map.size(); ++i) {
+    differ += ours[i] != reinterpret_cast<const std::uint16_t*>(theirs.data)[i];
+    removed += map[i] != 0 && ours[i] == 0;
+  }
+  EXPECT_EQ(differ, 0u) << what << " size " << max_size << " diff " << max_diff;
+  EXPECT_GT(removed, 0u) << what << ": the filter must have had work";
+}
+
+TEST(SpeckleFilter, EqualsOpenCvsFilterSpeckles) {
+  std::mt19937 rng(17);
+  // Random blobs of random values with holes: regions of every size, touching at every angle.
+  for (int round = 0; round < 6; ++round) {
+    const int w = 50 + static_cast<int>(rng() % 200), h = 30 + static_cast<int>(rng() % 100);
+    std::vector<std::uint16_t> map(static_cast<std::size_t>(w) * h);
+    for (int y = 0; y < h; ++y) {
+      for (int x = 0; x < w; ++x) {
+        const int band = ((x / (1 + rng() % 7)) + (y / 3)) % 5;
+        map[y * w + x] = rng() % 9 == 0 ? 0 : static_cast<std::uint16_t>(band * 40 + rng() % 40);
+      }
+    }
+    for (int max_diff : {0, 16, 32, 48}) {
+      for (int max_size : {1, 4, 20, 100})
+        ExpectSpecklesLikeOpenCv(map, w, h, max_size, max_diff, "random");
+    }
+  }
+  // Our matcher's own output before its filter.
+  const auto pair = ShiftedPair(240, 160, {8, 21.5, 33}, 12);
+  MatcherParams p;
+  p.num_disparities = 48;
+  p.speckle_window_size = 0;
+  p.uniqueness_ratio = 0;
+  const DisparityMap16 raw = Match(*Make(p), pair.left, pair.right);
+  ExpectSpecklesLikeOpenCv(raw.values, 240, 160, 100, 32, "matched");
+  testing::GreyPair tsukuba;
+  if (testing::LoadTsukubaGrey("00600", &tsukuba)) {
+    p.num_disparities = 128;
+    const DisparityMap16 real = Match(*Make(p), tsukuba.left, tsukuba.right);
+    ExpectSpecklesLikeOpenCv(real.values, 640, 480, 100, 32, "New Tsukuba 00600");
+  }
 }
 
 // ---- OpenCV's matchers --------------------------------------------------------------------------

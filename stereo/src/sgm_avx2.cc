@@ -98,6 +98,45 @@ struct V256 {
   }
 };
 
+// CheckPixel, 8 pixels at a time: the right matches come by gather.
+void CheckRow(const CheckArgs& a) {
+  const __m256i lanes = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+  const __m256i none = _mm256_set1_epi32(kNoMatch), width = _mm256_set1_epi32(a.width);
+  const __m256i tolerance = _mm256_set1_epi32(a.tolerance), fifteen = _mm256_set1_epi32(15);
+  const __m256i zero = _mm256_setzero_si256();
+  int x = 0;
+  for (; x + 8 <= a.width; x += 8) {
+    const __m256i d1 = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(a.disparity + x));
+    __m256i keep = _mm256_cmpgt_epi32(d1, zero);
+    if (a.tolerance >= 0) {
+      const __m256i xs = _mm256_add_epi32(_mm256_set1_epi32(x), lanes);
+      const __m256i d_lo = _mm256_srai_epi32(d1, 4);
+      const __m256i d_hi = _mm256_srai_epi32(_mm256_add_epi32(d1, fifteen), 4);
+      __m256i x_lo = _mm256_sub_epi32(xs, d_lo), x_hi = _mm256_sub_epi32(xs, d_hi);
+      x_lo = _mm256_blendv_epi8(x_lo, width, _mm256_cmpgt_epi32(zero, x_lo));
+      x_hi = _mm256_blendv_epi8(x_hi, width, _mm256_cmpgt_epi32(zero, x_hi));
+      // Lanes without a match gather slot width (kNoMatch), and are dropped anyway.
+      x_lo = _mm256_blendv_epi8(width, x_lo, keep);
+      x_hi = _mm256_blendv_epi8(width, x_hi, keep);
+      const __m256i r_lo = _mm256_i32gather_epi32(a.right_disparity, x_lo, 4);
+      const __m256i r_hi = _mm256_i32gather_epi32(a.right_disparity, x_hi, 4);
+      const __m256i bad_lo = _mm256_andnot_si256(
+          _mm256_cmpeq_epi32(r_lo, none),
+          _mm256_cmpgt_epi32(_mm256_abs_epi32(_mm256_sub_epi32(r_lo, d_lo)), tolerance));
+      const __m256i bad_hi = _mm256_andnot_si256(
+          _mm256_cmpeq_epi32(r_hi, none),
+          _mm256_cmpgt_epi32(_mm256_abs_epi32(_mm256_sub_epi32(r_hi, d_hi)), tolerance));
+      keep = _mm256_andnot_si256(_mm256_and_si256(bad_lo, bad_hi), keep);
+    }
+    const __m256i out = _mm256_and_si256(keep, d1);
+    // Values <= 32767: the signed pack keeps them.
+    const __m128i packed =
+        _mm_packs_epi32(_mm256_castsi256_si128(out), _mm256_extracti128_si256(out, 1));
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(a.out + x), packed);
+  }
+  for (; x < a.width; ++x) a.out[x] = CheckPixel(a, x);
+}
+
 void Census(const CensusArgs& a) { simd::Census<V256>(a); }
 void Forward(const RowArgs& a) { simd::Row<V256, true>(a); }
 void Backward(const RowArgs& a) { simd::Row<V256, false>(a); }
@@ -105,7 +144,7 @@ void Backward(const RowArgs& a) { simd::Row<V256, false>(a); }
 }  // namespace
 
 const Kernels* Avx2Kernels() {
-  static const Kernels k{"avx2", 32, 4, Census, Forward, Backward};
+  static const Kernels k{"avx2", 32, 4, Census, Forward, Backward, CheckRow};
   return &k;
 }
 

@@ -103,6 +103,43 @@ struct V512 {
   static std::uint64_t LessEqMask(T a, T b) { return _mm512_cmple_epu8_mask(a, b); }
 };
 
+// CheckPixel, 16 pixels at a time: the right matches come by gather.
+void CheckRow(const CheckArgs& a) {
+  const __m512i lanes = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+  const __m512i none = _mm512_set1_epi32(kNoMatch), width = _mm512_set1_epi32(a.width);
+  const __m512i tolerance = _mm512_set1_epi32(a.tolerance), fifteen = _mm512_set1_epi32(15);
+  int x = 0;
+  for (; x + 16 <= a.width; x += 16) {
+    const __m512i d1 = _mm512_loadu_si512(a.disparity + x);
+    __mmask16 keep = _mm512_cmpgt_epi32_mask(d1, _mm512_setzero_si512());
+    if (a.tolerance >= 0) {
+      const __m512i xs = _mm512_add_epi32(_mm512_set1_epi32(x), lanes);
+      const __m512i d_lo = _mm512_srai_epi32(d1, 4);
+      const __m512i d_hi = _mm512_srai_epi32(_mm512_add_epi32(d1, fifteen), 4);
+      __m512i x_lo = _mm512_sub_epi32(xs, d_lo), x_hi = _mm512_sub_epi32(xs, d_hi);
+      x_lo =
+          _mm512_mask_mov_epi32(x_lo, _mm512_cmplt_epi32_mask(x_lo, _mm512_setzero_si512()), width);
+      x_hi =
+          _mm512_mask_mov_epi32(x_hi, _mm512_cmplt_epi32_mask(x_hi, _mm512_setzero_si512()), width);
+      // Lanes without a match gather slot width (kNoMatch), and are dropped anyway.
+      x_lo = _mm512_mask_mov_epi32(width, keep, x_lo);
+      x_hi = _mm512_mask_mov_epi32(width, keep, x_hi);
+      const __m512i r_lo = _mm512_i32gather_epi32(x_lo, a.right_disparity, 4);
+      const __m512i r_hi = _mm512_i32gather_epi32(x_hi, a.right_disparity, 4);
+      const __mmask16 bad_lo =
+          _mm512_cmpneq_epi32_mask(r_lo, none) &
+          _mm512_cmpgt_epi32_mask(_mm512_abs_epi32(_mm512_sub_epi32(r_lo, d_lo)), tolerance);
+      const __mmask16 bad_hi =
+          _mm512_cmpneq_epi32_mask(r_hi, none) &
+          _mm512_cmpgt_epi32_mask(_mm512_abs_epi32(_mm512_sub_epi32(r_hi, d_hi)), tolerance);
+      keep &= static_cast<__mmask16>(~(bad_lo & bad_hi));
+    }
+    const __m512i out = _mm512_maskz_mov_epi32(keep, d1);
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(a.out + x), _mm512_cvtepi32_epi16(out));
+  }
+  for (; x < a.width; ++x) a.out[x] = CheckPixel(a, x);
+}
+
 void Census(const CensusArgs& a) { simd::Census<V512>(a); }
 void Forward(const RowArgs& a) { simd::Row<V512, true>(a); }
 void Backward(const RowArgs& a) { simd::Row<V512, false>(a); }
@@ -110,7 +147,7 @@ void Backward(const RowArgs& a) { simd::Row<V512, false>(a); }
 }  // namespace
 
 const Kernels* Avx512Kernels() {
-  static const Kernels k{"avx512", 64, 8, Census, Forward, Backward};
+  static const Kernels k{"avx512", 64, 8, Census, Forward, Backward, CheckRow};
   return &k;
 }
 

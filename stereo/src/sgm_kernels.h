@@ -219,6 +219,33 @@ static inline void Choose(const Shape& s, const Choice& c, int x, const std::uin
   c.disparity[x] = (best + s.dmin) * 16 + (inner ? SubPixel(t[best - 1], m, t[best + 1]) : 0);
 }
 
+// OpenCV's StereoSGBM left-right check on one row: a match is dropped when the right pixel it
+// lands on has a right match (Choice) more than `tolerance` px away; both roundings of the
+// sub-pixel disparity get a chance. out[x] = the disparity (1/16 px) or 0.
+struct CheckArgs {
+  const std::int32_t* disparity = nullptr;        // width values (Choice)
+  const std::int32_t* right_disparity = nullptr;  // width + 1 values, [width] = kNoMatch
+  int width = 0;
+  int tolerance = 0;  // < 0: no check
+  std::uint16_t* out = nullptr;
+};
+static inline std::uint16_t CheckPixel(const CheckArgs& a, int x) {
+  const int d1 = a.disparity[x];
+  bool keep = d1 > 0;  // kNoMatch too
+  if (a.tolerance >= 0 && keep) {
+    const int d_lo = d1 >> 4, d_hi = (d1 + 15) >> 4;
+    const int x_lo = x - d_lo, x_hi = x - d_hi;  // < width: d1 > 0
+    const int r_lo = a.right_disparity[x_lo >= 0 ? x_lo : a.width];
+    const int r_hi = a.right_disparity[x_hi >= 0 ? x_hi : a.width];
+    const bool bad_lo =
+        r_lo != kNoMatch && (r_lo - d_lo > a.tolerance || d_lo - r_lo > a.tolerance);
+    const bool bad_hi =
+        r_hi != kNoMatch && (r_hi - d_hi > a.tolerance || d_hi - r_hi > a.tolerance);
+    keep = !(bad_lo && bad_hi);
+  }
+  return static_cast<std::uint16_t>(keep ? d1 : 0);
+}
+
 struct Kernels {
   const char* name;
   int lanes;       // Shape::dp must be a multiple of this (32 or 64)
@@ -226,6 +253,7 @@ struct Kernels {
   void (*census)(const CensusArgs& args);
   void (*forward_row)(const RowArgs& args);
   void (*backward_row)(const RowArgs& args);  // with the choice
+  void (*check_row)(const CheckArgs& args);
 };
 
 const Kernels& ScalarKernels();

@@ -258,29 +258,13 @@ class SgmMatcher final : public Matcher {
       a.choice.right_disparity = right_disparity_.data();
       a.choice.right_cost = right_cost_.data();
       kernels_->backward_row(a);
-      CheckLeftRight(out->values.data() + static_cast<std::size_t>(y) * shape_.width);
-    }
-  }
-
-  // OpenCV's StereoSGBM left-right check on one row: a match is dropped when the right pixel it
-  // lands on has a right match (the left pixel of lowest total that landed there) more than
-  // disp12_max_diff away; both roundings of the sub-pixel disparity get a chance.
-  void CheckLeftRight(std::uint16_t* out) const {
-    const int w = shape_.width, tolerance = params_.disp12_max_diff;
-    const std::int32_t* disparity = disparity_.data();
-    const std::int32_t* right = right_disparity_.data();  // [w] is kNoMatch: off the image
-    for (int x = 0; x < w; ++x) {
-      const int d1 = disparity[x];
-      bool keep = d1 > 0;  // kNoMatch too
-      if (tolerance >= 0 && keep) {
-        const int d_lo = d1 >> 4, d_hi = (d1 + 15) >> 4;
-        const int x_lo = x - d_lo, x_hi = x - d_hi;
-        const int r_lo = right[x_lo >= 0 ? x_lo : w], r_hi = right[x_hi >= 0 ? x_hi : w];
-        const bool bad_lo = r_lo != sgm::kNoMatch && std::abs(r_lo - d_lo) > tolerance;
-        const bool bad_hi = r_hi != sgm::kNoMatch && std::abs(r_hi - d_hi) > tolerance;
-        keep = !(bad_lo && bad_hi);
-      }
-      out[x] = static_cast<std::uint16_t>(keep ? d1 : 0);
+      sgm::CheckArgs check;
+      check.disparity = disparity_.data();
+      check.right_disparity = right_disparity_.data();
+      check.width = shape_.width;
+      check.tolerance = params_.disp12_max_diff;
+      check.out = out->values.data() + static_cast<std::size_t>(y) * shape_.width;
+      kernels_->check_row(check);
     }
   }
 

@@ -146,10 +146,14 @@ void BackwardRow(const RowArgs& a) {
   }
 }
 
+void CheckRow(const CheckArgs& a) {
+  for (int x = 0; x < a.width; ++x) a.out[x] = CheckPixel(a, x);
+}
+
 }  // namespace
 
 const Kernels& ScalarKernels() {
-  static const Kernels k{"scalar", 32, 4, Census, ForwardRow, BackwardRow};
+  static const Kernels k{"scalar", 32, 4, Census, ForwardRow, BackwardRow, CheckRow};
   return k;
 }
 
