@@ -98,16 +98,32 @@ struct V256 {
   }
 };
 
-// CheckPixel, 8 pixels at a time: the right matches come by gather.
+// CheckPixel, 8 pixels at a time: the parabola's division in float lanes (the same IEEE division
+// as the scalar one), the right matches by gather.
 void CheckRow(const CheckArgs& a) {
   const __m256i lanes = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
   const __m256i none = _mm256_set1_epi32(kNoMatch), width = _mm256_set1_epi32(a.width);
   const __m256i tolerance = _mm256_set1_epi32(a.tolerance), fifteen = _mm256_set1_epi32(15);
-  const __m256i zero = _mm256_setzero_si256();
+  const __m256i zero = _mm256_setzero_si256(), byte = _mm256_set1_epi32(255);
+  const __m256i one = _mm256_set1_epi32(1);
   int x = 0;
   for (; x + 8 <= a.width; x += 8) {
-    const __m256i d1 = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(a.disparity + x));
-    __m256i keep = _mm256_cmpgt_epi32(d1, zero);
+    const __m256i d = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(a.disparity + x));
+    const __m256i p = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(a.parabola + x));
+    const __m256i before = _mm256_and_si256(p, byte);
+    const __m256i after = _mm256_and_si256(_mm256_srli_epi32(p, 8), byte);
+    const __m256i here = _mm256_and_si256(_mm256_srli_epi32(p, 16), byte);
+    const __m256i inner = _mm256_cmpgt_epi32(_mm256_srli_epi32(p, 24), zero);
+    const __m256i denom2 = _mm256_max_epi32(
+        _mm256_sub_epi32(_mm256_add_epi32(before, after), _mm256_slli_epi32(here, 1)), one);
+    const __m256i num =
+        _mm256_add_epi32(_mm256_slli_epi32(_mm256_sub_epi32(before, after), 4), denom2);
+    const __m256i fraction = _mm256_and_si256(
+        inner, _mm256_cvttps_epi32(_mm256_div_ps(
+                   _mm256_cvtepi32_ps(num), _mm256_cvtepi32_ps(_mm256_slli_epi32(denom2, 1)))));
+    const __m256i matched = _mm256_xor_si256(_mm256_cmpeq_epi32(d, none), _mm256_set1_epi32(-1));
+    const __m256i d1 = _mm256_add_epi32(_mm256_slli_epi32(d, 4), fraction);
+    __m256i keep = _mm256_and_si256(matched, _mm256_cmpgt_epi32(d1, zero));
     if (a.tolerance >= 0) {
       const __m256i xs = _mm256_add_epi32(_mm256_set1_epi32(x), lanes);
       const __m256i d_lo = _mm256_srai_epi32(d1, 4);

@@ -103,15 +103,31 @@ struct V512 {
   static std::uint64_t LessEqMask(T a, T b) { return _mm512_cmple_epu8_mask(a, b); }
 };
 
-// CheckPixel, 16 pixels at a time: the right matches come by gather.
+// CheckPixel, 16 pixels at a time: the parabola's division in float lanes (the same IEEE division
+// as the scalar one), the right matches by gather.
 void CheckRow(const CheckArgs& a) {
   const __m512i lanes = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
   const __m512i none = _mm512_set1_epi32(kNoMatch), width = _mm512_set1_epi32(a.width);
   const __m512i tolerance = _mm512_set1_epi32(a.tolerance), fifteen = _mm512_set1_epi32(15);
+  const __m512i byte = _mm512_set1_epi32(255), one = _mm512_set1_epi32(1);
   int x = 0;
   for (; x + 16 <= a.width; x += 16) {
-    const __m512i d1 = _mm512_loadu_si512(a.disparity + x);
-    __mmask16 keep = _mm512_cmpgt_epi32_mask(d1, _mm512_setzero_si512());
+    const __m512i d = _mm512_loadu_si512(a.disparity + x);
+    const __m512i p = _mm512_loadu_si512(a.parabola + x);
+    const __m512i before = _mm512_and_si512(p, byte);
+    const __m512i after = _mm512_and_si512(_mm512_srli_epi32(p, 8), byte);
+    const __m512i here = _mm512_and_si512(_mm512_srli_epi32(p, 16), byte);
+    const __mmask16 inner = _mm512_test_epi32_mask(p, _mm512_set1_epi32(1 << 24));
+    const __m512i denom2 = _mm512_max_epi32(
+        _mm512_sub_epi32(_mm512_add_epi32(before, after), _mm512_slli_epi32(here, 1)), one);
+    const __m512i num =
+        _mm512_add_epi32(_mm512_slli_epi32(_mm512_sub_epi32(before, after), 4), denom2);
+    const __m512i fraction = _mm512_maskz_cvttps_epi32(
+        inner,
+        _mm512_div_ps(_mm512_cvtepi32_ps(num), _mm512_cvtepi32_ps(_mm512_slli_epi32(denom2, 1))));
+    const __mmask16 matched = _mm512_cmpneq_epi32_mask(d, none);
+    const __m512i d1 = _mm512_add_epi32(_mm512_slli_epi32(d, 4), fraction);
+    __mmask16 keep = matched & _mm512_cmpgt_epi32_mask(d1, _mm512_setzero_si512());
     if (a.tolerance >= 0) {
       const __m512i xs = _mm512_add_epi32(_mm512_set1_epi32(x), lanes);
       const __m512i d_lo = _mm512_srai_epi32(d1, 4);

@@ -138,8 +138,10 @@ inline constexpr std::uint8_t kMaskedTotal = 255;
 // The backward pass's choice, pixel by pixel as it walks each row from right to left (the order
 // of OpenCV's StereoSGBM, which the right matches depend on): the lowest index k of the smallest
 // total, unless uniqueness refuses it or no index is valid; then
-//   disparity[x]        = (k + dmin) * 16 + SubPixel (where both neighbours of k are valid),
-//                         else kNoMatch;
+//   disparity[x]        = k + dmin, else kNoMatch;
+//   parabola[x]         = the totals at k - 1, k + 1 and k (bytes 0, 1, 2) and 1 in byte 3 where
+//                         both neighbours of k are valid, else 0: the sub-pixel step (SubPixel)
+//                         is left to the check, which does 16 at a time;
 //   right_disparity[xr] = k + dmin and right_cost[xr] = the total, for the right pixel
 //                         xr = x - dmin - k, when the total is below right_cost[xr] (the caller
 //                         fills right_cost with INT32_MAX and right_disparity with kNoMatch).
@@ -147,6 +149,7 @@ inline constexpr std::int32_t kNoMatch = INT32_MIN;
 struct Choice {
   const std::int16_t* limits = nullptr;  // UniquenessLimit(m, ratio) for m in [0, 255]
   std::int32_t* disparity = nullptr;
+  std::uint32_t* parabola = nullptr;
   std::int32_t* right_disparity = nullptr;
   std::int32_t* right_cost = nullptr;
 };
@@ -216,22 +219,30 @@ static inline void Choose(const Shape& s, const Choice& c, int x, const std::uin
   }
   const bool inner =
       best > 0 && best < s.d - 1 && t[best - 1] != kMaskedTotal && t[best + 1] != kMaskedTotal;
-  c.disparity[x] = (best + s.dmin) * 16 + (inner ? SubPixel(t[best - 1], m, t[best + 1]) : 0);
+  c.disparity[x] = best + s.dmin;
+  c.parabola[x] = inner ? t[best - 1] | t[best + 1] << 8 | static_cast<std::uint32_t>(m) << 16 |
+                              std::uint32_t{1} << 24
+                        : 0;
 }
 
-// OpenCV's StereoSGBM left-right check on one row: a match is dropped when the right pixel it
-// lands on has a right match (Choice) more than `tolerance` px away; both roundings of the
-// sub-pixel disparity get a chance. out[x] = the disparity (1/16 px) or 0.
+// The disparity of one row in 1/16 px with its sub-pixel step (Choice), then OpenCV's StereoSGBM
+// left-right check: a match is dropped when the right pixel it lands on has a right match
+// (Choice) more than `tolerance` px away; both roundings of the sub-pixel disparity get a chance.
+// out[x] = the disparity (1/16 px, > 0) or 0.
 struct CheckArgs {
   const std::int32_t* disparity = nullptr;        // width values (Choice)
+  const std::uint32_t* parabola = nullptr;        // width values (Choice)
   const std::int32_t* right_disparity = nullptr;  // width + 1 values, [width] = kNoMatch
   int width = 0;
   int tolerance = 0;  // < 0: no check
   std::uint16_t* out = nullptr;
 };
 static inline std::uint16_t CheckPixel(const CheckArgs& a, int x) {
-  const int d1 = a.disparity[x];
-  bool keep = d1 > 0;  // kNoMatch too
+  const int d = a.disparity[x];
+  if (d == kNoMatch) return 0;
+  const std::uint32_t p = a.parabola[x];
+  const int d1 = d * 16 + (p >> 24 != 0 ? SubPixel(p & 255, (p >> 16) & 255, (p >> 8) & 255) : 0);
+  bool keep = d1 > 0;
   if (a.tolerance >= 0 && keep) {
     const int d_lo = d1 >> 4, d_hi = (d1 + 15) >> 4;
     const int x_lo = x - d_lo, x_hi = x - d_hi;  // < width: d1 > 0

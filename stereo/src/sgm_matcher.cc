@@ -143,6 +143,7 @@ class SgmMatcher final : public Matcher {
                       s.dmin == shape_.dmin && s.planes == shape_.planes && s.paths == shape_.paths;
     shape_ = s;
     disparity_.resize(width);
+    parabola_.resize(width);
     right_disparity_.resize(width + 1);
     right_cost_.resize(width + 1);
     if (same && !new_rows && !new_minima) return;
@@ -255,11 +256,13 @@ class SgmMatcher final : public Matcher {
       std::fill(right_cost_.begin(), right_cost_.end(), INT32_MAX);
       a.choice.limits = limits_;
       a.choice.disparity = disparity_.data();
+      a.choice.parabola = parabola_.data();
       a.choice.right_disparity = right_disparity_.data();
       a.choice.right_cost = right_cost_.data();
       kernels_->backward_row(a);
       sgm::CheckArgs check;
       check.disparity = disparity_.data();
+      check.parabola = parabola_.data();
       check.right_disparity = right_disparity_.data();
       check.width = shape_.width;
       check.tolerance = params_.disp12_max_diff;
@@ -284,6 +287,7 @@ class SgmMatcher final : public Matcher {
   sgm::Floors floors_;
   std::int16_t limits_[256];
   std::vector<std::int32_t> disparity_, right_disparity_, right_cost_;
+  std::vector<std::uint32_t> parabola_;
   SpeckleFilter speckle_;
 };
 
