@@ -25,6 +25,13 @@ struct V256 {
   static T Max(T a, T b) { return _mm256_max_epu8(a, b); }
   static T Add8(T a, T b) { return _mm256_add_epi8(a, b); }
   static T Xor(T a, T b) { return _mm256_xor_si256(a, b); }
+  static T UnpackLo8(T a, T b) { return _mm256_unpacklo_epi8(a, b); }
+  static T UnpackHi8(T a, T b) { return _mm256_unpackhi_epi8(a, b); }
+  static T Min16(T a, T b) { return _mm256_min_epu16(a, b); }
+  static int HMin16(T v) {
+    const __m128i m = _mm_min_epu16(_mm256_castsi256_si128(v), _mm256_extracti128_si256(v, 1));
+    return _mm_cvtsi128_si32(_mm_minpos_epu16(m)) & 0xFFFF;
+  }
   static T Or(T a, T b) { return _mm256_or_si256(a, b); }
   static T FirstLane255() { return _mm256_setr_epi64x(0xFF, 0, 0, 0); }
   static T LastLane255() {

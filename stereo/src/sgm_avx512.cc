@@ -38,6 +38,14 @@ struct V512 {
   static T Max(T a, T b) { return _mm512_max_epu8(a, b); }
   static T Add8(T a, T b) { return _mm512_add_epi8(a, b); }
   static T Xor(T a, T b) { return _mm512_xor_si512(a, b); }
+  static T UnpackLo8(T a, T b) { return _mm512_unpacklo_epi8(a, b); }
+  static T UnpackHi8(T a, T b) { return _mm512_unpackhi_epi8(a, b); }
+  static T Min16(T a, T b) { return _mm512_min_epu16(a, b); }
+  static int HMin16(T v) {
+    const __m256i h = _mm256_min_epu16(_mm512_castsi512_si256(v), _mm512_extracti64x4_epi64(v, 1));
+    const __m128i m = _mm_min_epu16(_mm256_castsi256_si128(h), _mm256_extracti128_si256(h, 1));
+    return _mm_cvtsi128_si32(_mm_minpos_epu16(m)) & 0xFFFF;
+  }
   static T Or(T a, T b) { return _mm512_or_si512(a, b); }
   static T FirstLane255() { return _mm512_setr_epi64(0xFF, 0, 0, 0, 0, 0, 0, 0); }
   static T LastLane255() {

@@ -7,7 +7,9 @@
 // table for popcounts), PushBit (acc * 2 + (a > b) per signed byte), HalveUp ((a + 1) >> 1), HMin
 // (the smallest byte), ShiftInBelow(a, b) (b moved up one lane, a's last lane in lane 0),
 // ShiftInAbove(a, b) (a moved down one lane, b's lane 0 in the last), EqMask(a, b) and
-// LessEqMask(a, b) (unsigned a <= b): one bit per lane, lane 0 lowest; RowMinima(vectors, n,
+// LessEqMask(a, b) (unsigned a <= b): one bit per lane, lane 0 lowest; UnpackLo8 and UnpackHi8
+// (bytes interleaved into 16-bit lanes, as punpcklbw / punpckhbw), Min16 and HMin16 (unsigned
+// 16-bit); RowMinima(vectors, n,
 // minima): minima[x] = the smallest byte of vector x (kLanes bytes at vectors + x * kLanes) for
 // x in [0, RoundUp(n, kLanes)).
 //
@@ -87,6 +89,23 @@ inline typename V::T Step(typename V::T c, const std::uint8_t* pred, int chunk, 
   return l;
 }
 
+// 0, 1, ..., 255: the indices of kPackedChoice.
+alignas(64) constexpr std::uint8_t kIndices[256] = {
+    0,   1,   2,   3,   4,   5,   6,   7,   8,   9,   10,  11,  12,  13,  14,  15,  16,  17,  18,
+    19,  20,  21,  22,  23,  24,  25,  26,  27,  28,  29,  30,  31,  32,  33,  34,  35,  36,  37,
+    38,  39,  40,  41,  42,  43,  44,  45,  46,  47,  48,  49,  50,  51,  52,  53,  54,  55,  56,
+    57,  58,  59,  60,  61,  62,  63,  64,  65,  66,  67,  68,  69,  70,  71,  72,  73,  74,  75,
+    76,  77,  78,  79,  80,  81,  82,  83,  84,  85,  86,  87,  88,  89,  90,  91,  92,  93,  94,
+    95,  96,  97,  98,  99,  100, 101, 102, 103, 104, 105, 106, 107, 108, 109, 110, 111, 112, 113,
+    114, 115, 116, 117, 118, 119, 120, 121, 122, 123, 124, 125, 126, 127, 128, 129, 130, 131, 132,
+    133, 134, 135, 136, 137, 138, 139, 140, 141, 142, 143, 144, 145, 146, 147, 148, 149, 150, 151,
+    152, 153, 154, 155, 156, 157, 158, 159, 160, 161, 162, 163, 164, 165, 166, 167, 168, 169, 170,
+    171, 172, 173, 174, 175, 176, 177, 178, 179, 180, 181, 182, 183, 184, 185, 186, 187, 188, 189,
+    190, 191, 192, 193, 194, 195, 196, 197, 198, 199, 200, 201, 202, 203, 204, 205, 206, 207, 208,
+    209, 210, 211, 212, 213, 214, 215, 216, 217, 218, 219, 220, 221, 222, 223, 224, 225, 226, 227,
+    228, 229, 230, 231, 232, 233, 234, 235, 236, 237, 238, 239, 240, 241, 242, 243, 244, 245, 246,
+    247, 248, 249, 250, 251, 252, 253, 254, 255};
+
 // How far ahead the backward pass asks for S1.
 constexpr int kPrefetchPixels = 8;
 
@@ -124,13 +143,13 @@ inline typename V::T HorizontalStep(typename V::T c, const std::uint8_t* pred, i
 // The winner of pixel x's totals t, whose minimum is m (Choice), with selects instead of branches
 // on the data: where the minimum lies is a coin toss for the branch predictor. Over dp (its
 // padding holds 255: never the minimum, never under a limit).
+// The lowest index holding m in pixel x's totals t: the first chunk with a bit, scanned from the
+// end.
 template <class V, int kChunks>
-inline void ChoosePixel(const RowArgs& a, int x, const std::uint8_t* t, int m) {
+inline int LowestIndexOf(const Shape& s, const std::uint8_t* t, int m) {
   using T = typename V::T;
-  const int chunks = Chunks<V, kChunks>(*a.shape);
-  const int limit = a.choice.limits[m];
+  const int chunks = Chunks<V, kChunks>(s);
   const T mb = V::Set1(static_cast<std::uint8_t>(m));
-  // The lowest index holding m: the first chunk with a bit, scanned from the end.
   int best = 0;
   for (int c = chunks - 1; c >= 0; --c) {
     const std::uint64_t e = V::EqMask(V::Load(t + c * V::kLanes), mb);
@@ -138,6 +157,20 @@ inline void ChoosePixel(const RowArgs& a, int x, const std::uint8_t* t, int m) {
     const int first = static_cast<int>(__builtin_ctzll(e | (std::uint64_t{1} << 63)));
     best = e != 0 ? c * V::kLanes + first : best;
   }
+  return best;
+}
+
+// Where every index fits a byte (dp <= 256), the minimum and its lowest index come out of one
+// reduction: each total becomes total * 256 + index in 16 bits (an unpack with the indices), and
+// the smallest of those is the smallest total at its lowest index.
+template <class V, int kChunks>
+constexpr bool kPackedChoice = kChunks > 0 && kChunks* V::kLanes <= 256;
+
+template <class V, int kChunks>
+inline void ChoosePixel(const RowArgs& a, int x, const std::uint8_t* t, int m, int best) {
+  using T = typename V::T;
+  const int chunks = Chunks<V, kChunks>(*a.shape);
+  const int limit = a.choice.limits[m];
   // Any total <= limit, the best and its two neighbours aside (limit < 0: none).
   const T lb = V::Set1(static_cast<std::uint8_t>(MaxInt(limit, 0)));
   std::uint64_t any = 0;
@@ -205,6 +238,7 @@ inline void Pixel(const RowContext<kPlanes>& c, int x, typename V::T p1, typenam
   std::uint8_t* s1 = c.s1 + x * dp;
   std::uint8_t* totals = c.totals + x * dp;
   T total_min = V::Set1(255);
+  T packed_min = V::Set1(255);  // kPackedChoice: 16-bit total * 256 + index
   if constexpr (!kForward) {
     // S1 comes from memory (the frame's sums, 39 MB at 640x480 with 128 disparities), and the
     // loads missed: ask for it kPrefetchPixels ahead of the row walk (right to left).
@@ -243,7 +277,13 @@ inline void Pixel(const RowContext<kPlanes>& c, int x, typename V::T p1, typenam
       if (f.left != nullptr) total = V::Max(total, V::Load(f.left + c.floors.total_offset + k));
       if (f.right != nullptr) total = V::Max(total, V::Load(f.right + c.floors.total_offset + k));
       V::Store(totals + k, total);
-      total_min = V::Min(total_min, total);
+      if constexpr (kPackedChoice<V, kChunks>) {
+        const T index = V::Load(kIndices + k);
+        packed_min =
+            V::Min16(packed_min, V::Min16(V::UnpackLo8(index, total), V::UnpackHi8(index, total)));
+      } else {
+        total_min = V::Min(total_min, total);
+      }
     }
   }
   // The horizontal path's minimum is needed by the next pixel; the others' by the next row, so
@@ -252,7 +292,16 @@ inline void Pixel(const RowContext<kPlanes>& c, int x, typename V::T p1, typenam
   for (int i = 1; i < kPaths; ++i) {
     V::Store(c.min_vectors + (i - 1) * c.min_vectors_stride + x * V::kLanes, min[i]);
   }
-  if constexpr (!kForward) ChoosePixel<V, kChunks>(*c.args, x, totals, V::HMin(total_min));
+  if constexpr (!kForward) {
+    if constexpr (kPackedChoice<V, kChunks>) {
+      const int packed = V::HMin16(packed_min);
+      ChoosePixel<V, kChunks>(*c.args, x, totals, packed >> 8, packed & 255);
+    } else {
+      const int m = V::HMin(total_min);
+      ChoosePixel<V, kChunks>(*c.args, x, totals, m,
+                              LowestIndexOf<V, kChunks>(*c.shape, totals, m));
+    }
+  }
 }
 
 // A row in either direction; dp is a multiple of V's lanes.
