@@ -2,6 +2,7 @@
 // CPU without AVX2. Written to read like the formulas in sgm_kernels.h.
 #include <algorithm>
 #include <cstdlib>
+#include <cstring>
 
 #include "sgm_kernels.h"
 
@@ -40,11 +41,11 @@ void Costs(const RowArgs& a, int x, std::uint8_t* c) {
   const Shape& s = *a.shape;
   const int base = s.width - 1 - x + s.dmin;
   const PixelFloors f = FloorsFor(s, a.floors, x);
+  // Bits set in a nibble: the baseline x86-64 this file is compiled for has no popcnt.
+  static constexpr std::uint8_t kBits[16] = {0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4};
   for (int k = 0; k < s.dp; ++k) {
     int v = 0;
-    for (int j = 0; j < s.planes; ++j) {
-      v += __builtin_popcount(static_cast<unsigned>(a.left[j][x] ^ a.right[j][base + k]));
-    }
+    for (int j = 0; j < s.planes; ++j) v += kBits[(a.left[j][x] ^ a.right[j][base + k]) & 15];
     if (s.census_bits > 12) v = (v + 1) >> 1;  // 24 bits: halved, rounding up
     if (a.floors.pad != nullptr) v = std::max<int>(v, a.floors.pad[k]);
     if (f.left != nullptr) v = std::max<int>(v, f.left[k]);
@@ -58,10 +59,13 @@ void Costs(const RowArgs& a, int x, std::uint8_t* c) {
 std::uint8_t PathStep(const std::uint8_t* c, const std::uint8_t* pred, std::uint8_t pred_min,
                       int dp, int p1, int p2, std::uint8_t* out) {
   const int jump = AddSat(pred_min, p2);
+  // The predecessor between guards, so the loop has no tests (and the compiler vectorizes it).
+  std::uint8_t g[kMaxDp + 2];
+  g[0] = g[dp + 1] = 255;
+  std::memcpy(g + 1, pred, dp);
   std::uint8_t m = 255;
   for (int k = 0; k < dp; ++k) {
-    const int below = k > 0 ? pred[k - 1] : 255, above = k + 1 < dp ? pred[k + 1] : 255;
-    int v = std::min<int>(pred[k], AddSat(std::min(below, above), p1));
+    int v = std::min<int>(g[k + 1], AddSat(std::min(g[k], g[k + 2]), p1));
     v = std::min(v, jump);
     out[k] = AddSat(c[k], v - pred_min);
     m = std::min(m, out[k]);
