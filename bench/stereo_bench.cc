@@ -156,52 +156,71 @@ void RunThroughput(Mode& m, const std::vector<Pair>& pairs, int threads, int per
   m.thread_ms = sum / (threads * per_thread);
 }
 
+// The table: `reference` names the row the speed ratio is taken to (StereoSGBM, or the scalar code
+// in the table of instruction sets).
 nlohmann::json PrintAccuracyAndSpeed(const char* title, std::vector<Mode>& modes, bool throughput,
-                                     int threads) {
-  double sgbm_ms = 0;
-  for (Mode& m : modes) {
-    if (m.params.kind == MatcherKind::kOpenCvSgbm) sgbm_ms = Median(m.ms);
-  }
+                                     int threads, const char* reference = "SGBM") {
+  // The reference row's median for each row: StereoSGBM's, or the scalar code's with as many paths.
+  auto reference_ms = [&](const Mode& row) {
+    for (const Mode& m : modes) {
+      const bool is_reference =
+          std::string(reference) == "SGBM"
+              ? m.params.kind == MatcherKind::kOpenCvSgbm
+              : m.params.simd == stereo::SimdLevel::kScalar && m.params.paths == row.params.paths;
+      if (is_reference) return Median(m.ms);
+    }
+    return 0.0;
+  };
   std::printf("\n%s\n", title);
-  std::printf("%-16s %8s %8s %8s %8s %9s %8s %7s %9s %8s", "mode", "bad-1.0", "bad-1.0", "bad-2.0",
-              "bad-2.0", "bad-2.0", "density", "median", "ms/frame", "x SGBM");
-  if (throughput) std::printf(" %9s %9s", "frames/s", "thread ms");
-  std::printf("\n%-16s %8s %8s %8s %8s %9s %8s %7s %9s %8s", "", "GT", "GT+1", "GT", "GT+1",
+  std::printf("%-20s %8s %8s %8s %8s %9s %8s %7s %9s %8s", "mode", "bad-1.0", "bad-1.0", "bad-2.0",
+              "bad-2.0", "bad-2.0", "density", "median", "ms/frame",
+              (std::string("x ") + reference).c_str());
+  if (throughput) std::printf(" %9s %9s %9s", "frames/s", "thread ms", "frames/s");
+  std::printf("\n%-20s %8s %8s %8s %8s %9s %8s %7s %9s %8s", "", "GT", "GT+1", "GT", "GT+1",
               "GT+1 all", "", "d - GT", "1 thread", "speed");
-  if (throughput) std::printf(" %9s %9s", (std::to_string(threads) + " thr").c_str(), "");
+  if (throughput) {
+    const std::string t = std::to_string(threads);
+    std::printf(" %9s %9s %9s", (t + " thr").c_str(), "", (t + "x1/ms").c_str());
+  }
   std::printf("\n");
   nlohmann::json rows = nlohmann::json::array();
   for (Mode& m : modes) {
-    const double ms = Median(m.ms);
+    const double ms = Median(m.ms), sgbm_ms = reference_ms(m);
     const DisparityScore& s = m.score;
-    std::printf("%-16s %7.2f%% %7.2f%% %7.2f%% %7.2f%% %8.2f%% %7.2f%% %+7.2f %9.2f %7.2fx",
+    std::printf("%-20s %7.2f%% %7.2f%% %7.2f%% %7.2f%% %8.2f%% %7.2f%% %+7.2f %9.2f %7.2fx",
                 m.label.c_str(), s.Bad(1, 0), s.Bad(1, 1), s.Bad(2, 0), s.Bad(2, 1),
                 s.BadCountingMisses(2, 1), 100 * s.Density(), s.MedianError(), ms,
                 ms > 0 && sgbm_ms > 0 ? sgbm_ms / ms : 0.0);
-    if (throughput) std::printf(" %9.1f %9.2f", m.fps, m.thread_ms);
+    // Wall frames/s on this (shared) machine, and what the threads' own CPU time would give on
+    // otherwise idle cores.
+    if (throughput) {
+      std::printf(" %9.1f %9.2f %9.1f", m.fps, m.thread_ms, threads * 1000.0 / m.thread_ms);
+    }
     std::printf("\n");
-    nlohmann::json j = {{"mode", m.label},
-                        {"kind", std::string(stereo::Name(m.params.kind))},
-                        {"paths", m.params.paths},
-                        {"min_disparity", m.params.min_disparity},
-                        {"num_disparities", m.params.num_disparities},
-                        {"block_size", m.params.block_size},
-                        {"p1", m.params.EffectiveP1()},
-                        {"p2", m.params.EffectiveP2()},
-                        {"bad_1_gt", s.Bad(1, 0)},
-                        {"bad_1_gt_plus_1", s.Bad(1, 1)},
-                        {"bad_2_gt", s.Bad(2, 0)},
-                        {"bad_2_gt_plus_1", s.Bad(2, 1)},
-                        {"bad_2_gt_plus_1_counting_misses", s.BadCountingMisses(2, 1)},
-                        {"density", s.Density()},
-                        {"median_error_px", s.MedianError()},
-                        {"median_ms", ms},
-                        {"speed_vs_sgbm", ms > 0 && sgbm_ms > 0 ? sgbm_ms / ms : 0.0},
-                        {"ms_per_frame", m.ms}};
+    nlohmann::json j = {
+        {"mode", m.label},
+        {"kind", std::string(stereo::Name(m.params.kind))},
+        {"paths", m.params.paths},
+        {"min_disparity", m.params.min_disparity},
+        {"num_disparities", m.params.num_disparities},
+        {"block_size", m.params.block_size},
+        {"p1", m.params.EffectiveP1()},
+        {"p2", m.params.EffectiveP2()},
+        {"bad_1_gt", s.Bad(1, 0)},
+        {"bad_1_gt_plus_1", s.Bad(1, 1)},
+        {"bad_2_gt", s.Bad(2, 0)},
+        {"bad_2_gt_plus_1", s.Bad(2, 1)},
+        {"bad_2_gt_plus_1_counting_misses", s.BadCountingMisses(2, 1)},
+        {"density", s.Density()},
+        {"median_error_px", s.MedianError()},
+        {"median_ms", ms},
+        {std::string("speed_vs_") + reference, ms > 0 && sgbm_ms > 0 ? sgbm_ms / ms : 0.0},
+        {"ms_per_frame", m.ms}};
     if (throughput) {
       j["frames_per_second"] = m.fps;
       j["threads"] = threads;
       j["thread_ms_per_frame"] = m.thread_ms;
+      j["frames_per_second_of_thread_cpu"] = threads * 1000.0 / m.thread_ms;
     }
     rows.push_back(std::move(j));
   }
@@ -281,17 +300,21 @@ int Main(int argc, char** argv) {
       ->check(CLI::Range(1, 10000))
       ->capture_default_str();
   app.add_flag("--no-throughput", no_throughput, "skip the throughput columns");
-  app.add_option("--min-disparity", base.min_disparity)->capture_default_str();
+  app.add_option("--min-disparity", base.min_disparity, "the settings every mode gets")
+      ->capture_default_str();
   app.add_option("--num-disparities", base.num_disparities)->capture_default_str();
-  app.add_option("--block-size", base.block_size)->capture_default_str();
+  app.add_option("--block-size", base.block_size, "ours: 3, 5 or 7 (its census window)")
+      ->capture_default_str();
   app.add_option("--p1", base.p1, "0: each matcher's default")->capture_default_str();
   app.add_option("--p2", base.p2, "0: each matcher's default")->capture_default_str();
   app.add_option("--uniqueness", base.uniqueness_ratio)->capture_default_str();
   app.add_option("--speckle-window", base.speckle_window_size)->capture_default_str();
   app.add_option("--speckle-range", base.speckle_range)->capture_default_str();
   app.add_option("--disp12-max-diff", base.disp12_max_diff)->capture_default_str();
-  app.add_option("--simd-levels", simd_levels,
-                 "also a table of ours (8 paths) per instruction set, e.g. scalar,avx2,avx512");
+  app.add_option(
+      "--simd-levels", simd_levels,
+      "also a table of ours (4 and 8 paths) per instruction set, e.g. scalar,avx2,avx512 "
+      "(the ratio column is then to the first, scalar)");
   app.add_option(
       "--ranges", ranges,
       "also a table per disparity range MIN:NUM (e.g. 0:128,0:160,16:128) for the modes");
@@ -302,21 +325,24 @@ int Main(int argc, char** argv) {
     std::fprintf(stderr, "%s\n", std::string(s.message()).c_str());
     return 2;
   }
-  cv::setNumThreads(1);  // OpenCV's matchers on one thread, as ours
+  cv::setNumThreads(1);     // OpenCV's matchers on one thread, as ours
+  std::vector<Mode> modes;  // made first: a wrong --modes fails before the data is read
+  for (const std::string& name : SplitList(modes_list)) modes.push_back(MakeMode(name, base));
   const std::vector<Pair> pairs =
       aloe_dir.empty() ? LoadTsukuba(data_dir, frames) : LoadAloe(aloe_dir);
+  std::string load;
+  if (std::ifstream in("/proc/loadavg"); in) std::getline(in, load);
   std::printf(
       "%zu pairs of %ux%u (%s), disparities [%d, %d), block %d, uniqueness %d, speckle %d/%d, "
-      "disp12 %d; %d rounds, CPU %s\n",
+      "disp12 %d; %d rounds, CPU %s, load average %s\n",
       pairs.size(), pairs[0].left.width, pairs[0].left.height,
       aloe_dir.empty() ? "New Tsukuba" : "Aloe", base.min_disparity,
       base.min_disparity + base.num_disparities, base.block_size, base.uniqueness_ratio,
       base.speckle_window_size, base.speckle_range, base.disp12_max_diff, rounds,
-      std::string(stereo::Name(stereo::BestSimdLevel())).c_str());
+      std::string(stereo::Name(stereo::BestSimdLevel())).c_str(), load.c_str());
   nlohmann::json out;
+  out["load_average"] = load;
 
-  std::vector<Mode> modes;
-  for (const std::string& name : SplitList(modes_list)) modes.push_back(MakeMode(name, base));
   RunTimed(modes, pairs, rounds);
   if (!no_throughput) {
     for (Mode& m : modes) RunThroughput(m, pairs, threads, per_thread);
@@ -328,11 +354,14 @@ int Main(int argc, char** argv) {
 
   if (!simd_levels.empty()) {
     std::vector<Mode> simd;
-    for (const std::string& level : SplitList(simd_levels)) {
-      simd.push_back(MakeMode("sgm8@" + level, base));
+    for (const char* paths : {"sgm4", "sgm8"}) {
+      for (const std::string& level : SplitList(simd_levels)) {
+        simd.push_back(MakeMode(std::string(paths) + "@" + level, base));
+      }
     }
     RunTimed(simd, pairs, rounds);
-    out["simd"] = PrintAccuracyAndSpeed("ours (8 paths) per instruction set", simd, false, 0);
+    out["simd"] = PrintAccuracyAndSpeed("ours per instruction set (the same output)", simd, false,
+                                        0, "scalar");
   }
 
   if (!ranges.empty()) {
