@@ -2,16 +2,19 @@
 // vectors) and sgm_avx512.cc (64-byte vectors). Each computes exactly what sgm_scalar.cc does
 // (sgm_kernels.h has the formulas).
 //
-// The vector policy V (bytes) provides: T, kLanes, Zero, Set1, Load, Store, AddSat, SubSat, Min,
-// Max, Add8, Xor, Lookup (pshufb with a 16-byte table in each 128-bit lane), NibbleCounts (that
-// table for popcounts), PushBit (acc * 2 + (a > b) per signed byte), HalveUp ((a + 1) >> 1), HMin
-// (the smallest byte), ShiftInBelow(a, b) (b moved up one lane, a's last lane in lane 0),
-// ShiftInAbove(a, b) (a moved down one lane, b's lane 0 in the last), EqMask(a, b) and
-// LessEqMask(a, b) (unsigned a <= b): one bit per lane, lane 0 lowest; UnpackLo8 and UnpackHi8
-// (bytes interleaved into 16-bit lanes, as punpcklbw / punpckhbw), Min16 and HMin16 (unsigned
-// 16-bit); RowMinima(vectors, n,
-// minima): minima[x] = the smallest byte of vector x (kLanes bytes at vectors + x * kLanes) for
-// x in [0, RoundUp(n, kLanes)).
+// The vector policy V (of bytes) provides:
+//   T, kLanes, Zero, Set1, Load, Store, StoreStream (past the caches) and StreamFence;
+//   AddSat, SubSat, Min, Max, Add8, Xor, Or, HalveUp ((a + 1) >> 1);
+//   kPlaneBits and the census cost: 4, nibble planes, Lookup (pshufb with a 16-byte table in each
+//   128-bit lane) in NibbleCounts; 8, byte planes, PopCount;
+//   PushBit (acc * 2 + (a > b) per signed byte), HMin (the smallest byte);
+//   ShiftInBelow(a, b) (b moved up one lane, a's last lane in lane 0), ShiftInAbove(a, b) (a moved
+//   down one lane, b's lane 0 in the last), FirstLane255 and LastLane255 (255 in that lane only);
+//   EqMask(a, b) and LessEqMask(a, b) (unsigned a <= b): one bit per lane, lane 0 lowest;
+//   UnpackLo8 and UnpackHi8 (bytes interleaved into 16-bit lanes, as punpcklbw / punpckhbw),
+//   Min16 and HMin16 (unsigned 16-bit);
+//   RowMinima(vectors, n, minima): minima[x] = the smallest byte of vector x (kLanes bytes at
+//   vectors + x * kLanes) for x in [0, RoundUp(n, kLanes)).
 //
 // Include only from a file compiled with the matching instruction-set flags. Everything here has
 // internal linkage (the anonymous namespace), so no AVX code is shared with other files (see

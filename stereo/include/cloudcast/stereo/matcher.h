@@ -72,8 +72,9 @@ struct MatcherParams {
   // blocks 5 and 7, 27 for 3) and p1 below that.
   int p1 = 0;
   int p2 = 0;
-  // A match is rejected when another disparity (not a neighbour of the best) costs less than
-  // (100 + ratio)% of the best's, as OpenCV does. Percent, in [0, 99].
+  // A match is rejected when another disparity (not a neighbour of the best) costs less than the
+  // best's / (1 - ratio / 100), as OpenCV does (cost * (100 - ratio) < best * 100). Percent, in
+  // [0, 99].
   int uniqueness_ratio = 10;
   // cv::filterSpeckles after matching: regions of at most this many pixels whose disparities
   // differ from their neighbours' by more than speckle_range px are removed. 0: off.
