@@ -1,17 +1,16 @@
 // Our semi-global matcher: the frame-level steps around the kernels (sgm_kernels.h has the
-// algorithm): padding and census, the forward and the backward pass row by row, then per row the
-// choice of disparity (sub-pixel parabola and left-right check as OpenCV's StereoSGBM does them),
-// and cv::filterSpeckles on the frame.
+// algorithm): padding and census, the forward and the backward pass row by row (the backward one
+// choosing each row's disparities, then OpenCV's left-right check on it), and the speckle filter
+// on the frame.
 //
 // Memory per frame: S1 (width * height * dp bytes: 39 MB at 640x480 with 128 disparities) plus
-// about 1.5 MB of rows, kept between frames.
+// about 1 MB of path rows and census planes, kept between frames.
 #include <algorithm>
-#include <climits>
+#include <cstdint>
 #include <cstdlib>
 #include <cstring>
 #include <memory>
 
-#include "absl/strings/str_cat.h"
 #include "matcher_internal.h"
 #include "sgm_kernels.h"
 #include "speckle.h"
