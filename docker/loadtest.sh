@@ -63,6 +63,13 @@ for c in podman podman-compose python3 curl debootstrap; do
     exit 1
   fi
 done
+# Installed is not enough: inside a container podman may not run at all ("overlay is not supported
+# over overlayfs"), which `podman info` tells in a second (k8s/smoke.sh checks the same way).
+if ! podman info >/dev/null 2>&1; then
+  echo "loadtest.sh: podman cannot run here: $(podman info 2>&1 | tail -1)" >&2
+  [ "$ci" = 1 ] && { echo "loadtest.sh: SKIPPED: the containerised test cannot run here" >&2; exit 77; }
+  exit 1
+fi
 
 started=$(date +%s)
 step() { echo "loadtest [$(( $(date +%s) - started )) s] $*"; }
