@@ -21,6 +21,7 @@ ServerFlags::ServerFlags(CLI::App& app)
       memory_budget_mb_(options_.memory_budget_bytes >> 20),
       work_memory_mb_(options_.work_memory_bytes >> 20),
       shed_quiet_after_seconds_(std::chrono::duration<double>(options_.shed_quiet_after).count()),
+      refusal_delay_seconds_(std::chrono::duration<double>(options_.refusal_delay).count()),
       shutdown_grace_seconds_(std::chrono::duration<double>(options_.shutdown_grace).count()),
       delivery_(convert::Name(options_.defaults.delivery)) {
   app.option_defaults()->always_capture_default();
@@ -122,6 +123,12 @@ ServerFlags::ServerFlags(CLI::App& app)
                  "give their scratch memory back afterwards")
       ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 24))
       ->group("Limits");
+  app.add_option("--refusal-delay", refusal_delay_seconds_,
+                 "Seconds before a Process call refused for memory is answered (it holds one of "
+                 "its client's Process places meanwhile), so such refusals cannot flood the "
+                 "server; 0 = at once")
+      ->check(CLI::Range(0.0, 60.0))
+      ->group("Limits");
   app.add_option("--shed-quiet-after", shed_quiet_after_seconds_,
                  "When --max-streams is reached, a stream that has sent no frame for this many "
                  "seconds is ended (UNAVAILABLE) to make room for a new client; 0 = never")
@@ -187,6 +194,7 @@ absl::StatusOr<ServerOptions> ServerFlags::Options() const {
   o.memory_budget_bytes = memory_budget_mb_ << 20;
   o.work_memory_bytes = work_memory_mb_ << 20;
   o.shed_quiet_after = ToMillis(shed_quiet_after_seconds_);
+  o.refusal_delay = ToMillis(refusal_delay_seconds_);
   o.transport_memory_bytes = transport_memory_mb_ << 20;
   o.shutdown_grace = ToMillis(shutdown_grace_seconds_);
   o.reflection = !no_reflection_;

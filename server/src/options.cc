@@ -48,6 +48,9 @@ absl::Status ServerOptions::Validate() const {
   if (work_memory_bytes < (std::uint64_t{16} << 20)) {
     return Invalid("--work-memory-mb must be at least 16");
   }
+  if (refusal_delay.count() < 0 || refusal_delay > std::chrono::minutes(1)) {
+    return Invalid("--refusal-delay must be in [0, 60] seconds");
+  }
   if (large_frame_pixels == 0) return Invalid("--large-frame-pixels must be at least 1");
   if (shed_quiet_after.count() < 0) return Invalid("--shed-quiet-after must not be negative");
   for (const std::string& proxy : trusted_proxies) {

@@ -606,7 +606,7 @@ grpc::ServerUnaryReactor* CloudCastService::Process(grpc::CallbackServerContext*
   FrameMemoryCost cost = EstimateFrameMemory(call->request.frame());
   if (absl::Status s = ChargeFrame(bytes, &cost, &call->charged); !s.ok()) {
     metrics_->FrameErrors(s.code()).Increment();
-    reactor->Finish(ToGrpc(s));
+    RefuseLater(reactor, caller->client, ToGrpc(s));
     return reactor;
   }
   if (draining_.load()) {
@@ -858,6 +858,24 @@ bool CloudCastService::ShedQuietStream(const Caller& newcomer) {
   return shed;
 }
 
+void CloudCastService::RefuseLater(grpc::ServerUnaryReactor* reactor,
+                                   const Admission::Client& client, grpc::Status status) {
+  auto ticket = options_.refusal_delay.count() > 0 && !draining_.load()
+                    ? admission_.Admit(Admission::Kind::kProcess, client)
+                    : absl::StatusOr<Admission::Ticket>(absl::UnavailableError("no delay"));
+  if (!ticket.ok()) {
+    reactor->Finish(std::move(status));
+    return;
+  }
+  active_process_calls_.fetch_add(1);
+  auto held = std::make_shared<Admission::Ticket>(*std::move(ticket));
+  delayed_.RunAt(Clock::now() + options_.refusal_delay, [this, reactor, held, status] {
+    held->Release();
+    reactor->Finish(status);
+    ProcessCallDone();
+  });
+}
+
 template <typename... Args>
 void CloudCastService::LogCall(spdlog::level::level_enum level,
                                spdlog::format_string_t<Args...> format, Args&&... args) {
@@ -896,6 +914,7 @@ void CloudCastService::Unregister(StreamReactor* stream) {
 
 void CloudCastService::StartDraining() {
   draining_.store(true);
+  delayed_.Flush();  // refusals waiting out their delay are answered now
   std::vector<StreamReactor*> streams;
   {
     std::lock_guard<std::mutex> lock(streams_mu_);

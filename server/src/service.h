@@ -25,6 +25,7 @@
 #include "admission.h"
 #include "cloudcast/server/options.h"
 #include "cloudcast/v1/cloudcast.grpc.pb.h"
+#include "delayed_actions.h"
 #include "frame_processor.h"
 #include "log_limiter.h"
 #include "metrics.h"
@@ -115,6 +116,10 @@ class CloudCastService final : public CallbackBase {
   // --shed-quiet-after or more) of the client holding the most streams, not `newcomer`'s; true
   // if one was ended (its place is free).
   bool ShedQuietStream(const Caller& newcomer);
+  // Finishes a Process call refused for memory after --refusal-delay, holding one of the client's
+  // Process places meanwhile (at once when it has none left, or the server drains).
+  void RefuseLater(grpc::ServerUnaryReactor* reactor, const Admission::Client& client,
+                   grpc::Status status);
   // A per-call log line, within --log-calls-per-second (says how many were left out before it).
   template <typename... Args>
   void LogCall(spdlog::level::level_enum level, spdlog::format_string_t<Args...> format,
@@ -138,6 +143,9 @@ class CloudCastService final : public CallbackBase {
 
   std::vector<std::string> trusted_proxies_;  // as PeerHost gives them ("ipv4:127.0.0.1")
   LogLimiter call_log_;
+  // After admission_ and metrics_, which its actions use: it is destroyed (and runs what is left)
+  // before them.
+  DelayedActions delayed_;
 
   std::mutex tenants_mu_;
   std::shared_ptr<const TenantDirectory> tenants_;  // under tenants_mu_

@@ -53,6 +53,11 @@ struct ServerOptions {
   // that can never fit gets RESOURCE_EXHAUSTED at once. 320 MB fits one 1920x1080 frame at its
   // worst, or several camera frames.
   std::uint64_t work_memory_bytes = std::uint64_t{320} << 20;
+  // A Process call refused for memory (a frame that can never fit the work memory, or a full
+  // budget) is answered after this pause, holding one of its client's Process places meanwhile: a
+  // client that sends such frames call after call then gets a few refusals a second, not
+  // thousands (whose transport work costs everyone). 0: at once.
+  std::chrono::milliseconds refusal_delay{1'000};
   // Frames of more pixels than this are large: at most all workers but one run large frames at
   // once (a worker stays free for camera frames), and a worker that ran one gives its scratch back
   // to the allocator afterwards, instead of keeping it for the next frame. 2^21: just over
