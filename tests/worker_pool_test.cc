@@ -192,6 +192,36 @@ TEST(WorkerPoolTest, TasksStartOnlyWhileTheirWorkMemoryFits) {
   EXPECT_EQ(pool.work_bytes_in_use(), 0u);
 }
 
+// Defect 3, greedy streams: a client with a backlog on every worker (and so every core) made a
+// paced client's frame wait and share the CPU. While two clients are active, neither runs on more
+// than all workers but one; alone, a client has them all.
+TEST(WorkerPoolTest, AClientLeavesAWorkerWhileAnotherIsActive) {
+  for (const bool other_active : {false, true}) {
+    SCOPED_TRACE(other_active ? "another client active" : "alone");
+    WorkerPool pool(2);
+    std::mutex mu;
+    int running = 0, most = 0;
+    if (other_active) {
+      ASSERT_TRUE(pool.Submit([](std::size_t) {}, /*client=*/2, 1, 1));
+    }
+    for (int i = 0; i < 8; ++i) {
+      ASSERT_TRUE(pool.Submit(
+          [&](std::size_t) {
+            {
+              std::lock_guard<std::mutex> lock(mu);
+              most = std::max(most, ++running);
+            }
+            std::this_thread::sleep_for(std::chrono::milliseconds(20));
+            std::lock_guard<std::mutex> lock(mu);
+            --running;
+          },
+          /*client=*/1, /*call=*/1 + i % 2, /*cost=*/1));
+    }
+    pool.Stop();
+    EXPECT_EQ(most, other_active ? 1 : 2);
+  }
+}
+
 TEST(LogLimiterTest, LetsPerSecondLinesThroughAndSaysHowManyWereLeftOut) {
   LogLimiter limiter(3);
   std::uint64_t suppressed = 99;

@@ -678,6 +678,11 @@ grpc::ServerUnaryReactor* CloudCastService::GetInfo(grpc::CallbackServerContext*
   const auto idle_ms = options_.idle_timeout.count();
   limits->set_idle_timeout_seconds(static_cast<std::uint32_t>((idle_ms + 999) / 1000));
   limits->set_max_queued_frames(options_.max_queued_frames);
+  limits->set_work_memory_bytes(options_.work_memory_bytes);
+  limits->set_work_bytes_per_pixel(static_cast<std::uint32_t>(kWorkBytesPerPixel));
+  limits->set_max_streams_per_client(options_.ResolvedMaxStreamsPerClient());
+  limits->set_max_process_per_client(options_.ResolvedMaxProcessPerClient());
+  limits->set_shed_quiet_after_ms(static_cast<std::uint32_t>(options_.shed_quiet_after.count()));
   *info->mutable_defaults() = convert::ToProto(*default_settings_);
   // Every encoding the core reads.
   for (auto e : {DisparityEncoding::kU8, DisparityEncoding::kU16, DisparityEncoding::kF32}) {

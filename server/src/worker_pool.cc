@@ -23,7 +23,9 @@ bool WorkerPool::Submit(Task task, std::uint64_t client, std::uint64_t call, std
   {
     std::lock_guard<std::mutex> lock(mu_);
     if (stopping_) return false;
-    tasks_.Push(client, call, cost, Queued{std::move(task), work_bytes, cost > limits_.large_cost});
+    clients_[client].last_submit = std::chrono::steady_clock::now();
+    tasks_.Push(client, call, cost,
+                Queued{std::move(task), client, work_bytes, cost > limits_.large_cost});
   }
   cv_.notify_one();
   return true;
@@ -56,9 +58,25 @@ std::uint64_t WorkerPool::work_bytes_high_water() const {
   return work_high_water_;
 }
 
+std::size_t WorkerPool::ActiveClients() {
+  const auto now = std::chrono::steady_clock::now();
+  for (auto it = clients_.begin(); it != clients_.end();) {
+    if (it->second.running == 0 && now - it->second.last_submit > std::chrono::seconds(1)) {
+      it = clients_.erase(it);
+    } else {
+      ++it;
+    }
+  }
+  return clients_.size();
+}
+
 bool WorkerPool::MayStart(const Queued& q) const {
   if (running_ == 0) return true;
   if (q.large && large_running_ >= max_large_) return false;
+  if (size_ >= 2 && active_clients_ >= 2) {
+    const auto it = clients_.find(q.client);
+    if (it != clients_.end() && it->second.running >= size_ - 1) return false;
+  }
   return q.work_bytes <= limits_.work_memory_bytes &&
          work_in_use_ <= limits_.work_memory_bytes - q.work_bytes;
 }
@@ -68,14 +86,19 @@ void WorkerPool::Loop(std::size_t worker) {
     std::optional<Queued> next;
     {
       std::unique_lock<std::mutex> lock(mu_);
-      cv_.wait(lock, [&] {
-        if (tasks_.empty()) return stopping_;
-        next = tasks_.PopIf([this](const Queued& q) { return MayStart(q); });
-        return next.has_value();
-      });
-      // Drain before exiting: a queued task may hold a reference that only it releases.
-      if (!next) return;
+      for (;;) {
+        if (!tasks_.empty()) {
+          active_clients_ = ActiveClients();
+          next = tasks_.PopIf([this](const Queued& q) { return MayStart(q); });
+          if (next) break;
+        } else if (stopping_) {
+          return;  // drained: a queued task may hold a reference that only it releases
+        }
+        // Woken when a task ends or arrives; the timeout notices a client that went quiet.
+        cv_.wait_for(lock, std::chrono::milliseconds(100));
+      }
       ++running_;
+      ++clients_[next->client].running;
       large_running_ += next->large ? 1 : 0;
       work_in_use_ += next->work_bytes;
       work_high_water_ = std::max(work_high_water_, work_in_use_);
@@ -84,6 +107,7 @@ void WorkerPool::Loop(std::size_t worker) {
     {
       std::lock_guard<std::mutex> lock(mu_);
       --running_;
+      --clients_[next->client].running;
       large_running_ -= next->large ? 1 : 0;
       work_in_use_ -= next->work_bytes;
     }

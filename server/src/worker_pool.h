@@ -9,10 +9,15 @@
 //     pipeline's working memory, estimated from its header before anything is decoded); a task
 //     starts only while the tasks running plus it fit in `work_memory_bytes`;
 //   - large tasks (cost over `large_cost`) run on at most all workers but one, so that a worker is
-//     always left for ordinary frames while huge ones are processed (with one worker: one).
+//     always left for ordinary frames while huge ones are processed (with one worker: one);
+//   - while two or more clients are active (a task of theirs queued, running, or submitted in the
+//     last second), no client runs on more than all workers but one: a greedy client cannot take
+//     every worker, and every core, from a paced one, whose next frame then starts at once. A
+//     client alone has them all.
 // When no task is running, the next one starts whatever it states (progress, whatever the limits).
 #pragma once
 
+#include <chrono>
 #include <condition_variable>
 #include <cstddef>
 #include <cstdint>
@@ -20,6 +25,7 @@
 #include <limits>
 #include <mutex>
 #include <thread>
+#include <unordered_map>
 #include <vector>
 
 #include "fair_queue.h"
@@ -64,10 +70,18 @@ class WorkerPool {
  private:
   struct Queued {
     Task task;
+    std::uint64_t client;
     std::uint64_t work_bytes;
     bool large;
   };
+  struct ClientState {
+    std::size_t running = 0;
+    std::chrono::steady_clock::time_point last_submit;
+  };
   bool MayStart(const Queued& q) const;  // under mu_
+  // Clients active now: a task running or submitted within the last second (under mu_; forgets
+  // the others).
+  std::size_t ActiveClients();
   void Loop(std::size_t worker);
 
   const std::size_t size_;
@@ -80,6 +94,8 @@ class WorkerPool {
   bool stopping_ = false;
   std::size_t running_ = 0, large_running_ = 0;  // under mu_
   std::uint64_t work_in_use_ = 0, work_high_water_ = 0;
+  std::unordered_map<std::uint64_t, ClientState> clients_;
+  std::size_t active_clients_ = 0;  // as of the last ActiveClients()
   std::vector<std::thread> threads_;
 };
 
