@@ -43,9 +43,11 @@ struct ServerOptions {
   std::chrono::milliseconds first_message_timeout{10'000};
   // Frames held per stream in DELIVERY_ALL mode (waiting + in work + replies not yet written).
   std::uint32_t max_queued_frames = 4;
-  // Bytes of frames the server may hold at once (read, not yet processed), over all calls; past
-  // it new frames get RESOURCE_EXHAUSTED instead of memory growing. The transport adds at most
-  // max_streams x stream_window_bytes.
+  // Bytes of frames the server may hold at once (read, not yet processed), over all calls, each
+  // counted at its request's size plus what its images decode to (charged before anything is
+  // decoded: a few KB of zstd claiming 4096x4096 count 64 MB); past it new frames get
+  // RESOURCE_EXHAUSTED instead of memory growing. The transport adds at most max_streams x
+  // stream_window_bytes, and frames in work at most work_memory_bytes.
   std::uint64_t memory_budget_bytes = std::uint64_t{1} << 30;
   // Memory for frames in work: their decoded images and the pipeline's working memory, estimated
   // from each frame's header before anything is decoded (frame_input.h, EstimateFrameMemory: up to
