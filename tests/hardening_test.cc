@@ -671,5 +671,103 @@ TEST_F(HardeningTest, JpegDisparityIsRefused) {
   EXPECT_TRUE((*client)->Process(as_png, client::EncodedImage{*colour_jpeg}).ok());
 }
 
+// Issue 18, defect 5: camera values that are finite in double but 0 or denormal in float (the
+// pipeline's precision) were accepted, and every cloud came out empty. Now they are refused,
+// naming the field, on Process and on Stream alike.
+TEST_F(HardeningTest, CameraValuesThatVanishInFloatAreRefusedNamingTheField) {
+  auto client = client::Client::Connect(server_->address());
+  ASSERT_TRUE(client.ok());
+  struct Case {
+    const char* field;
+    void (*set)(v1::CameraModel*);
+  };
+  const Case cases[] = {
+      {"config.camera.fx", [](v1::CameraModel* c) { c->set_fx(1e-300); }},
+      {"config.camera.fx", [](v1::CameraModel* c) { c->set_fx(5e-324); }},
+      {"config.camera.fy", [](v1::CameraModel* c) { c->set_fy(1e-300); }},
+      {"config.camera.baseline", [](v1::CameraModel* c) { c->set_baseline(1e-300); }},
+      {"config.camera.disparity_scale", [](v1::CameraModel* c) { c->set_disparity_scale(1e-300); }},
+      {"config.camera.disparity_scale",
+       [](v1::CameraModel* c) { c->set_disparity_scale(-1e-300); }},
+  };
+  for (const Case& k : cases) {
+    client::StreamConfig config;
+    k.set(config.mutable_camera());
+    auto r = (*client)->Process(Frame().disparity_view(), Frame().colour_view(), config);
+    ASSERT_FALSE(r.ok()) << k.field << ": accepted, " << r->reply.point_count() << " points";
+    EXPECT_EQ(r.status().code(), absl::StatusCode::kInvalidArgument) << r.status();
+    EXPECT_NE(std::string(r.status().message()).find(k.field), std::string::npos) << r.status();
+    // The same config on a stream is a config error naming the field; the stream goes on.
+    auto stream = (*client)->OpenStream(config);
+    ASSERT_TRUE(stream.ok());
+    ASSERT_TRUE((*stream)->Send(Frame().disparity_view(), Frame().colour_view()).ok());
+    ASSERT_TRUE((*stream)->CloseSend().ok());
+    client::Result first;
+    ASSERT_TRUE((*stream)->Read(&first));
+    EXPECT_EQ(first.status.code(), absl::StatusCode::kInvalidArgument) << first.status;
+    EXPECT_NE(std::string(first.status.message()).find(k.field), std::string::npos) << first.status;
+    client::Result frame;
+    ASSERT_TRUE((*stream)->Read(&frame));
+    EXPECT_TRUE(frame.ok()) << frame.status;  // with the server's default camera
+    EXPECT_TRUE((*stream)->Finish().ok());
+  }
+  // Small but sound values still work: a 1e-3 baseline (millimetres) gives points.
+  client::StreamConfig small;
+  small.mutable_camera()->set_baseline(1e-3);
+  small.mutable_passthrough()->set_enabled(false);
+  auto r = (*client)->Process(Frame().disparity_view(), Frame().colour_view(), small);
+  ASSERT_TRUE(r.ok()) << r.status();
+  EXPECT_GT(r->reply.point_count(), 0u);
+}
+
+// Behind the shipped proxy every call comes from the proxy's address: the per-client shares and
+// fairness then count the address the proxy names in x-forwarded-for, when (and only when) the
+// proxy is trusted (--trusted-proxy). A client's own header before the proxy's counts for nothing.
+TEST_F(HardeningTest, ATrustedProxyNamesTheClientInXForwardedFor) {
+  auto stream_from = [&](const std::vector<std::string>& forwarded_for, grpc::ClientContext* ctx) {
+    for (const std::string& f : forwarded_for) ctx->AddMetadata("x-forwarded-for", f);
+    auto stub = v1::CloudCast::NewStub(channel_);
+    auto call = stub->Stream(ctx);
+    call->Write(FrameRequest(1));  // fails when the server refused the stream at once
+    return call;
+  };
+  auto answered = [](grpc::ClientReaderWriter<v1::StreamRequest, v1::StreamReply>* call) {
+    v1::StreamReply reply;
+    return call->Read(&reply) && reply.has_cloud();
+  };
+  for (const bool trusted : {true, false}) {
+    SCOPED_TRACE(trusted ? "trusted" : "not trusted");
+    server::ServerOptions options;
+    options.max_streams = 8;
+    options.max_streams_per_client = 1;
+    if (trusted) options.trusted_proxies = {"127.0.0.1"};
+    Start(options);
+    grpc::ClientContext a, b, c;
+    auto first = stream_from({"10.0.0.1"}, &a);
+    ASSERT_TRUE(answered(first.get()));
+    // Another client behind the proxy (the proxy's entry last, after one the client forged).
+    auto second = stream_from({"10.0.0.1", "10.0.0.2"}, &b);
+    EXPECT_EQ(answered(second.get()), trusted);
+    // The first client again: over its share either way.
+    auto third = stream_from({"10.0.0.2", "10.0.0.1"}, &c);
+    EXPECT_FALSE(answered(third.get()));
+    const grpc::Status refused = third->Finish();
+    EXPECT_EQ(refused.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
+    EXPECT_NE(refused.error_message().find(trusted ? "ipv4:10.0.0.1" : "ipv4:127.0.0.1"),
+              std::string::npos)
+        << refused.error_message();
+    a.TryCancel();
+    b.TryCancel();
+    first->Finish();
+    second->Finish();
+  }
+  // A trusted proxy must be an address.
+  server::ServerOptions bad;
+  bad.trusted_proxies = {"proxy.local"};
+  const absl::Status s = bad.Validate();
+  EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(std::string(s.message()).find("--trusted-proxy 'proxy.local'"), std::string::npos) << s;
+}
+
 }  // namespace
 }  // namespace cloudcast

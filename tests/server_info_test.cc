@@ -76,6 +76,12 @@ TEST_F(ServerTest, GetInfoReportsLimitsAndDefaults) {
   EXPECT_EQ(info.limits().max_streams(), 64u);
   EXPECT_EQ(info.limits().idle_timeout_seconds(), 60u);
   EXPECT_EQ(info.limits().max_queued_frames(), 4u);
+  // Issue 18's limits a client can act on.
+  EXPECT_EQ(info.limits().work_memory_bytes(), 320u << 20);
+  EXPECT_EQ(info.limits().work_bytes_per_pixel(), 128u);
+  EXPECT_EQ(info.limits().max_streams_per_client(), 32u);
+  EXPECT_EQ(info.limits().max_process_per_client(), 32u);
+  EXPECT_EQ(info.limits().shed_quiet_after_ms(), 2000u);
   const v1::StreamConfig& d = info.defaults();
   EXPECT_EQ(d.camera().fx(), 615.0);
   EXPECT_EQ(d.camera().fy(), 615.0);

@@ -1,15 +1,22 @@
 // The worker pool's order: fair between clients (deficit round robin, weighted by cost), so one
-// client's backlog cannot starve another.
+// client's backlog cannot starve another; and its limits on work memory and large tasks. The
+// per-call log rate limit.
 #include "worker_pool.h"
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <atomic>
+#include <chrono>
 #include <condition_variable>
 #include <mutex>
+#include <optional>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "fair_queue.h"
+#include "log_limiter.h"
 
 namespace cloudcast::server {
 namespace {
@@ -102,6 +109,131 @@ TEST(FairQueueTest, CallsOfOneClientTakeTurns) {
   std::vector<int> order;
   while (!q.empty()) order.push_back(q.Pop());
   EXPECT_EQ(order, (std::vector<int>{0, 100, 1, 2, 3, 4, 5}));
+}
+
+TEST(FairQueueTest, PopIfSkipsClientsWhoseNextItemMayNotStartAndKeepsTheirPlace) {
+  FairQueue<int> q(/*quantum=*/1);
+  q.Push(1, 1, 1, 10);  // client 1's next item may not start (say: it does not fit)
+  q.Push(1, 1, 1, 11);
+  q.Push(2, 1, 1, 20);
+  q.Push(2, 1, 1, 21);
+  const auto not_tens = [](int v) { return v / 10 != 1; };
+  EXPECT_EQ(q.PopIf(not_tens), std::optional<int>(20));
+  EXPECT_EQ(q.PopIf(not_tens), std::optional<int>(21));
+  EXPECT_EQ(q.PopIf(not_tens), std::nullopt);  // only client 1's are left
+  EXPECT_EQ(q.size(), 2u);
+  EXPECT_EQ(q.Pop(), 10);
+  EXPECT_EQ(q.Pop(), 11);
+  EXPECT_TRUE(q.empty());
+}
+
+// Issue 18, defect 3: huge frames on every worker made a camera frame wait for one of them to end
+// (1.5 s for 4096x4096). A task over the large cost runs on all workers but one at most.
+TEST(WorkerPoolTest, LargeTasksLeaveAWorkerForTheRest) {
+  WorkerPool pool(2, WorkerPool::Limits{/*work_memory_bytes=*/~0ull, /*large_cost=*/100});
+  std::mutex mu;
+  std::condition_variable cv;
+  bool release = false;
+  int large_running = 0, most_large = 0;
+  std::vector<std::string> order;
+  auto large = [&](std::size_t) {
+    std::unique_lock<std::mutex> lock(mu);
+    most_large = std::max(most_large, ++large_running);
+    order.push_back("large");
+    cv.wait(lock, [&] { return release; });
+    --large_running;
+  };
+  for (int i = 0; i < 4; ++i) ASSERT_TRUE(pool.Submit(large, /*client=*/1, i, /*cost=*/1000));
+  // The small one is queued behind four large ones of another client, and still runs at once.
+  std::atomic<bool> small_ran{false};
+  ASSERT_TRUE(pool.Submit(
+      [&](std::size_t) {
+        std::lock_guard<std::mutex> lock(mu);
+        order.push_back("small");
+        small_ran.store(true);
+      },
+      /*client=*/2, /*call=*/9, /*cost=*/10));
+  for (int i = 0; i < 500 && !small_ran.load(); ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  EXPECT_TRUE(small_ran.load()) << "a small task waited behind large ones on every worker";
+  {
+    std::lock_guard<std::mutex> lock(mu);
+    release = true;
+  }
+  cv.notify_all();
+  pool.Stop();
+  EXPECT_EQ(most_large, 1);
+  EXPECT_EQ(order.size(), 5u);
+}
+
+// Defect 4: tasks start only while their stated work memory fits beside the running ones'; the
+// pool never states more in use than its limit (but for a lone task, which always may start).
+TEST(WorkerPoolTest, TasksStartOnlyWhileTheirWorkMemoryFits) {
+  WorkerPool pool(4, WorkerPool::Limits{/*work_memory_bytes=*/100, /*large_cost=*/~0ull});
+  std::mutex mu;
+  int running = 0, most_running = 0;
+  for (int i = 0; i < 12; ++i) {
+    ASSERT_TRUE(pool.Submit(
+        [&](std::size_t) {
+          {
+            std::lock_guard<std::mutex> lock(mu);
+            most_running = std::max(most_running, ++running);
+          }
+          std::this_thread::sleep_for(std::chrono::milliseconds(20));
+          std::lock_guard<std::mutex> lock(mu);
+          --running;
+        },
+        /*client=*/static_cast<std::uint64_t>(i % 3), i, /*cost=*/1, /*work_bytes=*/40));
+  }
+  pool.Stop();
+  EXPECT_EQ(most_running, 2);  // 2 x 40 fit in 100, 3 x 40 do not
+  EXPECT_LE(pool.work_bytes_high_water(), 100u);
+  EXPECT_EQ(pool.work_bytes_in_use(), 0u);
+}
+
+// Defect 3, greedy streams: a client with a backlog on every worker (and so every core) made a
+// paced client's frame wait and share the CPU. While two clients are active, neither runs on more
+// than all workers but one; alone, a client has them all.
+TEST(WorkerPoolTest, AClientLeavesAWorkerWhileAnotherIsActive) {
+  for (const bool other_active : {false, true}) {
+    SCOPED_TRACE(other_active ? "another client active" : "alone");
+    WorkerPool pool(2);
+    std::mutex mu;
+    int running = 0, most = 0;
+    if (other_active) {
+      ASSERT_TRUE(pool.Submit([](std::size_t) {}, /*client=*/2, 1, 1));
+    }
+    for (int i = 0; i < 8; ++i) {
+      ASSERT_TRUE(pool.Submit(
+          [&](std::size_t) {
+            {
+              std::lock_guard<std::mutex> lock(mu);
+              most = std::max(most, ++running);
+            }
+            std::this_thread::sleep_for(std::chrono::milliseconds(20));
+            std::lock_guard<std::mutex> lock(mu);
+            --running;
+          },
+          /*client=*/1, /*call=*/1 + i % 2, /*cost=*/1));
+    }
+    pool.Stop();
+    EXPECT_EQ(most, other_active ? 1 : 2);
+  }
+}
+
+TEST(LogLimiterTest, LetsPerSecondLinesThroughAndSaysHowManyWereLeftOut) {
+  LogLimiter limiter(3);
+  std::uint64_t suppressed = 99;
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_TRUE(limiter.Allow(&suppressed));
+    EXPECT_EQ(suppressed, 0u);
+  }
+  for (int i = 0; i < 5; ++i) EXPECT_FALSE(limiter.Allow(&suppressed));
+  EXPECT_EQ(limiter.total_suppressed(), 5u);
+  std::this_thread::sleep_for(std::chrono::milliseconds(1100));
+  EXPECT_TRUE(limiter.Allow(&suppressed));
+  EXPECT_EQ(suppressed, 5u);  // the first line of the next second says so
 }
 
 }  // namespace

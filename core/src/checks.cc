@@ -11,6 +11,14 @@ namespace {
 // Debian's Abseil has its own string_view, which StrCat takes; std::string converts to both.
 std::string S(std::string_view v) { return std::string(v); }
 
+// A value finite and non-zero in double that float, which the pipeline computes in, loses.
+absl::Status TooSmall(std::string_view field, double value) {
+  return absl::InvalidArgumentError(absl::StrCat(
+      S(field), " is ", value, ": its magnitude must be at least ", kMinMagnitude,
+      " (smaller values are 0 or denormal in the pipeline's single precision, and every point "
+      "would vanish)"));
+}
+
 }  // namespace
 
 absl::Status Positive(std::string_view field, double value) {
@@ -18,6 +26,7 @@ absl::Status Positive(std::string_view field, double value) {
     return absl::InvalidArgumentError(
         absl::StrCat(S(field), " must be finite and in (0, 1e9], got ", value));
   }
+  if (value < kMinMagnitude) return TooSmall(field, value);
   return absl::OkStatus();
 }
 
@@ -39,6 +48,7 @@ absl::Status FiniteFloat(std::string_view field, float value) {
 absl::Status NonZero(std::string_view field, double value) {
   if (absl::Status s = Finite(field, value); !s.ok()) return s;
   if (value == 0.0) return absl::InvalidArgumentError(absl::StrCat(S(field), " must not be 0"));
+  if (std::fabs(value) < kMinMagnitude) return TooSmall(field, value);
   return absl::OkStatus();
 }
 

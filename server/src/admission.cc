@@ -20,7 +20,11 @@ void Admission::Ticket::Release() {
   if (admission_ != nullptr) std::exchange(admission_, nullptr)->Give(kind_, client_);
 }
 
-absl::StatusOr<Admission::Ticket> Admission::Admit(Kind kind, const Client& client) {
+absl::StatusOr<Admission::Ticket> Admission::Admit(Kind kind, const Client& client,
+                                                   Refusal* refusal) {
+  Refusal ignored;
+  if (refusal == nullptr) refusal = &ignored;
+  *refusal = Refusal::kNone;
   const bool stream = kind == Kind::kStream;
   const std::uint32_t limit = stream ? limits_.max_streams : limits_.max_process;
   const std::uint32_t own_limit = stream ? client.max_streams : client.max_process;
@@ -32,6 +36,7 @@ absl::StatusOr<Admission::Ticket> Admission::Admit(Kind kind, const Client& clie
     std::lock_guard<std::mutex> lock(mu_);
     std::uint32_t& total = stream ? total_.streams : total_.process;
     if (total >= limit) {
+      *refusal = Refusal::kServerFull;
       return absl::ResourceExhaustedError(
           absl::StrCat("too many ", what, ": the server's limit is ", limit,
                        stream ? " (max_streams, --max-streams)" : " (max_streams, --max-streams)"));
@@ -39,6 +44,7 @@ absl::StatusOr<Admission::Ticket> Admission::Admit(Kind kind, const Client& clie
     Counts& mine = clients_[client.key];
     std::uint32_t& own = stream ? mine.streams : mine.process;
     if (own >= share) {
+      *refusal = Refusal::kClientShare;
       if (!client.tenant.empty() && own_limit > 0) {
         return absl::ResourceExhaustedError(absl::StrCat(
             "too many ", what, " for tenant '", client.tenant, "': its limit is ", share,

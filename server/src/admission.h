@@ -55,9 +55,12 @@ class Admission {
   Admission(const Admission&) = delete;
   Admission& operator=(const Admission&) = delete;
 
+  // Which limit a refused call hit.
+  enum class Refusal { kNone, kServerFull, kClientShare };
+
   // A place for `client`, or RESOURCE_EXHAUSTED saying which limit (and its flag, or its key in
-  // the tokens file) it hit.
-  absl::StatusOr<Ticket> Admit(Kind kind, const Client& client);
+  // the tokens file) it hit; `refusal`, when given, gets which.
+  absl::StatusOr<Ticket> Admit(Kind kind, const Client& client, Refusal* refusal = nullptr);
   absl::StatusOr<Ticket> Admit(Kind kind, const std::string& peer_host) {
     return Admit(kind, Client{peer_host, "", 0, 0});
   }

@@ -19,6 +19,9 @@ ServerFlags::ServerFlags(CLI::App& app)
       first_message_timeout_seconds_(
           std::chrono::duration<double>(options_.first_message_timeout).count()),
       memory_budget_mb_(options_.memory_budget_bytes >> 20),
+      work_memory_mb_(options_.work_memory_bytes >> 20),
+      shed_quiet_after_seconds_(std::chrono::duration<double>(options_.shed_quiet_after).count()),
+      refusal_delay_seconds_(std::chrono::duration<double>(options_.refusal_delay).count()),
       shutdown_grace_seconds_(std::chrono::duration<double>(options_.shutdown_grace).count()),
       delivery_(convert::Name(options_.defaults.delivery)) {
   app.option_defaults()->always_capture_default();
@@ -106,9 +109,34 @@ ServerFlags::ServerFlags(CLI::App& app)
       ->check(CLI::Range(0.001, 86400.0))
       ->group("Limits");
   app.add_option("--memory-budget-mb", memory_budget_mb_,
-                 "Megabytes of frames the server may hold at once (read, not yet processed); "
-                 "past it new frames get RESOURCE_EXHAUSTED")
+                 "Megabytes of frames the server may hold at once (read, not yet processed), "
+                 "each counted at its decoded size (a compressed or encoded frame is charged "
+                 "what it decodes to, before it is decoded); past it new frames get "
+                 "RESOURCE_EXHAUSTED")
       ->check(CLI::Range(1, 1 << 24))
+      ->group("Limits");
+  app.add_option("--work-memory-mb", work_memory_mb_,
+                 "Megabytes frames in work may use (decoded images and the pipeline's working "
+                 "memory, estimated from each frame's header before decoding: up to 128 bytes a "
+                 "pixel); a frame waits for a worker until it fits, one that never fits gets "
+                 "RESOURCE_EXHAUSTED")
+      ->check(CLI::Range(16, 1 << 24))
+      ->group("Limits");
+  app.add_option("--large-frame-pixels", o.large_frame_pixels,
+                 "Frames of more pixels are large: they run on all workers but one at most, and "
+                 "give their scratch memory back afterwards")
+      ->check(CLI::Range(std::uint64_t{1}, std::uint64_t{1} << 24))
+      ->group("Limits");
+  app.add_option("--refusal-delay", refusal_delay_seconds_,
+                 "Seconds before a Process call refused for memory is answered (it holds one of "
+                 "its client's Process places meanwhile), so such refusals cannot flood the "
+                 "server; 0 = at once")
+      ->check(CLI::Range(0.0, 60.0))
+      ->group("Limits");
+  app.add_option("--shed-quiet-after", shed_quiet_after_seconds_,
+                 "When --max-streams is reached, a stream that has sent no frame for this many "
+                 "seconds is ended (UNAVAILABLE) to make room for a new client; 0 = never")
+      ->check(CLI::Range(0.0, 86400.0))
       ->group("Limits");
   app.add_option("--stream-window-bytes", o.stream_window_bytes,
                  "gRPC receive window per stream: what the transport buffers beyond the frames "
@@ -126,6 +154,28 @@ ServerFlags::ServerFlags(CLI::App& app)
   app.add_option("--max-process-per-client", o.max_process_per_client,
                  "One client's share of the Process calls in flight; 0 = half of --max-streams")
       ->group("Limits");
+  app.add_option("--trusted-proxy", o.trusted_proxies,
+                 "A proxy in front (its IP address; repeat for several) whose x-forwarded-for "
+                 "header names the client: its calls count against that address. Others' "
+                 "headers are ignored")
+      ->group("Limits");
+  const std::string transport = "HTTP/2 transport (docs/http2-hardening.md)";
+  app.add_option("--http2-max-concurrent-streams", o.http2_max_concurrent_streams,
+                 "Streams open at once on one connection (SETTINGS_MAX_CONCURRENT_STREAMS)")
+      ->check(CLI::Range(1u, 0x7fffffffu))
+      ->group(transport);
+  app.add_option("--http2-max-metadata-bytes", o.http2_max_metadata_bytes,
+                 "Largest header block of a call; 0 = gRPC's default (8 KB)")
+      ->group(transport);
+  app.add_option("--transport-memory-mb", transport_memory_mb_,
+                 "gRPC's resource quota: memory its transport may use; 0 = no quota")
+      ->check(CLI::Range(0, 1 << 24))
+      ->group(transport);
+  app.add_option("--log-calls-per-second", o.log_calls_per_second,
+                 "Per-call log lines (stream opened, done, refused) written per second at most; "
+                 "the rest are counted, not written")
+      ->check(CLI::Range(1u, 1000000u))
+      ->group("Service");
   app.add_option("--max-queued-frames", o.max_queued_frames,
                  "Frames held per stream in delivery 'all' (waiting + in work + replies not yet "
                  "written); when full the stream is not read")
@@ -146,6 +196,10 @@ absl::StatusOr<ServerOptions> ServerFlags::Options() const {
   o.idle_timeout = ToMillis(idle_timeout_seconds_);
   o.first_message_timeout = ToMillis(first_message_timeout_seconds_);
   o.memory_budget_bytes = memory_budget_mb_ << 20;
+  o.work_memory_bytes = work_memory_mb_ << 20;
+  o.shed_quiet_after = ToMillis(shed_quiet_after_seconds_);
+  o.refusal_delay = ToMillis(refusal_delay_seconds_);
+  o.transport_memory_bytes = transport_memory_mb_ << 20;
   o.shutdown_grace = ToMillis(shutdown_grace_seconds_);
   o.reflection = !no_reflection_;
   o.max_connection_age = ToMillis(max_connection_age_seconds_);

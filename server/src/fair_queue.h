@@ -1,16 +1,20 @@
 // Fair order for keyed work, on two levels:
-//   - between clients (a connection, or a tenant): deficit round robin (Shreedhar and Varghese)
+//   - between clients (a peer address, or a tenant): deficit round robin (Shreedhar and Varghese)
 //     weighted by cost. Each client takes turns; in its turn it runs work up to `quantum` more
 //     cost units than it has used. The server's costs are frame pixels, so a client sending
 //     4096x4096 frames gets a frame per 16.7 M pixels of turns, and one sending 640x480 frames
-//     about two frames per turn: neither starves the other.
+//     about two frames per turn: neither starves the other, however many connections either
+//     spreads its calls over.
 //   - between the calls (streams, Process calls) of one client: plain round robin, one item each
-//     in turn, so a greedy stream cannot starve a paced one on the same connection.
-// Within a call, items keep their arrival order. No locks: the caller holds its own.
+//     in turn, so a greedy stream cannot starve a paced one of the same client.
+// Within a call, items keep their arrival order. PopIf skips clients whose next item may not
+// start now (the worker pool's memory and large-frame limits), keeping their place and credit.
+// No locks: the caller holds its own.
 #pragma once
 
 #include <cstdint>
 #include <deque>
+#include <optional>
 #include <unordered_map>
 #include <utility>
 
@@ -32,17 +36,41 @@ class FairQueue {
 
   // The next item; the queue must not be empty.
   Item Pop() {
+    return *PopIf([](const Item&) { return true; });
+  }
+
+  // The next item in fair order among those `may_start(item)` accepts, looking only at each
+  // client's next item (its next call's oldest); nullopt when no client's next item may start.
+  template <typename MayStart>
+  std::optional<Item> PopIf(const MayStart& may_start) {
+    bool any = false;
+    for (const std::uint64_t id : ring_) {
+      if (may_start(Head(clients_.at(id)).item)) {
+        any = true;
+        break;
+      }
+    }
+    if (!any) return std::nullopt;
+    // Deficit round robin over the clients that may start; every visit of one in a new turn
+    // adds to its credit, so the loop ends.
+    std::size_t i = 0;
     for (;;) {
-      const std::uint64_t id = ring_.front();
+      if (i >= ring_.size()) i = 0;
+      const std::uint64_t id = ring_[i];
       Client& c = clients_.at(id);
+      Work& head = Head(c);
+      if (!may_start(head.item)) {
+        ++i;
+        continue;
+      }
       if (!c.in_turn) {
         c.deficit += quantum_;
         c.in_turn = true;
       }
-      const std::uint64_t call = c.ring.front();
-      std::deque<Work>& work = c.calls.at(call);
-      if (work.front().cost <= c.deficit) {
-        c.deficit -= work.front().cost;
+      if (head.cost <= c.deficit) {
+        c.deficit -= head.cost;
+        const std::uint64_t call = c.ring.front();
+        std::deque<Work>& work = c.calls.at(call);
         Item item = std::move(work.front().item);
         work.pop_front();
         --size_;
@@ -55,13 +83,13 @@ class FairQueue {
         if (c.ring.empty()) {
           // An idle client keeps no credit (DRR): it cannot save turns up for a burst.
           clients_.erase(id);
-          ring_.pop_front();
+          ring_.erase(ring_.begin() + static_cast<std::ptrdiff_t>(i));
         }
         return item;
       }
       // Its turn is over; the rest of its credit carries to its next turn.
       c.in_turn = false;
-      ring_.pop_front();
+      ring_.erase(ring_.begin() + static_cast<std::ptrdiff_t>(i));
       ring_.push_back(id);
     }
   }
@@ -80,6 +108,8 @@ class FairQueue {
     std::uint64_t deficit = 0;
     bool in_turn = false;
   };
+
+  static Work& Head(Client& c) { return c.calls.at(c.ring.front()).front(); }
 
   const std::uint64_t quantum_;
   std::unordered_map<std::uint64_t, Client> clients_;

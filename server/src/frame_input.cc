@@ -209,4 +209,67 @@ std::uint64_t FramePixels(const v1::Frame& frame) {
   return pixels > 0 ? pixels : 1;
 }
 
+namespace {
+
+// One image's stated size: width x height, and the bytes decoding it takes (0 for raw pixels,
+// which are in the message already).
+struct ImageCost {
+  std::uint64_t pixels = 0;
+  std::uint32_t max_side = 0;
+  std::uint64_t decoded_bytes = 0;
+};
+
+template <typename Image, typename Encoding>
+ImageCost CostOf(const Image& image) {
+  ImageCost c;
+  if (image.has_raw()) {
+    c.pixels = std::uint64_t{image.raw().width()} * image.raw().height();
+    c.max_side = std::max(image.raw().width(), image.raw().height());
+  } else if (image.has_compressed()) {
+    c.pixels = std::uint64_t{image.compressed().width()} * image.compressed().height();
+    c.max_side = std::max(image.compressed().width(), image.compressed().height());
+    Encoding e{};
+    const bool known = convert::FromProto(image.compressed().encoding(), "", &e).ok();
+    c.decoded_bytes = c.pixels * (known ? BytesPerPixel(e) : 4);
+  } else if (image.has_encoded()) {
+    std::uint32_t w = 0, h = 0;
+    const char* format = nullptr;
+    if (SniffImageSize(image.encoded(), &w, &h, &format)) c.pixels = std::uint64_t{w} * h;
+    c.max_side = std::max(w, h);
+    c.decoded_bytes = c.pixels * kEncodedImageBytesPerPixel / 2;
+  }
+  return c;
+}
+
+}  // namespace
+
+FrameMemoryCost EstimateFrameMemory(const v1::Frame& frame, const StereoParams& stereo) {
+  ImageCost g;  // the geometry's image
+  switch (frame.geometry_case()) {
+    case v1::Frame::kDepth:
+      g = CostOf<v1::DepthImage, DepthEncoding>(frame.depth());
+      break;
+    case v1::Frame::kRight:
+      g = CostOf<v1::ColorImage, ColorEncoding>(frame.right());
+      break;
+    default:
+      g = CostOf<v1::DisparityImage, DisparityEncoding>(frame.disparity());
+  }
+  const ImageCost c = CostOf<v1::ColorImage, ColorEncoding>(frame.colour());
+  FrameMemoryCost cost;
+  // Both images are decoded before their sizes are compared: each is charged its own.
+  cost.pixels = std::max(g.pixels, c.pixels);
+  cost.max_side = std::max(g.max_side, c.max_side);
+  cost.decoded_bytes = g.decoded_bytes + c.decoded_bytes;
+  cost.work_bytes = cost.decoded_bytes + cost.pixels * kWorkBytesPerPixel;
+  if (frame.has_right()) {
+    const std::uint64_t per_cost = stereo.matcher == StereoMatcher::kSgm       ? 1
+                                   : stereo.matcher == StereoMatcher::kOpenCvHH ? 4
+                                                                                : 0;
+    const auto disparities = static_cast<std::uint64_t>(std::max(stereo.num_disparities, 0));
+    cost.work_bytes += cost.pixels * (12 + per_cost * disparities);
+  }
+  return cost;
+}
+
 }  // namespace cloudcast::server

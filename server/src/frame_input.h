@@ -7,6 +7,7 @@
 #include "cloudcast/core/frame_codec.h"
 #include "cloudcast/core/image.h"
 #include "cloudcast/core/limits.h"
+#include "cloudcast/core/stereo.h"
 #include "cloudcast/io/image_io.h"
 #include "cloudcast/v1/cloudcast.pb.h"
 #include "request_reader.h"
@@ -67,5 +68,28 @@ absl::Status PrepareFrameImages(const v1::Frame& frame, const Limits& limits,
 // without decoding anything: the cost the worker pool weighs it by. 1 when it cannot tell (such
 // a frame is refused quickly anyway).
 std::uint64_t FramePixels(const v1::Frame& frame);
+
+// What a frame will cost in memory once a worker takes it, from the sizes its message states (raw
+// and compressed images) or its images' headers (encoded ones), before anything is decoded, so
+// that a few kilobytes which decode to a huge frame are weighed as that frame.
+struct FrameMemoryCost {
+  std::uint64_t pixels = 0;         // the larger image's width x height
+  std::uint32_t max_side = 0;       // the largest width or height stated
+  std::uint64_t decoded_bytes = 0;  // the images the server decodes (compressed, encoded)
+  std::uint64_t work_bytes = 0;     // decoded_bytes plus the pipeline's working memory
+};
+// The pipeline's working memory per pixel at its worst, measured: every pixel its own voxel
+// (voxel table, cloud, Draco encoder). 114 bytes were measured on 1024x1024 and 2048x2048 frames
+// (tests/hardening_attacks_test.cc); the rest is margin. Images decoded from PNG and the like
+// count 16 bytes a pixel (up to 4 for the disparity and for the colour, and the decoder's own
+// buffers as much again); compressed images their exact size.
+inline constexpr std::uint64_t kWorkBytesPerPixel = 128;
+inline constexpr std::uint64_t kEncodedImageBytesPerPixel = 16;
+// A stereo pair also costs its matcher's memory: `stereo` are the settings it will be matched
+// with (its stream's, or its Process call's). Measured per pixel and disparity: ours keeps one
+// byte, OpenCV's MODE_HH four (two 16-bit volumes); SGBM, SGBM_3WAY and BM keep rows only. Plus
+// the grey, rectified and disparity images: 12 bytes a pixel.
+FrameMemoryCost EstimateFrameMemory(const v1::Frame& frame,
+                                    const StereoParams& stereo = StereoParams{});
 
 }  // namespace cloudcast::server

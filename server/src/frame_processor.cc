@@ -110,14 +110,29 @@ absl::Status FrameProcessor::Process(const v1::Frame& frame, const InPlacePixels
   return absl::OkStatus();
 }
 
-FrameRunner::FrameRunner(int workers, Metrics* metrics, std::string instance)
-    : metrics_(metrics), instance_(std::move(instance)) {
+FrameRunner::FrameRunner(int workers, Metrics* metrics, std::string instance,
+                         std::uint64_t keep_scratch_pixels)
+    : keep_scratch_pixels_(keep_scratch_pixels),
+      scratch_mu_(new std::mutex[static_cast<std::size_t>(std::max(workers, 1))]),
+      metrics_(metrics),
+      instance_(std::move(instance)) {
   // One frame per worker, one worker per core: OpenCV's matchers must not fan out over the cores
   // the other workers use.
   stereo::SetOpenCvThreads(1);
   for (int i = 0; i < workers; ++i) {
     processors_.push_back(std::make_unique<FrameProcessor>(&rectifiers_));
   }
+}
+
+int FrameRunner::ReleaseIdleScratch() {
+  int released = 0;
+  for (std::size_t i = 0; i < processors_.size(); ++i) {
+    std::unique_lock<std::mutex> lock(scratch_mu_[i], std::try_to_lock);
+    if (!lock.owns_lock()) continue;
+    processors_[i] = std::make_unique<FrameProcessor>(&rectifiers_);
+    ++released;
+  }
+  return released;
 }
 
 absl::Status FrameRunner::Run(std::size_t worker, const v1::Frame& frame,
@@ -128,8 +143,14 @@ absl::Status FrameRunner::Run(std::size_t worker, const v1::Frame& frame,
   m.queue_seconds.Observe(Seconds(start - arrival.time));
   const double cpu0 = ThreadCpuSeconds();
   FrameCosts costs;
+  std::unique_lock<std::mutex> scratch(scratch_mu_[worker]);
   const absl::Status status =
       processors_[worker]->Process(frame, in_place, settings, reply, &costs);
+  // Scratch sized for a huge frame would stay resident for the frames after it.
+  if (EstimateFrameMemory(frame).pixels > keep_scratch_pixels_) {
+    processors_[worker] = std::make_unique<FrameProcessor>(&rectifiers_);
+  }
+  scratch.unlock();
   m.core_cpu_seconds.Increment(costs.core_cpu_seconds);
   if (status.ok()) {
     reply->mutable_times()->set_queue_us(Micros(Seconds(start - arrival.time)));

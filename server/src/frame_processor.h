@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cstdint>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -63,7 +64,10 @@ struct Arrival {
 // One FrameProcessor per worker, and the bookkeeping every frame gets.
 class FrameRunner {
  public:
-  FrameRunner(int workers, Metrics* metrics, std::string instance);
+  // A worker that ran a frame of more than `keep_scratch_pixels` pixels gives its scratch back
+  // afterwards (a fresh FrameProcessor), so that one huge frame does not stay resident.
+  FrameRunner(int workers, Metrics* metrics, std::string instance,
+              std::uint64_t keep_scratch_pixels = ~std::uint64_t{0});
 
   // On worker `worker`: processes `frame` into `reply`, which gets everything but its send time
   // and frames_dropped (the writer's). Counts the frame, its stage times and CPU, or its error.
@@ -73,7 +77,14 @@ class FrameRunner {
 
   const std::string& instance() const { return instance_; }
 
+  // Gives every idle worker's scratch back (a worker in the middle of a frame keeps its own):
+  // for a server that has gone idle. Thread-safe. The workers that did.
+  int ReleaseIdleScratch();
+
  private:
+  const std::uint64_t keep_scratch_pixels_;
+  // processors_[i] is used by worker i under scratch_mu_[i], which ReleaseIdleScratch tries.
+  std::unique_ptr<std::mutex[]> scratch_mu_;
   RectifierCache rectifiers_;  // before processors_, which point at it
   std::vector<std::unique_ptr<FrameProcessor>> processors_;
   Metrics* const metrics_;

@@ -98,6 +98,13 @@ Metrics::Metrics()
                                            "Stream calls refused: shutting down")),
       streams_idle_timeout(NewCounter(*registry_, "cloudcast_streams_idle_timeout_total",
                                       "Stream calls ended by the idle timeout")),
+      streams_cancelled(NewCounter(*registry_, "cloudcast_streams_cancelled_total",
+                                   "Stream calls the client cancelled")),
+      streams_shed(NewCounter(*registry_, "cloudcast_streams_shed_total",
+                              "Quiet Stream calls ended to make room for a new client while the "
+                              "server was full (--shed-quiet-after)")),
+      log_lines_suppressed(NewCounter(*registry_, "cloudcast_log_lines_suppressed_total",
+                                      "Per-call log lines left out by the log rate limit")),
       calls_unauthenticated(NewCounter(*registry_, "cloudcast_calls_unauthenticated_total",
                                        "Calls refused for a missing or invalid bearer token")),
       unparsable_family_(prometheus::BuildCounter()
@@ -107,6 +114,14 @@ Metrics::Metrics()
                              .Register(*registry_)),
       stream_requests_unparsable(unparsable_family_.Add({{"method", "Stream"}})),
       process_requests_unparsable(unparsable_family_.Add({{"method", "Process"}})),
+      refused_family_(prometheus::BuildCounter()
+                          .Name("cloudcast_frames_refused_total")
+                          .Help("Frames refused for memory before anything was decoded, by the "
+                                "limit: memory_budget (frames held, --memory-budget-mb) or "
+                                "work_memory (more than --work-memory-mb to process)")
+                          .Register(*registry_)),
+      frames_refused_memory_budget(refused_family_.Add({{"limit", "memory_budget"}})),
+      frames_refused_work_memory(refused_family_.Add({{"limit", "work_memory"}})),
       stage_family_(prometheus::BuildHistogram()
                         .Name("cloudcast_stage_seconds")
                         .Help("Time per frame in each stage: decode (PNG/JPEG, frames that had "

@@ -43,6 +43,12 @@ class Metrics {
   prometheus::Counter& streams_rejected_limit;     // over --max-streams
   prometheus::Counter& streams_rejected_shutdown;  // arrived while shutting down
   prometheus::Counter& streams_idle_timeout;
+  // Streams the client cancelled (a rapid reset shows here), and quiet streams the server ended
+  // to make room for a new client when it was full (--shed-quiet-after).
+  prometheus::Counter& streams_cancelled;
+  prometheus::Counter& streams_shed;
+  // Log lines left out by the rate limit on per-call lines (a flood of calls cannot flood the log).
+  prometheus::Counter& log_lines_suppressed;
   // Calls refused for a missing or invalid bearer token (--tokens-file).
   prometheus::Counter& calls_unauthenticated;
 
@@ -53,6 +59,16 @@ class Metrics {
   // Requests whose bytes were not a valid message of their RPC (the call ends).
   prometheus::Counter& stream_requests_unparsable;
   prometheus::Counter& process_requests_unparsable;
+
+ private:
+  prometheus::Family<prometheus::Counter>& refused_family_;
+
+ public:
+  // Frames refused for memory, before anything was decoded: the server's budget for frames held
+  // was in use (--memory-budget-mb), or the frame needs more work memory than the server has
+  // (--work-memory-mb). Each is also a FrameError RESOURCE_EXHAUSTED.
+  prometheus::Counter& frames_refused_memory_budget;
+  prometheus::Counter& frames_refused_work_memory;
 
  private:
   prometheus::Family<prometheus::Histogram>& stage_family_;

@@ -1,5 +1,6 @@
 #include "cloudcast/server/options.h"
 
+#include <arpa/inet.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -49,6 +50,34 @@ absl::Status ServerOptions::Validate() const {
   if (memory_budget_bytes < (std::uint64_t{1} << 20)) {
     return Invalid("--memory-budget-mb must be at least 1");
   }
+  if (work_memory_bytes < (std::uint64_t{16} << 20)) {
+    return Invalid("--work-memory-mb must be at least 16");
+  }
+  if (refusal_delay.count() < 0 || refusal_delay > std::chrono::minutes(1)) {
+    return Invalid("--refusal-delay must be in [0, 60] seconds");
+  }
+  if (large_frame_pixels == 0) return Invalid("--large-frame-pixels must be at least 1");
+  if (shed_quiet_after.count() < 0) return Invalid("--shed-quiet-after must not be negative");
+  for (const std::string& proxy : trusted_proxies) {
+    in6_addr v6{};
+    in_addr v4{};
+    if (inet_pton(AF_INET, proxy.c_str(), &v4) != 1 &&
+        inet_pton(AF_INET6, proxy.c_str(), &v6) != 1) {
+      return Invalid(absl::StrCat("--trusted-proxy '", proxy,
+                                  "' is not an IP address (e.g. 127.0.0.1 or ::1)"));
+    }
+  }
+  if (http2_max_concurrent_streams == 0) {
+    return Invalid("--http2-max-concurrent-streams must be at least 1");
+  }
+  if (http2_max_metadata_bytes != 0 && http2_max_metadata_bytes < 1024) {
+    return Invalid(absl::StrCat("--http2-max-metadata-bytes is ", http2_max_metadata_bytes,
+                                "; it must be 0 (gRPC's default) or at least 1024"));
+  }
+  if (transport_memory_bytes != 0 && transport_memory_bytes < (std::uint64_t{16} << 20)) {
+    return Invalid("--transport-memory-mb must be 0 (no quota) or at least 16");
+  }
+  if (log_calls_per_second == 0) return Invalid("--log-calls-per-second must be at least 1");
   if (stream_window_bytes < 65536 || stream_window_bytes > (1u << 30)) {
     return Invalid(absl::StrCat("--stream-window-bytes is ", stream_window_bytes,
                                 "; it must be in [65536, 2^30]"));

@@ -3,6 +3,7 @@
 #include <arpa/inet.h>
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
 #include <grpcpp/health_check_service_interface.h>
+#include <grpcpp/resource_quota.h>
 #include <netinet/in.h>
 #include <spdlog/spdlog.h>
 #include <sys/socket.h>
@@ -122,6 +123,19 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& optio
   if (options.max_connection_age_grace.count() > 0) {
     builder.AddChannelArgument(GRPC_ARG_MAX_CONNECTION_AGE_GRACE_MS,
                                static_cast<int>(options.max_connection_age_grace.count()));
+  }
+  // HTTP/2 limits (docs/http2-hardening.md has what each bounds, measured): streams open at once
+  // per connection, the size of a call's header block, and the transport's memory quota.
+  builder.AddChannelArgument(GRPC_ARG_MAX_CONCURRENT_STREAMS,
+                             static_cast<int>(options.http2_max_concurrent_streams));
+  if (options.http2_max_metadata_bytes > 0) {
+    builder.AddChannelArgument(GRPC_ARG_MAX_METADATA_SIZE,
+                               static_cast<int>(options.http2_max_metadata_bytes));
+  }
+  if (options.transport_memory_bytes > 0) {
+    grpc::ResourceQuota quota("cloudcast-transport");
+    quota.Resize(static_cast<std::size_t>(options.transport_memory_bytes));
+    builder.SetResourceQuota(quota);
   }
   builder.RegisterService(server->service_.get());
   server->server_ = builder.BuildAndStart();

@@ -1,10 +1,12 @@
 #include "service.h"
 
+#include <arpa/inet.h>
 #include <malloc.h>
 
 #include <algorithm>
 #include <optional>
 #include <string>
+#include <unordered_map>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
@@ -73,12 +75,14 @@ class CloudCastService::StreamReactor final
         context_(context),
         caller_(std::move(caller)),
         peer_(caller_.label),
-        client_key_(std::hash<std::string>{}(context->peer())),
+        client_key_(caller_.fair_key),
         call_key_(service->next_call_key_.fetch_add(1)),
         settings_(caller_.defaults),
         queue_(service->options_.max_queued_frames),
-        last_activity_(Clock::now()) {
-    spdlog::info("stream from {} opened ({} active)", peer_, service_->active_streams());
+        last_activity_(Clock::now()),
+        last_frame_(last_activity_) {
+    service_->LogCall(spdlog::level::info, "stream from {} opened ({} active)", peer_,
+                      service_->active_streams());
     service_->Register(this);
     std::unique_lock<std::mutex> lock(mu_);
     if (service_->draining()) closing_ = Draining();
@@ -133,6 +137,7 @@ class CloudCastService::StreamReactor final
   }
 
   void OnCancel() override {
+    service_->metrics_->streams_cancelled.Increment();
     std::unique_lock<std::mutex> lock(mu_);
     Break();
     Pump(lock);
@@ -141,8 +146,8 @@ class CloudCastService::StreamReactor final
   void OnDone() override {
     {
       std::lock_guard<std::mutex> lock(mu_);
-      spdlog::info("stream from {} done: {} replies, {} dropped", peer_, queue_.written(),
-                   queue_.dropped());
+      service_->LogCall(spdlog::level::info, "stream from {} done: {} replies, {} dropped", peer_,
+                        queue_.written(), queue_.dropped());
       ticket_.Release();  // already released where Finish was decided, unless none was
     }
     service_->Unregister(this);
@@ -185,6 +190,24 @@ class CloudCastService::StreamReactor final
     Pump(lock);
   }
 
+  // How long the stream has sent no frame, when it holds none either and is not ending: a
+  // stream the server may shed to make room for a new client.
+  std::optional<Clock::duration> QuietFor(Clock::time_point now) {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (finished_ || ending_ || broken_ || closing_ || !queue_.Empty()) return std::nullopt;
+    return now - last_frame_;
+  }
+  const std::string& client() const { return caller_.client.key; }
+
+  // Ends the stream with `status` to free its place; false when it is ending already.
+  bool Shed(grpc::Status status) {
+    std::unique_lock<std::mutex> lock(mu_);
+    if (finished_ || ending_ || broken_) return false;
+    ending_ = std::move(status);
+    Pump(lock, /*cancel=*/writing_ != nullptr);
+    return true;
+  }
+
  private:
   // A request slot: what is read into it, and the reply it turns into.
   struct Job : StreamSlot {
@@ -198,7 +221,9 @@ class CloudCastService::StreamReactor final
     std::unique_ptr<v1::CloudReply> spare_cloud;
     std::shared_ptr<const StreamSettings> settings;
     Arrival arrival;
-    std::uint64_t charged = 0;  // bytes taken from the server's memory budget
+    std::uint64_t charged = 0;     // bytes taken from the server's memory budget
+    std::uint64_t pixels = 0;      // the worker pool's cost of the frame
+    std::uint64_t work_bytes = 0;  // its work memory (EstimateFrameMemory)
   };
 
   // The calls decided under mu_, made by Pump after it is released.
@@ -240,8 +265,11 @@ class CloudCastService::StreamReactor final
         finished_ = true;
         // The stream's place is free once its end is decided: a client that has its status and
         // opens the next stream at once must not be refused for this one (OnDone, where the
-        // ticket went before, may run after the client already holds the status).
-        ticket_.Release();
+        // ticket went before, may run after the client already holds the status). A stream the
+        // client cancelled keeps its place until gRPC is done with it (OnDone): nobody waits for
+        // its status, and a client that resets streams as fast as it opens them (rapid reset)
+        // must not have more of them alive than its share.
+        if (!broken_) ticket_.Release();
       }
     }
     // Read the next message when there is room for it.
@@ -317,6 +345,7 @@ class CloudCastService::StreamReactor final
         return;
       }
       case v1::StreamRequest::kFrame: {
+        last_frame_ = last_activity_;
         if (absl::Status s = CheckTenantPixels(caller_, job->request.frame()); !s.ok()) {
           const std::uint64_t sequence = job->request.frame().sequence();
           const std::string frame_id = job->request.frame().frame_id();
@@ -326,18 +355,21 @@ class CloudCastService::StreamReactor final
           service_->NoteQueued(queue_.held());
           return;
         }
-        if (!service_->memory_.TryTake(bytes)) {
+        FrameMemoryCost cost = EstimateFrameMemory(job->request.frame(), settings_->frame.stereo);
+        std::uint64_t charged = 0;
+        if (absl::Status s = service_->ChargeFrame(bytes, &cost, &charged); !s.ok()) {
           const v1::Frame& f = job->request.frame();
           const std::uint64_t sequence = f.sequence();
           const std::string frame_id = f.frame_id();
           job->request.Clear();
-          FillError(service_->MemoryExhausted(bytes), v1::ERROR_KIND_FRAME, sequence, frame_id,
-                    job->reply.mutable_error());
+          FillError(s, v1::ERROR_KIND_FRAME, sequence, frame_id, job->reply.mutable_error());
           queue_.PushReply(job);
           service_->NoteQueued(queue_.held());
           return;
         }
-        job->charged = bytes;
+        job->charged = charged;
+        job->pixels = std::max<std::uint64_t>(cost.pixels, 1);
+        job->work_bytes = cost.work_bytes;
         job->settings = settings_;
         job->delivery = settings_->delivery;
         job->arrival = {last_activity_, UnixNanos()};
@@ -381,9 +413,10 @@ class CloudCastService::StreamReactor final
     while (StreamSlot* slot = queue_.NextToProcess()) {
       Job* job = static_cast<Job*>(slot);
       Ref();
-      // Fair between connections (weighted by pixels) and between the streams of one.
+      // Fair between clients (weighted by pixels) and between the streams of one; the frame's
+      // work memory waits for room in the pool's.
       if (!service_->pool_.Submit([this, job](std::size_t worker) { Work(job, worker); },
-                                  client_key_, call_key_, FramePixels(job->request.frame()))) {
+                                  client_key_, call_key_, job->pixels, job->work_bytes)) {
         // The pool is stopping: the server is past its grace period.
         queue_.Processed(job);
         Release(job);
@@ -456,7 +489,7 @@ class CloudCastService::StreamReactor final
   grpc::CallbackServerContext* const context_;
   const Caller caller_;
   const std::string peer_;          // with the tenant, for logs
-  const std::uint64_t client_key_;  // the connection, for the worker pool's fairness
+  const std::uint64_t client_key_;  // the client, for the worker pool's fairness
   const std::uint64_t call_key_;
   std::atomic<int> refs_{1};
 
@@ -477,6 +510,7 @@ class CloudCastService::StreamReactor final
   bool finished_ = false;               // Finish has been called
   bool got_message_ = false;            // any message read (for --first-message-timeout)
   Clock::time_point last_activity_;
+  Clock::time_point last_frame_;  // the last frame read, or the opening (for shedding)
 };
 
 // Ends a call at once: over the stream limit, or while shutting down.
@@ -495,8 +529,15 @@ CloudCastService::CloudCastService(const ServerOptions& options, Metrics* metric
                                    options.max_streams, options.ResolvedMaxProcessPerClient()}),
       default_settings_(std::make_shared<const StreamSettings>(options.StreamDefaults())),
       metrics_(metrics),
-      runner_(options.ResolvedThreads(), metrics, options.ResolvedInstance()),
-      pool_(options.ResolvedThreads()) {
+      runner_(options.ResolvedThreads(), metrics, options.ResolvedInstance(),
+              options.large_frame_pixels),
+      pool_(options.ResolvedThreads(),
+            WorkerPool::Limits{options.work_memory_bytes, options.large_frame_pixels}),
+      call_log_(options.log_calls_per_second) {
+  for (const std::string& proxy : options.trusted_proxies) {
+    trusted_proxies_.push_back(proxy.find(':') == std::string::npos ? "ipv4:" + proxy
+                                                                    : "ipv6:[" + proxy + "]");
+  }
   housekeeping_ = std::thread([this] { Housekeeping(); });
 }
 
@@ -511,11 +552,16 @@ grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* CloudCastService::S
   }
   auto caller = Identify(context);
   if (!caller.ok()) return new RejectedStream(ToGrpc(caller.status()));
-  auto ticket = admission_.Admit(Admission::Kind::kStream, caller->client);
+  Admission::Refusal refusal;
+  auto ticket = admission_.Admit(Admission::Kind::kStream, caller->client, &refusal);
+  // A full server makes room for a new client by ending a stream that sends nothing.
+  if (!ticket.ok() && refusal == Admission::Refusal::kServerFull && ShedQuietStream(*caller)) {
+    ticket = admission_.Admit(Admission::Kind::kStream, caller->client, &refusal);
+  }
   if (!ticket.ok()) {
     metrics_->streams_rejected_limit.Increment();
-    spdlog::warn("stream from {} refused: {}", caller->label,
-                 std::string(ticket.status().message()));
+    LogCall(spdlog::level::warn, "stream from {} refused: {}", caller->label,
+            std::string(ticket.status().message()));
     return new RejectedStream(ToGrpc(ticket.status()));
   }
   metrics_->streams_accepted.Increment();
@@ -557,12 +603,20 @@ grpc::ServerUnaryReactor* CloudCastService::Process(grpc::CallbackServerContext*
     return reactor;
   }
   metrics_->bytes_received.Increment(static_cast<double>(bytes));
-  if (!memory_.TryTake(bytes)) {
-    metrics_->FrameErrors(absl::StatusCode::kResourceExhausted).Increment();
-    reactor->Finish(ToGrpc(MemoryExhausted(bytes)));
+  // A stereo pair's matcher memory depends on its settings, resolved only later: the request's
+  // disparity count and matcher, else the defaults (an invalid config is refused anyway).
+  StereoParams stereo = default_settings_->frame.stereo;
+  const v1::StereoConfig& asked = call->request.config().stereo();
+  if (asked.has_num_disparities()) stereo.num_disparities = asked.num_disparities();
+  if (asked.matcher() != v1::STEREO_MATCHER_UNSPECIFIED) {
+    convert::FromProto(asked.matcher(), "", &stereo.matcher).IgnoreError();
+  }
+  FrameMemoryCost cost = EstimateFrameMemory(call->request.frame(), stereo);
+  if (absl::Status s = ChargeFrame(bytes, &cost, &call->charged); !s.ok()) {
+    metrics_->FrameErrors(s.code()).Increment();
+    RefuseLater(reactor, caller->client, ToGrpc(s));
     return reactor;
   }
-  call->charged = bytes;
   if (draining_.load()) {
     reactor->Finish(grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
     return reactor;
@@ -587,7 +641,7 @@ grpc::ServerUnaryReactor* CloudCastService::Process(grpc::CallbackServerContext*
   }
   call->ticket = *std::move(ticket);
   active_process_calls_.fetch_add(1);
-  const std::uint64_t pixels = FramePixels(call->request.frame());
+  const std::uint64_t pixels = std::max<std::uint64_t>(cost.pixels, 1);
   const bool submitted = pool_.Submit(
       [this, reactor, reply_bytes, arrival, call](std::size_t worker) {
         const absl::Status status =
@@ -607,7 +661,7 @@ grpc::ServerUnaryReactor* CloudCastService::Process(grpc::CallbackServerContext*
         reactor->Finish(std::move(result));
         ProcessCallDone();
       },
-      std::hash<std::string>{}(context->peer()), next_call_key_.fetch_add(1), pixels);
+      caller->fair_key, next_call_key_.fetch_add(1), pixels, cost.work_bytes);
   if (!submitted) {
     reactor->Finish(grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
     ProcessCallDone();
@@ -632,6 +686,11 @@ grpc::ServerUnaryReactor* CloudCastService::GetInfo(grpc::CallbackServerContext*
   const auto idle_ms = options_.idle_timeout.count();
   limits->set_idle_timeout_seconds(static_cast<std::uint32_t>((idle_ms + 999) / 1000));
   limits->set_max_queued_frames(options_.max_queued_frames);
+  limits->set_work_memory_bytes(options_.work_memory_bytes);
+  limits->set_work_bytes_per_pixel(static_cast<std::uint32_t>(kWorkBytesPerPixel));
+  limits->set_max_streams_per_client(options_.ResolvedMaxStreamsPerClient());
+  limits->set_max_process_per_client(options_.ResolvedMaxProcessPerClient());
+  limits->set_shed_quiet_after_ms(static_cast<std::uint32_t>(options_.shed_quiet_after.count()));
   limits->set_max_stereo_volume(options_.limits.max_stereo_volume);
   *info->mutable_defaults() = convert::ToProto(*default_settings_);
   // Every encoding the core reads.
@@ -672,8 +731,13 @@ absl::StatusOr<CloudCastService::Caller> CloudCastService::Identify(
   Caller caller;
   if (tenants == nullptr) {
     caller.client.key = PeerHost(context->peer());
-    caller.defaults = default_settings_;
     caller.label = context->peer();
+    if (std::string forwarded = ForwardedClient(context, caller.client.key); !forwarded.empty()) {
+      caller.label = absl::StrCat(context->peer(), " for ", forwarded);
+      caller.client.key = std::move(forwarded);
+    }
+    caller.defaults = default_settings_;
+    caller.fair_key = std::hash<std::string>{}(caller.client.key);
     return caller;
   }
   auto tenant = tenants->Authenticate(context->client_metadata());
@@ -690,6 +754,7 @@ absl::StatusOr<CloudCastService::Caller> CloudCastService::Identify(
   caller.client.max_streams = caller.tenant->max_streams;
   caller.client.max_process = caller.tenant->max_process_in_flight;
   caller.label = absl::StrCat(context->peer(), " (tenant ", caller.tenant->name, ")");
+  caller.fair_key = std::hash<std::string>{}(caller.client.key);
   if (caller.tenant->max_pixels > 0 && caller.tenant->max_pixels < options_.limits.max_pixels) {
     // The core checks every image against these, whatever its encoding.
     auto defaults = std::make_shared<StreamSettings>(*default_settings_);
@@ -711,6 +776,138 @@ absl::Status CloudCastService::CheckTenantPixels(const Caller& caller, const v1:
       "frame.disparity: ", pixels, " pixels (width x height) is over the limit of tenant '",
       caller.tenant->name, "': ", caller.tenant->max_pixels,
       " pixels per frame (max_pixels in --tokens-file)"));
+}
+
+std::string CloudCastService::ForwardedClient(grpc::CallbackServerContext* context,
+                                              const std::string& peer_host) const {
+  if (std::find(trusted_proxies_.begin(), trusted_proxies_.end(), peer_host) ==
+      trusted_proxies_.end()) {
+    return "";
+  }
+  // "client, proxy1, proxy2", or several headers: the last entry is the one the trusted proxy
+  // itself added (a client may send its own header first).
+  const auto range = context->client_metadata().equal_range("x-forwarded-for");
+  if (range.first == range.second) return "";
+  auto last = range.first;
+  for (auto it = range.first; it != range.second; ++it) last = it;
+  std::string_view value(last->second.data(), last->second.size());
+  if (const std::size_t comma = value.rfind(','); comma != std::string_view::npos) {
+    value.remove_prefix(comma + 1);
+  }
+  while (!value.empty() && value.front() == ' ') value.remove_prefix(1);
+  while (!value.empty() && value.back() == ' ') value.remove_suffix(1);
+  const std::string address(value);
+  in_addr v4{};
+  in6_addr v6{};
+  if (inet_pton(AF_INET, address.c_str(), &v4) == 1) return "ipv4:" + address;
+  if (inet_pton(AF_INET6, address.c_str(), &v6) == 1) return "ipv6:[" + address + "]";
+  return "";
+}
+
+absl::Status CloudCastService::ChargeFrame(std::size_t request_bytes, FrameMemoryCost* cost,
+                                           std::uint64_t* charged) {
+  *charged = 0;
+  const Limits& limits = options_.limits;
+  if (cost->pixels > limits.max_pixels || cost->max_side > limits.max_side) {
+    cost->decoded_bytes = cost->work_bytes = 0;
+  }
+  if (cost->work_bytes > options_.work_memory_bytes) {
+    metrics_->frames_refused_work_memory.Increment();
+    return absl::ResourceExhaustedError(absl::StrCat(
+        "frame: ", cost->pixels, " pixels need about ", cost->work_bytes >> 20,
+        " MB to process (the decoded images and the pipeline's working memory, estimated from "
+        "the frame's header before decoding), more than the server's work memory of ",
+        options_.work_memory_bytes >> 20, " MB (--work-memory-mb); send smaller frames"));
+  }
+  // Held until a worker is done with it: the request as received, and what it decodes to.
+  const std::uint64_t bytes = request_bytes + cost->decoded_bytes;
+  if (!memory_.TryTake(bytes)) {
+    metrics_->frames_refused_memory_budget.Increment();
+    return MemoryExhausted(bytes);
+  }
+  *charged = bytes;
+  return absl::OkStatus();
+}
+
+bool CloudCastService::ShedQuietStream(const Caller& newcomer) {
+  if (options_.shed_quiet_after.count() == 0) return false;
+  std::vector<StreamReactor*> streams;
+  {
+    std::lock_guard<std::mutex> lock(streams_mu_);
+    for (StreamReactor* s : streams_) {
+      s->Ref();
+      streams.push_back(s);
+    }
+  }
+  // The quiet streams of each client (never the newcomer's own).
+  const Clock::time_point now = Clock::now();
+  std::unordered_map<std::string, int> per_client;
+  struct Quiet {
+    StreamReactor* stream;
+    Clock::duration quiet;
+  };
+  std::vector<Quiet> quiet;
+  for (StreamReactor* s : streams) {
+    if (s->client() == newcomer.client.key) continue;
+    ++per_client[s->client()];
+    if (auto q = s->QuietFor(now); q && *q >= options_.shed_quiet_after) quiet.push_back({s, *q});
+  }
+  // The client holding the most streams gives first, its quietest stream first.
+  std::sort(quiet.begin(), quiet.end(), [&](const Quiet& a, const Quiet& b) {
+    const int na = per_client[a.stream->client()], nb = per_client[b.stream->client()];
+    return na != nb ? na > nb : a.quiet > b.quiet;
+  });
+  bool shed = false;
+  for (const Quiet& q : quiet) {
+    const double s = Seconds(q.quiet);
+    if (q.stream->Shed(grpc::Status(
+            grpc::StatusCode::UNAVAILABLE,
+            absl::StrCat("the server is full (--max-streams ", options_.max_streams,
+                         ") and this stream sent no frame for ", static_cast<int>(s),
+                         " s: ended to make room for another client (--shed-quiet-after)")))) {
+      metrics_->streams_shed.Increment();
+      LogCall(spdlog::level::info, "stream of {} shed after {} s without a frame, for {}",
+              q.stream->client(), s, newcomer.label);
+      shed = true;
+      break;
+    }
+  }
+  for (StreamReactor* s : streams) s->Unref();
+  return shed;
+}
+
+void CloudCastService::RefuseLater(grpc::ServerUnaryReactor* reactor,
+                                   const Admission::Client& client, grpc::Status status) {
+  auto ticket = options_.refusal_delay.count() > 0 && !draining_.load()
+                    ? admission_.Admit(Admission::Kind::kProcess, client)
+                    : absl::StatusOr<Admission::Ticket>(absl::UnavailableError("no delay"));
+  if (!ticket.ok()) {
+    reactor->Finish(std::move(status));
+    return;
+  }
+  active_process_calls_.fetch_add(1);
+  auto held = std::make_shared<Admission::Ticket>(*std::move(ticket));
+  delayed_.RunAt(Clock::now() + options_.refusal_delay, [this, reactor, held, status] {
+    held->Release();
+    reactor->Finish(status);
+    ProcessCallDone();
+  });
+}
+
+template <typename... Args>
+void CloudCastService::LogCall(spdlog::level::level_enum level,
+                               spdlog::format_string_t<Args...> format, Args&&... args) {
+  if (!spdlog::should_log(level)) return;
+  std::uint64_t suppressed = 0;
+  if (!call_log_.Allow(&suppressed)) {
+    metrics_->log_lines_suppressed.Increment();
+    return;
+  }
+  if (suppressed > 0) {
+    spdlog::log(level, "({} per-call log lines left out: over --log-calls-per-second {})",
+                suppressed, options_.log_calls_per_second);
+  }
+  spdlog::log(level, format, std::forward<Args>(args)...);
 }
 
 void CloudCastService::NoteQueued(std::uint32_t held) {
@@ -735,6 +932,7 @@ void CloudCastService::Unregister(StreamReactor* stream) {
 
 void CloudCastService::StartDraining() {
   draining_.store(true);
+  delayed_.Flush();  // refusals waiting out their delay are answered now
   std::vector<StreamReactor*> streams;
   {
     std::lock_guard<std::mutex> lock(streams_mu_);
@@ -789,6 +987,8 @@ void CloudCastService::Housekeeping() {
       std::chrono::milliseconds(10), std::chrono::milliseconds(1000));
   bool trimmed = true;
   std::size_t free_at_trim = 0;
+  int idle_ticks = 0;
+  bool scratch_released = true;  // nothing to give back before the first frame
   std::unique_lock<std::mutex> lock(streams_mu_);
   while (!stop_housekeeping_) {
     streams_cv_.wait_for(lock, tick, [this] { return stop_housekeeping_; });
@@ -806,6 +1006,17 @@ void CloudCastService::Housekeeping() {
     // buffers go with the connection), so while idle it trims again whenever the arenas' free
     // bytes have grown by a megabyte since the last trim. Trimming does not shrink that figure
     // (the pages stay on the free lists, only unmapped), so an idle server trims once and rests.
+    // A server idle for a second gives its workers' scratch back first: after a burst of big
+    // frames (each at most --large-frame-pixels keeps its scratch) it would stay resident.
+    if (idle && ++idle_ticks * tick >= std::chrono::seconds(1) && !scratch_released) {
+      runner_.ReleaseIdleScratch();
+      scratch_released = true;
+      trimmed = false;
+    }
+    if (!idle) {
+      idle_ticks = 0;
+      scratch_released = false;
+    }
     if (idle) {
       const std::size_t free_bytes = mallinfo2().fordblks;
       if (!trimmed || free_bytes > free_at_trim + (std::size_t{1} << 20)) {

@@ -18,14 +18,18 @@
 #include <memory>
 #include <mutex>
 #include <set>
+#include <string>
 #include <thread>
 #include <vector>
 
 #include "admission.h"
 #include "cloudcast/server/options.h"
 #include "cloudcast/v1/cloudcast.grpc.pb.h"
+#include "delayed_actions.h"
 #include "frame_processor.h"
+#include "log_limiter.h"
 #include "metrics.h"
+#include "spdlog/spdlog.h"
 #include "tenants.h"
 #include "worker_pool.h"
 
@@ -87,11 +91,39 @@ class CloudCastService final : public CallbackBase {
     std::shared_ptr<const StreamSettings> defaults;
     // "ipv4:10.0.0.1:40123" or "ipv4:10.0.0.1:40123 (tenant fleet-a)", for logs.
     std::string label;
+    // The worker pool's key of the client (its admission key): fairness is per client, however
+    // many connections it spreads its calls over.
+    std::uint64_t fair_key = 0;
   };
   // UNAUTHENTICATED when tokens are required and the call has no valid one (counted).
   absl::StatusOr<Caller> Identify(grpc::CallbackServerContext* context);
   // RESOURCE_EXHAUSTED naming the tenant's limit when the frame has more pixels than it allows.
   static absl::Status CheckTenantPixels(const Caller& caller, const v1::Frame& frame);
+
+  // The client a trusted proxy's x-forwarded-for names (its last entry), as an admission key
+  // ("ipv4:10.1.2.3"); empty when the call is not from a trusted proxy or names no address.
+  std::string ForwardedClient(grpc::CallbackServerContext* context,
+                              const std::string& peer_host) const;
+  // A frame's memory, checked and charged before anything is decoded: RESOURCE_EXHAUSTED naming
+  // --work-memory-mb when it can never be processed, or --memory-budget-mb when the frames held
+  // fill the budget; otherwise `charged` gets what was taken from the budget (the request's bytes
+  // and the frame's decoded images). A frame over the image limits (--max-side, --max-pixels),
+  // which the worker refuses naming the field before it decodes anything, is charged its bytes
+  // only and its `cost` zeroed.
+  absl::Status ChargeFrame(std::size_t request_bytes, FrameMemoryCost* cost,
+                           std::uint64_t* charged);
+  // When the server is full: ends the stream that has been quiet longest (no frame for
+  // --shed-quiet-after or more) of the client holding the most streams, not `newcomer`'s; true
+  // if one was ended (its place is free).
+  bool ShedQuietStream(const Caller& newcomer);
+  // Finishes a Process call refused for memory after --refusal-delay, holding one of the client's
+  // Process places meanwhile (at once when it has none left, or the server drains).
+  void RefuseLater(grpc::ServerUnaryReactor* reactor, const Admission::Client& client,
+                   grpc::Status status);
+  // A per-call log line, within --log-calls-per-second (says how many were left out before it).
+  template <typename... Args>
+  void LogCall(spdlog::level::level_enum level, spdlog::format_string_t<Args...> format,
+               Args&&... args);
 
   void NoteQueued(std::uint32_t held);
   void ProcessCallDone();
@@ -108,6 +140,12 @@ class CloudCastService final : public CallbackBase {
   // Before pool_: the workers use it until the pool is stopped.
   FrameRunner runner_;
   WorkerPool pool_;
+
+  std::vector<std::string> trusted_proxies_;  // as PeerHost gives them ("ipv4:127.0.0.1")
+  LogLimiter call_log_;
+  // After admission_ and metrics_, which its actions use: it is destroyed (and runs what is left)
+  // before them.
+  DelayedActions delayed_;
 
   std::mutex tenants_mu_;
   std::shared_ptr<const TenantDirectory> tenants_;  // under tenants_mu_

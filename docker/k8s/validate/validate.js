@@ -5,10 +5,11 @@
 //     pass, and the API server would drop it or refuse it), so every field is also looked up in
 //     the models' type declarations (.d.ts), which list each object's fields;
 //  3. how the objects fit together and fit the server: selectors match the pod labels, Services
-//     and probes name container ports, probes ask for cloudcast.v1.CloudCast, the HPA targets
-//     the Deployment, the NetworkPolicy admits exactly the gRPC and metrics ports, the grace
-//     period covers preStop plus the server's shutdown-grace, the kustomization lists every
-//     manifest;
+//     and probes name container ports, probes ask for cloudcast.v1.CloudCast, the server listens
+//     on loopback behind the HAProxy container (whose ConfigMap holds docker/haproxy's files,
+//     byte for byte), the HPA targets the Deployment, the NetworkPolicy admits exactly the gRPC
+//     and metrics ports, the grace period covers preStop plus the server's shutdown-grace and the
+//     proxy outlives the drain, the kustomization lists every manifest;
 //  4. with --server BIN: the ConfigMap's config names only flags the server has, and the
 //     server starts with the Deployment's args and that config, then drains on SIGTERM;
 //  5. that the checks can fail: broken copies of the Deployment (made in memory) must be refused.
@@ -163,36 +164,65 @@ function parseServerConfig(text) {
   return config;
 }
 
-function crossChecks(objects) {
+// The Pod: the server, and HAProxy in front of it (the `proxy` container). Clients reach the
+// proxy's port; the server listens on loopback only.
+const kServerListen = "127.0.0.1:50052";
+
+function crossChecks(objects, dir) {
   const byKind = (kind) => objects.filter((o) => o.kind === kind);
   const [deployment] = byKind("Deployment");
   if (!check(deployment !== undefined, "a Deployment exists")) return;
   const pod = deployment.spec.template;
   const labels = pod.metadata.labels;
-  const [container] = pod.spec.containers;
-  const ports = new Map((container.ports || []).map((p) => [p.name, p.containerPort]));
+  const containers = pod.spec.containers;
+  const container = containers.find((c) => c.name === "server");
+  const proxy = containers.find((c) => c.name === "proxy");
+  if (!check(container !== undefined && proxy !== undefined, "the Pod has a server and a proxy container")) return;
+  check(containers[0] === container, "the server is the Pod's first container (kube-play.js, smoke.sh)");
+  // Ports are the Pod's: the proxy's grpc, the server's metrics.
+  const ports = new Map(containers.flatMap((c) => (c.ports || []).map((p) => [p.name, p.containerPort])));
+  check(
+    ports.get("grpc") === kPorts.grpc && ports.get("metrics") === kPorts.metrics && ports.size === 2,
+    `Pod ports grpc ${kPorts.grpc} and metrics ${kPorts.metrics}, and no others`,
+    JSON.stringify([...ports]),
+  );
+  check(
+    (proxy.ports || []).some((p) => p.name === "grpc") && (container.ports || []).some((p) => p.name === "metrics"),
+    "grpc is the proxy's port, metrics the server's",
+  );
   check(
     matches(deployment.spec.selector.matchLabels, labels),
     "Deployment selector matches its pod labels",
   );
+  const readiness = proxy.readinessProbe;
   check(
-    ports.get("grpc") === kPorts.grpc && ports.get("metrics") === kPorts.metrics,
-    `container ports grpc ${kPorts.grpc} and metrics ${kPorts.metrics}`,
-    JSON.stringify(container.ports),
+    readiness && readiness.grpc && readiness.grpc.port === kPorts.grpc && readiness.grpc.service === kHealthService,
+    `the proxy's readinessProbe is a grpc probe of ${kHealthService} on ${kPorts.grpc} (through the proxy to the server)`,
+    JSON.stringify(readiness),
   );
-  for (const probe of ["readinessProbe", "livenessProbe"]) {
-    const p = container[probe];
+  const liveness = container.livenessProbe;
+  const live = (liveness && liveness.exec && liveness.exec.command) || [];
+  check(
+    live[0] === "cloudcast-load" && live.includes("--probe") && live[live.indexOf("--server") + 1] === kServerListen,
+    `the server's livenessProbe checks its own health on ${kServerListen}`,
+    JSON.stringify(liveness),
+  );
+  check(
+    proxy.livenessProbe && proxy.livenessProbe.tcpSocket && proxy.livenessProbe.tcpSocket.port === kPorts.grpc,
+    "the proxy's livenessProbe is its port",
+  );
+  for (const c of containers) {
+    const r = c.resources || {};
     check(
-      p && p.grpc && p.grpc.port === kPorts.grpc && p.grpc.service === kHealthService,
-      `${probe} is a grpc probe of ${kHealthService} on ${kPorts.grpc}`,
-      JSON.stringify(p),
+      r.requests && r.requests.cpu && r.requests.memory && r.limits && r.limits.memory,
+      `container ${c.name} requests CPU and memory (the HPA needs the CPU requests) and limits memory`,
+    );
+    const sc = c.securityContext || {};
+    check(
+      sc.readOnlyRootFilesystem === true && sc.allowPrivilegeEscalation === false,
+      `container ${c.name}: read-only root filesystem, no privilege escalation`,
     );
   }
-  const r = container.resources || {};
-  check(
-    r.requests && r.requests.cpu && r.requests.memory && r.limits && r.limits.memory,
-    "container requests CPU and memory (the HPA needs the CPU request) and limits memory",
-  );
   const args = container.args || [];
   const arg = (flag) => (args.indexOf(flag) >= 0 ? args[args.indexOf(flag) + 1] : undefined);
   check(
@@ -202,12 +232,33 @@ function crossChecks(objects) {
       ),
     "--instance is the pod's name (downward API)",
   );
-  check(arg("--listen") === `0.0.0.0:${kPorts.grpc}`, "--listen 0.0.0.0:50051", arg("--listen"));
+  check(arg("--listen") === kServerListen, `--listen ${kServerListen} (loopback: only the proxy reaches it)`, arg("--listen"));
+  check(arg("--trusted-proxy") === "127.0.0.1", "--trusted-proxy 127.0.0.1 (the proxy names the clients)", arg("--trusted-proxy"));
   check(
     [`0.0.0.0:${kPorts.metrics}`, `:${kPorts.metrics}`].includes(arg("--metrics-listen")),
     "--metrics-listen on 9464",
     arg("--metrics-listen"),
   );
+
+  // The proxy: the shipped configuration, from its ConfigMap, in front of the server's address.
+  const env = new Map((proxy.env || []).map((e) => [e.name, e.value]));
+  check(env.get("CLOUDCAST_BACKEND") === kServerListen, "the proxy's backend is the server's --listen", env.get("CLOUDCAST_BACKEND"));
+  check(env.get("CLOUDCAST_PROXY_LISTEN") === `:${kPorts.grpc}`, `the proxy listens on :${kPorts.grpc}`, env.get("CLOUDCAST_PROXY_LISTEN"));
+  const command = proxy.command || [];
+  const files = command.filter((_, i) => i > 0 && command[i - 1] === "-f");
+  const proxyMount = (proxy.volumeMounts || []).find((m) => files.length && files.every((f) => f.startsWith(m.mountPath + "/")));
+  const proxyVolume = proxyMount && pod.spec.volumes.find((v) => v.name === proxyMount.name);
+  const proxyConfig = proxyVolume && proxyVolume.configMap && byKind("ConfigMap").find((c) => c.metadata.name === proxyVolume.configMap.name);
+  if (check(proxyConfig !== undefined && files.length === 2, "the proxy reads two files of a ConfigMap in these manifests", JSON.stringify(command))) {
+    for (const f of files) {
+      const key = path.relative(proxyMount.mountPath, f);
+      const shipped = path.join(dir, "..", "haproxy", key);
+      check(
+        fs.existsSync(shipped) && proxyConfig.data[key] === fs.readFileSync(shipped, "utf8"),
+        `the ConfigMap's ${key} is docker/haproxy/${key}, byte for byte`,
+      );
+    }
+  }
 
   // The config: mounted from the ConfigMap, and a grace period that covers the drain.
   const mount = (container.volumeMounts || []).find((m) => arg("--config").startsWith(m.mountPath + "/"));
@@ -217,14 +268,21 @@ function crossChecks(objects) {
   const configText = configMap && configMap.data && configMap.data[configKey];
   if (check(typeof configText === "string", "--config is a file of a ConfigMap in these manifests")) {
     const config = parseServerConfig(configText);
-    const preStop = ((container.lifecycle || {}).preStop || {}).exec;
-    const pause = preStop && preStop.command[0] === "sleep" ? seconds(preStop.command[1]) : 0;
+    const pauseOf = (c) => {
+      const preStop = ((c.lifecycle || {}).preStop || {}).exec;
+      return preStop && preStop.command[0] === "sleep" ? seconds(preStop.command[1]) : 0;
+    };
+    const pause = pauseOf(container);
     const grace = seconds(config["shutdown-grace"] || 5);
     check(
       pod.spec.terminationGracePeriodSeconds > pause + grace,
       `terminationGracePeriodSeconds (${pod.spec.terminationGracePeriodSeconds}) > preStop ${pause} s + shutdown-grace ${grace} s`,
     );
-    const liveness = container.livenessProbe;
+    const proxyPause = pauseOf(proxy);
+    check(
+      proxyPause >= pause + grace && proxyPause < pod.spec.terminationGracePeriodSeconds,
+      `the proxy's preStop (${proxyPause} s) outlives the server's drain (${pause + grace} s) within the grace period`,
+    );
     check(
       liveness.periodSeconds * liveness.failureThreshold > pause + grace,
       "the liveness probe cannot fire during a drain (NOT_SERVING until the process exits)",
@@ -309,7 +367,7 @@ function checkWithServer(server, objects) {
   const container = deployment.spec.template.spec.containers[0];
   const args = container.args.slice();
   const configPath = args[args.indexOf("--config") + 1];
-  const configMap = objects.find((o) => o.kind === "ConfigMap");
+  const configMap = objects.find((o) => o.kind === "ConfigMap" && o.data && o.data[path.basename(configPath)] !== undefined);
   const text = configMap.data[path.basename(configPath)];
 
   // The server takes unknown keys in --config without a word, so they are checked here.
@@ -358,12 +416,12 @@ function checkBrokenCopiesFail(objects) {
   const breakages = {
     "replicas as a string": (d) => { d.spec.replicas = "three"; },
     "a misspelt field (readinesProbe)": (d) => {
-      const c = d.spec.template.spec.containers[0];
+      const c = d.spec.template.spec.containers[1];
       c.readinesProbe = c.readinessProbe;
       delete c.readinessProbe;
     },
     "a grpc probe port that is not a number": (d) => {
-      d.spec.template.spec.containers[0].livenessProbe.grpc.port = "grpc";
+      d.spec.template.spec.containers[1].readinessProbe.grpc.port = "grpc";
     },
     "no containers list": (d) => { delete d.spec.template.spec.containers; },
     "an unknown field deep in the pod": (d) => { d.spec.template.spec.containers[0].resources.requestz = {}; },
@@ -410,7 +468,7 @@ async function main() {
   }
   check(objects.length > 0, `manifests found in ${dir}`);
   checkKustomization(dir, files);
-  crossChecks(objects);
+  crossChecks(objects, dir);
   checkBrokenCopiesFail(objects);
   if (server) await checkWithServer(server, objects);
   console.log(`${passed} passed, ${failed} failed`);

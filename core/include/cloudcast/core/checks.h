@@ -16,13 +16,17 @@
 
 namespace cloudcast::check {
 
-// Finite and in (0, 1e9]: focal lengths, baselines.
+// The smallest magnitude Positive and NonZero accept: the pipeline computes in float, where a
+// value finite in double (1e-300, 5e-324) is 0 or denormal and every point vanishes. 1e-9 keeps
+// the products of two such values (fx * baseline) normal floats too.
+inline constexpr double kMinMagnitude = 1e-9;
+// Finite and in [1e-9, 1e9] (0 and negatives named as such): focal lengths, baselines.
 absl::Status Positive(std::string_view field, double value);
 // Finite and within +-1e9: principal points, scales, offsets.
 absl::Status Finite(std::string_view field, double value);
 // Finite (any float): passthrough limits.
 absl::Status FiniteFloat(std::string_view field, float value);
-// Finite and non-zero, within +-1e9: a disparity scale.
+// Finite and non-zero, its magnitude in [1e-9, 1e9]: a disparity scale.
 absl::Status NonZero(std::string_view field, double value);
 // A voxel leaf: finite, > 0, and 1 / leaf a finite float (the grid multiplies by it, as PCL does).
 absl::Status Leaf(std::string_view field, float value);

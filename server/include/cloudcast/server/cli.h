@@ -26,6 +26,10 @@ class ServerFlags {
   double idle_timeout_seconds_;
   double first_message_timeout_seconds_;
   std::uint64_t memory_budget_mb_;
+  std::uint64_t work_memory_mb_;
+  double shed_quiet_after_seconds_;
+  double refusal_delay_seconds_;
+  std::uint64_t transport_memory_mb_ = 0;
   double shutdown_grace_seconds_;
   double max_connection_age_seconds_ = 0;
   double max_connection_age_grace_seconds_ = 0;

@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include "absl/status/status.h"
 #include "cloudcast/core/limits.h"
@@ -42,10 +43,50 @@ struct ServerOptions {
   std::chrono::milliseconds first_message_timeout{10'000};
   // Frames held per stream in DELIVERY_ALL mode (waiting + in work + replies not yet written).
   std::uint32_t max_queued_frames = 4;
-  // Bytes of frames the server may hold at once (read, not yet processed), over all calls; past
-  // it new frames get RESOURCE_EXHAUSTED instead of memory growing. The transport adds at most
-  // max_streams x stream_window_bytes.
+  // Bytes of frames the server may hold at once (read, not yet processed), over all calls, each
+  // counted at its request's size plus what its images decode to (charged before anything is
+  // decoded: a few KB of zstd claiming 4096x4096 count 64 MB); past it new frames get
+  // RESOURCE_EXHAUSTED instead of memory growing. The transport adds at most max_streams x
+  // stream_window_bytes, and frames in work at most work_memory_bytes.
   std::uint64_t memory_budget_bytes = std::uint64_t{1} << 30;
+  // Memory for frames in work: their decoded images and the pipeline's working memory, estimated
+  // from each frame's header before anything is decoded (frame_input.h, EstimateFrameMemory: up to
+  // 128 bytes a pixel). A frame starts on a worker only while the frames in work plus it fit; one
+  // that can never fit gets RESOURCE_EXHAUSTED at once. 320 MB fits one 1920x1080 frame at its
+  // worst, or several camera frames.
+  std::uint64_t work_memory_bytes = std::uint64_t{320} << 20;
+  // A Process call refused for memory (a frame that can never fit the work memory, or a full
+  // budget) is answered after this pause, holding one of its client's Process places meanwhile: a
+  // client that sends such frames call after call then gets a few refusals a second, not
+  // thousands (whose transport work costs everyone). 0: at once.
+  std::chrono::milliseconds refusal_delay{1'000};
+  // Frames of more pixels than this are large: at most all workers but one run large frames at
+  // once (a worker stays free for camera frames), and a worker that ran one gives its scratch back
+  // to the allocator afterwards, instead of keeping it for the next frame. 2^21: just over
+  // 1920x1080.
+  std::uint64_t large_frame_pixels = std::uint64_t{1} << 21;
+  // When the server is full (--max-streams), a stream that has sent no frame for this long (only
+  // a StreamConfig, or nothing, or its last frame that long ago) is ended with UNAVAILABLE to make
+  // room for a new client, the client holding the most streams first; a resilient client reopens
+  // it. A camera stream at 1 fps or more is never that quiet. 0: never.
+  std::chrono::milliseconds shed_quiet_after{2'000};
+  // Peers trusted to name the client in an `x-forwarded-for` header (a proxy in front, e.g. the
+  // HAProxy sidecar: option forwardfor): a call from one of these addresses counts against the
+  // address the header's last entry names, for the per-client shares and fairness. Others'
+  // headers are ignored (anyone could send one). IP addresses, e.g. "127.0.0.1".
+  std::vector<std::string> trusted_proxies;
+  // HTTP/2 limits of gRPC's transport. Streams open at once on one connection (SETTINGS
+  // MAX_CONCURRENT_STREAMS; a client may still open and reset streams faster than that, which
+  // only a proxy in front bounds: docs/http2-hardening.md).
+  std::uint32_t http2_max_concurrent_streams = 256;
+  // Largest header block (metadata) of a call; 0: gRPC's default (8 KB).
+  std::uint32_t http2_max_metadata_bytes = 0;
+  // gRPC's resource quota: memory its transport may use before it starts to refuse work; 0: no
+  // quota (gRPC's default).
+  std::uint64_t transport_memory_bytes = 0;
+  // Per-call log lines (stream opened, done, refused) written per second at most; the rest are
+  // counted (cloudcast_log_lines_suppressed_total) and the next line written says how many.
+  std::uint32_t log_calls_per_second = 20;
   // gRPC's receive window per stream: how much of the next frames the transport buffers beyond
   // those the stream holds. Fixed (no BDP probing, which grows windows to tens of megabytes):
   // with it a stream whose frames wait holds about max_queued_frames frames plus this.
