@@ -204,12 +204,13 @@ class Harness:
                 f"__ns:={namespace}"] + [f"{a}:={b}" for a, b in remaps.items()]
         return self.start(log or name, argv), node
 
-    def start_nodelet(self, kind, name, namespace, params=None):
+    def start_nodelet(self, kind, name, namespace, params=None, remaps=None):
         """`kind` (e.g. depth_image_proc/point_cloud_xyzrgb) as a standalone nodelet, node
-        `namespace`/`name`, its private parameters set first."""
+        `namespace`/`name`, its private parameters set first, its topics remapped by `remaps`."""
         node = f"{namespace}/{name}"
         self.set_params(node, params or {})
         argv = [NODELET, "standalone", kind, f"__name:={name}", f"__ns:={namespace}"]
+        argv += [f"{a}:={b}" for a, b in (remaps or {}).items()]
         return self.start(name, argv), node
 
     def start_point_cloud2(self, name="point_cloud2", namespace="/stereo", params=None):
