@@ -300,6 +300,26 @@ def run_case(args, h, suite, case, name, bridge_params, rate):
             q.stop()
 
 
+def print_table(rows):
+    """The rows as a Markdown table (docs/ros.md)."""
+    head = ("| input | consumer | publisher rate | published | clouds | clouds/s | "
+            "latency ms (median) | CPU ms / cloud | CPU vs stock | points (median) | "
+            "cloud bytes (median) | bad-2.0 (GT+1) | density |")
+    print(head)
+    print("|" + " --- |" * 13)
+    for r in rows:
+        rate = (f"max ({r['published_hz']:.0f} Hz)" if r["rate_hz"] == 0
+                else f"{r['rate_hz']:g} Hz")
+        bad = "-" if r["bad_2_vs_gt_plus_1"] is None else f"{100 * r['bad_2_vs_gt_plus_1']:.1f} %"
+        density = ("-" if r["disparity_density"] is None
+                   else f"{100 * r['disparity_density']:.1f} %")
+        print(f"| {r['input']} | {r['consumer']} | {rate} | {r['published']} | {r['clouds']} | "
+              f"{r['clouds_per_s']:.1f} | {r['latency_ms_median']:.1f} | "
+              f"{r['cpu_ms_per_cloud']:.1f} | {r['cpu_ratio_vs_nodelet']:.2f}x | "
+              f"{r['points_median']:,.0f} | {r['cloud_bytes_median']:,.0f} | {bad} | "
+              f"{density} |")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -312,7 +332,13 @@ def main():
     ap.add_argument("--inputs", default="disparity,depth,stereo",
                     help=f"comma-separated input kinds, of {', '.join(SUITES)}")
     ap.add_argument("--json", action="store_true", help="print JSON instead of the table")
+    ap.add_argument("--table-from", metavar="JSON",
+                    help="print the table of an earlier --json run and exit")
     args = ap.parse_args()
+    if args.table_from:
+        with open(args.table_from) as f:
+            print_table(json.load(f)["rows"])
+        return
     suites = []
     for name in args.inputs.split(","):
         if name not in SUITES:
@@ -345,22 +371,7 @@ def main():
     if args.json:
         print(json.dumps({"frames": args.frames, "rows": rows}, indent=2))
         return
-    head = ("| input | consumer | publisher rate | published | clouds | clouds/s | "
-            "latency ms (median) | CPU ms / cloud | CPU vs stock | points (median) | "
-            "cloud bytes (median) | bad-2.0 (GT+1) | density |")
-    print(head)
-    print("|" + " --- |" * 13)
-    for r in rows:
-        rate = (f"max ({r['published_hz']:.0f} Hz)" if r["rate_hz"] == 0
-                else f"{r['rate_hz']:g} Hz")
-        bad = "-" if r["bad_2_vs_gt_plus_1"] is None else f"{100 * r['bad_2_vs_gt_plus_1']:.1f} %"
-        density = ("-" if r["disparity_density"] is None
-                   else f"{100 * r['disparity_density']:.1f} %")
-        print(f"| {r['input']} | {r['consumer']} | {rate} | {r['published']} | {r['clouds']} | "
-              f"{r['clouds_per_s']:.1f} | {r['latency_ms_median']:.1f} | "
-              f"{r['cpu_ms_per_cloud']:.1f} | {r['cpu_ratio_vs_nodelet']:.2f}x | "
-              f"{r['points_median']:,.0f} | {r['cloud_bytes_median']:,.0f} | {bad} | "
-              f"{density} |")
+    print_table(rows)
 
 
 if __name__ == "__main__":
