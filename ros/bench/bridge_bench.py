@@ -26,10 +26,11 @@ disparity maps (below). Inputs (--inputs) and their consumers:
                                                  the same with ~stereo/publish_disparity
                bridge, sgbm, paper filters       OpenCV's StereoSGBM on the server, the
                                                  nodelet's settings
-bad-2.0, as PLATFORM.md measures OpenCV's matchers: of the pixels where the published
-DisparityImage has a disparity and the ground truth one (d > 0), the share more than 2 px from
-the ground truth + 1 (it reads about 1 px low); density: the share of ground-truth pixels with a
-disparity; both means over the first cycle of the 10 frames, "-" where no disparity is published.
+bad-2.0, as docs/stereo.md scores the matchers: of the pixels where the published DisparityImage
+has a match (a valid disparity above 0) and the ground truth a value (> 0), the share more than
+2 px from the ground truth + 1 (the New Tsukuba truth reads 1 px low); density: the share of
+ground-truth pixels with a match; both means over the first cycle of the 10 frames, "-" where no
+disparity is published.
 The clouds and disparities are read here as raw bytes (rospy.AnyMsg), so that this process's own
 cost is the same small one for every consumer.
 
@@ -158,7 +159,7 @@ def bad_2(buf, gt):
     msg.deserialize(buf)
     d = np.frombuffer(bytes(msg.image.data), dtype="<f4").reshape(msg.image.height,
                                                                  msg.image.width)
-    scored = (d >= msg.min_disparity) & (gt > 0)
+    scored = (d >= msg.min_disparity) & (d > 0) & (gt > 0)
     wrong = np.abs(d - (gt + 1.0)) > 2.0
     return (float((wrong & scored).sum()) / float(scored.sum()),
             float(scored.sum()) / float((gt > 0).sum()))

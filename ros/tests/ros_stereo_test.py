@@ -53,11 +53,12 @@ def ground_truth(frame):
 
 
 def bad_2(disparity, valid, gt, offset):
-    """bad-2.0 as PLATFORM.md measures OpenCV's matchers: of the pixels with a disparity and a
-    ground truth (gt > 0), the share more than 2 pixels from gt + offset (the ground truth reads
-    about 1 px low); and the density, the share of ground-truth pixels with a disparity."""
+    """bad-2.0 as docs/stereo.md scores the matchers: of the pixels with a match (a valid
+    disparity above 0: 0 has no depth) and a ground truth (gt > 0), the share more than 2 pixels
+    from gt + offset (the New Tsukuba truth reads 1 px low); and the density, the share of
+    ground-truth pixels with a match."""
     import numpy as np
-    scored = valid & (gt > 0)
+    scored = valid & (disparity > 0) & (gt > 0)
     wrong = np.abs(disparity - (gt + offset)) > 2.0
     return float((wrong & scored).sum()) / float(scored.sum()), float(scored.sum()) / float(
         (gt > 0).sum())
