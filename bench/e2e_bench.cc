@@ -50,6 +50,7 @@
 #include "cloudcast/datasets/tsukuba.h"
 #include "cloudcast/io/image_io.h"
 #include "cloudcast/proto/convert.h"
+#include "cloudcast/sources/uplink.h"
 #include "cloudcast/testing/metrics_scrape.h"
 #include "stats.h"
 
@@ -68,10 +69,8 @@ struct Frame {
   v1::CompressedColor colour_zstd;
 };
 
-enum class Uplink { kRaw, kPng, kZstd };
-const char* Name(Uplink u) {
-  return u == Uplink::kPng ? "png" : u == Uplink::kZstd ? "zstd" : "raw";
-}
+// The client programs' uplink names; this bench encodes its frames up front (jpeg it leaves out).
+using sources::Uplink;
 
 int FreePort() {
   const int fd = socket(AF_INET, SOCK_STREAM, 0);
@@ -601,9 +600,8 @@ int Main(int argc, char** argv) {
   for (int round = 1; round <= rounds; ++round) {
     for (const std::string& enc : encodings) {
       for (int n : stream_counts) {
-        const Uplink uplink = enc == "png"    ? Uplink::kPng
-                              : enc == "zstd" ? Uplink::kZstd
-                                              : Uplink::kRaw;
+        Uplink uplink = Uplink::kRaw;
+        sources::ParseUplink(enc, &uplink);
         std::vector<double> modes = {0.0};  // throughput
         if (paced_fps > 0) modes.push_back(paced_fps);
         for (const double fps : modes) {

@@ -10,7 +10,7 @@
 #include <string>
 #include <vector>
 
-#include "program_support.h"
+#include "support/program_support.h"
 
 namespace cloudcast {
 namespace {

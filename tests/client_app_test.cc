@@ -1,9 +1,8 @@
-// Tests of cloudcast-client: its frame sources in-process (New Tsukuba folder, image globs,
-// lossless videos written here, the synthetic scene, the looped pair, --loop and --frames), its
-// statistics, and the real binary against an in-process server on a loopback port: the live
-// viewer's snapshot under Xvfb (visible and hidden window), --record in every format checked
-// against the server's own replies, --no-window statistics and JSON, --open of cloudcast-process
-// output, and the errors of bad flags and files.
+// Tests of cloudcast-client: its statistics and session in-process (its frame sources are
+// cloudcast_sources, tested by sources_test), and the real binary against an in-process server
+// on a loopback port: the live viewer's snapshot under Xvfb (visible and hidden window), --record
+// in every format checked against the server's own replies, --no-window statistics and JSON,
+// --open of cloudcast-process output, and the errors of bad flags and files.
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -30,7 +29,6 @@
 #include <thread>
 #include <vector>
 
-#include "app/frame_source.h"
 #include "app/session.h"
 #include "app/stats.h"
 #include "app/viewer.h"
@@ -38,10 +36,12 @@
 #include "cloudcast/client/opencv.h"
 #include "cloudcast/datasets/synthetic.h"
 #include "cloudcast/io/cloud_io.h"
-#include "program_support.h"
+#include "cloudcast/sources/frame_source.h"
+#include "support/mats.h"
+#include "support/program_support.h"
 #include "support/server_fixture.h"
-#include "test_support.h"
-#include "xvfb_support.h"
+#include "support/test_support.h"
+#include "support/xvfb_support.h"
 
 namespace cloudcast::client::app {
 namespace {
@@ -54,62 +54,15 @@ using Json = nlohmann::json;
 
 // A fresh folder per test, removed afterwards.
 using TempDirTest = cloudcast::testing::ScratchDirTest;
-
-// Equal type, size and every value.
-::testing::AssertionResult SameMat(const cv::Mat& a, const cv::Mat& b) {
-  if (a.type() != b.type() || a.size() != b.size()) {
-    return ::testing::AssertionFailure()
-           << "type/size differ: " << cv::typeToString(a.type()) << " " << a.cols << "x" << a.rows
-           << " vs " << cv::typeToString(b.type()) << " " << b.cols << "x" << b.rows;
-  }
-  if (a.empty()) return ::testing::AssertionSuccess();
-  cv::Mat diff;
-  cv::absdiff(a.reshape(1), b.reshape(1), diff);
-  double max = 0;
-  cv::minMaxLoc(diff, nullptr, &max);
-  if (max != 0) return ::testing::AssertionFailure() << "values differ by up to " << max;
-  return ::testing::AssertionSuccess();
-}
-
-// A disparity with every 8-bit value, zeros included, and a structured colour image.
-cv::Mat TestDisparity8(int w, int h, int seed) {
-  cv::Mat d(h, w, CV_8UC1);
-  cv::RNG rng(seed);
-  rng.fill(d, cv::RNG::UNIFORM, 0, 256);
-  return d;
-}
-cv::Mat TestColour(int w, int h, int seed) {
-  cv::Mat c(h, w, CV_8UC3);
-  cv::RNG rng(seed + 1000);
-  rng.fill(c, cv::RNG::UNIFORM, 0, 256);
-  return c;
-}
-
-std::vector<SourceFrame> Drain(FrameSource& source, std::size_t max = 1000) {
-  std::vector<SourceFrame> frames;
-  for (std::size_t i = 0; i < max; ++i) {
-    SourceFrame f;
-    absl::StatusOr<bool> got = source.Next(&f);
-    EXPECT_TRUE(got.ok()) << got.status();
-    if (!got.ok() || !*got) break;
-    // Deep copies: a source may reuse its Mats for the next frame.
-    f.disparity = f.disparity.clone();
-    f.colour = f.colour.clone();
-    frames.push_back(f);
-  }
-  return frames;
-}
-
-// ---------------------------------------------------------------------------------------------
-// Helpers
-
-TEST(NaturalSortTest, NumbersCompareByValue) {
-  std::vector<std::string> names = {"f10.png", "f2.png", "f1.png", "f002.png",
-                                    "g1.png",  "f9.png", "f.png",  "f01.png"};
-  NaturalSort(&names);
-  EXPECT_EQ(names, (std::vector<std::string>{"f.png", "f01.png", "f1.png", "f002.png", "f2.png",
-                                             "f9.png", "f10.png", "g1.png"}));
-}
+using cloudcast::testing::SameMat;
+using cloudcast::testing::TestColour;
+using cloudcast::testing::TestDisparity8;
+using cloudcast::testing::WriteVideo;
+using sources::LimitFrames;
+using sources::OpenSynthetic;
+using sources::OpenTsukuba;
+using sources::SourceOptions;
+using sources::Uplink;
 
 TEST(ClientStatsTest, PercentilesAndCounts) {
   std::vector<double> v;
@@ -211,375 +164,6 @@ TEST(CloudMailboxTest, WaitPolicyHoldsTheReceiverUntilTheViewerTakes) {
   EXPECT_EQ(mailbox.skipped(), 0u);
 }
 
-TEST(VideoCodecTest, LosslessCodecsAreKnown) {
-  EXPECT_EQ(FourccToString(cv::VideoWriter::fourcc('F', 'F', 'V', '1')), "FFV1");
-  EXPECT_TRUE(IsLosslessCodec("FFV1"));
-  EXPECT_TRUE(IsLosslessCodec("png "));
-  EXPECT_FALSE(IsLosslessCodec("MJPG"));
-  EXPECT_FALSE(IsLosslessCodec("H264"));
-  EXPECT_FALSE(IsLosslessCodec("IYUV"));  // 4:2:0: grey survives, colour does not
-}
-
-// ---------------------------------------------------------------------------------------------
-// Sources
-
-class ClientSourceTest : public TempDirTest {};
-
-TEST_F(ClientSourceTest, TsukubaFolderYieldsTheTenFramesInOrder) {
-  CLOUDCAST_REQUIRE_TSUKUBA();
-  auto source = OpenTsukuba(cloudcast::testing::TsukubaDir(), "daylight", SourceOptions{});
-  ASSERT_TRUE(source.ok()) << source.status();
-  EXPECT_EQ((*source)->info().kind, "tsukuba");
-  EXPECT_EQ((*source)->info().width, 640u);
-  EXPECT_EQ((*source)->info().height, 480u);
-  ASSERT_TRUE((*source)->info().frames_per_pass.has_value());
-  EXPECT_EQ(*(*source)->info().frames_per_pass, 10u);
-  EXPECT_EQ((*source)->info().camera.fx, 615.0);
-  EXPECT_EQ((*source)->info().camera.cx, 320.0);
-
-  const std::vector<SourceFrame> frames = Drain(**source);
-  const auto& ids = cloudcast::testing::TsukubaFrameIds();
-  ASSERT_EQ(frames.size(), ids.size());
-  for (std::size_t i = 0; i < ids.size(); ++i) {
-    SCOPED_TRACE(ids[i]);
-    EXPECT_EQ(frames[i].name, "tsukuba_" + ids[i]);
-    EXPECT_EQ(frames[i].index, i);
-    EXPECT_TRUE(SameMat(
-        frames[i].disparity,
-        cv::imread(cloudcast::testing::TsukubaDisparityPath(ids[i]), cv::IMREAD_UNCHANGED)));
-    EXPECT_TRUE(SameMat(frames[i].colour, cv::imread(cloudcast::testing::TsukubaColourPath(ids[i]),
-                                                     cv::IMREAD_COLOR)));
-  }
-}
-
-TEST_F(ClientSourceTest, TsukubaLoopServesLaterPassesFromMemory) {
-  CLOUDCAST_REQUIRE_TSUKUBA();
-  SourceOptions options;
-  options.loop = true;
-  auto source =
-      LimitFrames(*OpenTsukuba(cloudcast::testing::TsukubaDir(), "daylight", options), 25);
-  const std::vector<SourceFrame> frames = Drain(*source);
-  ASSERT_EQ(frames.size(), 25u);
-  for (std::size_t i = 10; i < 25; ++i) {
-    EXPECT_EQ(frames[i].name, frames[i - 10].name);
-    EXPECT_EQ(frames[i].index, i);
-    EXPECT_TRUE(SameMat(frames[i].disparity, frames[i - 10].disparity));
-    EXPECT_TRUE(SameMat(frames[i].colour, frames[i - 10].colour));
-  }
-}
-
-TEST_F(ClientSourceTest, TsukubaLayoutErrorsNameTheFolder) {
-  auto missing = OpenTsukuba(Path("nowhere"), "daylight", SourceOptions{});
-  ASSERT_FALSE(missing.ok());
-  EXPECT_NE(missing.status().message().find("--tsukuba"), std::string::npos);
-  EXPECT_NE(missing.status().message().find("nowhere"), std::string::npos);
-
-  // A folder of the right shape with one unpaired frame.
-  fs::create_directories(dir_ / "groundtruth/disparity_maps/left");
-  fs::create_directories(dir_ / "illumination/daylight/left");
-  auto not_layout = OpenTsukuba(dir_.string(), "lamps", SourceOptions{});
-  ASSERT_FALSE(not_layout.ok());
-  EXPECT_NE(not_layout.status().message().find("illumination/lamps/left"), std::string::npos)
-      << not_layout.status();
-  cv::imwrite(Path("groundtruth/disparity_maps/left/tsukuba_disparity_L_00001.png"),
-              TestDisparity8(8, 6, 1));
-  auto unpaired = OpenTsukuba(dir_.string(), "daylight", SourceOptions{});
-  ASSERT_FALSE(unpaired.ok());
-  EXPECT_NE(unpaired.status().message().find("no partner"), std::string::npos) << unpaired.status();
-}
-
-TEST_F(ClientSourceTest, GlobsPairSortedFilesExactly) {
-  fs::create_directories(dir_ / "d");
-  fs::create_directories(dir_ / "c");
-  // 16-bit disparities named so that byte order and natural order differ (f2 < f10).
-  std::map<int, cv::Mat> disparities, colours;
-  for (int i : {1, 2, 3, 10, 11, 12}) {
-    cv::Mat d(30, 40, CV_16UC1);
-    cv::RNG(i).fill(d, cv::RNG::UNIFORM, 0, 65536);
-    disparities[i] = d;
-    colours[i] = TestColour(40, 30, i);
-    ASSERT_TRUE(cv::imwrite(Path("d/f" + std::to_string(i) + ".png"), d));
-    ASSERT_TRUE(cv::imwrite(Path("c/img_" + std::to_string(i) + ".png"), colours[i]));
-  }
-  auto source = OpenGlobs(Path("d/*.png"), Path("c/*.png"), SourceOptions{});
-  ASSERT_TRUE(source.ok()) << source.status();
-  EXPECT_EQ((*source)->info().kind, "glob");
-  EXPECT_EQ((*source)->info().width, 40u);
-  EXPECT_EQ(*(*source)->info().frames_per_pass, 6u);
-  const std::vector<SourceFrame> frames = Drain(**source);
-  ASSERT_EQ(frames.size(), 6u);
-  std::size_t k = 0;
-  for (const auto& [i, d] : disparities) {
-    SCOPED_TRACE(i);
-    EXPECT_EQ(frames[k].name, "f" + std::to_string(i));
-    EXPECT_TRUE(SameMat(frames[k].disparity, d));
-    EXPECT_TRUE(SameMat(frames[k].colour, colours[i]));
-    ++k;
-  }
-
-  // --loop and --frames together: 6 files, 14 frames, wrapping twice.
-  SourceOptions loop;
-  loop.loop = true;
-  auto looped = LimitFrames(*OpenGlobs(Path("d/*.png"), Path("c/*.png"), loop), 14);
-  const std::vector<SourceFrame> again = Drain(*looped);
-  ASSERT_EQ(again.size(), 14u);
-  for (std::size_t i = 0; i < again.size(); ++i) {
-    EXPECT_EQ(again[i].name, frames[i % 6].name);
-    EXPECT_TRUE(SameMat(again[i].disparity, frames[i % 6].disparity));
-  }
-}
-
-TEST_F(ClientSourceTest, GlobErrorsNameTheFlags) {
-  fs::create_directories(dir_ / "d");
-  fs::create_directories(dir_ / "c");
-  for (int i = 0; i < 3; ++i) {
-    cv::imwrite(Path("d/" + std::to_string(i) + ".png"), TestDisparity8(8, 6, i));
-    if (i < 2) cv::imwrite(Path("c/" + std::to_string(i) + ".png"), TestColour(8, 6, i));
-  }
-  auto mismatch = OpenGlobs(Path("d/*.png"), Path("c/*.png"), SourceOptions{});
-  ASSERT_FALSE(mismatch.ok());
-  const std::string m(mismatch.status().message());
-  EXPECT_NE(m.find("--disparity-glob"), std::string::npos) << m;
-  EXPECT_NE(m.find("matches 3"), std::string::npos) << m;
-  EXPECT_NE(m.find("matches 2"), std::string::npos) << m;
-
-  auto none = OpenGlobs(Path("d/*.tif"), Path("c/*.png"), SourceOptions{});
-  ASSERT_FALSE(none.ok());
-  EXPECT_NE(none.status().message().find("matches no file"), std::string::npos);
-
-  // Sizes that differ are caught on the first frame, naming both files.
-  cv::imwrite(Path("c/2.png"), TestColour(9, 6, 2));
-  cv::imwrite(Path("c/0.png"), TestColour(9, 6, 0));
-  auto sizes = OpenGlobs(Path("d/*.png"), Path("c/*.png"), SourceOptions{});
-  ASSERT_FALSE(sizes.ok());
-  EXPECT_NE(sizes.status().message().find("0.png"), std::string::npos) << sizes.status();
-  EXPECT_NE(sizes.status().message().find("must match"), std::string::npos) << sizes.status();
-}
-
-// Writes `frames` to `path` with `fourcc`; false when this OpenCV build cannot.
-bool WriteVideo(const std::string& path, const char* fourcc, const std::vector<cv::Mat>& frames) {
-  const bool colour = frames.front().channels() == 3;
-  cv::VideoWriter writer(path, cv::CAP_FFMPEG,
-                         cv::VideoWriter::fourcc(fourcc[0], fourcc[1], fourcc[2], fourcc[3]), 30,
-                         frames.front().size(), colour);
-  if (!writer.isOpened()) return false;
-  for (const cv::Mat& f : frames) writer.write(f);
-  writer.release();
-  return true;
-}
-
-struct VideoCase {
-  const char* container;
-  const char* fourcc;
-};
-
-// Readable test names in ctest, instead of the parameter's bytes.
-void PrintTo(const VideoCase& c, std::ostream* os) { *os << c.fourcc << " in ." << c.container; }
-
-class ClientVideoSourceTest : public TempDirTest,
-                              public ::testing::WithParamInterface<VideoCase> {};
-
-TEST_P(ClientVideoSourceTest, LosslessVideosKeepEveryDisparityValue) {
-  const VideoCase c = GetParam();
-  std::vector<cv::Mat> disparities, colours;
-  for (int i = 0; i < 7; ++i) {
-    disparities.push_back(TestDisparity8(64, 48, i));
-    colours.push_back(TestColour(64, 48, i));
-  }
-  const std::string d = Path(std::string("d.") + c.container);
-  const std::string col = Path(std::string("c.") + c.container);
-  if (!WriteVideo(d, c.fourcc, disparities) || !WriteVideo(col, c.fourcc, colours)) {
-    GTEST_SKIP() << "this OpenCV build cannot write " << c.fourcc << " in ." << c.container;
-  }
-  SourceOptions options;
-  options.loop = true;
-  auto source = OpenVideos(d, col, options);
-  ASSERT_TRUE(source.ok()) << source.status();
-  EXPECT_EQ((*source)->info().kind, "video");
-  EXPECT_TRUE((*source)->info().warnings.empty()) << (*source)->info().warnings.front();
-  EXPECT_EQ((*source)->info().width, 64u);
-  ASSERT_TRUE((*source)->info().frames_per_pass.has_value());
-  EXPECT_EQ(*(*source)->info().frames_per_pass, 7u);
-
-  // Two passes and a bit: the loop reopens the files.
-  auto limited = LimitFrames(*std::move(source), 16);
-  const std::vector<SourceFrame> frames = Drain(*limited);
-  ASSERT_EQ(frames.size(), 16u);
-  for (std::size_t i = 0; i < frames.size(); ++i) {
-    SCOPED_TRACE(i);
-    EXPECT_EQ(frames[i].disparity.type(), CV_8UC1);  // back to one channel
-    EXPECT_TRUE(SameMat(frames[i].disparity, disparities[i % 7]));
-    EXPECT_TRUE(SameMat(frames[i].colour, colours[i % 7]));
-  }
-}
-
-INSTANTIATE_TEST_SUITE_P(Codecs, ClientVideoSourceTest,
-                         ::testing::Values(VideoCase{"mkv", "FFV1"}, VideoCase{"avi", "png "},
-                                           VideoCase{"avi", "FFV1"}),
-                         [](const ::testing::TestParamInfo<VideoCase>& info) {
-                           std::string name =
-                               std::string(info.param.container) + "_" + info.param.fourcc;
-                           name.erase(std::remove(name.begin(), name.end(), ' '), name.end());
-                           return name;
-                         });
-
-TEST_F(ClientSourceTest, LossyDisparityVideoIsWarnedAbout) {
-  std::vector<cv::Mat> disparities, colours;
-  for (int i = 0; i < 3; ++i) {
-    disparities.push_back(TestDisparity8(64, 48, i));
-    colours.push_back(TestColour(64, 48, i));
-  }
-  if (!WriteVideo(Path("d.avi"), "MJPG", disparities) ||
-      !WriteVideo(Path("c.avi"), "MJPG", colours)) {
-    GTEST_SKIP() << "this OpenCV build cannot write MJPG";
-  }
-  auto source = OpenVideos(Path("d.avi"), Path("c.avi"), SourceOptions{});
-  ASSERT_TRUE(source.ok()) << source.status();
-  ASSERT_FALSE((*source)->info().warnings.empty());
-  EXPECT_NE((*source)->info().warnings.front().find("MJPG"), std::string::npos);
-  EXPECT_NE((*source)->info().warnings.front().find("lossless"), std::string::npos);
-  EXPECT_EQ(Drain(**source).size(), 3u);
-
-  auto missing = OpenVideos(Path("none.mkv"), Path("c.avi"), SourceOptions{});
-  ASSERT_FALSE(missing.ok());
-  EXPECT_NE(missing.status().message().find("--disparity-video"), std::string::npos);
-  EXPECT_NE(missing.status().message().find("none.mkv"), std::string::npos);
-}
-
-// The paper's section A: frames from a video decode faster than the same frames as stills. Here
-// that depends on the codec: FFV1 decodes slower than PNG, while PNG-in-AVI disparity with
-// HuffYUV colour (both exact) decodes faster. Times are printed, not asserted (tests never
-// assert on time); the values must survive exactly.
-TEST_F(ClientSourceTest, TsukubaAsLosslessVideosIsExactAndPrintsDecodeTimes) {
-  CLOUDCAST_REQUIRE_TSUKUBA();
-  std::vector<cv::Mat> disparities, colours;
-  for (const std::string& id : cloudcast::testing::TsukubaFrameIds()) {
-    disparities.push_back(
-        cv::imread(cloudcast::testing::TsukubaDisparityPath(id), cv::IMREAD_UNCHANGED));
-    colours.push_back(cv::imread(cloudcast::testing::TsukubaColourPath(id), cv::IMREAD_COLOR));
-  }
-  // Decodes every frame of `source` twice over (the first pass warms caches), ms per frame.
-  auto time_pass = [](auto open, std::vector<SourceFrame>* out) {
-    double ms = 0;
-    for (int pass = 0; pass < 2; ++pass) {
-      auto source = open();
-      if (!source.ok()) {
-        ADD_FAILURE() << source.status();
-        return 0.0;
-      }
-      const auto start = std::chrono::steady_clock::now();
-      *out = Drain(**source);
-      ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
-               .count() /
-           std::max<std::size_t>(1, out->size());
-    }
-    return ms;
-  };
-  std::vector<SourceFrame> frames;
-  const double stills_ms = time_pass(
-      [] { return OpenTsukuba(cloudcast::testing::TsukubaDir(), "daylight", SourceOptions{}); },
-      &frames);
-  std::printf("[ info     ] per frame, decode + clone: PNG stills %.2f ms", stills_ms);
-  struct Combo {
-    const char* disparity_file;
-    const char* disparity_fourcc;
-    const char* colour_file;
-    const char* colour_fourcc;
-  };
-  for (const Combo& c :
-       {Combo{"d.mkv", "FFV1", "c.mkv", "FFV1"}, Combo{"d.avi", "png ", "c.avi", "HFYU"}}) {
-    SCOPED_TRACE(c.colour_fourcc);
-    if (!WriteVideo(Path(c.disparity_file), c.disparity_fourcc, disparities) ||
-        !WriteVideo(Path(c.colour_file), c.colour_fourcc, colours)) {
-      std::printf(", %s + %s: cannot write", c.disparity_fourcc, c.colour_fourcc);
-      continue;
-    }
-    const std::string d = Path(c.disparity_file), col = Path(c.colour_file);
-    const double ms = time_pass([&] { return OpenVideos(d, col, SourceOptions{}); }, &frames);
-    ASSERT_EQ(frames.size(), 10u);
-    for (std::size_t i = 0; i < 10; ++i) {
-      EXPECT_TRUE(SameMat(frames[i].disparity, disparities[i])) << i;
-      EXPECT_TRUE(SameMat(frames[i].colour, colours[i])) << i;
-    }
-    std::printf(", %s + %s video %.2f ms", c.disparity_fourcc, c.colour_fourcc, ms);
-  }
-  std::printf("\n");
-}
-
-TEST_F(ClientSourceTest, SyntheticFramesAdvanceAndMatchTheScene) {
-  auto source = OpenSynthetic(160, 120);
-  ASSERT_TRUE(source.ok()) << source.status();
-  EXPECT_EQ((*source)->info().kind, "synthetic");
-  EXPECT_FALSE((*source)->info().frames_per_pass.has_value());
-  auto limited = LimitFrames(*std::move(source), 4);
-  const std::vector<SourceFrame> frames = Drain(*limited);
-  ASSERT_EQ(frames.size(), 4u);
-  const SyntheticScene scene = SyntheticScene::Default();
-  for (std::size_t i = 0; i < frames.size(); ++i) {
-    SyntheticOptions o;
-    o.width = 160;
-    o.height = 120;
-    o.frame = i;
-    auto expected = scene.Render(o);
-    ASSERT_TRUE(expected.ok());
-    EXPECT_EQ(frames[i].name, "synthetic_" + std::to_string(i));
-    EXPECT_TRUE(
-        SameMat(frames[i].disparity, cv::Mat(120, 160, CV_32FC1, expected->disparity.data())));
-    EXPECT_TRUE(SameMat(frames[i].colour, cv::Mat(120, 160, CV_8UC3, expected->colour.data())));
-    EXPECT_EQ(limited->info().camera.fx, expected->camera.fx);
-  }
-  EXPECT_FALSE(SameMat(frames[0].disparity, frames[1].disparity)) << "the camera must move";
-
-  auto bad = OpenSynthetic(0, 10);
-  ASSERT_FALSE(bad.ok());
-  EXPECT_NE(bad.status().message().find("--synthetic"), std::string::npos);
-}
-
-TEST_F(ClientSourceTest, PairRepeatsUntilTheLimit) {
-  const cv::Mat d = TestDisparity8(32, 24, 5), c = TestColour(32, 24, 5);
-  ASSERT_TRUE(cv::imwrite(Path("disp.png"), d));
-  ASSERT_TRUE(cv::imwrite(Path("col.png"), c));
-  auto source = OpenPair(Path("disp.png"), Path("col.png"), SourceOptions{});
-  ASSERT_TRUE(source.ok()) << source.status();
-  EXPECT_FALSE((*source)->info().frames_per_pass.has_value());  // endless
-  EXPECT_EQ((*source)->info().camera.cx, 16.0);
-  auto limited = LimitFrames(*std::move(source), 5);
-  const std::vector<SourceFrame> frames = Drain(*limited);
-  ASSERT_EQ(frames.size(), 5u);
-  for (std::size_t i = 0; i < frames.size(); ++i) {
-    EXPECT_EQ(frames[i].index, i);
-    EXPECT_EQ(frames[i].name, "disp");
-    EXPECT_TRUE(SameMat(frames[i].disparity, d));
-    EXPECT_TRUE(SameMat(frames[i].colour, c));
-  }
-}
-
-TEST_F(ClientSourceTest, PairErrorsNameFlagAndFile) {
-  ASSERT_TRUE(cv::imwrite(Path("rgb.png"), TestColour(8, 6, 1)));
-  ASSERT_TRUE(cv::imwrite(Path("d.png"), TestDisparity8(8, 6, 1)));
-  ASSERT_TRUE(cv::imwrite(Path("big.png"), TestColour(9, 6, 1)));
-  std::ofstream(Path("junk.png")) << "not an image";
-
-  auto three_channels = OpenPair(Path("rgb.png"), Path("rgb.png"), SourceOptions{});
-  ASSERT_FALSE(three_channels.ok());
-  EXPECT_NE(three_channels.status().message().find("3 channels"), std::string::npos);
-  EXPECT_NE(three_channels.status().message().find("--disparity"), std::string::npos);
-
-  auto missing = OpenPair(Path("d.png"), Path("nope.png"), SourceOptions{});
-  ASSERT_FALSE(missing.ok());
-  EXPECT_EQ(missing.status().code(), absl::StatusCode::kNotFound);
-  EXPECT_NE(missing.status().message().find("--colour"), std::string::npos);
-  EXPECT_NE(missing.status().message().find("nope.png"), std::string::npos);
-
-  auto junk = OpenPair(Path("junk.png"), Path("rgb.png"), SourceOptions{});
-  ASSERT_FALSE(junk.ok());
-  EXPECT_NE(junk.status().message().find("cannot decode"), std::string::npos);
-
-  auto sizes = OpenPair(Path("d.png"), Path("big.png"), SourceOptions{});
-  ASSERT_FALSE(sizes.ok());
-  EXPECT_NE(sizes.status().message().find("9x6"), std::string::npos) << sizes.status();
-}
-
 // ---------------------------------------------------------------------------------------------
 // The session in-process, against a loopback server.
 
@@ -640,12 +224,12 @@ TEST_F(ClientSessionTest, SessionPaceHoldsFramesBackUntilTheirTime) {
 }
 
 TEST_F(ClientSessionTest, SessionSendsEncodedImages) {
-  for (ImageEncoding encoding : {ImageEncoding::kPng, ImageEncoding::kJpeg}) {
+  for (Uplink encoding : {Uplink::kPng, Uplink::kJpeg}) {
     SCOPED_TRACE(Name(encoding));
     auto source = LimitFrames(*OpenSynthetic(160, 120), 3);
     SessionOptions options;
     options.server = shared_target();
-    options.encoding = encoding;
+    options.uplink.encoding = encoding;
     options.config.set_delivery(v1::DELIVERY_ALL);
     StreamStats stats;
     auto session = Session::Start(options, source.get(), &stats, nullptr);
@@ -830,9 +414,9 @@ TEST_F(ClientProgramTest, RecordedFilesHoldTheRepliesPointCounts) {
   config.mutable_camera()->clear_cx();
   config.mutable_camera()->clear_cy();
   std::vector<std::uint32_t> expected;
-  SourceFrame f;
+  sources::SourceFrame f;
   while (*reference_source->Next(&f)) {
-    auto r = ProcessMats(**client, f.disparity, f.colour, config);
+    auto r = ProcessMats(**client, f.disparity(), f.colour(), config);
     ASSERT_TRUE(r.ok()) << r.status();
     expected.push_back(r->reply.point_count());
   }

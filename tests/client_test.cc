@@ -42,8 +42,8 @@
 #include "cloudcast/io/image_io.h"
 #include "gtest/gtest.h"
 #include "support/server_fixture.h"
+#include "support/test_support.h"
 #include "support/waiting.h"
-#include "test_support.h"
 
 namespace cloudcast::client {
 namespace {

@@ -21,10 +21,10 @@
 
 #include "cloudcast/core/draco_codec.h"
 #include "cloudcast/core/point.h"
-#include "program_support.h"
 #include "support/cloud_match.h"
 #include "support/image_files.h"
-#include "test_support.h"
+#include "support/program_support.h"
+#include "support/test_support.h"
 
 namespace cloudcast {
 namespace {
@@ -238,7 +238,8 @@ TEST_F(CloudIoTest, HeaderEntriesOutOfOrderAreRefusedBeforePclReadsThem) {
   const std::string body = "1 2 3 4\n5 6 7 8\n";
   const std::string late_fields =
       "VERSION 0.7\nFIELDS x\nSIZE 4\nTYPE F\nPOINTS 2\nDATA ascii\n"
-      "VERSION 0.7\nFIELDS x y z rgba\nSIZE 4 4 4 4\nTYPE F F F U\n" + body;
+      "VERSION 0.7\nFIELDS x y z rgba\nSIZE 4 4 4 4\nTYPE F F F U\n" +
+      body;
   WriteFile(Path("late.pcd"), late_fields);
   PointCloud back;
   const absl::Status s = LoadCloud(Path("late.pcd"), &back);
@@ -246,15 +247,19 @@ TEST_F(CloudIoTest, HeaderEntriesOutOfOrderAreRefusedBeforePclReadsThem) {
   EXPECT_NE(s.message().find("VERSION comes after DATA"), std::string::npos) << s;
   EXPECT_NE(s.message().find(Path("late.pcd")), std::string::npos) << s;
 
-  WriteFile(Path("twice.pcd"), "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nFIELDS x y z rgba\n"
-                               "SIZE 4 4 4 4\nTYPE F F F U\nPOINTS 2\nDATA ascii\n" + body);
+  WriteFile(Path("twice.pcd"),
+            "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nFIELDS x y z rgba\n"
+            "SIZE 4 4 4 4\nTYPE F F F U\nPOINTS 2\nDATA ascii\n" +
+                body);
   const absl::Status twice = LoadCloud(Path("twice.pcd"), &back);
   EXPECT_NE(twice.message().find("FIELDS comes after SIZE"), std::string::npos) << twice;
 
   // The same entries in the format's order load.
-  WriteFile(Path("ordered.pcd"), "VERSION 0.7\nFIELDS x y z rgba\nSIZE 4 4 4 4\nTYPE F F F U\n"
-                                 "COUNT 1 1 1 1\nWIDTH 2\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\n"
-                                 "POINTS 2\nDATA ascii\n" + body);
+  WriteFile(Path("ordered.pcd"),
+            "VERSION 0.7\nFIELDS x y z rgba\nSIZE 4 4 4 4\nTYPE F F F U\n"
+            "COUNT 1 1 1 1\nWIDTH 2\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\n"
+            "POINTS 2\nDATA ascii\n" +
+                body);
   ASSERT_TRUE(LoadCloud(Path("ordered.pcd"), &back).ok());
   EXPECT_EQ(back.size(), 2u);
 }

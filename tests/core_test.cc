@@ -10,15 +10,15 @@
 #include "cloudcast/core/camera.h"
 #include "cloudcast/core/filters.h"
 #include "cloudcast/core/pipeline.h"
-#include "test_support.h"
+#include "support/test_support.h"
 
 namespace cloudcast {
 namespace {
 
 using testing::CloudsIdentical;
 using testing::CloudsMatch;
-using testing::CloudTolerance;
 using testing::CloudsMatchInOrder;
+using testing::CloudTolerance;
 using testing::MakeFrame;
 using testing::RandomFrame;
 using testing::SetSample;
@@ -342,11 +342,13 @@ TEST(VoxelGrid, MatchesBruteForceOnRandomCloudsIncludingWideKeys) {
     p.leaf_x = leaf;
     PointCloud out;
     ASSERT_TRUE(grid.Filter(in, p, &out).ok()) << grid.Filter(in, p, &out);
-    EXPECT_TRUE(CloudsMatch(testing::BruteForceVoxelGrid(in, p), out, CloudTolerance::Equivalence(/*colour=*/0))) << "leaf " << leaf;
+    EXPECT_TRUE(CloudsMatch(testing::BruteForceVoxelGrid(in, p), out,
+                            CloudTolerance::Equivalence(/*colour=*/0)))
+        << "leaf " << leaf;
     p.key_order = true;  // 32- and 64-bit keys alike come out in (z, y, x) index order
     ASSERT_TRUE(grid.Filter(in, p, &out).ok());
-    EXPECT_TRUE(
-        CloudsMatchInOrder(testing::BruteForceVoxelGrid(in, p, /*pcl_order=*/true), out, CloudTolerance::Equivalence(/*colour=*/0)))
+    EXPECT_TRUE(CloudsMatchInOrder(testing::BruteForceVoxelGrid(in, p, /*pcl_order=*/true), out,
+                                   CloudTolerance::Equivalence(/*colour=*/0)))
         << "leaf " << leaf << ", key order";
   }
 }
@@ -376,9 +378,11 @@ TEST(VoxelGrid, ReusedOverManyDifferentClouds) {
     ASSERT_TRUE(grid.Filter(in, p, &out).ok()) << "round " << round;
     const PointCloud brute = testing::BruteForceVoxelGrid(in, p, /*pcl_order=*/true);
     if (p.key_order) {
-      ASSERT_TRUE(CloudsMatchInOrder(brute, out, CloudTolerance::Equivalence(/*colour=*/0))) << "round " << round;
+      ASSERT_TRUE(CloudsMatchInOrder(brute, out, CloudTolerance::Equivalence(/*colour=*/0)))
+          << "round " << round;
     } else {
-      ASSERT_TRUE(CloudsMatch(brute, out, CloudTolerance::Equivalence(/*colour=*/0))) << "round " << round;
+      ASSERT_TRUE(CloudsMatch(brute, out, CloudTolerance::Equivalence(/*colour=*/0)))
+          << "round " << round;
     }
   }
 }

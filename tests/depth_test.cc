@@ -15,7 +15,7 @@
 #include "cloudcast/core/camera.h"
 #include "cloudcast/core/filters.h"
 #include "cloudcast/core/pipeline.h"
-#include "test_support.h"
+#include "support/test_support.h"
 
 namespace cloudcast {
 namespace {

@@ -7,11 +7,11 @@
 //   - the server gets SIGKILL or SIGTERM under load and is started again on its port: a
 //     resilient DELIVERY_ALL stream reconnects, sends again what was not answered, and every
 //     frame is answered exactly once (nothing acknowledged is lost).
+#include <fcntl.h>
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <spawn.h>
 #include <sys/wait.h>
-#include <fcntl.h>
 #include <unistd.h>
 
 #include <atomic>
@@ -29,7 +29,7 @@
 #include "cloudcast/client/client.h"
 #include "cloudcast/datasets/synthetic.h"
 #include "cloudcast/testing/metrics_scrape.h"
-#include "replica_support.h"
+#include "support/replica_support.h"
 #include "support/robot.h"
 #include "support/small_frames.h"
 #include "support/waiting.h"
@@ -112,8 +112,7 @@ TEST(FaultsTest, ClientsVanishingMidFrameLeaveNoStreamAndOthersCarryOn) {
   const std::string dir = ::testing::TempDir();
   const int port = testing::FreeLoopbackPort(), metrics = testing::FreeLoopbackPort();
   ServerProcess server("127.0.0.1:" + std::to_string(port), "faults", {},
-                       dir + "/vanish_server.log", "warn",
-                       "127.0.0.1:" + std::to_string(metrics));
+                       dir + "/vanish_server.log", "warn", "127.0.0.1:" + std::to_string(metrics));
   ASSERT_TRUE(server.WaitUntilServing());
   auto metric = [&](const std::string& name) {
     return server::MetricValue(server::ScrapeMetrics(metrics), name);
@@ -121,9 +120,9 @@ TEST(FaultsTest, ClientsVanishingMidFrameLeaveNoStreamAndOthersCarryOn) {
   constexpr int kRounds = 4;
   for (int round = 0; round < kRounds; ++round) {
     const double received_before = metric("cloudcast_bytes_received_total");
-    Child load({testing::BinDir() + "/cloudcast-load", "--server", server.address(),
-                "--synthetic", "1280x960", "--synthetic-frames", "2", "--streams", "3", "--fps",
-                "200", "--lossless", "--duration", "60", "--quiet"});
+    Child load({testing::BinDir() + "/cloudcast-load", "--server", server.address(), "--synthetic",
+                "1280x960", "--synthetic-frames", "2", "--streams", "3", "--fps", "200",
+                "--lossless", "--duration", "60", "--quiet"});
     ASSERT_TRUE(load.started());
     // Once its frames are arriving (a server counter: nothing announces it).
     ASSERT_TRUE(testing::Eventually([&] {
@@ -159,8 +158,8 @@ class Namespace {
     ns_if_ = "ccf" + std::to_string(getpid()) + "n";
     host_ip_ = "10.213." + std::to_string(tag) + ".1";
     ns_ip_ = "10.213." + std::to_string(tag) + ".2";
-    ok_ = Run("ip netns add " + name_) && Run("ip link add " + host_if_ + " type veth peer name " +
-                                              ns_if_ + " netns " + name_) &&
+    ok_ = Run("ip netns add " + name_) &&
+          Run("ip link add " + host_if_ + " type veth peer name " + ns_if_ + " netns " + name_) &&
           Run("ip addr add " + host_ip_ + "/30 dev " + host_if_) &&
           Run("ip link set " + host_if_ + " up") &&
           Run(Exec("ip addr add " + ns_ip_ + "/30 dev " + ns_if_)) &&
@@ -224,10 +223,11 @@ TEST(FaultsTest, NetworkStallOfSecondsThenRecoveryLosesNothing) {
   const std::size_t during = robot->answered() - at_stall;
   ASSERT_TRUE(ns.Stall(false));
   driver.join();
-  std::printf("network stalled 3 s (%s) at frame %zu: %zu answers during the stall, then all %zu "
-              "answered; worst send-to-answer %.0f ms, reconnects %zu\n",
-              ns.how(), at_stall, during, robot->answered(), robot->MaxLatencyMs(),
-              robot->reconnects.size());
+  std::printf(
+      "network stalled 3 s (%s) at frame %zu: %zu answers during the stall, then all %zu "
+      "answered; worst send-to-answer %.0f ms, reconnects %zu\n",
+      ns.how(), at_stall, during, robot->answered(), robot->MaxLatencyMs(),
+      robot->reconnects.size());
   EXPECT_LE(during, 2u);  // nothing passes while stalled (an answer already on the wire may)
   robot->ExpectEveryFrameOnce(kFrames);
   EXPECT_TRUE(robot->reconnects.empty());
@@ -268,16 +268,18 @@ TEST_P(ServerStopTest, ResilientStreamLosesNothingAcrossAServerRestart) {
                 static_cast<long long>(e.took.count()));
   }
   std::printf("  stream ended: %s\n", robot->final_status.ToString().c_str());
-  std::printf("SIG%s under load at %zu answers, restarted: %zu reconnects (%sms), %lu frames "
-              "sent again, %zu of %d answered\n",
-              sigabbrev_np(signal_number), at_stop, robot->reconnects.size(), took.c_str(),
-              static_cast<unsigned long>(robot->stream->frames_resent()), robot->answered(),
-              kFrames);
+  std::printf(
+      "SIG%s under load at %zu answers, restarted: %zu reconnects (%sms), %lu frames "
+      "sent again, %zu of %d answered\n",
+      sigabbrev_np(signal_number), at_stop, robot->reconnects.size(), took.c_str(),
+      static_cast<unsigned long>(robot->stream->frames_resent()), robot->answered(), kFrames);
   robot->ExpectEveryFrameOnce(kFrames);
   ASSERT_GE(robot->reconnects.size(), 1u);
   EXPECT_EQ(robot->reconnects.front().cause.code(), absl::StatusCode::kUnavailable)
       << robot->reconnects.front().cause;
-  if (signal_number == SIGTERM) EXPECT_EQ(status, std::optional<int>(0));
+  if (signal_number == SIGTERM) {
+    EXPECT_EQ(status, std::optional<int>(0));
+  }
 }
 
 INSTANTIATE_TEST_SUITE_P(Signals, ServerStopTest, ::testing::Values(SIGKILL, SIGTERM),

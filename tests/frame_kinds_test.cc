@@ -17,7 +17,7 @@
 #include "cloudcast/client/opencv.h"
 #include "cloudcast/core/pipeline.h"
 #include "support/server_fixture.h"
-#include "test_support.h"
+#include "support/test_support.h"
 
 namespace cloudcast {
 namespace {
@@ -138,7 +138,10 @@ TEST_F(FrameKindsTest, KindsMixOnOneStream) {
   std::mt19937 rng(4);
   testing::TestFrame disparity =
       testing::RandomFrame(rng, w, h, DisparityEncoding::kU8, ColorEncoding::kBGR8, 50, 200);
-  auto stream = client_->OpenStream(client::MakeStreamConfig(options));
+  // Every frame answered: the default (latest) would drop the frames sent while one is in work.
+  v1::StreamConfig config = client::MakeStreamConfig(options);
+  config.set_delivery(v1::DELIVERY_ALL);
+  auto stream = client_->OpenStream(config);
   ASSERT_TRUE(stream.ok()) << stream.status();
   for (int i = 0; i < 4; ++i) {
     if (i % 2 == 0) {

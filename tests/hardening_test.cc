@@ -28,7 +28,7 @@
 #include "cloudcast/server/server.h"
 #include "cloudcast/testing/metrics_scrape.h"
 #include "cloudcast/v1/cloudcast.grpc.pb.h"
-#include "replica_support.h"
+#include "support/replica_support.h"
 
 namespace cloudcast {
 namespace {

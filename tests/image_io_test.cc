@@ -12,9 +12,9 @@
 
 #include "cloudcast/core/image.h"
 #include "cloudcast/core/limits.h"
-#include "program_support.h"
 #include "support/image_files.h"
-#include "test_support.h"
+#include "support/program_support.h"
+#include "support/test_support.h"
 
 namespace cloudcast {
 namespace {

@@ -13,7 +13,7 @@
 #include <thread>
 
 #include "cloudcast/load/null_server.h"
-#include "program_support.h"
+#include "support/program_support.h"
 #include "support/waiting.h"
 
 extern char** environ;

@@ -23,7 +23,7 @@
 #include "cloudcast/load/fleet.h"
 #include "cloudcast/load/frame_store.h"
 #include "cloudcast/load/report.h"
-#include "replica_support.h"
+#include "support/replica_support.h"
 #include "support/waiting.h"
 
 namespace cloudcast {
@@ -38,8 +38,8 @@ using testing::ServerProcess;
 const load::FrameStore& Store() {
   static const load::FrameStore store = [] {
     load::FrameSourceOptions o;
-    o.synthetic_width = 160;
-    o.synthetic_height = 120;
+    o.source.synthetic_width = 160;
+    o.source.synthetic_height = 120;
     o.synthetic_frames = 4;
     return load::FrameStore::Prepare(o).value();
   }();
@@ -49,10 +49,9 @@ const load::FrameStore& Store() {
 class LoadReplicasTest : public testing::ScratchDirTest {
  public:
   void StartReplicas(int n) {
-    replicas_ = testing::StartReplicaSet(n, {"--threads", "1"},
-                                         [this](const std::string& id) {
-                                           return Path("replica" + id + ".log");
-                                         });
+    replicas_ = testing::StartReplicaSet(n, {"--threads", "1"}, [this](const std::string& id) {
+      return Path("replica" + id + ".log");
+    });
     ASSERT_EQ(replicas_.size(), static_cast<std::size_t>(n)) << "replicas did not start";
   }
 

@@ -115,8 +115,8 @@ TEST(ScheduleTest, BadRampsNameTheFlag) {
 
 FrameStore SmallStore(int frames = 3, std::uint32_t w = 64, std::uint32_t h = 48) {
   FrameSourceOptions o;
-  o.synthetic_width = w;
-  o.synthetic_height = h;
+  o.source.synthetic_width = w;
+  o.source.synthetic_height = h;
   o.synthetic_frames = frames;
   return FrameStore::Prepare(o).value();
 }
@@ -143,10 +143,10 @@ TEST(FrameStoreTest, RequestsParseAsStreamRequestsWithPatchedFields) {
 
 TEST(FrameStoreTest, PngAndJpegUplinksEncodeTheImages) {
   FrameSourceOptions o;
-  o.synthetic_width = 64;
-  o.synthetic_height = 48;
+  o.source.synthetic_width = 64;
+  o.source.synthetic_height = 48;
   o.synthetic_frames = 1;
-  o.uplink = Uplink::kJpeg;
+  o.uplink.encoding = sources::Uplink::kJpeg;
   FrameStore store = FrameStore::Prepare(o).value();
   grpc::ByteBuffer buffer = store.Request(0, 1, 1);
   std::vector<grpc::Slice> slices;
@@ -161,8 +161,8 @@ TEST(FrameStoreTest, PngAndJpegUplinksEncodeTheImages) {
 
 TEST(FrameStoreTest, MissingFilesNameTheFlag) {
   FrameSourceOptions o;
-  o.disparity_glob = "/nonexistent/*.png";
-  o.colour_glob = "/nonexistent/*.png";
+  o.source.globs[sources::ImageRole::kDisparity] = "/nonexistent/*.png";
+  o.source.globs[sources::ImageRole::kColour] = "/nonexistent/*.png";
   auto store = FrameStore::Prepare(o);
   ASSERT_FALSE(store.ok());
   EXPECT_NE(store.status().message().find("--disparity-glob"), std::string::npos);
@@ -277,8 +277,8 @@ TEST_F(FleetTest, NullServerAnswersAndStopEndsTheRunWithCancel) {
   auto fleet = Fleet::Connect(o, &store).value();
   std::thread stopper([&] {
     // Stops once frames are flowing: the recorder's counters announce nothing to wait on.
-    EXPECT_TRUE(cloudcast::testing::Eventually(
-        [&] { return fleet->recorder().totals().answered >= 50; }));
+    EXPECT_TRUE(
+        cloudcast::testing::Eventually([&] { return fleet->recorder().totals().answered >= 50; }));
     fleet->Stop();
   });
   const FleetResult r = fleet->Run();
@@ -360,8 +360,7 @@ TEST(MemoryWatchTest, ScrapesARealServersMemory) {
   options.listen = "127.0.0.1:0";
   options.metrics_listen = "127.0.0.1:0";
   auto server = server::Server::Start(options).value();
-  const std::string url =
-      "http://127.0.0.1:" + std::to_string(server->metrics_port()) + "/metrics";
+  const std::string url = "http://127.0.0.1:" + std::to_string(server->metrics_port()) + "/metrics";
   const std::uint64_t rss = MemoryWatch::Scrape(url).value();
   EXPECT_GT(rss, 1u << 20);  // a process with gRPC loaded holds megabytes
   MemoryWatch watch(url, std::chrono::milliseconds(100));
@@ -385,8 +384,8 @@ TEST(MemoryWatchTest, SoakFailsOnLossOrGrowthAfterTheWarmUp) {
   bounds.warmup_s = 10;
   bounds.max_growth_bytes = 20e6;
   // Growth during the warm-up does not count; after it, up to the bound passes.
-  SoakVerdict v = JudgeSoak({at(0, 50), at(5, 150), at(10, 160), at(15, 170), at(20, 179)},
-                            clean, bounds);
+  SoakVerdict v =
+      JudgeSoak({at(0, 50), at(5, 150), at(10, 160), at(15, 170), at(20, 179)}, clean, bounds);
   EXPECT_TRUE(v.passed) << (v.failures.empty() ? "" : v.failures.front());
   EXPECT_EQ(v.baseline_bytes, 160'000'000u);
   EXPECT_EQ(v.peak_bytes, 179'000'000u);

@@ -11,7 +11,7 @@
 #include "cloudcast/core/pipeline.h"
 #include "cloudcast/io/image_io.h"
 #include "cloudcast/reference/pcl_reference.h"
-#include "test_support.h"
+#include "support/test_support.h"
 
 namespace cloudcast {
 namespace {
@@ -21,8 +21,8 @@ using reference::PclCloud;
 using reference::ToPcl;
 using testing::CloudsIdentical;
 using testing::CloudsMatch;
-using testing::CloudTolerance;
 using testing::CloudsMatchInOrder;
+using testing::CloudTolerance;
 
 // PCL VoxelGrid's own test (voxel_grid.hpp): it gives up when the voxel count along the bounding
 // box exceeds INT32_MAX. PCL computes it with int64 casts and products that overflow for huge
@@ -150,11 +150,17 @@ bool ExpectSameAsPcl(const DisparityView& disparity, const ColorView& colour,
     if (!ok(pipeline.Run(options, disparity, colour, &fused_sorted))) return false;
     if (pcl_gave_up) {
       const PointCloud brute = testing::BruteForceVoxelGrid(ours.passed, voxel, /*pcl_order=*/true);
-      EXPECT_TRUE(CloudsMatchInOrder(brute, sorted, CloudTolerance::Equivalence(/*colour=*/0))) << "voxel grid, key order";
-      EXPECT_TRUE(CloudsMatchInOrder(brute, fused_sorted, CloudTolerance::Equivalence(/*colour=*/0))) << "fused chain, key order";
+      EXPECT_TRUE(CloudsMatchInOrder(brute, sorted, CloudTolerance::Equivalence(/*colour=*/0)))
+          << "voxel grid, key order";
+      EXPECT_TRUE(
+          CloudsMatchInOrder(brute, fused_sorted, CloudTolerance::Equivalence(/*colour=*/0)))
+          << "fused chain, key order";
     } else {
-      EXPECT_TRUE(CloudsMatchInOrder(FromPcl(pcl_voxel), sorted, CloudTolerance::Equivalence())) << "voxel grid, key order";
-      EXPECT_TRUE(CloudsMatchInOrder(FromPcl(pcl_voxel), fused_sorted, CloudTolerance::Equivalence())) << "fused chain, key order";
+      EXPECT_TRUE(CloudsMatchInOrder(FromPcl(pcl_voxel), sorted, CloudTolerance::Equivalence()))
+          << "voxel grid, key order";
+      EXPECT_TRUE(
+          CloudsMatchInOrder(FromPcl(pcl_voxel), fused_sorted, CloudTolerance::Equivalence()))
+          << "fused chain, key order";
     }
   }
   std::uint64_t finite = 0;

@@ -39,10 +39,10 @@
 #include "cloudcast/io/cloud_io.h"
 #include "cloudcast/io/image_io.h"
 #include "cloudcast/reference/pcl_reference.h"
-#include "program_support.h"
 #include "support/cloud_match.h"
 #include "support/image_files.h"
-#include "test_support.h"
+#include "support/program_support.h"
+#include "support/test_support.h"
 
 namespace cloudcast {
 namespace {

@@ -1,6 +1,6 @@
 // Tests of cloudcast_render, the OpenGL point cloud renderer, on a real GL 3.3 core context:
-// Mesa's llvmpipe in an Xvfb the test starts itself (tests/xvfb_support.h). Every check reads
-// the rendered pixels back: points land where ViewProjection() says, with their packed colour
+// Mesa's llvmpipe in an Xvfb the test starts itself (tests/support/xvfb_support.h). Every check
+// reads the rendered pixels back: points land where ViewProjection() says, with their packed colour
 // bit for bit, NaN points and stale buffer contents never show, the overlay stays in its corner,
 // screenshots are upright, and a cloudcast-process PCD file renders.
 #include <gtest/gtest.h>
@@ -25,8 +25,8 @@
 #include "cloudcast/core/point.h"
 #include "cloudcast/io/cloud_io.h"
 #include "cloudcast/render/renderer.h"
-#include "test_support.h"
-#include "xvfb_support.h"
+#include "support/test_support.h"
+#include "support/xvfb_support.h"
 
 namespace cloudcast::render {
 namespace {

@@ -19,7 +19,7 @@
 
 #include "cloudcast/client/client.h"
 #include "cloudcast/datasets/synthetic.h"
-#include "replica_support.h"
+#include "support/replica_support.h"
 #include "support/robot.h"
 #include "support/small_frames.h"
 #include "support/waiting.h"
@@ -36,9 +36,8 @@ const std::vector<SyntheticFrame>& Frames() { return testing::SmallFrames(4); }
 class ReplicasTest : public testing::ScratchDirTest {
  public:
   void StartReplicas(int n, const std::vector<std::string>& args = {}) {
-    replicas_ = testing::StartReplicaSet(n, args, [this](const std::string& id) {
-      return Path("replica" + id + ".log");
-    });
+    replicas_ = testing::StartReplicaSet(
+        n, args, [this](const std::string& id) { return Path("replica" + id + ".log"); });
     ASSERT_EQ(replicas_.size(), static_cast<std::size_t>(n)) << "replicas did not start";
   }
 
@@ -59,7 +58,8 @@ class ReplicasTest : public testing::ScratchDirTest {
       auto info = (*client)->GetInfo();
       if (info.ok()) seen.insert(info->instance());
       return seen.size() == replicas_.size();
-    })) << "only " << seen.size() << " of " << replicas_.size() << " replicas answered GetInfo";
+    })) << "only "
+        << seen.size() << " of " << replicas_.size() << " replicas answered GetInfo";
     return *std::move(client);
   }
 
@@ -224,22 +224,31 @@ TEST_F(ReplicasTest, ConnectionAgeMovesLongStreamsToNewConnectionsLosingNothing)
   ASSERT_NE(client, nullptr);
   auto robot = OpenRobot(*client);
   ASSERT_NE(robot->stream, nullptr);
-  // A camera at 50 fps for about 2.5 s: several connection lifetimes.
-  const auto start = std::chrono::steady_clock::now();
-  constexpr int kFrames = 125;
-  for (int i = 0; i < kFrames; ++i) {
-    std::this_thread::sleep_until(start + milliseconds(20 * i));
-    const SyntheticFrame& f = Frames()[static_cast<std::size_t>(i) % Frames().size()];
+  // A camera with two frames in flight (each sent once the one before the last is answered)
+  // until its stream has moved to a new connection twice: several connection lifetimes. The
+  // count and the deadline only turn a stream that never moves into a failure.
+  constexpr std::size_t kMoves = 2, kMaxFrames = 200000;
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+  std::size_t frames = 0;
+  for (; frames < kMaxFrames && std::chrono::steady_clock::now() < deadline; ++frames) {
+    if (frames >= 2) {
+      ASSERT_TRUE(robot->WaitForAnswers(frames - 1)) << "frame " << frames - 2;
+    }
+    {
+      std::lock_guard<std::mutex> lock(robot->mu);
+      if (robot->reconnects.size() >= kMoves) break;
+    }
+    const SyntheticFrame& f = Frames()[frames % Frames().size()];
     cc::FrameMeta meta;
-    meta.sequence = static_cast<std::uint64_t>(i);
+    meta.sequence = frames;
     ASSERT_TRUE(robot->stream->Send(f.disparity_view(), f.colour_view(), meta).ok());
   }
   EXPECT_TRUE(robot->stream->Finish().ok());
   std::lock_guard<std::mutex> lock(robot->mu);
-  std::printf("%d reconnects over %d frames\n", robot->stream->reconnects(), kFrames);
-  EXPECT_GE(robot->stream->reconnects(), 1);
+  std::printf("%d reconnects over %zu frames\n", robot->stream->reconnects(), frames);
+  EXPECT_GE(robot->reconnects.size(), kMoves);
   EXPECT_TRUE(robot->errors.empty());
-  ASSERT_EQ(robot->answers.size(), static_cast<std::size_t>(kFrames));
+  ASSERT_EQ(robot->answers.size(), frames);
   for (const auto& [sequence, times] : robot->answers) EXPECT_EQ(times, 1) << sequence;
 }
 

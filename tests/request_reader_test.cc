@@ -16,7 +16,7 @@
 #include "cloudcast/proto/convert.h"
 #include "frame_input.h"
 #include "google/protobuf/util/message_differencer.h"
-#include "test_support.h"
+#include "support/test_support.h"
 
 namespace cloudcast {
 namespace {

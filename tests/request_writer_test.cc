@@ -11,7 +11,7 @@
 #include "frame_builder.h"  // client/src
 #include "google/protobuf/util/message_differencer.h"
 #include "request_reader.h"  // server/src
-#include "test_support.h"
+#include "support/test_support.h"
 
 namespace cloudcast {
 namespace {

@@ -24,7 +24,7 @@
 #include "cloudcast/testing/metrics_scrape.h"
 #include "cloudcast/v1/cloudcast.grpc.pb.h"
 #include "nlohmann/json.hpp"
-#include "replica_support.h"
+#include "support/replica_support.h"
 #include "support/test_pki.h"
 #include "support/waiting.h"
 #include "tenants.h"

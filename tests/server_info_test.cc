@@ -14,7 +14,7 @@
 #include "cloudcast/server/cli.h"
 #include "cloudcast/server/options.h"
 #include "cloudcast/testing/metrics_scrape.h"
-#include "program_support.h"
+#include "support/program_support.h"
 #include "support/server_support.h"
 
 namespace cloudcast::server {

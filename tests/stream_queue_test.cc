@@ -244,7 +244,9 @@ TEST_F(StreamQueueTest, RandomScheduleKeepsTheInvariants) {
               q.PushFrame(s, &dropped);
               returned.insert(returned.end(), dropped.begin(), dropped.end());
             }
-            if (mode == Delivery::kAll) ASSERT_LE(q.held(), bound) << "seed " << seed;
+            if (mode == Delivery::kAll) {
+              ASSERT_LE(q.held(), bound) << "seed " << seed;
+            }
           }
           break;
         case 2:

@@ -1,5 +1,5 @@
 // cloudcast-client: streams stereo frames to a cloudcast server and shows, records or measures
-// the clouds it sends back; also views local cloud files. See --help, and client/src/app/.
+// the clouds it sends back; also views local cloud files. See --help, and viewer/app/.
 #include <cstdio>
 #include <exception>
 

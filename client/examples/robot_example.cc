@@ -93,7 +93,7 @@ int main(int argc, char** argv) {
     if (!token.ok()) return Fail(token.status());
     client_options.security.bearer_token = *std::move(token);
   }
-  const std::string target = args.size() > 0 ? args[0] : "localhost:50051";
+  const std::string target = args.size() > 0 ? args[0] : cc::kDefaultTarget;
   const int frames = args.size() > 1 ? std::atoi(args[1].c_str()) : 30;
   Camera camera;
   if (args.size() > 3) {

@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "cloudcast/client/resend_ledger.h"
 #include "cloudcast/core/draco_codec.h"
 #include "cloudcast/proto/convert.h"
 #include "cloudcast/v1/cloudcast.grpc.pb.h"
@@ -81,10 +82,10 @@ void DecodeInto(bool decode, Result* result) {
   result->times.decode_us = MicrosSince(start);
 }
 
-// A frame sent and not answered yet. `bytes` are kept only where a resilient stream may have to
-// send it again (DELIVERY_ALL): they share the slices gRPC wrote, so keeping them copies nothing.
+// What the stream keeps of a frame sent and not answered yet. `bytes` are kept only where a
+// resilient stream may have to send it again (DELIVERY_ALL): they share the slices gRPC wrote, so
+// keeping them copies nothing.
 struct Pending {
-  std::uint64_t sequence = 0;
   std::string frame_id;
   std::int64_t capture_time_unix_ns = 0;
   Clock::time_point send;
@@ -145,10 +146,10 @@ struct Stream::Impl {
   std::atomic<std::uint64_t> frames_sent{0};
   std::atomic<std::uint64_t> image_bytes_sent{0};
 
-  // Frames sent and not answered yet, in send order. Replies come in send order; frames the
-  // server skipped (DELIVERY_LATEST) are passed over when a later reply arrives.
+  // Frames sent and not answered yet (resend_ledger.h: replies in send order, frames the server
+  // skipped passed over, what a new call sends again).
   std::mutex pending_mu;
-  std::deque<Pending> pending;
+  ResendLedger<Pending> pending;
 
   // Reader side.
   std::mutex read_mu;
@@ -194,16 +195,10 @@ struct Stream::Impl {
     return rpc->Write(Serialized(config));
   }
 
-  // Takes the send record of `sequence` (and passes over skipped frames before it).
-  bool TakePending(std::uint64_t sequence, Pending* out) {
+  // Books the reply to `sequence`: its send record, or that the reply is a duplicate.
+  ResendLedger<Pending>::Reply TakePending(std::uint64_t sequence) {
     std::lock_guard<std::mutex> lock(pending_mu);
-    auto it = std::find_if(pending.begin(), pending.end(),
-                           [&](const Pending& p) { return p.sequence == sequence; });
-    if (it == pending.end()) return false;
-    *out = std::move(*it);
-    out->bytes.reset();
-    pending.erase(pending.begin(), it + 1);
-    return true;
+    return pending.Answer(sequence);
   }
 
   absl::Status Send(const FrameInput& input, const FrameMeta& meta) {
@@ -220,11 +215,12 @@ struct Stream::Impl {
     const std::uint64_t image_bytes = frames.image_bytes();
     {
       // Recorded before the write: the reply may arrive before Write returns.
-      Pending p{sequence,     meta.frame_id,  frames.frame().capture_time_unix_ns(),
-                Clock::now(), UnixNanosNow(), std::nullopt};
-      if (KeepsFrames()) p.bytes = bytes;  // shares the slices
+      Pending p{meta.frame_id, frames.frame().capture_time_unix_ns(), Clock::now(), UnixNanosNow(),
+                std::nullopt};
+      const bool keep = KeepsFrames();
+      if (keep) p.bytes = bytes;  // shares the slices
       std::lock_guard<std::mutex> plock(pending_mu);
-      pending.push_back(std::move(p));
+      pending.Sent(sequence, std::move(p), keep);
     }
     next_sequence = sequence + 1;
     if (!write_failed && !call->rpc->Write(bytes)) write_failed = true;
@@ -285,14 +281,7 @@ struct Stream::Impl {
     {
       // DELIVERY_LATEST frames are not sent again: the server would have dropped them anyway.
       std::lock_guard<std::mutex> lock(pending_mu);
-      for (auto it = pending.begin(); it != pending.end();) {
-        if (!it->bytes) {
-          ++event->frames_dropped;
-          it = pending.erase(it);
-        } else {
-          ++it;
-        }
-      }
+      event->frames_dropped = pending.CallLost();
     }
     dropped_before += dropped_this_call + event->frames_dropped;
     dropped_this_call = 0;
@@ -313,11 +302,13 @@ struct Stream::Impl {
       std::uint64_t resent = 0;
       {
         std::lock_guard<std::mutex> lock(pending_mu);
-        for (const Pending& p : pending) {
-          if (!ok) break;
-          ok = next->rpc->Write(*p.bytes);
+        while (ok) {
+          const ResendLedger<Pending>::Entry* again = pending.NextResend();
+          if (again == nullptr) break;
+          ok = next->rpc->Write(*again->record.bytes);
           ++resent;
         }
+        if (!ok) pending.CallLost();  // what this attempt resent goes again on the next
       }
       if (ok && writes_closed) ok = next->rpc->WritesDone();
       if (ok) {
@@ -346,19 +337,18 @@ struct Stream::Impl {
     final_status = std::move(why);
     if (!options.resilient) return;
     std::lock_guard<std::mutex> lock(pending_mu);
-    for (Pending& p : pending) {
+    for (ResendLedger<Pending>::Entry& e : pending.TakeUnanswered()) {
       Result r;
       r.status = absl::UnavailableError(absl::StrCat(
-          "frame ", p.sequence, " was sent but never answered: ", final_status.message()));
-      r.sequence = p.sequence;
-      r.frame_id = p.frame_id;
-      r.capture_time_unix_ns = p.capture_time_unix_ns;
-      r.times.send = p.send;
-      r.times.send_unix_ns = p.send_unix_ns;
+          "frame ", e.sequence, " was sent but never answered: ", final_status.message()));
+      r.sequence = e.sequence;
+      r.frame_id = std::move(e.record.frame_id);
+      r.capture_time_unix_ns = e.record.capture_time_unix_ns;
+      r.times.send = e.record.send;
+      r.times.send_unix_ns = e.record.send_unix_ns;
       r.frames_dropped = dropped_before + dropped_this_call;
       lost.push_back(std::move(r));
     }
-    pending.clear();
   }
 
   // The next reply, or false once the stream has ended (its status then in final_status).
@@ -373,7 +363,7 @@ struct Stream::Impl {
       if (read_done) return false;
       if (call->rpc->Read(&reply)) {
         failing_since.reset();
-        Fill(result, decode);
+        if (!Fill(result, decode)) continue;  // a second answer to a resent frame
         return true;
       }
       std::unique_lock<std::timed_mutex> writers = TakeWriters();
@@ -399,8 +389,9 @@ struct Stream::Impl {
     }
   }
 
-  // Fills `result` from `reply`.
-  void Fill(Result* result, bool decode) {
+  // Fills `result` from `reply`. False for a reply that answers a frame already answered (each
+  // frame is answered once), which is not handed out.
+  bool Fill(Result* result, bool decode) {
     result->times = ClientTimes{};
     result->times.receive = Clock::now();
     result->times.receive_unix_ns = UnixNanosNow();
@@ -447,17 +438,25 @@ struct Stream::Impl {
     if (!result->server_instance.empty()) last_instance = result->server_instance;
     dropped_this_call = std::max(dropped_this_call, dropped);
     result->frames_dropped = dropped_before + dropped_this_call;
-    if (Pending p; answers_frame && TakePending(result->sequence, &p)) {
-      result->times.send = p.send;
-      result->times.send_unix_ns = p.send_unix_ns;
-      // FrameError does not echo the capture time; the client knows what it sent.
-      if (result->capture_time_unix_ns == 0) result->capture_time_unix_ns = p.capture_time_unix_ns;
+    if (answers_frame) {
+      const ResendLedger<Pending>::Reply booked = TakePending(result->sequence);
+      if (booked.match == ResendLedger<Pending>::Match::kDuplicate) return false;
+      if (booked.entry) {
+        const Pending& p = booked.entry->record;
+        result->times.send = p.send;
+        result->times.send_unix_ns = p.send_unix_ns;
+        // FrameError does not echo the capture time; the client knows what it sent.
+        if (result->capture_time_unix_ns == 0) {
+          result->capture_time_unix_ns = p.capture_time_unix_ns;
+        }
+      }
     }
     if (result->status.ok()) {
       DecodeInto(decode, result);
     } else {
       result->cloud.ResizeUnorganized(0);
     }
+    return true;
   }
 
   absl::Status Finish() {

@@ -10,6 +10,7 @@
 
 #include <CLI/CLI.hpp>
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -27,6 +28,7 @@
 #include "cloudcast/load/probe.h"
 #include "cloudcast/load/report.h"
 #include "cloudcast/proto/convert.h"
+#include "cloudcast/v1/cloudcast.grpc.pb.h"
 
 namespace {
 
@@ -41,37 +43,52 @@ constexpr int kExitSoakFailed = 3;
 constexpr double kMaxDurationS = 3600;
 constexpr double kMaxFrames = 1e8;
 
+// The defaults of the flags: those of the options structs they fill, so each is written once.
+const load::FleetOptions& FleetDefaults() {
+  static const load::FleetOptions o;
+  return o;
+}
+const load::FrameSourceOptions& FrameDefaults() {
+  static const load::FrameSourceOptions o;
+  return o;
+}
+
+double Seconds(std::chrono::nanoseconds d) { return std::chrono::duration<double>(d).count(); }
+
 struct Flags {
-  std::string server = "localhost:50051";
-  double connect_timeout_s = 5;
+  std::string server = FleetDefaults().server;
+  double connect_timeout_s = Seconds(FleetDefaults().connect_timeout);
   bool probe = false;
-  std::string probe_service = "cloudcast.v1.CloudCast";
-  std::string lb;
-  bool resilient = false;
-  double reconnect_timeout_s = 30;
-  int streams = 1;
-  int connections = 0;
-  double fps = 30;
-  int in_flight = 1;
-  std::string schedule = "const";
-  double load_start = 0, load_step = 0, load_end = 0, load_step_duration_s = 1;
-  double duration_s = 10;
-  double frames = 0;
-  double drain_timeout_s = 5;
-  std::uint64_t seed = 1;
-  int scheduler_threads = 1;
+  std::string probe_service = cloudcast::v1::CloudCast::service_full_name();
+  std::string lb = FleetDefaults().lb_policy;
+  bool resilient = FleetDefaults().resilient;
+  double reconnect_timeout_s = Seconds(FleetDefaults().reconnect_timeout);
+  int streams = FleetDefaults().streams;
+  int connections = FleetDefaults().connections;
+  double fps = FleetDefaults().schedule.start;
+  int in_flight = FleetDefaults().in_flight;
+  std::string schedule = std::string(load::Name(FleetDefaults().schedule.kind));
+  double load_start = 0;  // unset: --fps
+  double load_step = FleetDefaults().schedule.step, load_end = FleetDefaults().schedule.end;
+  double load_step_duration_s = Seconds(FleetDefaults().schedule.step_duration);
+  double duration_s = Seconds(FleetDefaults().duration);
+  double frames = static_cast<double>(FleetDefaults().frames);
+  double drain_timeout_s = Seconds(FleetDefaults().drain_timeout);
+  std::uint64_t seed = FleetDefaults().seed;
+  int scheduler_threads = FleetDefaults().scheduler_threads;
   // Frames
-  std::string tsukuba, illumination = "daylight", disparity_glob, colour_glob, synthetic;
-  int synthetic_frames = 10;
-  std::string encoding = "raw";
-  int jpeg_quality = 90;
+  std::string tsukuba, disparity_glob, colour_glob, synthetic;
+  std::string illumination = FrameDefaults().source.illumination;
+  int synthetic_frames = FrameDefaults().synthetic_frames;
+  std::string encoding = cloudcast::sources::Name(FrameDefaults().uplink.encoding);
+  int jpeg_quality = FrameDefaults().uplink.jpeg_quality;
   bool lossless = false;
   // Server memory and the soak
   std::string watch_memory;
   double memory_interval_s = 5;
   bool soak = false;
-  double soak_warmup_s = 15;
-  double soak_max_growth_mb = 64;
+  double soak_warmup_s = load::SoakBounds{}.warmup_s;
+  double soak_max_growth_mb = load::SoakBounds{}.max_growth_bytes / 1e6;
   // Output
   std::string json, html;
   double progress_s = 1;
@@ -235,8 +252,9 @@ std::unique_ptr<cloudcast::cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
       ->group(frames);
   app.add_option("--encoding", f.encoding,
                  "How images travel: raw pixels; zstd (lossless: row deltas + zstd, cheap for "
-                 "the server); png (lossless); jpeg (colour JPEG, disparity PNG)")
-      ->check(CLI::IsMember({"raw", "zstd", "png", "jpeg"}))
+                 "the server); png (lossless: PNG, float disparities TIFF); jpeg (colour JPEG, "
+                 "disparity as png)")
+      ->check(CLI::IsMember(cloudcast::sources::UplinkNames()))
       ->capture_default_str()
       ->group(frames);
   app.add_option("--jpeg-quality", f.jpeg_quality, "JPEG quality with --encoding jpeg")
@@ -278,7 +296,8 @@ std::unique_ptr<cloudcast::cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
       ->group(soak);
   app.add_option("--soak-max-growth-mb", f.soak_max_growth_mb,
                  "Allowed rise of the server's memory after the warm-up, MB")
-      ->check(NumberCheck("a number of MB in [0, 1e6]", [](double v) { return v >= 0 && v <= 1e6; }))
+      ->check(
+          NumberCheck("a number of MB in [0, 1e6]", [](double v) { return v >= 0 && v <= 1e6; }))
       ->capture_default_str()
       ->group(soak);
 
@@ -360,8 +379,9 @@ int main(int argc, char** argv) {
     return usage("--reconnect-timeout needs --resilient");
   }
   if (f.soak && f.watch_memory.empty()) {
-    return usage("--soak needs --watch-memory URL (the server's /metrics, e.g. "
-                 "http://127.0.0.1:9464/metrics)");
+    return usage(
+        "--soak needs --watch-memory URL (the server's /metrics, e.g. "
+        "http://127.0.0.1:9464/metrics)");
   }
   for (const char* flag : {"--memory-interval", "--soak-warmup", "--soak-max-growth-mb"}) {
     const bool needs_soak = std::string(flag) != "--memory-interval";
@@ -380,16 +400,18 @@ int main(int argc, char** argv) {
   }
 
   load::FrameSourceOptions source;
-  source.tsukuba_dir = f.tsukuba;
-  source.illumination = f.illumination;
-  source.disparity_glob = f.disparity_glob;
-  source.colour_glob = f.colour_glob;
+  source.source.tsukuba_dir = f.tsukuba;
+  source.source.illumination = f.illumination;
+  using cloudcast::sources::ImageRole;
+  if (!f.disparity_glob.empty()) source.source.globs[ImageRole::kDisparity] = f.disparity_glob;
+  if (!f.colour_glob.empty()) source.source.globs[ImageRole::kColour] = f.colour_glob;
   if (!f.synthetic.empty()) {
-    cloudcast::cli::ParseSize(f.synthetic, &source.synthetic_width, &source.synthetic_height);
+    cloudcast::cli::ParseSize(f.synthetic, &source.source.synthetic_width,
+                              &source.source.synthetic_height);
   }
   source.synthetic_frames = f.synthetic_frames;
-  load::ParseUplink(f.encoding, &source.uplink);
-  source.jpeg_quality = f.jpeg_quality;
+  cloudcast::sources::ParseUplink(f.encoding, &source.uplink.encoding);
+  source.uplink.jpeg_quality = f.jpeg_quality;
 
   load::FleetOptions o;
   o.security = *security;

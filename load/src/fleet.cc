@@ -14,6 +14,7 @@
 #include <thread>
 
 #include "absl/status/status.h"
+#include "cloudcast/client/resend_ledger.h"
 #include "cloudcast/v1/cloudcast.grpc.pb.h"
 
 namespace cloudcast::load {
@@ -108,7 +109,7 @@ class Fleet::Driver {
         ++stats_.unsent;
         return;
       }
-      pending_.push_back({next_seq_++, intended, 0, 0, false});
+      due_.push_back({next_seq_++, intended});
       if (call_ == nullptr || call_->write_in_flight) {
         ctx_->recorder->Late(/*flow_control=*/true);  // the previous write (or call) is not done
       } else if (scheduler_late) {
@@ -120,22 +121,17 @@ class Fleet::Driver {
   }
 
   // No more frames will be due. `discard`: frames still queued are not sent (a stop); frames
-  // queued for a resend were sent once, so they still go and are awaited.
+  // waiting for a resend were sent once, so they still go and are awaited.
   void NoMoreFrames(bool discard) {
     Call* release = nullptr;
     {
       std::lock_guard<std::mutex> lock(mu_);
       if (no_more_) return;
       no_more_ = true;
-      if (discard) {
-        const auto first_new = std::find_if(pending_.begin(), pending_.end(),
-                                            [](const Frame& f) { return !f.resend; });
-        const auto unsent = static_cast<std::uint64_t>(pending_.end() - first_new);
-        if (unsent > 0) {
-          ctx_->recorder->Unsent(unsent);
-          stats_.unsent += unsent;
-          pending_.erase(first_new, pending_.end());
-        }
+      if (discard && !due_.empty()) {
+        ctx_->recorder->Unsent(due_.size());
+        stats_.unsent += due_.size();
+        due_.clear();
       }
       release = TryWriteLocked(call_);
     }
@@ -203,12 +199,17 @@ class Fleet::Driver {
   }
 
  private:
-  struct Frame {
+  // A frame that is due and not written yet.
+  struct DueFrame {
     std::uint64_t seq;
-    std::int64_t intended, actual;
-    std::size_t bytes;
-    bool resend;  // sent on an earlier call, unanswered: goes again
+    std::int64_t intended;
   };
+  // What the stream keeps of a frame written and not answered (the ledger holds its sequence).
+  struct Written {
+    std::int64_t intended = 0, actual = 0;
+    std::size_t bytes = 0;
+  };
+  using Ledger = client::ResendLedger<Written>;
 
   // One gRPC call of the stream. Its fields are guarded by the driver's mu_; the driver owns it
   // until the driver itself goes (a call ends a few times per stream at most).
@@ -283,33 +284,29 @@ class Fleet::Driver {
       c->StartWrite(&c->write_buf);
       return nullptr;
     }
-    if (pending_.empty() && ctx_->closed_loop && !no_more_ && sent_ < frame_limit_ &&
-        static_cast<int>(in_flight_.size()) < ctx_->in_flight) {
-      // Closed loop: the frame is intended now; there is no schedule to fall behind.
-      pending_.push_back({next_seq_++, Ns(Clock::now()), 0, 0, false});
+    // Frames sent on a lost call go again first, in order, with their intended times.
+    if (Ledger::Entry* again = ledger_.NextResend()) {
+      Written& w = again->record;
+      WriteFrameLocked(c, again->sequence, w.intended, &w);
+      ++stats_.resent;
+      ctx_->recorder->Resent(w.bytes);
+      return nullptr;
     }
-    if (!pending_.empty()) {
-      Frame f = pending_.front();
-      pending_.pop_front();
-      f.actual = Ns(Clock::now());
-      // The same bytes as the first send: a new 20-byte header before the shared image slice.
-      const std::size_t frame_index = static_cast<std::size_t>(index_) + f.seq - 1;
-      c->write_buf = ctx_->store->Request(frame_index, f.seq,
-                                          ctx_->t0_unix_ns + (f.intended - ctx_->t0_steady_ns));
-      f.bytes = c->write_buf.Length();
-      if (f.resend) {
-        ++stats_.resent;
-        ctx_->recorder->Resent(f.bytes);
-      } else {
-        ++sent_;
-        ++stats_.sent;
-        ctx_->recorder->Sent(f.bytes);
-      }
-      in_flight_.push_back(f);
-      last_send_ns_ = f.actual;
+    if (due_.empty() && ctx_->closed_loop && !no_more_ && sent_ < frame_limit_ &&
+        static_cast<int>(ledger_.in_flight()) < ctx_->in_flight) {
+      // Closed loop: the frame is intended now; there is no schedule to fall behind.
+      due_.push_back({next_seq_++, Ns(Clock::now())});
+    }
+    if (!due_.empty()) {
+      const DueFrame d = due_.front();
+      due_.pop_front();
+      Written w;
+      WriteFrameLocked(c, d.seq, d.intended, &w);
+      ++sent_;
+      ++stats_.sent;
+      ctx_->recorder->Sent(w.bytes);
+      ledger_.Sent(d.seq, w, /*resendable=*/ctx_->lossless);
       if (ctx_->closed_loop && sent_ >= frame_limit_) no_more_ = true;
-      c->write_in_flight = true;
-      c->StartWrite(&c->write_buf);
       return nullptr;
     }
     if (no_more_) {
@@ -318,6 +315,20 @@ class Fleet::Driver {
       return c;
     }
     return nullptr;
+  }
+
+  // Starts the write of frame `seq` on `c`, and notes when and how big it went in `w`.
+  void WriteFrameLocked(Call* c, std::uint64_t seq, std::int64_t intended, Written* w) {
+    w->intended = intended;
+    w->actual = Ns(Clock::now());
+    // The same bytes as the first send: a new 20-byte header before the shared image slice.
+    const std::size_t frame_index = static_cast<std::size_t>(index_) + seq - 1;
+    c->write_buf =
+        ctx_->store->Request(frame_index, seq, ctx_->t0_unix_ns + (intended - ctx_->t0_steady_ns));
+    w->bytes = c->write_buf.Length();
+    last_send_ns_ = w->actual;
+    c->write_in_flight = true;
+    c->StartWrite(&c->write_buf);
   }
 
   void MarkBrokenLocked(Call* c) {
@@ -332,7 +343,7 @@ class Fleet::Driver {
       std::lock_guard<std::mutex> lock(mu_);
       c->write_in_flight = false;
       if (ok) {
-        if (!c->wrote_once && c->after_failure && in_flight_.empty() && pending_.empty()) {
+        if (!c->wrote_once && c->after_failure && ledger_.empty() && due_.empty()) {
           // Nothing awaits an answer: the new call being on a replica is the reconnect.
           ReconnectedLocked();
         }
@@ -385,7 +396,7 @@ class Fleet::Driver {
       stats_.end_status = code;
       server_dropped_before_ += c->server_dropped;
       if (call_ == c) call_ = nullptr;
-      const bool has_work = !in_flight_.empty() || !pending_.empty() || !no_more_;
+      const bool has_work = !ledger_.empty() || !due_.empty() || !no_more_;
       if (giving_up_) {
         GiveUpLocked();
         ended_now = true;
@@ -431,17 +442,10 @@ class Fleet::Driver {
   // the next call; in DELIVERY_LATEST they count as dropped (the server would have skipped
   // them for newer ones anyway).
   void RequeueUnansweredLocked() {
-    if (ctx_->lossless) {
-      for (auto it = in_flight_.rbegin(); it != in_flight_.rend(); ++it) {
-        Frame f = *it;
-        f.resend = true;
-        pending_.push_front(f);
-      }
-    } else if (!in_flight_.empty()) {
-      ctx_->recorder->Dropped(in_flight_.size());
-      stats_.dropped += in_flight_.size();
+    if (const std::uint64_t dropped = ledger_.CallLost(); dropped > 0) {
+      ctx_->recorder->Dropped(dropped);
+      stats_.dropped += dropped;
     }
-    in_flight_.clear();
   }
 
   void ReconnectedLocked() {
@@ -455,9 +459,8 @@ class Fleet::Driver {
   // The stream is over: frames it still holds are accounted for as the final status says.
   void EndLocked(const grpc::Status& status) {
     const std::string code = CodeName(status.error_code());
-    std::uint64_t unanswered = in_flight_.size();
-    for (const Frame& f : pending_) unanswered += f.resend ? 1 : 0;
-    const std::uint64_t unsent = pending_.size() - (unanswered - in_flight_.size());
+    const std::uint64_t unanswered = ledger_.TakeUnanswered().size();
+    const std::uint64_t unsent = due_.size();
     if (status.ok() && !ctx_->lossless) {
       // DELIVERY_LATEST: a clean end with frames unanswered means the server skipped them.
       ctx_->recorder->Dropped(unanswered);
@@ -470,8 +473,7 @@ class Fleet::Driver {
       ctx_->recorder->Unsent(unsent);
       stats_.unsent += unsent;
     }
-    in_flight_.clear();
-    pending_.clear();
+    due_.clear();
     ctx_->recorder->StreamEnded(server_dropped_before_);
     ended_ = true;
   }
@@ -514,28 +516,22 @@ class Fleet::Driver {
       stats_.replicas.push_back(instance.empty() ? "(unnamed)" : instance);
     }
     // Exactly once: a sequence answered before (on an earlier call) is not counted again.
-    if (seq <= last_answered_seq_) {
+    Ledger::Reply booked = ledger_.Answer(seq);
+    if (booked.match == Ledger::Match::kDuplicate) {
       ++stats_.duplicates;
       ctx_->recorder->Duplicate();
       return;
     }
-    // Replies come in order: frames before this one that got none were skipped by the server.
-    std::uint64_t skipped = 0;
-    while (!in_flight_.empty() && in_flight_.front().seq < seq) {
-      in_flight_.pop_front();
-      ++skipped;
-    }
-    if (skipped) {
-      ctx_->recorder->Dropped(skipped);
-      stats_.dropped += skipped;
-    }
-    if (in_flight_.empty() || in_flight_.front().seq != seq) {
+    if (booked.match == Ledger::Match::kUnknown) {
       ctx_->recorder->FrameError("INTERNAL", "a reply to a frame not in flight", instance);
       return;
     }
-    const Frame f = in_flight_.front();
-    in_flight_.pop_front();
-    last_answered_seq_ = seq;
+    // Replies come in order: frames before this one that got none were skipped by the server.
+    if (booked.skipped > 0) {
+      ctx_->recorder->Dropped(booked.skipped);
+      stats_.dropped += booked.skipped;
+    }
+    const Written& f = booked.entry->record;
     ReconnectedLocked();
     if (reply.has_cloud()) {
       ++stats_.answered;
@@ -562,7 +558,6 @@ class Fleet::Driver {
   bool ended_ = false;
   std::uint64_t next_seq_ = 1;
   std::uint64_t sent_ = 0;
-  std::uint64_t last_answered_seq_ = 0;
   std::int64_t last_send_ns_ = 0;
   std::uint64_t server_dropped_before_ = 0;  // frames_dropped of the calls that ended
   // Resilience: when the calls started failing (0: they are not), the attempts since, the time
@@ -571,8 +566,8 @@ class Fleet::Driver {
   int attempts_ = 0;
   std::int64_t retry_at_ = 0;
   std::string cause_;
-  std::deque<Frame> pending_;    // due (or to be sent again), not yet written
-  std::deque<Frame> in_flight_;  // written on the current call, not yet answered
+  std::deque<DueFrame> due_;  // due, not yet written
+  Ledger ledger_;             // written, not yet answered: in flight, or to be sent again
   StreamStats stats_;
 };
 
@@ -615,7 +610,8 @@ absl::StatusOr<std::unique_ptr<Fleet>> Fleet::Connect(const FleetOptions& o,
     args.SetMaxReceiveMessageSize(-1);
     args.SetMaxSendMessageSize(-1);
     // As the client library: a lost replica is retried within seconds, not gRPC's 2 minutes.
-    args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, 5000);
+    args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS,
+                static_cast<int>(client::ClientOptions{}.max_reconnect_backoff.count()));
     if (lb == "round_robin") {
       // Health checking makes round_robin pass over replicas that are draining (NOT_SERVING).
       args.SetServiceConfigJSON(

@@ -1,19 +1,10 @@
 #include "cloudcast/load/frame_store.h"
 
-#include <glob.h>
 #include <spdlog/fmt/fmt.h>
 
 #include <algorithm>
-#include <cctype>
-#include <filesystem>
-#include <opencv2/core/mat.hpp>
 
 #include "absl/status/status.h"
-#include "cloudcast/client/opencv.h"
-#include "cloudcast/datasets/synthetic.h"
-#include "cloudcast/datasets/tsukuba.h"
-#include "cloudcast/io/image_io.h"
-#include "cloudcast/proto/convert.h"
 
 namespace cloudcast::load {
 namespace {
@@ -42,222 +33,40 @@ std::size_t VarintSize(std::uint64_t v) {
   return n;
 }
 
-int CvType(DisparityEncoding e) {
-  switch (e) {
-    case DisparityEncoding::kU8:
-      return CV_8UC1;
-    case DisparityEncoding::kU16:
-      return CV_16UC1;
-    case DisparityEncoding::kF32:
-      return CV_32FC1;
-  }
-  return CV_8UC1;
-}
-
-cv::Mat MatOf(const DisparityView& v) {
-  return cv::Mat(static_cast<int>(v.height), static_cast<int>(v.width), CvType(v.encoding),
-                 const_cast<void*>(static_cast<const void*>(v.data)), v.stride_bytes);
-}
-
-cv::Mat MatOf(const ColorView& v) {
-  const int channels = static_cast<int>(BytesPerPixel(v.encoding));
-  cv::Mat m(static_cast<int>(v.height), static_cast<int>(v.width), CV_8UC(channels),
-            const_cast<void*>(static_cast<const void*>(v.data)), v.stride_bytes);
-  return m;
-}
-
-// One frame's images as the uplink sends them. PNG keeps a float disparity only as 16-bit, so a
-// float disparity stays raw under --encoding png/jpeg (the server takes mixed frames).
-absl::StatusOr<v1::Frame> MakeFrame(const DisparityView& disparity, const ColorView& colour,
-                                    const std::string& frame_id, const FrameSourceOptions& o) {
-  v1::Frame frame;
-  frame.set_frame_id(frame_id);
-  if (o.uplink == Uplink::kZstd) {
-    const convert::Compression z;
-    if (auto s = convert::ToProto(disparity, z, "disparity",
-                                  frame.mutable_disparity()->mutable_compressed());
-        !s.ok()) {
-      return s;
-    }
-    if (auto s =
-            convert::ToProto(colour, z, "colour", frame.mutable_colour()->mutable_compressed());
-        !s.ok()) {
-      return s;
-    }
-    return frame;
-  }
-  const bool encode_disparity =
-      o.uplink != Uplink::kRaw && disparity.encoding != DisparityEncoding::kF32;
-  if (encode_disparity) {
-    auto png = client::EncodePng(MatOf(disparity), o.png_compression);
-    if (!png.ok()) return png.status();
-    frame.mutable_disparity()->set_encoded(std::move(*png));
-  } else if (auto s =
-                 convert::ToProto(disparity, "disparity", frame.mutable_disparity()->mutable_raw());
-             !s.ok()) {
-    return s;
-  }
-  if (o.uplink == Uplink::kRaw || colour.encoding == ColorEncoding::kRGBA8 ||
-      colour.encoding == ColorEncoding::kRGB8) {
-    if (auto s = convert::ToProto(colour, "colour", frame.mutable_colour()->mutable_raw());
-        !s.ok()) {
-      return s;
-    }
-  } else {
-    auto bytes = o.uplink == Uplink::kJpeg ? client::EncodeJpeg(MatOf(colour), o.jpeg_quality)
-                                           : client::EncodePng(MatOf(colour), o.png_compression);
-    if (!bytes.ok()) return bytes.status();
-    frame.mutable_colour()->set_encoded(std::move(*bytes));
-  }
-  return frame;
-}
-
-// Natural order: "f2" before "f10".
-bool NaturalLess(const std::string& a, const std::string& b) {
-  std::size_t i = 0, j = 0;
-  while (i < a.size() && j < b.size()) {
-    if (std::isdigit(static_cast<unsigned char>(a[i])) &&
-        std::isdigit(static_cast<unsigned char>(b[j]))) {
-      std::size_t i2 = i, j2 = j;
-      while (i2 < a.size() && std::isdigit(static_cast<unsigned char>(a[i2]))) ++i2;
-      while (j2 < b.size() && std::isdigit(static_cast<unsigned char>(b[j2]))) ++j2;
-      const std::string na = a.substr(i, i2 - i), nb = b.substr(j, j2 - j);
-      const std::size_t za = na.find_first_not_of('0'), zb = nb.find_first_not_of('0');
-      const std::string ta = za == std::string::npos ? "" : na.substr(za);
-      const std::string tb = zb == std::string::npos ? "" : nb.substr(zb);
-      if (ta.size() != tb.size()) return ta.size() < tb.size();
-      if (ta != tb) return ta < tb;
-      i = i2;
-      j = j2;
-    } else {
-      if (a[i] != b[j]) return a[i] < b[j];
-      ++i;
-      ++j;
-    }
-  }
-  return a.size() - i < b.size() - j;
-}
-
-absl::StatusOr<std::vector<std::string>> Glob(const std::string& flag, const std::string& pattern) {
-  glob_t g{};
-  const int rc = ::glob(pattern.c_str(), 0, nullptr, &g);
-  std::vector<std::string> out;
-  if (rc == 0) {
-    for (std::size_t i = 0; i < g.gl_pathc; ++i) out.emplace_back(g.gl_pathv[i]);
-  }
-  globfree(&g);
-  if (out.empty())
-    return absl::NotFoundError(fmt::format("{} '{}' matches no file", flag, pattern));
-  std::sort(out.begin(), out.end(), NaturalLess);
-  return out;
+// A short name of the source for the description.
+std::string Label(const sources::SourceInfo& info) {
+  if (info.kind == "tsukuba") return "New Tsukuba";
+  if (info.kind == "glob") return "images";
+  return info.kind;
 }
 
 }  // namespace
 
-bool ParseUplink(const std::string& name, Uplink* out) {
-  if (name == "raw")
-    *out = Uplink::kRaw;
-  else if (name == "png")
-    *out = Uplink::kPng;
-  else if (name == "jpeg")
-    *out = Uplink::kJpeg;
-  else if (name == "zstd")
-    *out = Uplink::kZstd;
-  else
-    return false;
-  return true;
-}
-
-const char* Name(Uplink uplink) {
-  switch (uplink) {
-    case Uplink::kRaw:
-      return "raw";
-    case Uplink::kPng:
-      return "png";
-    case Uplink::kJpeg:
-      return "jpeg";
-    case Uplink::kZstd:
-      return "zstd";
-  }
-  return "raw";
-}
-
 absl::StatusOr<FrameStore> FrameStore::Prepare(const FrameSourceOptions& o) {
+  sources::SourceSpec spec = o.source;
+  spec.synthetic_encoding = DisparityEncoding::kU16;
+  auto source = sources::OpenSource(spec, sources::SourceOptions{});
+  if (!source.ok()) return source.status();
+  const sources::SourceInfo& info = (*source)->info();
+  const std::uint64_t frames =
+      info.frames_per_pass.value_or(static_cast<std::uint64_t>(std::max(1, o.synthetic_frames)));
   FrameStore store;
-  std::uint32_t width = 0, height = 0;
-  std::string kind;
-  FrameSourceOptions options = o;
-  const bool none = o.tsukuba_dir.empty() && o.disparity_glob.empty() && o.synthetic_width == 0;
-  if (none && tsukuba::Present(tsukuba::DefaultDir())) options.tsukuba_dir = tsukuba::DefaultDir();
-  if (none && options.tsukuba_dir.empty()) {
-    options.synthetic_width = 640;
-    options.synthetic_height = 480;
+  sources::SourceFrame frame;
+  sources::UplinkFrame uplink;
+  for (std::uint64_t i = 0; i < frames; ++i) {
+    auto got = (*source)->Next(&frame);
+    if (!got.ok()) return got.status();
+    if (!*got) break;
+    if (absl::Status s = uplink.Encode(frame, o.uplink); !s.ok()) return s;
+    v1::Frame f;
+    f.set_frame_id(frame.name);
+    if (absl::Status s = uplink.ToProto(&f); !s.ok()) return s;
+    store.AddTail(f);
   }
-
-  if (!options.tsukuba_dir.empty() || !options.disparity_glob.empty()) {
-    std::vector<std::string> disparities, colours;
-    if (!options.tsukuba_dir.empty()) {
-      const std::string& dir = options.tsukuba_dir;
-      auto d = Glob("--tsukuba", dir + "/groundtruth/disparity_maps/left/*.png");
-      if (!d.ok()) return d.status();
-      auto c = Glob("--tsukuba", dir + "/illumination/" + options.illumination + "/left/*.png");
-      if (!c.ok()) return c.status();
-      disparities = std::move(*d);
-      colours = std::move(*c);
-      kind = "New Tsukuba";
-    } else {
-      if (options.colour_glob.empty()) {
-        return absl::InvalidArgumentError("--disparity-glob needs --colour-glob");
-      }
-      auto d = Glob("--disparity-glob", options.disparity_glob);
-      if (!d.ok()) return d.status();
-      auto c = Glob("--colour-glob", options.colour_glob);
-      if (!c.ok()) return c.status();
-      disparities = std::move(*d);
-      colours = std::move(*c);
-      kind = "images";
-    }
-    if (disparities.size() != colours.size()) {
-      return absl::InvalidArgumentError(
-          fmt::format("{} disparity images but {} colour images: they pair up one to one",
-                      disparities.size(), colours.size()));
-    }
-    for (std::size_t i = 0; i < disparities.size(); ++i) {
-      auto d = LoadDisparity(disparities[i]);
-      if (!d.ok()) return d.status();
-      auto c = LoadColor(colours[i]);
-      if (!c.ok()) return c.status();
-      const std::string id = std::filesystem::path(disparities[i]).stem().string();
-      auto frame = MakeFrame(d->view(), c->view(), id, options);
-      if (!frame.ok()) return frame.status();
-      store.AddTail(*frame);
-      width = d->width;
-      height = d->height;
-    }
-    store.camera_ = CameraModel::PclCompatible(width, height, 615);
-  } else {
-    const SyntheticScene scene = SyntheticScene::Default();
-    for (int i = 0; i < std::max(1, options.synthetic_frames); ++i) {
-      SyntheticOptions so;
-      so.width = options.synthetic_width;
-      so.height = options.synthetic_height;
-      so.frame = static_cast<std::uint64_t>(i);
-      so.disparity_encoding = DisparityEncoding::kU16;
-      auto rendered = scene.Render(so);
-      if (!rendered.ok()) return rendered.status();
-      auto frame = MakeFrame(rendered->disparity_view(), rendered->colour_view(),
-                             "synthetic_" + std::to_string(i), options);
-      if (!frame.ok()) return frame.status();
-      store.AddTail(*frame);
-      store.camera_ = rendered->camera;
-    }
-    width = options.synthetic_width;
-    height = options.synthetic_height;
-    kind = "synthetic";
-  }
-  store.description_ =
-      fmt::format("{} ({} frames, {}x{}), {}, {:.0f} KB per frame", kind, store.size(), width,
-                  height, Name(options.uplink), store.MeanRequestBytes() / 1024);
+  store.camera_ = info.camera;
+  store.description_ = fmt::format(
+      "{} ({} frames, {}x{}), {}, {:.0f} KB per frame", Label(info), store.size(), info.width,
+      info.height, sources::Name(o.uplink.encoding), store.MeanRequestBytes() / 1024);
   return store;
 }
 

@@ -34,8 +34,8 @@
 #include "cloudcast/v1/cloudcast.grpc.pb.h"
 #include "support/cloud_match.h"
 #include "support/server_fixture.h"
+#include "support/test_support.h"
 #include "support/waiting.h"
-#include "test_support.h"
 
 namespace cloudcast::server {
 

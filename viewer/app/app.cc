@@ -21,11 +21,11 @@
 #include <optional>
 #include <string>
 #include <thread>
+#include <tuple>
 #include <utility>
 #include <vector>
 
 #include "absl/status/status.h"
-#include "app/frame_source.h"
 #include "app/recorder.h"
 #include "app/session.h"
 #include "app/stats.h"
@@ -39,8 +39,9 @@
 #include "cloudcast/core/filters.h"
 #include "cloudcast/core/limits.h"
 #include "cloudcast/core/settings.h"
-#include "cloudcast/datasets/tsukuba.h"
 #include "cloudcast/io/cloud_io.h"
+#include "cloudcast/sources/frame_source.h"
+#include "cloudcast/sources/uplink.h"
 
 namespace cloudcast::client::app {
 namespace {
@@ -58,10 +59,22 @@ extern "C" void OnSignal(int signal_number) {
   std::signal(signal_number, SIG_DFL);
 }
 
+// The defaults of the flags: those of the options structs they fill, so each is written once.
+const SessionOptions& SessionDefaults() {
+  static const SessionOptions o;
+  return o;
+}
+const ViewerOptions& ViewerDefaults() {
+  static const ViewerOptions o;
+  return o;
+}
+
+double Seconds(std::chrono::milliseconds d) { return std::chrono::duration<double>(d).count(); }
+
 struct Flags {
   // Source
   std::string tsukuba;
-  std::string illumination = "daylight";
+  std::string illumination = sources::SourceSpec{}.illumination;
   std::string disparity_glob, colour_glob;
   std::string disparity_video, colour_video;
   std::string synthetic;
@@ -70,13 +83,13 @@ struct Flags {
   std::uint64_t frames = 0;
 
   // Streaming
-  std::string server = "localhost:50051";
-  double connect_timeout_s = 5;
-  double fps = 0;
-  int in_flight = 2;
+  std::string server = SessionDefaults().server;
+  double connect_timeout_s = Seconds(SessionDefaults().connect_timeout);
+  double fps = SessionDefaults().fps;
+  int in_flight = SessionDefaults().max_in_flight;
   bool lossless = false;
-  std::string encoding = "raw";
-  int jpeg_quality = 90;
+  std::string encoding = sources::Name(SessionDefaults().uplink.encoding);
+  int jpeg_quality = SessionDefaults().uplink.jpeg_quality;
 
   // TLS and the bearer token (cli::ConnectionFlags), read after parsing.
   client::ChannelSecurity security;
@@ -86,11 +99,12 @@ struct Flags {
   // Viewer
   bool no_window = false;
   std::vector<std::string> open;
-  std::string window = "1280x720";
+  std::string window = std::to_string(ViewerDefaults().window.width) + "x" +
+                       std::to_string(ViewerDefaults().window.height);
   bool hidden = false;
-  float point_size = 2.0f;
+  float point_size = ViewerDefaults().window.point_size;
   std::string snapshot;
-  std::uint64_t snapshot_after = 10;
+  std::uint64_t snapshot_after = ViewerDefaults().snapshot_after;
   bool exit_at_end = false;
 
   // Output
@@ -178,8 +192,10 @@ std::unique_ptr<cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
       ->expected(1, -1)
       ->group(source);
   app.add_flag("--loop", f.loop,
-               "Start finite sources (folder, globs, videos) again at their end; decoded images "
-               "are kept in memory (up to 512 MB) so later passes cost no decoding")
+               fmt::format("Start finite sources (folder, globs, videos) again at their end; "
+                           "decoded images are kept in memory (up to {} MB) so later passes cost "
+                           "no decoding",
+                           sources::SourceOptions{}.cache_bytes >> 20))
       ->group(source);
   app.add_option("--frames", f.frames, "Send at most N frames; 0 = all (endless sources: forever)")
       ->capture_default_str()
@@ -215,7 +231,7 @@ std::unique_ptr<cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
                  "How images travel: raw pixels; zstd (lossless: row deltas + zstd, about a "
                  "third of raw and cheap for the server); png (lossless); jpeg (colour JPEG, "
                  "disparity still lossless) for a thin uplink")
-      ->check(CLI::IsMember({"raw", "zstd", "png", "jpeg"}))
+      ->check(CLI::IsMember(sources::UplinkNames()))
       ->capture_default_str()
       ->group(streaming);
   app.add_option("--jpeg-quality", f.jpeg_quality, "JPEG quality with --encoding jpeg")
@@ -295,7 +311,8 @@ std::unique_ptr<cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
 
 // The StreamConfig the flags ask for. The camera is always sent (it belongs to the source);
 // stage settings only when given, so that the server's configured defaults apply otherwise.
-StreamConfig BuildConfig(const Flags& f, const cli::StageFlags& stages, const SourceInfo& info) {
+StreamConfig BuildConfig(const Flags& f, const cli::StageFlags& stages,
+                         const sources::SourceInfo& info) {
   StreamConfig config = stages.GivenStageConfig();
   FrameSettings source;
   source.pipeline.camera = info.camera;
@@ -319,40 +336,38 @@ StreamConfig BuildConfig(const Flags& f, const cli::StageFlags& stages, const So
 }
 
 // Opens the source the flags name, or the default one.
-absl::StatusOr<std::unique_ptr<FrameSource>> OpenSource(const Flags& f) {
-  SourceOptions options;
-  options.loop = f.loop;
-  absl::StatusOr<std::unique_ptr<FrameSource>> source;
-  if (!f.tsukuba.empty()) {
-    source = OpenTsukuba(f.tsukuba, f.illumination, options);
-  } else if (!f.disparity_glob.empty()) {
-    source = OpenGlobs(f.disparity_glob, f.colour_glob, options);
-  } else if (!f.disparity_video.empty()) {
-    source = OpenVideos(f.disparity_video, f.colour_video, options);
-  } else if (!f.synthetic.empty()) {
-    std::uint32_t w = 0, h = 0;
-    ParseSize(f.synthetic, &w, &h);
-    source = OpenSynthetic(w, h);
-  } else if (!f.disparity.empty()) {
-    source = OpenPair(f.disparity, f.colour, options);
-  } else {
-    const std::string dir =
-        std::filesystem::path(tsukuba::DefaultDir()).lexically_normal().string();
-    if (LooksLikeTsukuba(dir, f.illumination)) {
-      // Ten frames go by in a blink: the default source is endless, like the synthetic scene.
-      options.loop = true;
-      spdlog::info("no source given: New Tsukuba frames from {}, looped", dir);
-      source = OpenTsukuba(dir, f.illumination, options);
-    } else {
-      spdlog::info(
-          "no source given and no New Tsukuba data at {} (set CLOUDCAST_DATA): "
-          "synthetic scene 640x480",
-          dir);
-      source = OpenSynthetic(640, 480);
-    }
+absl::StatusOr<std::unique_ptr<sources::FrameSource>> OpenSource(const Flags& f) {
+  using sources::ImageRole;
+  sources::SourceSpec spec;
+  spec.tsukuba_dir = f.tsukuba;
+  spec.illumination = f.illumination;
+  for (auto& [paths, disparity, colour] :
+       {std::tuple<sources::RolePaths&, const std::string&, const std::string&>{
+            spec.globs, f.disparity_glob, f.colour_glob},
+        {spec.videos, f.disparity_video, f.colour_video},
+        {spec.stills, f.disparity, f.colour}}) {
+    if (!disparity.empty()) paths[ImageRole::kDisparity] = disparity;
+    if (!colour.empty()) paths[ImageRole::kColour] = colour;
   }
+  if (!f.synthetic.empty()) ParseSize(f.synthetic, &spec.synthetic_width, &spec.synthetic_height);
+  sources::SourceOptions options;
+  options.loop = f.loop;
+  const bool by_default = spec.Given().empty();
+  // Ten frames go by in a blink: the default source is endless, like the synthetic scene.
+  if (by_default) options.loop = true;
+  auto source = sources::OpenSource(spec, options);
   if (!source.ok()) return source.status();
-  return LimitFrames(*std::move(source), f.frames);
+  if (by_default && (*source)->info().kind == "tsukuba") {
+    spdlog::info("no source given: New Tsukuba frames from {}, looped",
+                 sources::DefaultTsukubaDir());
+  } else if (by_default) {
+    spdlog::info(
+        "no source given and no New Tsukuba data at {} (set CLOUDCAST_DATA): synthetic scene "
+        "{}x{}",
+        sources::DefaultTsukubaDir(), sources::kDefaultSyntheticWidth,
+        sources::kDefaultSyntheticHeight);
+  }
+  return sources::LimitFrames(*std::move(source), f.frames);
 }
 
 // One line per reply, for --print-frames (the demo's per-frame latency).
@@ -420,13 +435,13 @@ class ProgressReporter {
 
 ViewerOptions MakeViewerOptions(const Flags& f, bool exit_at_end) {
   ViewerOptions v;
-  std::uint32_t w = 1280, h = 720;
-  ParseSize(f.window, &w, &h);
-  v.window.width = static_cast<int>(w);
-  v.window.height = static_cast<int>(h);
+  std::uint32_t w = 0, h = 0;
+  if (ParseSize(f.window, &w, &h)) {  // checked by --window's SizeCheck
+    v.window.width = static_cast<int>(w);
+    v.window.height = static_cast<int>(h);
+  }
   v.window.visible = !f.hidden;
   v.window.point_size = f.point_size;
-  v.window.title = "cloudcast";
   v.snapshot_path = f.snapshot;
   v.snapshot_after = f.snapshot_after;
   v.exit_at_end = exit_at_end;
@@ -450,7 +465,7 @@ int Run(const Flags& f, const cli::StageFlags& stages) {
   const bool interactive = windowed && !f.hidden && f.snapshot.empty();
   auto source = OpenSource(f);
   if (!source.ok()) return Fail(source.status());
-  FrameSource& src = **source;
+  sources::FrameSource& src = **source;
   spdlog::info("source: {}{}", src.info().description, src.info().looped ? ", looped" : "");
   for (const std::string& w : src.info().warnings) spdlog::warn("{}", w);
   const bool endless = !src.info().frames_per_pass || src.info().looped;
@@ -478,8 +493,8 @@ int Run(const Flags& f, const cli::StageFlags& stages) {
   options.config = BuildConfig(f, stages, src.info());
   options.fps = f.fps;
   options.max_in_flight = f.in_flight;
-  ParseImageEncoding(f.encoding, &options.encoding);
-  options.jpeg_quality = f.jpeg_quality;
+  sources::ParseUplink(f.encoding, &options.uplink.encoding);
+  options.uplink.jpeg_quality = f.jpeg_quality;
 
   // The window opens first: without a display there is no point in connecting.
   std::unique_ptr<render::Renderer> renderer;

@@ -1,6 +1,6 @@
-// cloudcast-client's program logic, kept in the cloudcast_client_app library so that tests can
-// reach the sources and statistics without the binary. client/tools/cloudcast_client.cc is only
-// main() around ClientMain.
+// cloudcast-client's program logic, kept in the cloudcast_viewer_app library so that tests can
+// reach the session and statistics without the binary. viewer/cloudcast_client.cc is only main()
+// around ClientMain.
 #pragma once
 
 namespace cloudcast::client::app {

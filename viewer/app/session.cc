@@ -7,7 +7,6 @@
 #include <vector>
 
 #include "absl/strings/str_cat.h"
-#include "cloudcast/client/opencv.h"
 
 namespace cloudcast::client::app {
 namespace {
@@ -18,49 +17,11 @@ using Clock = std::chrono::steady_clock;
 // stream does not flood the terminal.
 constexpr std::uint64_t kErrorsLoggedInFull = 5;
 
-// The encoded files of one frame; they must outlive the Send that views them.
-struct EncodedFrame {
-  std::string disparity, colour;
-};
-
-std::uint64_t RawBytes(const cv::Mat& disparity, const cv::Mat& colour) {
-  // BGRA is sent as BGR; everything else as stored, rows packed.
-  const std::uint64_t colour_bpp = colour.channels() == 4 ? 3 : colour.elemSize();
-  return disparity.total() * disparity.elemSize() + colour.total() * colour_bpp;
-}
-
 }  // namespace
 
-bool ParseImageEncoding(const std::string& name, ImageEncoding* out) {
-  if (name == "raw")
-    *out = ImageEncoding::kRaw;
-  else if (name == "png")
-    *out = ImageEncoding::kPng;
-  else if (name == "jpeg")
-    *out = ImageEncoding::kJpeg;
-  else if (name == "zstd")
-    *out = ImageEncoding::kZstd;
-  else
-    return false;
-  return true;
-}
-
-const char* Name(ImageEncoding encoding) {
-  switch (encoding) {
-    case ImageEncoding::kRaw:
-      return "raw";
-    case ImageEncoding::kPng:
-      return "png";
-    case ImageEncoding::kJpeg:
-      return "jpeg";
-    case ImageEncoding::kZstd:
-      return "zstd";
-  }
-  return "?";
-}
-
 absl::StatusOr<std::unique_ptr<Session>> Session::Start(const SessionOptions& options,
-                                                        FrameSource* source, StreamStats* stats,
+                                                        sources::FrameSource* source,
+                                                        StreamStats* stats,
                                                         ResultCallback on_result) {
   std::unique_ptr<Session> s(new Session());
   s->options_ = options;
@@ -173,9 +134,9 @@ void Session::SendLoop() {
                             : Clock::duration::zero();
   const std::uint64_t window = static_cast<std::uint64_t>(std::max(1, options_.max_in_flight));
   Clock::time_point due = Clock::now();
-  SourceFrame frame;
-  EncodedFrame encoded;
-  bool png_float_noted = false;
+  sources::SourceFrame frame;
+  sources::UplinkFrame uplink;
+  bool tiff_noted = false;
 
   for (;;) {
     // The next frame is read (decoded) before waiting, so its decoding overlaps the wait.
@@ -205,36 +166,16 @@ void Session::SendLoop() {
     FrameMeta meta;
     meta.capture_time_unix_ns = UnixNanosNow();  // encoding below counts as latency
     meta.frame_id = frame.name;
-    absl::Status status;
-    std::uint64_t bytes = 0;
-    if (options_.encoding == ImageEncoding::kRaw) {
-      bytes = RawBytes(frame.disparity, frame.colour);
-      status = SendMats(*stream_, frame.disparity, frame.colour, meta);
-    } else if (options_.encoding == ImageEncoding::kZstd) {
-      const std::uint64_t before = stream_->image_bytes_sent();
-      status = SendMats(*stream_, frame.disparity, frame.colour, meta, convert::Compression{});
-      bytes = stream_->image_bytes_sent() - before;
-    } else {
-      // PNG has no float samples; TIFF keeps them exactly.
-      absl::StatusOr<std::string> d = frame.disparity.depth() == CV_32F
-                                          ? EncodeImage(frame.disparity, ".tiff")
-                                          : EncodePng(frame.disparity, options_.png_compression);
-      if (frame.disparity.depth() == CV_32F && !png_float_noted) {
-        png_float_noted = true;
-        spdlog::info("float disparities are sent as TIFF (PNG has no float samples)");
-      }
-      absl::StatusOr<std::string> c = options_.encoding == ImageEncoding::kJpeg
-                                          ? EncodeJpeg(frame.colour, options_.jpeg_quality)
-                                          : EncodePng(frame.colour, options_.png_compression);
-      if (!d.ok() || !c.ok()) {
-        SetError(!d.ok() ? d.status() : c.status());
-        break;
-      }
-      encoded.disparity = *std::move(d);
-      encoded.colour = *std::move(c);
-      bytes = encoded.disparity.size() + encoded.colour.size();
-      status = stream_->Send(EncodedImage{encoded.disparity}, EncodedImage{encoded.colour}, meta);
+    if (absl::Status s = uplink.Encode(frame, options_.uplink); !s.ok()) {
+      SetError(absl::Status(s.code(), absl::StrCat("frame ", frame.name, ": ", s.message())));
+      break;
     }
+    if (uplink.float_disparity_as_tiff() && !tiff_noted) {
+      tiff_noted = true;
+      spdlog::info("float disparities are sent as TIFF (PNG has no float samples)");
+    }
+    const std::uint64_t bytes_before = stream_->image_bytes_sent();
+    const absl::Status status = stream_->Send(uplink.input(), meta);
     if (!status.ok()) {
       // A failed write means the call ended; Finish below says why. Bad inputs are ours.
       if (status.code() != absl::StatusCode::kUnavailable) {
@@ -243,7 +184,7 @@ void Session::SendLoop() {
       }
       break;
     }
-    stats_->RecordSent(bytes);
+    stats_->RecordSent(stream_->image_bytes_sent() - bytes_before);
     {
       std::lock_guard<std::mutex> lock(mu_);
       ++sent_;

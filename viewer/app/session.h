@@ -16,35 +16,25 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
-#include "app/frame_source.h"
 #include "app/stats.h"
 #include "cloudcast/client/client.h"
+#include "cloudcast/sources/frame_source.h"
+#include "cloudcast/sources/uplink.h"
 
 namespace cloudcast::client::app {
 
-// How frames travel to the server.
-enum class ImageEncoding {
-  kRaw,   // pixels as they are (the fastest on loopback and fast links)
-  kPng,   // both images as PNG (lossless; float disparities go as TIFF)
-  kJpeg,  // colour as JPEG, disparity lossless as with kPng: the thinnest uplink
-  kZstd,  // both images compressed losslessly (row deltas + zstd): cheap on both sides
-};
-bool ParseImageEncoding(const std::string& name, ImageEncoding* out);
-const char* Name(ImageEncoding encoding);
-
 struct SessionOptions {
-  std::string server = "localhost:50051";
+  std::string server = kDefaultTarget;
   // TLS and the bearer token (cloudcast/client/security.h).
   ChannelSecurity security;
-  std::chrono::milliseconds connect_timeout{5000};
+  std::chrono::milliseconds connect_timeout = ClientOptions{}.connect_timeout;
   // Sent as the stream's first message.
   StreamConfig config;
   // Frames per second; 0: send whenever fewer than max_in_flight frames await their reply.
   double fps = 0;
   int max_in_flight = 2;
-  ImageEncoding encoding = ImageEncoding::kRaw;
-  int jpeg_quality = 90;
-  int png_compression = 1;
+  // How frames travel (raw, zstd, png, jpeg).
+  sources::UplinkOptions uplink;
   // Decode the Draco replies (off for pure load measurements).
   bool decode_clouds = true;
 };
@@ -58,7 +48,8 @@ class Session {
   // Connects (UNAVAILABLE naming --server when it cannot), asks the server for its info, opens
   // the stream and starts sending. `source` and `stats` must outlive the session.
   static absl::StatusOr<std::unique_ptr<Session>> Start(const SessionOptions& options,
-                                                        FrameSource* source, StreamStats* stats,
+                                                        sources::FrameSource* source,
+                                                        StreamStats* stats,
                                                         ResultCallback on_result);
   ~Session();  // Stop() and Wait()
 
@@ -83,7 +74,7 @@ class Session {
   void SetError(const absl::Status& status);
 
   SessionOptions options_;
-  FrameSource* source_ = nullptr;
+  sources::FrameSource* source_ = nullptr;
   StreamStats* stats_ = nullptr;
   ResultCallback on_result_;
   std::unique_ptr<Client> client_;

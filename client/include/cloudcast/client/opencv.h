@@ -48,6 +48,7 @@ absl::StatusOr<std::string> EncodeImage(const cv::Mat& image, const std::string&
 absl::StatusOr<std::string> EncodePng(const cv::Mat& image, int compression = 1);
 // Lossy, for colour only (the server refuses nothing, but JPEG corrupts disparities).
 // Quality 0..100.
-absl::StatusOr<std::string> EncodeJpeg(const cv::Mat& colour, int quality = 90);
+inline constexpr int kDefaultJpegQuality = 90;
+absl::StatusOr<std::string> EncodeJpeg(const cv::Mat& colour, int quality = kDefaultJpegQuality);
 
 }  // namespace cloudcast::client

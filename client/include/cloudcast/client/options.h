@@ -17,6 +17,9 @@ namespace cloudcast::client {
 
 struct Result;
 
+// The server a client program dials when given none: cloudcast-server's default port, here.
+inline constexpr char kDefaultTarget[] = "localhost:50051";
+
 // How a Client reaches the server. One Client (one gRPC channel) serves any number of calls and
 // streams at once.
 struct ClientOptions {

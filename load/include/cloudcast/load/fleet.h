@@ -28,6 +28,7 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "cloudcast/client/options.h"
 #include "cloudcast/client/security.h"
 #include "cloudcast/load/frame_store.h"
 #include "cloudcast/load/recorder.h"
@@ -41,7 +42,7 @@ class Channel;
 namespace cloudcast::load {
 
 struct FleetOptions {
-  std::string server = "localhost:50051";  // any gRPC target
+  std::string server = client::kDefaultTarget;  // any gRPC target
   int streams = 1;
   int connections = 0;  // channels; 0: one per stream
   // Open loop when > 0 (ScheduleOptions::start is the per-stream rate); closed loop when 0, with
@@ -53,7 +54,7 @@ struct FleetOptions {
   // all (0: no count bound), shared out evenly over the streams.
   std::chrono::nanoseconds duration = std::chrono::seconds(10);
   std::uint64_t frames = 0;
-  std::chrono::nanoseconds connect_timeout = std::chrono::seconds(5);
+  std::chrono::nanoseconds connect_timeout = client::ClientOptions{}.connect_timeout;
   // After the last frame is due: how long answers may take before the calls are cancelled.
   std::chrono::nanoseconds drain_timeout = std::chrono::seconds(5);
   std::uint64_t seed = 1;  // the streams' phases
@@ -66,7 +67,7 @@ struct FleetOptions {
   // calls), "pick_first", or "" for DefaultLbPolicy(server).
   std::string lb_policy;
   bool resilient = false;
-  std::chrono::nanoseconds reconnect_timeout = std::chrono::seconds(30);
+  std::chrono::nanoseconds reconnect_timeout = client::StreamOptions{}.reconnect_timeout;
   // TLS and the bearer token of every channel (cloudcast/client/security.h); default plaintext.
   client::ChannelSecurity security;
 };

@@ -17,26 +17,19 @@
 
 #include "absl/status/statusor.h"
 #include "cloudcast/core/camera.h"
+#include "cloudcast/sources/frame_source.h"
+#include "cloudcast/sources/uplink.h"
 #include "cloudcast/v1/cloudcast.pb.h"
 
 namespace cloudcast::load {
 
-// kZstd: both images compressed losslessly (row deltas + zstd), float disparities included.
-enum class Uplink { kRaw, kPng, kJpeg, kZstd };
-bool ParseUplink(const std::string& name, Uplink* out);
-const char* Name(Uplink uplink);
-
 struct FrameSourceOptions {
-  // One of these three (checked by the caller's flags); all empty: New Tsukuba when present,
-  // else the synthetic scene at 640x480.
-  std::string tsukuba_dir;
-  std::string illumination = "daylight";
-  std::string disparity_glob, colour_glob;
-  std::uint32_t synthetic_width = 0, synthetic_height = 0;
+  // The source (sources::OpenSource: one of them, or New Tsukuba when present, else the
+  // synthetic scene at 640x480). One pass of a finite source is sent; the synthetic scene's
+  // disparity is 16-bit here, as a camera's fixed-point disparity (so png and jpeg carry it).
+  sources::SourceSpec source;
   int synthetic_frames = 10;  // distinct synthetic frames (the camera moves from one to the next)
-  Uplink uplink = Uplink::kRaw;
-  int jpeg_quality = 90;
-  int png_compression = 1;
+  sources::UplinkOptions uplink;
 };
 
 class FrameStore {

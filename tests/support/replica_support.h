@@ -19,7 +19,7 @@
 #include <string>
 #include <vector>
 
-#include "program_support.h"
+#include "support/program_support.h"
 
 namespace cloudcast::testing {
 

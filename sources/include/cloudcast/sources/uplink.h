@@ -1,0 +1,65 @@
+// How a source's frames travel to the server: the --encoding of cloudcast-client and
+// cloudcast-load, and the one place that turns a SourceFrame into what the uplink carries.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "cloudcast/client/frame.h"
+#include "cloudcast/client/opencv.h"
+#include "cloudcast/sources/frame.h"
+#include "cloudcast/v1/cloudcast.pb.h"
+
+namespace cloudcast::sources {
+
+enum class Uplink {
+  kRaw,   // pixels as they are: the fastest on loopback and fast links
+  kZstd,  // both images compressed losslessly (row deltas + zstd): about a third of raw, and
+          // cheap on both sides
+  kPng,   // both images as files, losslessly: PNG, and TIFF for a float disparity (PNG has no
+          // float samples)
+  kJpeg,  // colour as JPEG (lossy), disparity as with kPng: the thinnest uplink
+};
+// "raw", "zstd", "png", "jpeg" (what the --encoding flags accept).
+bool ParseUplink(std::string_view name, Uplink* out);
+const char* Name(Uplink uplink);
+const std::vector<std::string>& UplinkNames();
+
+struct UplinkOptions {
+  Uplink encoding = Uplink::kRaw;
+  int jpeg_quality = client::kDefaultJpegQuality;  // 1..100, kJpeg
+  int png_compression = 1;                         // 0..9, kPng and kJpeg's disparity
+};
+
+// One frame's images as the uplink carries them. Raw and zstd frames view the source's Mats
+// (held here, so they stay alive); zstd is compressed by whoever consumes the images (Send, or
+// ToProto), so nothing is compressed twice; png and jpeg frames are encoded by Encode.
+class UplinkFrame {
+ public:
+  // Prepares `frame` for `options`. Errors name the image ("disparity Mat has type ...").
+  absl::Status Encode(const SourceFrame& frame, const UplinkOptions& options);
+
+  // As client inputs, for Stream::Send. They view this object: keep it until Send returns.
+  // input() is the whole frame (the kind's client::FrameInput alternative).
+  client::FrameInput input() const;
+  client::DisparityInput disparity() const;
+  client::ColorInput colour() const;
+  // Writes the images into `frame`'s image fields (cloudcast-load's prepared requests).
+  absl::Status ToProto(v1::Frame* frame) const;
+
+  // A float disparity went as TIFF (kPng and kJpeg), worth a note to the user once.
+  bool float_disparity_as_tiff() const { return float_as_tiff_; }
+
+ private:
+  Uplink encoding_ = Uplink::kRaw;
+  cv::Mat disparity_mat_, colour_mat_;  // kRaw, kZstd
+  client::DisparityInput disparity_view_;
+  client::ColorInput colour_view_;
+  std::string disparity_file_, colour_file_;  // kPng, kJpeg
+  bool float_as_tiff_ = false;
+};
+
+}  // namespace cloudcast::sources
