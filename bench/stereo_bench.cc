@@ -37,8 +37,6 @@ namespace {
 using stereo::DisparityMap16;
 using stereo::DisparityScore;
 using stereo::GreyImage;
-using stereo::MatcherKind;
-using stereo::MatcherParams;
 
 struct Pair {
   std::string id;
@@ -55,7 +53,8 @@ double ThreadCpuMs() {
 // A row of the tables: a matcher and what it measured.
 struct Mode {
   std::string label;
-  MatcherParams params;
+  StereoParams params;
+  stereo::SimdLevel simd = stereo::SimdLevel::kAuto;  // ours: which code
   std::unique_ptr<stereo::Matcher> matcher;
   std::vector<double> ms;  // per frame and round
   DisparityScore score;
@@ -130,7 +129,7 @@ void RunTimed(std::vector<Mode>& modes, const std::vector<Pair>& pairs, int roun
 // starts at frame i); frames/s over the wall time of all of them.
 void RunThroughput(Mode& m, const std::vector<Pair>& pairs, int threads, int per_thread) {
   std::vector<std::unique_ptr<stereo::Matcher>> matchers;
-  for (int i = 0; i < threads; ++i) matchers.push_back(*stereo::MakeMatcher(m.params));
+  for (int i = 0; i < threads; ++i) matchers.push_back(*stereo::MakeMatcher(m.params, m.simd));
   std::vector<double> cpu(threads, 0);
   std::atomic<int> ready{0};
   const auto start = std::chrono::steady_clock::now();
@@ -165,8 +164,8 @@ nlohmann::json PrintAccuracyAndSpeed(const char* title, std::vector<Mode>& modes
     for (const Mode& m : modes) {
       const bool is_reference =
           std::string(reference) == "SGBM"
-              ? m.params.kind == MatcherKind::kOpenCvSgbm
-              : m.params.simd == stereo::SimdLevel::kScalar && m.params.paths == row.params.paths;
+              ? m.params.matcher == StereoMatcher::kOpenCvSgbm
+              : m.simd == stereo::SimdLevel::kScalar && m.params.paths == row.params.paths;
       if (is_reference) return Median(m.ms);
     }
     return 0.0;
@@ -199,7 +198,7 @@ nlohmann::json PrintAccuracyAndSpeed(const char* title, std::vector<Mode>& modes
     std::printf("\n");
     nlohmann::json j = {
         {"mode", m.label},
-        {"kind", std::string(stereo::Name(m.params.kind))},
+        {"kind", std::string(Name(m.params.matcher))},
         {"paths", m.params.paths},
         {"min_disparity", m.params.min_disparity},
         {"num_disparities", m.params.num_disparities},
@@ -227,7 +226,7 @@ nlohmann::json PrintAccuracyAndSpeed(const char* title, std::vector<Mode>& modes
   return rows;
 }
 
-Mode MakeMode(const std::string& name, const MatcherParams& base) {
+Mode MakeMode(const std::string& name, const StereoParams& base) {
   Mode m;
   m.params = base;
   std::string kind = name;
@@ -237,10 +236,10 @@ Mode MakeMode(const std::string& name, const MatcherParams& base) {
     simd = name.substr(at + 1);
   }
   if (kind == "sgm4" || kind == "sgm8") {
-    m.params.kind = MatcherKind::kSgm;
+    m.params.matcher = StereoMatcher::kSgm;
     m.params.paths = kind == "sgm4" ? 4 : 8;
     m.label = kind == "sgm4" ? "ours 4 paths" : "ours 8 paths";
-  } else if (!stereo::ParseMatcherKind(kind, &m.params.kind) || kind == "sgm") {
+  } else if (!ParseStereoMatcher(kind, &m.params.matcher) || kind == "sgm") {
     std::fprintf(stderr, "--modes: unknown mode '%s' (sgm4, sgm8, sgbm, sgbm-3way, hh, bm)\n",
                  kind.c_str());
     std::exit(2);
@@ -248,14 +247,14 @@ Mode MakeMode(const std::string& name, const MatcherParams& base) {
     m.label = "OpenCV " + kind;
   }
   if (!simd.empty()) {
-    if (!stereo::ParseSimdLevel(simd, &m.params.simd)) {
+    if (!stereo::ParseSimdLevel(simd, &m.simd)) {
       std::fprintf(stderr, "--modes: unknown SIMD level '%s' (scalar, avx2, avx512)\n",
                    simd.c_str());
       std::exit(2);
     }
     m.label += " " + simd;
   }
-  auto matcher = stereo::MakeMatcher(m.params);
+  auto matcher = stereo::MakeMatcher(m.params, m.simd);
   if (!matcher.ok()) {
     std::fprintf(stderr, "%s: %s\n", name.c_str(), std::string(matcher.status().message()).c_str());
     std::exit(2);
@@ -278,7 +277,7 @@ int Main(int argc, char** argv) {
   std::string modes_list = "sgm4,sgm8,sgbm,sgbm-3way,hh,bm", simd_levels, ranges;
   int rounds = 3, frames = 0, threads = 2, per_thread = 20;
   bool no_throughput = false;
-  MatcherParams base;
+  StereoParams base;
   app.add_option("--data", data_dir,
                  "New Tsukuba folder (default: $CLOUDCAST_DATA or the build's)");
   app.add_option("--aloe", aloe_dir,
@@ -367,7 +366,7 @@ int Main(int argc, char** argv) {
   if (!ranges.empty()) {
     nlohmann::json tables = nlohmann::json::array();
     for (const std::string& range : SplitList(ranges)) {
-      MatcherParams p = base;
+      StereoParams p = base;
       if (std::sscanf(range.c_str(), "%d:%d", &p.min_disparity, &p.num_disparities) != 2) {
         std::fprintf(stderr, "--ranges: '%s' is not MIN:NUM\n", range.c_str());
         return 2;

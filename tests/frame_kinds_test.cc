@@ -15,8 +15,14 @@
 #include "cloudcast/client/client.h"
 #include "cloudcast/client/config.h"
 #include "cloudcast/client/opencv.h"
+#include "cloudcast/core/frame_codec.h"
 #include "cloudcast/core/pipeline.h"
+#include "cloudcast/datasets/tsukuba.h"
+#include "cloudcast/stereo/grey.h"
+#include "cloudcast/stereo/matcher.h"
+#include "stereo_stage.h"  // server/src
 #include "support/server_fixture.h"
+#include "support/stereo_support.h"
 #include "support/test_support.h"
 
 namespace cloudcast {
@@ -25,6 +31,7 @@ namespace {
 using client::DepthFrame;
 using client::DisparityFrame;
 using client::Result;
+using client::StereoFrame;
 using testing::CloudsMatch;
 using testing::CloudTolerance;
 
@@ -248,6 +255,201 @@ TEST_F(FrameKindsTest, BadDepthFramesGetErrorsNamingTheField) {
     EXPECT_EQ(static_cast<int>(s.error_code()), static_cast<int>(c.code)) << s.error_message();
     EXPECT_NE(s.error_message().find(c.message_has), std::string::npos) << s.error_message();
   }
+}
+
+// What the server computes for a stereo pair, here: grey, our matcher, the pipeline reading its
+// output with the camera's scale set to the matcher's.
+PointCloud StereoReference(const PipelineOptions& o, const StereoParams& params,
+                           const ColorView& left, const ColorView& right,
+                           stereo::DisparityMap16* disparity = nullptr) {
+  stereo::GreyImage gl, gr;
+  EXPECT_TRUE(stereo::ToGrey(left, &gl).ok());
+  EXPECT_TRUE(stereo::ToGrey(right, &gr).ok());
+  auto matcher = stereo::MakeMatcher(params);
+  EXPECT_TRUE(matcher.ok()) << matcher.status();
+  stereo::DisparityMap16 map;
+  EXPECT_TRUE((*matcher)->Compute(gl.view(), gr.view(), &map).ok());
+  PipelineOptions matched = o;
+  matched.camera = stereo::ForMatcherOutput(o.camera);
+  Pipeline pipeline;
+  PointCloud cloud;
+  EXPECT_TRUE(pipeline.Run(matched, map.view(), left, &cloud).ok());
+  if (disparity != nullptr) *disparity = std::move(map);
+  return cloud;
+}
+
+// A New Tsukuba pair (the paper's camera: f = 615, baseline 10 cm; z in metres), every matcher:
+// the cloud is what the matcher and the pipeline give here, and the disparity map comes back on
+// request, exactly.
+TEST_F(FrameKindsTest, StereoPairsAreMatchedByEveryMatcher) {
+  auto frame = tsukuba::LoadStereo(tsukuba::DefaultDir(), "00001");
+  if (!frame.ok()) GTEST_SKIP() << "New Tsukuba data not found: " << frame.status();
+  PipelineOptions options;
+  options.camera = CameraModel::PclCompatible(640, 480, 615);
+  options.camera.baseline = 0.1;
+  options.passthrough.min = 0.3f;  // z = 61.5 / d: 0.42 to 0.8 m
+  options.passthrough.max = 1.2f;
+  options.voxel.SetLeaf(0.005f);
+  for (StereoMatcher m : AllStereoMatchers()) {
+    SCOPED_TRACE(std::string(Name(m)));
+    StereoParams params;
+    params.matcher = m;
+    if (m == StereoMatcher::kOpenCvBm) params.block_size = 15;
+    params.return_disparity = m == StereoMatcher::kSgm;
+    v1::StreamConfig config = client::MakeStreamConfig(options);
+    convert::SetStereo(params, &config);
+    absl::StatusOr<Result> r =
+        client_->Process(StereoFrame{frame->left.view(), frame->right.view()}, config);
+    ASSERT_TRUE(r.ok()) << r.status();
+    stereo::DisparityMap16 disparity;
+    const PointCloud reference =
+        StereoReference(options, params, frame->left.view(), frame->right.view(), &disparity);
+    EXPECT_GT(reference.size(), 2000u);
+    EXPECT_EQ(r->reply.counts().after_voxel_grid(), reference.size());
+    EXPECT_TRUE(CloudsMatch(reference, r->cloud,
+                            CloudTolerance::DracoBound(r->reply.position_error_bound())));
+    EXPECT_GT(r->reply.times().match_us(), 0u);
+    EXPECT_EQ(r->reply.times().rectify_us(), 0u);
+    if (params.return_disparity) {
+      ASSERT_TRUE(r->reply.has_disparity());
+      PlaneDecompressor decompressor;
+      DisparityView back;
+      ASSERT_TRUE(convert::DecodeCompressed(r->reply.disparity(), "disparity", Limits{},
+                                            &decompressor, &back)
+                      .ok());
+      ASSERT_EQ(back.encoding, DisparityEncoding::kU16);
+      ASSERT_EQ(back.size_bytes, disparity.values.size() * 2);
+      EXPECT_EQ(std::memcmp(back.data, disparity.values.data(), back.size_bytes), 0);
+    } else {
+      EXPECT_FALSE(r->reply.has_disparity());
+    }
+  }
+}
+
+// A pair sent with its calibration (identity rotation, the baseline along x, no distortion): the
+// server rectifies it (a remap that keeps it as it is, up to interpolation) and matches it with
+// the rectified camera, which replaces the stream's.
+TEST_F(FrameKindsTest, CalibratedPairsAreRectifiedAndMatchedWithTheRectifiedCamera) {
+  const testing::SyntheticPair pair = testing::ShiftedPair(160, 120, {12.0, 20.0}, 7);
+  PipelineOptions options;
+  options.camera.fx = 1;  // replaced by the calibration's
+  options.passthrough.enabled = false;
+  options.voxel.enabled = false;
+  StereoParams params;
+  params.num_disparities = 32;
+  params.has_calibration = true;
+  StereoCalibration& k = params.calibration;
+  k.width = 160;
+  k.height = 120;
+  k.left_k = k.right_k = {200, 0, 80, 0, 200, 60, 0, 0, 1};
+  k.r = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+  k.t = {-0.2, 0, 0};
+  v1::StreamConfig config = client::MakeStreamConfig(options);
+  convert::SetStereo(params, &config);
+  auto stream = client_->OpenStream(config);
+  ASSERT_TRUE(stream.ok()) << stream.status();
+  for (int i = 0; i < 3; ++i) {
+    ASSERT_TRUE((*stream)->Send(StereoFrame{pair.left.view(), pair.right.view()}).ok());
+    Result r;
+    ASSERT_TRUE((*stream)->Read(&r));
+    ASSERT_TRUE(r.ok()) << r.status;
+    EXPECT_GT(r.reply.times().rectify_us(), 0u);
+    ASSERT_GT(r.cloud.size(), 10000u);
+    // z = f B / d with the calibration's f = 200 and B = 0.2: 40 / 12 and 40 / 20 m.
+    std::size_t near_truth = 0;
+    for (const Point& p : r.cloud.points) {
+      near_truth += std::fabs(p.z - 40.0f / 12) < 0.05f || std::fabs(p.z - 2.0f) < 0.05f;
+    }
+    EXPECT_GT(near_truth, r.cloud.size() * 9 / 10);
+  }
+  EXPECT_TRUE((*stream)->Finish().ok());
+}
+
+TEST_F(FrameKindsTest, BadStereoFramesAndConfigsGetErrorsNamingTheField) {
+  const testing::SyntheticPair pair = testing::ShiftedPair(64, 48, {8.0}, 3);
+  const testing::SyntheticPair small = testing::ShiftedPair(32, 48, {8.0}, 3);
+  auto process = [&](const client::FrameInput& input, const StereoParams& params,
+                     const PipelineOptions& options = PipelineOptions{}) {
+    v1::StreamConfig config = client::MakeStreamConfig(options);
+    convert::SetStereo(params, &config);
+    return client_->Process(input, config).status();
+  };
+  StereoParams ok;
+  ok.num_disparities = 16;
+  struct Case {
+    std::string name;
+    absl::Status status;
+    absl::StatusCode code;
+    std::string message_has;
+  };
+  StereoParams too_many = ok;
+  too_many.num_disparities = 100;
+  StereoParams bad_block = ok;
+  bad_block.block_size = 9;
+  StereoParams bad_p2 = ok;
+  bad_p2.p2 = 40;
+  StereoParams bad_rotation = ok;
+  bad_rotation.has_calibration = true;
+  bad_rotation.calibration.width = 64;
+  bad_rotation.calibration.height = 48;
+  bad_rotation.calibration.left_k =
+      bad_rotation.calibration.right_k = {100, 0, 32, 0, 100, 24, 0, 0, 1};
+  bad_rotation.calibration.r = {2, 0, 0, 0, 1, 0, 0, 0, 1};
+  bad_rotation.calibration.t = {-0.1, 0, 0};
+  StereoParams wrong_size = bad_rotation;
+  wrong_size.calibration.r = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+  wrong_size.calibration.width = 80;
+  StereoParams huge = ok;
+  huge.num_disparities = 512;
+  const testing::SyntheticPair big = testing::ShiftedPair(640, 480, {8.0}, 3);
+  const StereoFrame good{pair.left.view(), pair.right.view()};
+  const std::vector<Case> cases = {
+      {"right of another size", process(StereoFrame{pair.left.view(), small.right.view()}, ok),
+       absl::StatusCode::kInvalidArgument, "frame.right is 32x48 but frame.colour is 64x48"},
+      {"num_disparities", process(good, too_many), absl::StatusCode::kInvalidArgument,
+       "config.stereo.num_disparities is 100; it must be a positive multiple of 16"},
+      {"block_size", process(good, bad_block), absl::StatusCode::kInvalidArgument,
+       "config.stereo.block_size is 9"},
+      {"p2", process(good, bad_p2), absl::StatusCode::kInvalidArgument, "config.stereo.p2"},
+      {"rotation", process(good, bad_rotation), absl::StatusCode::kInvalidArgument,
+       "config.stereo.calibration.r is not a rotation"},
+      {"calibration size", process(good, wrong_size), absl::StatusCode::kInvalidArgument,
+       "config.stereo.calibration is for 80x48 images"},
+      {"volume", process(StereoFrame{big.left.view(), big.right.view()}, huge),
+       absl::StatusCode::kResourceExhausted, "ServerLimits.max_stereo_volume"},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    EXPECT_EQ(c.status.code(), c.code) << c.status;
+    EXPECT_NE(c.status.message().find(c.message_has), std::string::npos) << c.status;
+  }
+}
+
+// Maps are built once per calibration and shared: the same rectifier comes back until the
+// calibration falls out of the few most recently used.
+TEST(RectifierCacheTest, BuildsOncePerCalibrationAndKeepsTheMostRecent) {
+  server::RectifierCache cache(2);
+  auto calibration = [](double baseline) {
+    StereoCalibration k;
+    k.width = 64;
+    k.height = 48;
+    k.left_k = k.right_k = {100, 0, 32, 0, 100, 24, 0, 0, 1};
+    k.r = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+    k.t = {-baseline, 0, 0};
+    return k;
+  };
+  auto a = cache.Get(calibration(0.1));
+  ASSERT_TRUE(a.ok()) << a.status();
+  auto again = cache.Get(calibration(0.1));
+  ASSERT_TRUE(again.ok());
+  EXPECT_EQ(a->get(), again->get());
+  ASSERT_TRUE(cache.Get(calibration(0.2)).ok());
+  ASSERT_TRUE(cache.Get(calibration(0.3)).ok());  // evicts 0.1, the least recently used
+  EXPECT_EQ(cache.size(), 2u);
+  auto rebuilt = cache.Get(calibration(0.1));
+  ASSERT_TRUE(rebuilt.ok());
+  EXPECT_NE(rebuilt->get(), a->get());
+  EXPECT_NEAR((*rebuilt)->camera().baseline, 0.1, 1e-9);
 }
 
 TEST(FrameKindsMatTest, DepthAndStereoMatsBecomeFramesOrNameWhatIsWrong) {

@@ -18,7 +18,7 @@ struct Scores {
   DisparityScore ours4, ours8, sgbm;
 };
 
-void AddPair(const testing::GreyPair& pair, const MatcherParams& base, Matcher* ours4,
+void AddPair(const testing::GreyPair& pair, const StereoParams& base, Matcher* ours4,
              Matcher* ours8, Matcher* sgbm, Scores* s) {
   for (auto [m, score] :
        {std::pair{ours4, &s->ours4}, std::pair{ours8, &s->ours8}, std::pair{sgbm, &s->sgbm}}) {
@@ -28,8 +28,8 @@ void AddPair(const testing::GreyPair& pair, const MatcherParams& base, Matcher* 
   }
 }
 
-std::unique_ptr<Matcher> Make(MatcherParams p, MatcherKind kind, int paths) {
-  p.kind = kind;
+std::unique_ptr<Matcher> Make(StereoParams p, StereoMatcher kind, int paths) {
+  p.matcher = kind;
   p.paths = paths;
   auto m = MakeMatcher(p);
   EXPECT_TRUE(m.ok()) << m.status();
@@ -62,9 +62,9 @@ void ExpectNoWorse(const Scores& s, int truth_offset, const char* data) {
 
 TEST(StereoAccuracy, NewTsukubaBad2NoWorseThanStereoSgbm) {
   cv::setNumThreads(1);
-  const MatcherParams p;  // the defaults: 128 disparities, block 5
-  auto ours4 = Make(p, MatcherKind::kSgm, 4), ours8 = Make(p, MatcherKind::kSgm, 8);
-  auto sgbm = Make(p, MatcherKind::kOpenCvSgbm, 8);
+  const StereoParams p;  // the defaults: 128 disparities, block 5
+  auto ours4 = Make(p, StereoMatcher::kSgm, 4), ours8 = Make(p, StereoMatcher::kSgm, 8);
+  auto sgbm = Make(p, StereoMatcher::kOpenCvSgbm, 8);
   Scores s;
   int pairs = 0;
   for (const std::string& id : tsukuba::FrameIds()) {
@@ -88,9 +88,9 @@ TEST(StereoAccuracy, AloeBad2NoWorseThanStereoSgbm) {
                  << " (apt-get install opencv-doc)";
   }
   cv::setNumThreads(1);
-  const MatcherParams p;
-  auto ours4 = Make(p, MatcherKind::kSgm, 4), ours8 = Make(p, MatcherKind::kSgm, 8);
-  auto sgbm = Make(p, MatcherKind::kOpenCvSgbm, 8);
+  const StereoParams p;
+  auto ours4 = Make(p, StereoMatcher::kSgm, 4), ours8 = Make(p, StereoMatcher::kSgm, 8);
+  auto sgbm = Make(p, StereoMatcher::kOpenCvSgbm, 8);
   Scores s;
   AddPair(pair, p, ours4.get(), ours8.get(), sgbm.get(), &s);
   ExpectNoWorse(s, 0, "Aloe (half size)");

@@ -9,7 +9,7 @@
 
 #include "cloudcast/datasets/middlebury.h"
 #include "cloudcast/datasets/tsukuba.h"
-#include "program_support.h"
+#include "support/program_support.h"
 
 namespace cloudcast {
 namespace {

@@ -29,8 +29,8 @@ using cloudcast::testing::ShiftedPair;
 using cloudcast::testing::Texture;
 using ::testing::HasSubstr;
 
-std::unique_ptr<Matcher> Make(const MatcherParams& p) {
-  auto m = MakeMatcher(p);
+std::unique_ptr<Matcher> Make(const StereoParams& p, SimdLevel simd = SimdLevel::kAuto) {
+  auto m = MakeMatcher(p, simd);
   EXPECT_TRUE(m.ok()) << m.status();
   return m.ok() ? *std::move(m) : nullptr;
 }
@@ -52,59 +52,56 @@ std::vector<SimdLevel> SimdLevelsHere() {
 
 // ---- parameters ---------------------------------------------------------------------------------
 
-TEST(MatcherParams, DefaultsAreValidForEveryKind) {
-  for (MatcherKind k : {MatcherKind::kSgm, MatcherKind::kOpenCvSgbm, MatcherKind::kOpenCvSgbm3Way,
-                        MatcherKind::kOpenCvHH, MatcherKind::kOpenCvBm}) {
-    MatcherParams p;
-    p.kind = k;
+TEST(StereoParams, DefaultsAreValidForEveryKind) {
+  for (StereoMatcher k :
+       {StereoMatcher::kSgm, StereoMatcher::kOpenCvSgbm, StereoMatcher::kOpenCvSgbm3Way,
+        StereoMatcher::kOpenCvHH, StereoMatcher::kOpenCvBm}) {
+    StereoParams p;
+    p.matcher = k;
     EXPECT_TRUE(p.Validate().ok()) << Name(k) << ": " << p.Validate();
   }
 }
 
-TEST(MatcherParams, ErrorsNameTheField) {
+TEST(StereoParams, ErrorsNameTheField) {
   struct Case {
     const char* expect;
-    void (*set)(MatcherParams*);
+    void (*set)(StereoParams*);
   };
   const Case cases[] = {
       {"config.stereo.num_disparities is 100; it must be a positive multiple of 16",
-       [](MatcherParams* p) { p->num_disparities = 100; }},
-      {"config.stereo.num_disparities is 0", [](MatcherParams* p) { p->num_disparities = 0; }},
-      {"config.stereo.num_disparities is 4096",
-       [](MatcherParams* p) { p->num_disparities = 4096; }},
-      {"config.stereo.min_disparity is 2000", [](MatcherParams* p) { p->min_disparity = 2000; }},
-      {"config.stereo.block_size is 4; it must be odd",
-       [](MatcherParams* p) { p->block_size = 4; }},
+       [](StereoParams* p) { p->num_disparities = 100; }},
+      {"config.stereo.num_disparities is 0", [](StereoParams* p) { p->num_disparities = 0; }},
+      {"config.stereo.num_disparities is 4096", [](StereoParams* p) { p->num_disparities = 4096; }},
+      {"config.stereo.min_disparity is 2000", [](StereoParams* p) { p->min_disparity = 2000; }},
+      {"config.stereo.block_size is 4; it must be odd", [](StereoParams* p) { p->block_size = 4; }},
       {"config.stereo.block_size is 9; the sgm matcher's census window is 3, 5 or 7",
-       [](MatcherParams* p) { p->block_size = 9; }},
+       [](StereoParams* p) { p->block_size = 9; }},
       {"config.stereo.block_size is 3; OpenCV's StereoBM (bm) needs >= 5",
-       [](MatcherParams* p) {
-         p->kind = MatcherKind::kOpenCvBm;
+       [](StereoParams* p) {
+         p->matcher = StereoMatcher::kOpenCvBm;
          p->block_size = 3;
        }},
-      {"config.stereo.p2 is 40", [](MatcherParams* p) { p->p2 = 40; }},
+      {"config.stereo.p2 is 40", [](StereoParams* p) { p->p2 = 40; }},
       {"config.stereo.p2 is 2",
-       [](MatcherParams* p) {
+       [](StereoParams* p) {
          p->p1 = 3;
          p->p2 = 2;
        }},
-      {"config.stereo.p1 is 19", [](MatcherParams* p) { p->p1 = 19; }},
+      {"config.stereo.p1 is 19", [](StereoParams* p) { p->p1 = 19; }},
       {"config.stereo.p1 is -1",
-       [](MatcherParams* p) {
-         p->kind = MatcherKind::kOpenCvSgbm;
+       [](StereoParams* p) {
+         p->matcher = StereoMatcher::kOpenCvSgbm;
          p->p1 = -1;
        }},
-      {"config.stereo.uniqueness_ratio is 100",
-       [](MatcherParams* p) { p->uniqueness_ratio = 100; }},
+      {"config.stereo.uniqueness_ratio is 100", [](StereoParams* p) { p->uniqueness_ratio = 100; }},
       {"config.stereo.speckle_window_size is -1",
-       [](MatcherParams* p) { p->speckle_window_size = -1; }},
-      {"config.stereo.speckle_range is -2", [](MatcherParams* p) { p->speckle_range = -2; }},
-      {"config.stereo.disp12_max_diff is 5000",
-       [](MatcherParams* p) { p->disp12_max_diff = 5000; }},
-      {"config.stereo.paths is 6; it must be 4 or 8", [](MatcherParams* p) { p->paths = 6; }},
+       [](StereoParams* p) { p->speckle_window_size = -1; }},
+      {"config.stereo.speckle_range is -2", [](StereoParams* p) { p->speckle_range = -2; }},
+      {"config.stereo.disp12_max_diff is 5000", [](StereoParams* p) { p->disp12_max_diff = 5000; }},
+      {"config.stereo.paths is 6; it must be 4 or 8", [](StereoParams* p) { p->paths = 6; }},
   };
   for (const Case& c : cases) {
-    MatcherParams p;
+    StereoParams p;
     c.set(&p);
     const absl::Status s = p.Validate("config.stereo");
     EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument) << c.expect << ": " << s;
@@ -112,24 +109,25 @@ TEST(MatcherParams, ErrorsNameTheField) {
   }
 }
 
-TEST(MatcherParams, MakeMatcherRefusesInvalidParams) {
-  MatcherParams p;
+TEST(StereoParams, MakeMatcherRefusesInvalidParams) {
+  StereoParams p;
   p.num_disparities = 20;
   auto m = MakeMatcher(p);
   ASSERT_FALSE(m.ok());
   EXPECT_THAT(std::string(m.status().message()), HasSubstr("stereo.num_disparities is 20"));
 }
 
-TEST(MatcherParams, NamesRoundTrip) {
-  for (MatcherKind k : {MatcherKind::kSgm, MatcherKind::kOpenCvSgbm, MatcherKind::kOpenCvSgbm3Way,
-                        MatcherKind::kOpenCvHH, MatcherKind::kOpenCvBm}) {
-    MatcherKind back{};
-    ASSERT_TRUE(ParseMatcherKind(Name(k), &back)) << Name(k);
+TEST(StereoParams, NamesRoundTrip) {
+  for (StereoMatcher k :
+       {StereoMatcher::kSgm, StereoMatcher::kOpenCvSgbm, StereoMatcher::kOpenCvSgbm3Way,
+        StereoMatcher::kOpenCvHH, StereoMatcher::kOpenCvBm}) {
+    StereoMatcher back{};
+    ASSERT_TRUE(ParseStereoMatcher(Name(k), &back)) << Name(k);
     EXPECT_EQ(back, k);
   }
-  EXPECT_EQ(Name(MatcherKind::kOpenCvSgbm3Way), "sgbm-3way");
-  MatcherKind k;
-  EXPECT_FALSE(ParseMatcherKind("sgbm3way", &k));
+  EXPECT_EQ(Name(StereoMatcher::kOpenCvSgbm3Way), "sgbm-3way");
+  StereoMatcher k;
+  EXPECT_FALSE(ParseStereoMatcher("sgbm3way", &k));
   for (SimdLevel l : {SimdLevel::kAuto, SimdLevel::kScalar, SimdLevel::kAvx2, SimdLevel::kAvx512}) {
     SimdLevel back{};
     ASSERT_TRUE(ParseSimdLevel(Name(l), &back));
@@ -137,11 +135,11 @@ TEST(MatcherParams, NamesRoundTrip) {
   }
 }
 
-TEST(MatcherParams, EffectivePenalties) {
-  MatcherParams p;
+TEST(StereoParams, EffectivePenalties) {
+  StereoParams p;
   EXPECT_EQ(p.EffectiveP1(), 5);
   EXPECT_EQ(p.EffectiveP2(), 19);
-  p.kind = MatcherKind::kOpenCvSgbm;
+  p.matcher = StereoMatcher::kOpenCvSgbm;
   EXPECT_EQ(p.EffectiveP1(), 8 * 25);
   EXPECT_EQ(p.EffectiveP2(), 32 * 25);
   p.p1 = 7;
@@ -158,9 +156,9 @@ TEST(Matcher, ComputeRefusesWhatItCannotMatch) {
   bgr.height = 32;
   bgr.encoding = ColorEncoding::kBGR8;
   bgr.pixels.assign(64 * 32 * 3, 7);
-  for (MatcherKind k : {MatcherKind::kSgm, MatcherKind::kOpenCvSgbm}) {
-    MatcherParams p;
-    p.kind = k;
+  for (StereoMatcher k : {StereoMatcher::kSgm, StereoMatcher::kOpenCvSgbm}) {
+    StereoParams p;
+    p.matcher = k;
     p.num_disparities = 16;
     auto m = Make(p);
     DisparityMap16 out;
@@ -182,7 +180,7 @@ TEST(Matcher, RefusesAFrameWhoseCostsWouldNotFitItsLimit) {
   big.width = big.height = 4096;
   big.encoding = ColorEncoding::kMono8;
   big.pixels.assign(std::size_t{4096} * 4096, 0);
-  auto m = Make(MatcherParams{});
+  auto m = Make(StereoParams{});
   DisparityMap16 out;
   const absl::Status s = m->Compute(big.view(), big.view(), &out);
   EXPECT_EQ(s.code(), absl::StatusCode::kResourceExhausted) << s;
@@ -224,7 +222,7 @@ TEST(SgmMatcher, ShiftedTexturesComeOutAtTheirDisparities) {
   // Bands of whole and half-pixel disparities.
   const auto pair = ShiftedPair(320, 200, {12, 30, 30.5, 47, 63.25}, 7);
   for (int paths : {4, 8}) {
-    MatcherParams p;
+    StereoParams p;
     p.num_disparities = 64;
     p.paths = paths;
     auto m = Make(p);
@@ -238,7 +236,7 @@ TEST(SgmMatcher, ShiftedTexturesComeOutAtTheirDisparities) {
 
 TEST(SgmMatcher, WholePixelShiftsAreExactWithinTheParabola) {
   const auto pair = ShiftedPair(256, 96, {20}, 3);
-  auto m = Make(MatcherParams{});
+  auto m = Make(StereoParams{});
   const DisparityMap16 map = Match(*m, pair.left, pair.right);
   const BandResult r = Check(map, pair, 24);
   EXPECT_GT(r.density, 0.99);
@@ -248,7 +246,7 @@ TEST(SgmMatcher, WholePixelShiftsAreExactWithinTheParabola) {
 
 TEST(SgmMatcher, MinDisparityShiftsTheRangeAndTheOutputHoldsTheDisparityItself) {
   const auto pair = ShiftedPair(256, 96, {40}, 5);
-  MatcherParams p;
+  StereoParams p;
   p.min_disparity = 32;
   p.num_disparities = 16;  // [32, 48)
   auto m = Make(p);
@@ -269,7 +267,7 @@ TEST(SgmMatcher, MinDisparityShiftsTheRangeAndTheOutputHoldsTheDisparityItself) 
 TEST(SgmMatcher, TheCorePipelineReadsItsOutput) {
   // A plane at disparity 25 px: z = fx * baseline / 25 for every matched pixel.
   const auto pair = ShiftedPair(200, 120, {25}, 11);
-  auto m = Make(MatcherParams{});
+  auto m = Make(StereoParams{});
   const DisparityMap16 map = Match(*m, pair.left, pair.right);
   CameraModel camera;
   camera.fx = camera.fy = 615;
@@ -326,7 +324,7 @@ TEST(SgmMatcher, SimdEqualsScalarBitForBit) {
           ShiftedPair(v.width, v.height, {v.min_disparity + 3.0, v.min_disparity + 11.5}, seed);
       std::mt19937 rng(seed);
       for (std::uint8_t& px : pair.right.pixels) px = static_cast<std::uint8_t>(px + rng() % 5);
-      MatcherParams p;
+      StereoParams p;
       p.min_disparity = v.min_disparity;
       p.num_disparities = v.num_disparities;
       p.block_size = v.block_size;
@@ -334,11 +332,9 @@ TEST(SgmMatcher, SimdEqualsScalarBitForBit) {
       p.uniqueness_ratio = v.uniqueness;
       p.disp12_max_diff = v.disp12;
       p.speckle_window_size = v.speckle;
-      p.simd = SimdLevel::kScalar;
-      const DisparityMap16 want = Match(*Make(p), pair.left, pair.right);
+      const DisparityMap16 want = Match(*Make(p, SimdLevel::kScalar), pair.left, pair.right);
       for (SimdLevel level : levels) {
-        p.simd = level;
-        const DisparityMap16 got = Match(*Make(p), pair.left, pair.right);
+        const DisparityMap16 got = Match(*Make(p, level), pair.left, pair.right);
         ASSERT_EQ(got.values.size(), want.values.size());
         std::size_t differ = 0, first = 0;
         for (std::size_t i = 0; i < want.values.size(); ++i) {
@@ -371,14 +367,13 @@ TEST(SgmMatcher, SimdEqualsScalarOnNewTsukuba) {
     return v;
   };
   for (int paths : {4, 8}) {
-    MatcherParams p;
+    StereoParams p;
     p.paths = paths;
-    p.simd = SimdLevel::kScalar;
     DisparityMap16 want, got;
-    ASSERT_TRUE(Make(p)->Compute(half(pair.left), half(pair.right), &want).ok());
+    ASSERT_TRUE(
+        Make(p, SimdLevel::kScalar)->Compute(half(pair.left), half(pair.right), &want).ok());
     for (SimdLevel level : levels) {
-      p.simd = level;
-      ASSERT_TRUE(Make(p)->Compute(half(pair.left), half(pair.right), &got).ok());
+      ASSERT_TRUE(Make(p, level)->Compute(half(pair.left), half(pair.right), &got).ok());
       EXPECT_TRUE(got.values == want.values) << Name(level) << ", " << paths << " paths";
     }
   }
@@ -387,7 +382,7 @@ TEST(SgmMatcher, SimdEqualsScalarOnNewTsukuba) {
 TEST(SgmMatcher, ScratchKeptBetweenFramesOfAnySizeChangesNothing) {
   const auto big = ShiftedPair(300, 160, {9, 21.5}, 4);
   const auto small = ShiftedPair(70, 30, {6}, 5);
-  MatcherParams p;
+  StereoParams p;
   p.num_disparities = 48;
   const DisparityMap16 big_fresh = Match(*Make(p), big.left, big.right);
   const DisparityMap16 small_fresh = Match(*Make(p), small.left, small.right);
@@ -400,7 +395,7 @@ TEST(SgmMatcher, ScratchKeptBetweenFramesOfAnySizeChangesNothing) {
 
 TEST(SgmMatcher, ReadsRowsInPieces) {
   const auto pair = ShiftedPair(120, 40, {10}, 8);
-  auto m = Make(MatcherParams{});
+  auto m = Make(StereoParams{});
   const DisparityMap16 want = Match(*m, pair.left, pair.right);
   // The same rows at scattered places, as the server reads them from network buffers.
   std::vector<std::vector<std::uint8_t>> pieces;
@@ -465,7 +460,7 @@ TEST(SpeckleFilter, EqualsOpenCvsFilterSpeckles) {
   }
   // Our matcher's own output before its filter.
   const auto pair = ShiftedPair(240, 160, {8, 21.5, 33}, 12);
-  MatcherParams p;
+  StereoParams p;
   p.num_disparities = 48;
   p.speckle_window_size = 0;
   p.uniqueness_ratio = 0;
@@ -485,16 +480,16 @@ TEST(OpenCvMatchers, GiveWhatOpenCvGivesCalledDirectly) {
   const auto pair = ShiftedPair(200, 120, {14, 33}, 9);
   const cv::Mat left = MatOf(pair.left), right = MatOf(pair.right);
   cv::setNumThreads(1);
-  for (MatcherKind k : {MatcherKind::kOpenCvSgbm, MatcherKind::kOpenCvSgbm3Way,
-                        MatcherKind::kOpenCvHH, MatcherKind::kOpenCvBm}) {
-    MatcherParams p;
-    p.kind = k;
+  for (StereoMatcher k : {StereoMatcher::kOpenCvSgbm, StereoMatcher::kOpenCvSgbm3Way,
+                          StereoMatcher::kOpenCvHH, StereoMatcher::kOpenCvBm}) {
+    StereoParams p;
+    p.matcher = k;
     p.min_disparity = 2;
     p.num_disparities = 48;
     p.block_size = 7;
     const DisparityMap16 got = Match(*Make(p), pair.left, pair.right);
     cv::Mat direct;
-    if (k == MatcherKind::kOpenCvBm) {
+    if (k == StereoMatcher::kOpenCvBm) {
       auto bm = cv::StereoBM::create(48, 7);
       bm->setMinDisparity(2);
       bm->setUniquenessRatio(10);
@@ -503,9 +498,9 @@ TEST(OpenCvMatchers, GiveWhatOpenCvGivesCalledDirectly) {
       bm->setDisp12MaxDiff(1);
       bm->compute(left, right, direct);
     } else {
-      const int mode = k == MatcherKind::kOpenCvSgbm3Way ? cv::StereoSGBM::MODE_SGBM_3WAY
-                       : k == MatcherKind::kOpenCvHH     ? cv::StereoSGBM::MODE_HH
-                                                         : cv::StereoSGBM::MODE_SGBM;
+      const int mode = k == StereoMatcher::kOpenCvSgbm3Way ? cv::StereoSGBM::MODE_SGBM_3WAY
+                       : k == StereoMatcher::kOpenCvHH     ? cv::StereoSGBM::MODE_HH
+                                                           : cv::StereoSGBM::MODE_SGBM;
       cv::StereoSGBM::create(2, 48, 7, 8 * 49, 32 * 49, 1, 0, 10, 100, 2, mode)
           ->compute(left, right, direct);
     }
@@ -582,8 +577,8 @@ StereoCalibration Calibration(const cv::Mat& k1, const cv::Mat& k2, const cv::Ma
                               const cv::Mat& t, int width, int height) {
   StereoCalibration c;
   for (int i = 0; i < 9; ++i) {
-    c.k1[i] = k1.at<double>(i / 3, i % 3);
-    c.k2[i] = k2.at<double>(i / 3, i % 3);
+    c.left_k[i] = k1.at<double>(i / 3, i % 3);
+    c.right_k[i] = k2.at<double>(i / 3, i % 3);
     c.r[i] = r.at<double>(i / 3, i % 3);
   }
   for (int i = 0; i < 3; ++i) c.t[i] = t.at<double>(i);
@@ -624,7 +619,7 @@ TEST(Rectifier, UndoesASyntheticRotationAndOffsetSoThePairMatchesAgain) {
   EXPECT_EQ(out_l.encoding, ColorEncoding::kMono8);
 
   // Rectified again, the plane is at one disparity: d0 scaled by the new focal length.
-  MatcherParams p;
+  StereoParams p;
   p.num_disparities = 64;
   auto m = Make(p);
   const DisparityMap16 rectified = Match(*m, out_l, out_r);
@@ -652,7 +647,7 @@ TEST(Rectifier, ColourImagesStayColour) {
   const cv::Mat k = (cv::Mat_<double>(3, 3) << 300, 0, 80, 0, 300, 60, 0, 0, 1);
   const cv::Mat t = (cv::Mat_<double>(3, 1) << -0.2, 0, 0);
   StereoCalibration c = Calibration(k, k, cv::Mat::eye(3, 3, CV_64F), t, 160, 120);
-  c.d1 = {0.05, -0.01, 0, 0, 0};
+  c.left_d = {0.05, -0.01, 0, 0, 0};
   auto rect = Rectifier::Make(c);
   ASSERT_TRUE(rect.ok()) << rect.status();
   OwnedColor bgr;
@@ -679,17 +674,18 @@ TEST(Rectifier, ErrorsNameTheField) {
     void (*set)(StereoCalibration*);
   };
   const Case cases[] = {
-      {"calibration.k1[0] (fx) must be finite and in (0, 1e9]",
-       [](StereoCalibration* c) { c->k1[0] = 0; }},
-      {"calibration.k2[4] (fy)", [](StereoCalibration* c) { c->k2[4] = -1; }},
-      {"calibration.k1 must be a camera matrix", [](StereoCalibration* c) { c->k1[8] = 2; }},
-      {"calibration.d2 holds 3 coefficients; OpenCV takes 0, 4, 5 or 8",
+      {"calibration.left_k[0] (fx) must be finite and in (0, 1e9]",
+       [](StereoCalibration* c) { c->left_k[0] = 0; }},
+      {"calibration.right_k[4] (fy)", [](StereoCalibration* c) { c->right_k[4] = -1; }},
+      {"calibration.left_k must be a camera matrix",
+       [](StereoCalibration* c) { c->left_k[8] = 2; }},
+      {"calibration.right_d holds 3 coefficients; OpenCV takes 0, 4, 5, 8, 12 or 14",
        [](StereoCalibration* c) {
-         c->d2 = {0, 0, 0};
+         c->right_d = {0, 0, 0};
        }},
-      {"calibration.d1[1] must be finite",
+      {"calibration.left_d[1] must be finite",
        [](StereoCalibration* c) {
-         c->d1 = {0, NAN, 0, 0};
+         c->left_d = {0, NAN, 0, 0};
        }},
       {"calibration.r is not a rotation", [](StereoCalibration* c) { c->r[0] = 2; }},
       {"calibration.r is not a rotation", [](StereoCalibration* c) { c->r[0] = -1; }},

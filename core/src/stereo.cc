@@ -1,10 +1,13 @@
 #include "cloudcast/core/stereo.h"
 
+#include <algorithm>
 #include <cmath>
 #include <string>
+#include <utility>
 
 #include "absl/strings/str_cat.h"
 #include "cloudcast/core/checks.h"
+#include "cloudcast/core/limits.h"
 
 namespace cloudcast {
 
@@ -41,83 +44,81 @@ bool ParseStereoMatcher(std::string_view name, StereoMatcher* out) {
   return false;
 }
 
+int SgmMaxCensusCost(int block_size) {
+  const int radius = block_size / 2;
+  const int bits = 2 * radius * (radius + 1);  // a centre-symmetric census window's comparisons
+  return bits > 12 ? (bits + 1) / 2 : bits;
+}
+
 namespace {
 
+// Debian's Abseil has its own string_view, which StrCat takes; std::string converts to both.
+std::string S(std::string_view v) { return std::string(v); }
+
 std::string Member(std::string_view field, std::string_view member) {
-  return absl::StrCat(std::string(field), ".", std::string(member));
+  return absl::StrCat(S(field), ".", S(member));
 }
 
-absl::Status FiniteValues(std::string_view field, const double* values, std::size_t n) {
-  for (std::size_t i = 0; i < n; ++i) {
-    if (!std::isfinite(values[i])) {
-      return absl::InvalidArgumentError(
-          absl::StrCat(std::string(field), "[", i, "] must be finite, got ", values[i]));
-    }
+absl::Status CameraMatrix(const std::string& field, const std::array<double, 9>& k) {
+  for (int i = 0; i < 9; ++i) {
+    if (absl::Status s = check::Finite(absl::StrCat(field, "[", i, "]"), k[i]); !s.ok()) return s;
+  }
+  if (absl::Status s = check::Positive(field + "[0] (fx)", k[0]); !s.ok()) return s;
+  if (absl::Status s = check::Positive(field + "[4] (fy)", k[4]); !s.ok()) return s;
+  if (k[3] != 0 || k[6] != 0 || k[7] != 0 || k[8] != 1) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(field, " must be a camera matrix: [3], [6], [7] = 0 and [8] = 1; got ", k[3],
+                     ", ", k[6], ", ", k[7], " and ", k[8]));
   }
   return absl::OkStatus();
 }
 
-absl::Status Intrinsics(std::string_view field, const std::array<double, 9>& k) {
-  if (auto s = FiniteValues(field, k.data(), k.size()); !s.ok()) return s;
-  if (!(k[0] > 0 && k[4] > 0)) {
-    return absl::InvalidArgumentError(
-        absl::StrCat(std::string(field), " must have positive focal lengths at [0] and [4], got ",
-                     k[0], " and ", k[4]));
-  }
-  if (k[6] != 0 || k[7] != 0 || k[8] != 1) {
-    return absl::InvalidArgumentError(
-        absl::StrCat(std::string(field), " must end in the row 0, 0, 1 (a camera matrix), got ",
-                     k[6], ", ", k[7], ", ", k[8]));
-  }
-  return absl::OkStatus();
-}
-
-absl::Status Distortion(std::string_view field, const std::vector<double>& d) {
+absl::Status Distortion(const std::string& field, const std::vector<double>& d) {
   const std::size_t n = d.size();
   if (n != 0 && n != 4 && n != 5 && n != 8 && n != 12 && n != 14) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        std::string(field), " has ", n, " coefficients; OpenCV takes 0, 4, 5, 8, 12 or 14"));
+    return absl::InvalidArgumentError(
+        absl::StrCat(field, " holds ", n, " coefficients; OpenCV takes 0, 4, 5, 8, 12 or 14"));
   }
-  return FiniteValues(field, d.data(), n);
+  for (std::size_t i = 0; i < n; ++i) {
+    if (absl::Status s = check::Finite(absl::StrCat(field, "[", i, "]"), d[i]); !s.ok()) return s;
+  }
+  return absl::OkStatus();
 }
 
 }  // namespace
 
 absl::Status StereoCalibration::Validate(std::string_view field) const {
-  if (width == 0 || height == 0) {
-    return absl::InvalidArgumentError(absl::StrCat(std::string(field), " is for a ", width, "x",
-                                                   height,
-                                                   " image; width and height must be >= 1"));
-  }
+  const std::string f(field);
   for (absl::Status s :
-       {Intrinsics(Member(field, "left_k"), left_k), Distortion(Member(field, "left_d"), left_d),
-        Intrinsics(Member(field, "right_k"), right_k),
-        Distortion(Member(field, "right_d"), right_d),
-        FiniteValues(Member(field, "r"), r.data(), r.size()),
-        FiniteValues(Member(field, "t"), t.data(), t.size())}) {
+       {CameraMatrix(f + ".left_k", left_k), Distortion(f + ".left_d", left_d),
+        CameraMatrix(f + ".right_k", right_k), Distortion(f + ".right_d", right_d)}) {
     if (!s.ok()) return s;
   }
-  // R must be a rotation: R * R^T = I and det R = 1.
+  for (int i = 0; i < 9; ++i) {
+    if (absl::Status s = check::Finite(absl::StrCat(f, ".r[", i, "]"), r[i]); !s.ok()) return s;
+  }
+  // R^T R = I and det R = +1: a rotation, not a reflection or a scaled matrix.
   double worst = 0;
   for (int i = 0; i < 3; ++i) {
     for (int j = 0; j < 3; ++j) {
       double dot = 0;
-      for (int k = 0; k < 3; ++k) dot += r[3 * i + k] * r[3 * j + k];
+      for (int k = 0; k < 3; ++k) dot += r[3 * k + i] * r[3 * k + j];
       worst = std::max(worst, std::fabs(dot - (i == j ? 1.0 : 0.0)));
     }
   }
   const double det = r[0] * (r[4] * r[8] - r[5] * r[7]) - r[1] * (r[3] * r[8] - r[5] * r[6]) +
                      r[2] * (r[3] * r[7] - r[4] * r[6]);
-  if (worst > 1e-6 || std::fabs(det - 1) > 1e-6) {
+  if (worst > 1e-6 || det < 0) {
     return absl::InvalidArgumentError(
-        absl::StrCat(Member(field, "r"), " is not a rotation matrix (R R^T differs from I by ",
-                     worst, ", det R = ", det, ")"));
+        absl::StrCat(f, ".r is not a rotation: |R^T R - I| reaches ", worst, ", det R is ", det));
+  }
+  for (int i = 0; i < 3; ++i) {
+    if (absl::Status s = check::Finite(absl::StrCat(f, ".t[", i, "]"), t[i]); !s.ok()) return s;
   }
   if (t[0] == 0 && t[1] == 0 && t[2] == 0) {
-    return absl::InvalidArgumentError(
-        absl::StrCat(Member(field, "t"), " is 0: the two cameras need a baseline"));
+    return absl::InvalidArgumentError(absl::StrCat(f, ".t is 0; the cameras need a baseline"));
   }
-  return absl::OkStatus();
+  return check::ImageSize(f, width, height, Limits{});
 }
 
 bool StereoCalibration::operator==(const StereoCalibration& o) const {
@@ -126,42 +127,101 @@ bool StereoCalibration::operator==(const StereoCalibration& o) const {
 }
 
 absl::Status StereoParams::Validate(std::string_view field) const {
-  auto in = [&](std::string_view member, int value, int lo, int hi) {
-    return check::InRange(Member(field, member), value, lo, hi);
-  };
+  const std::string f(field);
   if (Name(matcher) == "?") {
-    return absl::InvalidArgumentError(absl::StrCat(Member(field, "matcher"), " is ",
-                                                   static_cast<int>(matcher), ", not a matcher"));
-  }
-  // 512 disparities bound the cost volume our matcher keeps (width x height x 512 bytes).
-  if (num_disparities <= 0 || num_disparities % 16 != 0 || num_disparities > 512) {
     return absl::InvalidArgumentError(
-        absl::StrCat(Member(field, "num_disparities"), " is ", num_disparities,
-                     "; it must be a positive multiple of 16, at most 512"));
+        absl::StrCat(f, ".matcher is not a known matcher (", static_cast<int>(matcher), ")"));
   }
-  const int min_block = matcher == StereoMatcher::kOpenCvBm ? 5 : 1;
-  if (block_size % 2 == 0 || block_size < min_block || block_size > 51) {
+  if (num_disparities <= 0 || num_disparities % 16 != 0) {
+    return absl::InvalidArgumentError(absl::StrCat(f, ".num_disparities is ", num_disparities,
+                                                   "; it must be a positive multiple of 16"));
+  }
+  if (absl::Status s =
+          check::InRange(f + ".num_disparities", num_disparities, 16, kMaxStereoDisparity);
+      !s.ok()) {
+    return s;
+  }
+  if (absl::Status s = check::InRange(f + ".min_disparity", min_disparity, -kMaxStereoDisparity,
+                                      kMaxStereoDisparity - num_disparities);
+      !s.ok()) {
     return absl::InvalidArgumentError(
-        absl::StrCat(Member(field, "block_size"), " is ", block_size, "; it must be odd, in [",
-                     min_block, ", 51]", matcher == StereoMatcher::kOpenCvBm ? " for bm" : ""));
+        absl::StrCat(s.message(), " (min_disparity + num_disparities must not exceed ",
+                     kMaxStereoDisparity, ")"));
   }
-  for (absl::Status s : {in("min_disparity", min_disparity, -4096, 4096), in("p1", p1, 0, 1 << 20),
-                         in("p2", p2, 0, 1 << 20), in("uniqueness_ratio", uniqueness_ratio, 0, 100),
-                         in("speckle_window_size", speckle_window_size, 0, 10000),
-                         in("speckle_range", speckle_range, 0, 4096),
-                         in("disp12_max_diff", disp12_max_diff, -1, 4096)}) {
-    if (!s.ok()) return s;
-  }
-  if (p1 != 0 && p2 != 0 && p2 <= p1) {
+  if (block_size < 1 || block_size % 2 == 0 || block_size > 255) {
     return absl::InvalidArgumentError(
-        absl::StrCat(Member(field, "p2"), " is ", p2, "; it must be greater than p1 (", p1, ")"));
+        absl::StrCat(f, ".block_size is ", block_size, "; it must be odd and in [1, 255]"));
+  }
+  if (matcher == StereoMatcher::kSgm && block_size != 3 && block_size != 5 && block_size != 7) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(f, ".block_size is ", block_size,
+                     "; the sgm matcher's census window is 3, 5 or 7 pixels square"));
+  }
+  if (matcher == StereoMatcher::kOpenCvBm && block_size < 5) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(f, ".block_size is ", block_size, "; OpenCV's StereoBM (bm) needs >= 5"));
+  }
+  if (matcher == StereoMatcher::kSgm) {
+    const int max_p2 = kSgmMaxPathCost - SgmMaxCensusCost(block_size);
+    if (p1 != 0) {
+      if (absl::Status s = check::InRange(f + ".p1", p1, 1, max_p2 - 1); !s.ok()) return s;
+    }
+    if (p2 != 0) {
+      if (absl::Status s = check::InRange(f + ".p2", p2, EffectiveP1() + 1, max_p2); !s.ok()) {
+        return absl::InvalidArgumentError(
+            absl::StrCat(s.message(), " (the sgm matcher: above p1, and at most ", kSgmMaxPathCost,
+                         " minus its largest cost ", SgmMaxCensusCost(block_size),
+                         ", so that 8 paths sum exactly in a byte)"));
+      }
+    } else if (EffectiveP2() <= EffectiveP1()) {
+      return absl::InvalidArgumentError(absl::StrCat(f, ".p1 is ", p1, "; with p2 0 (the default ",
+                                                     EffectiveP2(), ") it must be below ",
+                                                     EffectiveP2()));
+    }
+  } else {
+    for (auto [name, value] : {std::pair{".p1", p1}, std::pair{".p2", p2}}) {
+      if (absl::Status s = check::InRange(f + name, value, 0, 1 << 20); !s.ok()) return s;
+    }
+    if (p1 != 0 && p2 != 0 && p2 <= p1) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(f, ".p2 is ", p2, "; it must be greater than p1 (", p1, ")"));
+    }
+  }
+  if (absl::Status s = check::InRange(f + ".uniqueness_ratio", uniqueness_ratio, 0, 99); !s.ok()) {
+    return s;
+  }
+  if (absl::Status s = check::InRange(f + ".speckle_window_size", speckle_window_size, 0,
+                                      static_cast<std::int64_t>(Limits{}.max_pixels));
+      !s.ok()) {
+    return s;
+  }
+  if (absl::Status s = check::InRange(f + ".speckle_range", speckle_range, 0, kMaxStereoDisparity);
+      !s.ok()) {
+    return s;
+  }
+  if (disp12_max_diff > kMaxStereoDisparity) {
+    return absl::InvalidArgumentError(absl::StrCat(f, ".disp12_max_diff is ", disp12_max_diff,
+                                                   "; it must be at most ", kMaxStereoDisparity,
+                                                   " (< 0 turns the check off)"));
   }
   if (paths != 4 && paths != 8) {
-    return absl::InvalidArgumentError(
-        absl::StrCat(Member(field, "paths"), " is ", paths, "; it must be 4 or 8"));
+    return absl::InvalidArgumentError(absl::StrCat(f, ".paths is ", paths, "; it must be 4 or 8"));
   }
   if (has_calibration) return calibration.Validate(Member(field, "calibration"));
   return absl::OkStatus();
+}
+
+// Ours: chosen on New Tsukuba and Aloe (docs/stereo.md, "Choosing the defaults").
+int StereoParams::EffectiveP1() const {
+  if (p1 != 0) return p1;
+  if (matcher != StereoMatcher::kSgm) return 8 * block_size * block_size;
+  return block_size == 3 ? 3 : block_size == 5 ? 5 : 4;
+}
+
+int StereoParams::EffectiveP2() const {
+  if (p2 != 0) return p2;
+  if (matcher != StereoMatcher::kSgm) return 32 * block_size * block_size;
+  return block_size == 3 ? 16 : 19;
 }
 
 }  // namespace cloudcast

@@ -92,6 +92,10 @@ ServerFlags::ServerFlags(CLI::App& app)
   app.add_option("--max-pixels", o.limits.max_pixels,
                  "Largest width x height, pixels (at most 2^24)")
       ->group("Limits");
+  app.add_option("--max-stereo-volume", o.limits.max_stereo_volume,
+                 "Largest width x height x num_disparities of a stereo pair matched (the matcher's "
+                 "cost volume, a byte each); a larger pair gets RESOURCE_EXHAUSTED")
+      ->group("Limits");
   app.add_option("--max-streams", o.max_streams,
                  "Concurrent Stream calls (and, separately, Process calls in flight); more get "
                  "RESOURCE_EXHAUSTED")

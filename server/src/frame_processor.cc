@@ -58,9 +58,23 @@ absl::Status FrameProcessor::Process(const v1::Frame& frame, const InPlacePixels
     case FrameKind::kDepth:
       status = pipeline_.Run(options, images.depth, images.colour, &cloud_, &counts);
       break;
-    case FrameKind::kStereo:
-      status = absl::UnimplementedError("frame.right: stereo pairs are not matched yet");
+    case FrameKind::kStereo: {
+      // The stream's camera for this size; a calibration gives the rectified one instead.
+      MatchedPair pair;
+      status = stereo_.Match(images.colour, images.right, settings, options.camera,
+                             settings.pipeline.limits.max_stereo_volume, &pair);
+      costs->rectify_seconds = pair.rectify_seconds;
+      costs->match_seconds = pair.match_seconds;
+      if (!status.ok()) break;
+      PipelineOptions matched = options;
+      matched.camera = pair.camera;
+      status = pipeline_.Run(matched, pair.disparity, pair.colour, &cloud_, &counts);
+      if (status.ok() && settings.stereo.return_disparity) {
+        status = convert::ToProto(pair.disparity, convert::Compression{}, "disparity",
+                                  reply->mutable_disparity(), &disparity_compressor_);
+      }
       break;
+    }
   }
   const Clock::time_point t2 = Clock::now();
   DracoEncodeInfo info;
@@ -70,7 +84,9 @@ absl::Status FrameProcessor::Process(const v1::Frame& frame, const InPlacePixels
   }
   const double cpu1 = ThreadCpuSeconds();
   const Clock::time_point t3 = Clock::now();
-  costs->pipeline_seconds = Seconds(t2 - t1);
+  // The pipeline's time without the matching, which has a stage time of its own.
+  costs->pipeline_seconds =
+      std::max(0.0, Seconds(t2 - t1) - costs->rectify_seconds - costs->match_seconds);
   costs->encode_seconds = Seconds(t3 - t2);
   costs->core_cpu_seconds = cpu1 - cpu0;
   // The settings were checked when the StreamConfig was resolved, so what fails here is the
@@ -89,12 +105,19 @@ absl::Status FrameProcessor::Process(const v1::Frame& frame, const InPlacePixels
   t->set_decode_us(Micros(costs->decode_seconds));
   t->set_pipeline_us(Micros(costs->pipeline_seconds));
   t->set_encode_us(Micros(costs->encode_seconds));
+  t->set_rectify_us(Micros(costs->rectify_seconds));
+  t->set_match_us(Micros(costs->match_seconds));
   return absl::OkStatus();
 }
 
 FrameRunner::FrameRunner(int workers, Metrics* metrics, std::string instance)
     : metrics_(metrics), instance_(std::move(instance)) {
-  for (int i = 0; i < workers; ++i) processors_.push_back(std::make_unique<FrameProcessor>());
+  // One frame per worker, one worker per core: OpenCV's matchers must not fan out over the cores
+  // the other workers use.
+  stereo::SetOpenCvThreads(1);
+  for (int i = 0; i < workers; ++i) {
+    processors_.push_back(std::make_unique<FrameProcessor>(&rectifiers_));
+  }
 }
 
 absl::Status FrameRunner::Run(std::size_t worker, const v1::Frame& frame,
@@ -116,6 +139,9 @@ absl::Status FrameRunner::Run(std::size_t worker, const v1::Frame& frame,
     m.pipeline_seconds.Observe(costs.pipeline_seconds);
     m.encode_seconds.Observe(costs.encode_seconds);
     if (costs.decoded) m.decode_seconds.Observe(costs.decode_seconds);
+    if (costs.match_seconds > 0) {
+      m.match_seconds.Observe(costs.rectify_seconds + costs.match_seconds);
+    }
   } else {
     m.FrameErrors(status.code()).Increment();
   }

@@ -9,18 +9,22 @@
 #include <vector>
 
 #include "absl/status/status.h"
+#include "cloudcast/core/frame_codec.h"
 #include "cloudcast/core/pipeline.h"
 #include "cloudcast/core/point.h"
 #include "cloudcast/proto/convert.h"
 #include "cloudcast/v1/cloudcast.pb.h"
 #include "frame_input.h"
 #include "metrics.h"
+#include "stereo_stage.h"
 
 namespace cloudcast::server {
 
 // What one frame cost, for the metrics.
 struct FrameCosts {
   double decode_seconds = 0;    // wall time decoding PNG / JPEG (0 for raw images)
+  double rectify_seconds = 0;   // stereo pairs with a calibration: remapping both images
+  double match_seconds = 0;     // stereo pairs: grey + the matcher
   double pipeline_seconds = 0;  // wall time in Pipeline::Run
   double encode_seconds = 0;    // wall time in EncodeDraco
   double core_cpu_seconds = 0;  // this thread's CPU time in Pipeline::Run + EncodeDraco
@@ -31,6 +35,9 @@ struct FrameCosts {
 // images) so that steady-state frames allocate little. Not thread-safe: one per worker thread.
 class FrameProcessor {
  public:
+  // `rectifiers`: the rectification maps every worker shares (must outlive the processor).
+  explicit FrameProcessor(RectifierCache* rectifiers) : stereo_(rectifiers) {}
+
   // Fills `reply`'s cloud fields: the echoed sequence / frame_id / capture time, `draco` (written
   // in place), point_count, position_error_bound, position_bits, counts and the decode, pipeline
   // and encode times. Errors: see PrepareFrameImages; pipeline and Draco errors keep the core's
@@ -43,6 +50,8 @@ class FrameProcessor {
   Pipeline pipeline_;
   PointCloud cloud_;
   DecodeScratch decode_;
+  StereoStage stereo_;
+  PlaneCompressor disparity_compressor_;  // the disparity map sent back on request
 };
 
 // When a frame had arrived whole.
@@ -65,6 +74,7 @@ class FrameRunner {
   const std::string& instance() const { return instance_; }
 
  private:
+  RectifierCache rectifiers_;  // before processors_, which point at it
   std::vector<std::unique_ptr<FrameProcessor>> processors_;
   Metrics* const metrics_;
   const std::string instance_;

@@ -110,12 +110,15 @@ Metrics::Metrics()
       stage_family_(prometheus::BuildHistogram()
                         .Name("cloudcast_stage_seconds")
                         .Help("Time per frame in each stage: decode (PNG/JPEG, frames that had "
-                              "any), pipeline, encode (Draco), queue (received -> a worker "
+                              "any), pipeline, encode (Draco), match (stereo pairs: rectification, "
+                              "grey and the "
+                              "matcher), queue (received -> a worker "
                               "starts), total (received -> reply handed to gRPC)")
                         .Register(*registry_)),
       decode_seconds(StageHistogram(stage_family_, "decode")),
       pipeline_seconds(StageHistogram(stage_family_, "pipeline")),
       encode_seconds(StageHistogram(stage_family_, "encode")),
+      match_seconds(StageHistogram(stage_family_, "match")),
       queue_seconds(StageHistogram(stage_family_, "queue")),
       total_seconds(StageHistogram(stage_family_, "total")),
       core_cpu_seconds(NewCounter(*registry_, "cloudcast_core_cpu_seconds_total",

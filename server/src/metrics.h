@@ -62,6 +62,7 @@ class Metrics {
   prometheus::Histogram& decode_seconds;    // PNG / JPEG decoding (frames that had any)
   prometheus::Histogram& pipeline_seconds;  // conversion + passthrough + voxel grid
   prometheus::Histogram& encode_seconds;    // Draco
+  prometheus::Histogram& match_seconds;     // stereo pairs: rectification, grey and matching
   prometheus::Histogram& queue_seconds;     // received -> a worker starts on it
   prometheus::Histogram& total_seconds;     // received -> reply handed to gRPC
   // CPU time of the worker thread inside the core pipeline and Draco, and in the whole frame

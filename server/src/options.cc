@@ -31,6 +31,11 @@ absl::Status ServerOptions::Validate() const {
     return Invalid(absl::StrCat("--max-pixels is ", limits.max_pixels,
                                 "; it must be in [1, 2^24 = 16777216]"));
   }
+  // The matcher's volume: at least one 16-disparity row, at most what stereo/ will allocate.
+  if (limits.max_stereo_volume < 16 || limits.max_stereo_volume > (std::uint64_t{1} << 30)) {
+    return Invalid(absl::StrCat("--max-stereo-volume is ", limits.max_stereo_volume,
+                                "; it must be in [16, 2^30 = 1073741824]"));
+  }
   if (max_streams == 0) return Invalid("--max-streams must be at least 1");
   if (idle_timeout.count() <= 0) return Invalid("--idle-timeout must be positive");
   if (first_message_timeout.count() <= 0) {

@@ -632,6 +632,7 @@ grpc::ServerUnaryReactor* CloudCastService::GetInfo(grpc::CallbackServerContext*
   const auto idle_ms = options_.idle_timeout.count();
   limits->set_idle_timeout_seconds(static_cast<std::uint32_t>((idle_ms + 999) / 1000));
   limits->set_max_queued_frames(options_.max_queued_frames);
+  limits->set_max_stereo_volume(options_.limits.max_stereo_volume);
   *info->mutable_defaults() = convert::ToProto(*default_settings_);
   // Every encoding the core reads.
   for (auto e : {DisparityEncoding::kU8, DisparityEncoding::kU16, DisparityEncoding::kF32}) {

@@ -24,7 +24,7 @@ inline int CensusRadius(int block_size) { return block_size / 2; }
 // Its largest cost: the census bits (4, 12), halved for the 24 of a 7x7 window (sgm_kernels.h).
 int MaxCensusCost(int block_size);
 
-std::unique_ptr<Matcher> MakeSgmMatcher(const MatcherParams& params, SimdLevel level);
-std::unique_ptr<Matcher> MakeOpenCvMatcher(const MatcherParams& params);
+std::unique_ptr<Matcher> MakeSgmMatcher(const StereoParams& params, SimdLevel level);
+std::unique_ptr<Matcher> MakeOpenCvMatcher(const StereoParams& params);
 
 }  // namespace cloudcast::stereo

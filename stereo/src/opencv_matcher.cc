@@ -21,8 +21,8 @@ cv::Mat MatOf(const GreyView& v, cv::Mat* copy) {
   return *copy;
 }
 
-cv::Ptr<cv::StereoMatcher> Create(const MatcherParams& p) {
-  if (p.kind == MatcherKind::kOpenCvBm) {
+cv::Ptr<cv::StereoMatcher> Create(const StereoParams& p) {
+  if (p.matcher == StereoMatcher::kOpenCvBm) {
     cv::Ptr<cv::StereoBM> bm = cv::StereoBM::create(p.num_disparities, p.block_size);
     bm->setMinDisparity(p.min_disparity);
     bm->setUniquenessRatio(p.uniqueness_ratio);
@@ -31,9 +31,9 @@ cv::Ptr<cv::StereoMatcher> Create(const MatcherParams& p) {
     bm->setDisp12MaxDiff(p.disp12_max_diff);
     return bm;
   }
-  const int mode = p.kind == MatcherKind::kOpenCvSgbm3Way ? cv::StereoSGBM::MODE_SGBM_3WAY
-                   : p.kind == MatcherKind::kOpenCvHH     ? cv::StereoSGBM::MODE_HH
-                                                          : cv::StereoSGBM::MODE_SGBM;
+  const int mode = p.matcher == StereoMatcher::kOpenCvSgbm3Way ? cv::StereoSGBM::MODE_SGBM_3WAY
+                   : p.matcher == StereoMatcher::kOpenCvHH     ? cv::StereoSGBM::MODE_HH
+                                                               : cv::StereoSGBM::MODE_SGBM;
   return cv::StereoSGBM::create(p.min_disparity, p.num_disparities, p.block_size, p.EffectiveP1(),
                                 p.EffectiveP2(), p.disp12_max_diff,
                                 /*preFilterCap=*/0, p.uniqueness_ratio, p.speckle_window_size,
@@ -42,14 +42,14 @@ cv::Ptr<cv::StereoMatcher> Create(const MatcherParams& p) {
 
 class OpenCvMatcher final : public Matcher {
  public:
-  explicit OpenCvMatcher(const MatcherParams& params) : params_(params), cv_(Create(params)) {}
+  explicit OpenCvMatcher(const StereoParams& params) : params_(params), cv_(Create(params)) {}
 
-  const MatcherParams& params() const override { return params_; }
+  const StereoParams& params() const override { return params_; }
 
   absl::Status Compute(const GreyView& left, const GreyView& right, DisparityMap16* out) override {
     if (absl::Status s = CheckPair(left, right); !s.ok()) return s;
     // MODE_HH keeps every pixel's 16-bit costs for the frame.
-    if (params_.kind == MatcherKind::kOpenCvHH) {
+    if (params_.matcher == StereoMatcher::kOpenCvHH) {
       if (absl::Status s =
               CheckVolume(left.width, left.height, params_.num_disparities, 2, "OpenCV's MODE_HH");
           !s.ok()) {
@@ -59,9 +59,9 @@ class OpenCvMatcher final : public Matcher {
     try {
       cv_->compute(MatOf(left, &left_copy_), MatOf(right, &right_copy_), disparity_);
     } catch (const cv::Exception& e) {
-      return absl::InvalidArgumentError(absl::StrCat("OpenCV's ", std::string(Name(params_.kind)),
-                                                     " refused the ", left.width, "x", left.height,
-                                                     " pair: ", e.what()));
+      return absl::InvalidArgumentError(
+          absl::StrCat("OpenCV's ", std::string(Name(params_.matcher)), " refused the ", left.width,
+                       "x", left.height, " pair: ", e.what()));
     }
     out->width = left.width;
     out->height = left.height;
@@ -79,14 +79,16 @@ class OpenCvMatcher final : public Matcher {
   }
 
  private:
-  const MatcherParams params_;
+  const StereoParams params_;
   cv::Ptr<cv::StereoMatcher> cv_;
   cv::Mat left_copy_, right_copy_, disparity_;
 };
 
 }  // namespace
 
-std::unique_ptr<Matcher> MakeOpenCvMatcher(const MatcherParams& params) {
+void SetOpenCvThreads(int threads) { cv::setNumThreads(threads); }
+
+std::unique_ptr<Matcher> MakeOpenCvMatcher(const StereoParams& params) {
   return std::make_unique<OpenCvMatcher>(params);
 }
 

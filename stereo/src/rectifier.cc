@@ -15,31 +15,6 @@
 namespace cloudcast::stereo {
 namespace {
 
-absl::Status CheckCameraMatrix(const std::string& field, const std::array<double, 9>& k) {
-  for (int i = 0; i < 9; ++i) {
-    if (absl::Status s = check::Finite(absl::StrCat(field, "[", i, "]"), k[i]); !s.ok()) return s;
-  }
-  if (absl::Status s = check::Positive(field + "[0] (fx)", k[0]); !s.ok()) return s;
-  if (absl::Status s = check::Positive(field + "[4] (fy)", k[4]); !s.ok()) return s;
-  if (k[3] != 0 || k[6] != 0 || k[7] != 0 || k[8] != 1) {
-    return absl::InvalidArgumentError(
-        absl::StrCat(field, " must be a camera matrix: k[3], k[6], k[7] = 0 and k[8] = 1; got ",
-                     k[3], ", ", k[6], ", ", k[7], " and ", k[8]));
-  }
-  return absl::OkStatus();
-}
-
-absl::Status CheckDistortion(const std::string& field, const std::vector<double>& d) {
-  if (d.size() != 0 && d.size() != 4 && d.size() != 5 && d.size() != 8) {
-    return absl::InvalidArgumentError(
-        absl::StrCat(field, " holds ", d.size(), " coefficients; OpenCV takes 0, 4, 5 or 8"));
-  }
-  for (std::size_t i = 0; i < d.size(); ++i) {
-    if (absl::Status s = check::Finite(absl::StrCat(field, "[", i, "]"), d[i]); !s.ok()) return s;
-  }
-  return absl::OkStatus();
-}
-
 cv::Mat Mat3(const std::array<double, 9>& m) {
   return cv::Mat(3, 3, CV_64F, const_cast<double*>(m.data())).clone();
 }
@@ -63,39 +38,6 @@ cv::Mat MatOf(const ColorView& v, cv::Mat* copy) {
 }
 
 }  // namespace
-
-absl::Status StereoCalibration::Validate(std::string_view field) const {
-  const std::string f(field);
-  if (absl::Status s = CheckCameraMatrix(f + ".k1", k1); !s.ok()) return s;
-  if (absl::Status s = CheckDistortion(f + ".d1", d1); !s.ok()) return s;
-  if (absl::Status s = CheckCameraMatrix(f + ".k2", k2); !s.ok()) return s;
-  if (absl::Status s = CheckDistortion(f + ".d2", d2); !s.ok()) return s;
-  for (int i = 0; i < 9; ++i) {
-    if (absl::Status s = check::Finite(absl::StrCat(f, ".r[", i, "]"), r[i]); !s.ok()) return s;
-  }
-  // R^T R = I and det R = +1: a rotation, not a reflection or a scaled matrix.
-  double worst = 0;
-  for (int i = 0; i < 3; ++i) {
-    for (int j = 0; j < 3; ++j) {
-      double dot = 0;
-      for (int k = 0; k < 3; ++k) dot += r[3 * k + i] * r[3 * k + j];
-      worst = std::max(worst, std::fabs(dot - (i == j ? 1.0 : 0.0)));
-    }
-  }
-  const double det = r[0] * (r[4] * r[8] - r[5] * r[7]) - r[1] * (r[3] * r[8] - r[5] * r[6]) +
-                     r[2] * (r[3] * r[7] - r[4] * r[6]);
-  if (worst > 1e-6 || det < 0) {
-    return absl::InvalidArgumentError(
-        absl::StrCat(f, ".r is not a rotation: |R^T R - I| reaches ", worst, ", det R is ", det));
-  }
-  for (int i = 0; i < 3; ++i) {
-    if (absl::Status s = check::Finite(absl::StrCat(f, ".t[", i, "]"), t[i]); !s.ok()) return s;
-  }
-  if (t[0] == 0 && t[1] == 0 && t[2] == 0) {
-    return absl::InvalidArgumentError(absl::StrCat(f, ".t is 0; the cameras need a baseline"));
-  }
-  return check::ImageSize(f, width, height, Limits{});
-}
 
 absl::Status RectifierOptions::Validate(std::string_view field) const {
   if (!(alpha == -1.0 || (alpha >= 0.0 && alpha <= 1.0))) {
@@ -124,8 +66,8 @@ absl::StatusOr<Rectifier> Rectifier::Make(const StereoCalibration& c,
   if (absl::Status s = c.Validate(); !s.ok()) return s;
   if (absl::Status s = options.Validate(); !s.ok()) return s;
   const cv::Size size(static_cast<int>(c.width), static_cast<int>(c.height));
-  const cv::Mat k1 = Mat3(c.k1), k2 = Mat3(c.k2), d1 = Coefficients(c.d1), d2 = Coefficients(c.d2),
-                r = Mat3(c.r);
+  const cv::Mat k1 = Mat3(c.left_k), k2 = Mat3(c.right_k), d1 = Coefficients(c.left_d),
+                d2 = Coefficients(c.right_d), r = Mat3(c.r);
   const cv::Mat t = cv::Mat(3, 1, CV_64F, const_cast<double*>(c.t.data())).clone();
   cv::Mat r1, r2, p1, p2, q;
   try {

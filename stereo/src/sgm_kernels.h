@@ -16,7 +16,7 @@
 //             more than 1 away costs less than (100 + uniqueness) % of it; then OpenCV's parabola
 //             for the sub-pixel part, its left-right check and cv::filterSpeckles (sgm_matcher.cc).
 //
-// Everything stays in bytes, exactly: L <= C + P2 <= max_cost + P2 <= 31 (MatcherParams bounds
+// Everything stays in bytes, exactly: L <= C + P2 <= max_cost + P2 <= 31 (StereoParams bounds
 // P2 so), hence a sum of 8 paths <= 248. The adds saturate only for the padding indices, which
 // hold 255 throughout and never win.
 //

@@ -60,14 +60,14 @@ const sgm::Kernels* KernelsFor(SimdLevel level) {
 
 class SgmMatcher final : public Matcher {
  public:
-  SgmMatcher(const MatcherParams& params, const sgm::Kernels* kernels)
+  SgmMatcher(const StereoParams& params, const sgm::Kernels* kernels)
       : params_(params), kernels_(kernels) {
     for (int m = 0; m < 256; ++m) {
       limits_[m] = static_cast<std::int16_t>(sgm::UniquenessLimit(m, params.uniqueness_ratio));
     }
   }
 
-  const MatcherParams& params() const override { return params_; }
+  const StereoParams& params() const override { return params_; }
 
   absl::Status Compute(const GreyView& left, const GreyView& right, DisparityMap16* out) override {
     if (absl::Status s = CheckPair(left, right); !s.ok()) return s;
@@ -273,7 +273,7 @@ class SgmMatcher final : public Matcher {
   static constexpr int kZeroRow = 2;
   static constexpr int kRows = 3;
 
-  const MatcherParams params_;
+  const StereoParams params_;
   const sgm::Kernels* const kernels_;
   sgm::Shape shape_;
   int radius_ = 0;
@@ -292,7 +292,7 @@ class SgmMatcher final : public Matcher {
 
 }  // namespace
 
-std::unique_ptr<Matcher> MakeSgmMatcher(const MatcherParams& params, SimdLevel level) {
+std::unique_ptr<Matcher> MakeSgmMatcher(const StereoParams& params, SimdLevel level) {
   return std::make_unique<SgmMatcher>(params, KernelsFor(level));
 }
 

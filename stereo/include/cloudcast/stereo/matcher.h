@@ -19,19 +19,12 @@
 #include "absl/status/statusor.h"
 #include "cloudcast/core/camera.h"
 #include "cloudcast/core/image.h"
+#include "cloudcast/core/stereo.h"
 
 namespace cloudcast::stereo {
 
-enum class MatcherKind : std::uint8_t {
-  kSgm,             // ours, the default
-  kOpenCvSgbm,      // cv::StereoSGBM::MODE_SGBM (5 directions, one pass)
-  kOpenCvSgbm3Way,  // cv::StereoSGBM::MODE_SGBM_3WAY
-  kOpenCvHH,        // cv::StereoSGBM::MODE_HH (8 directions, full cost volume)
-  kOpenCvBm,        // cv::StereoBM (block matching with its prefilter)
-};
-// "sgm", "sgbm", "sgbm-3way", "hh", "bm".
-std::string_view Name(MatcherKind kind);
-bool ParseMatcherKind(std::string_view name, MatcherKind* out);
+// The matchers and their parameters are core's StereoMatcher and StereoParams
+// (cloudcast/core/stereo.h): the protocol, the server and the clients share them.
 
 // Which code our matcher (kSgm) runs. kAuto picks the widest the CPU has; the others exist so
 // tests and benchmarks can compare them (MakeMatcher fails for one the CPU lacks). All give the
@@ -44,58 +37,11 @@ bool CpuSupports(SimdLevel level);
 // What kAuto resolves to on this CPU.
 SimdLevel BestSimdLevel();
 
-// The largest disparity the output can hold: 16 * (min_disparity + num_disparities) must fit in
-// 15 bits (OpenCV's int16 output and cv::filterSpeckles need it too).
-inline constexpr int kMaxDisparity = 2048;
+// The largest disparity the output can hold (core's kMaxStereoDisparity).
+inline constexpr int kMaxDisparity = kMaxStereoDisparity;
 // Our matcher keeps one byte per pixel and disparity for a frame; OpenCV's MODE_HH two. Frames
 // whose volume would exceed this are refused (RESOURCE_EXHAUSTED) instead of allocated.
 inline constexpr std::uint64_t kMaxCostVolumeBytes = std::uint64_t{1} << 30;
-
-// Defaults suit 640x480 (New Tsukuba: docs/stereo.md has the measurements they were chosen by).
-struct MatcherParams {
-  MatcherKind kind = MatcherKind::kSgm;
-  // Disparities searched: [min_disparity, min_disparity + num_disparities). The output holds the
-  // disparity itself (not its offset from min_disparity), so the pipeline's scale stays 1/16 with
-  // no offset whatever min_disparity is; a disparity <= 0 (possible only with min_disparity <= 0)
-  // has no depth in front of the camera and is output as 0, "no match".
-  int min_disparity = 0;
-  int num_disparities = 128;  // > 0, a multiple of 16
-  // OpenCV: its blockSize (SGBM: >= 1, BM: >= 5, odd). Ours: the side of the square window of the
-  // centre-symmetric census transform whose Hamming distance is its matching cost: 3, 5 or 7 (4,
-  // 12 or 24 bits, each comparing one pixel of the window with its mirror image through the
-  // centre; the 24-bit distance is halved, rounding up, so costs stay within 0..12).
-  int block_size = 5;
-  // Smoothness penalties for a disparity change of 1 (p1) and of more (p2). 0 picks the default:
-  // OpenCV's usual 8 * block^2 and 32 * block^2; ours, for its costs of 0 to 12 (4 for block 3),
-  // measured on New Tsukuba and Aloe: 5 and 19 for block 5, 4 and 19 for 7, 3 and 16 for 3. Ours
-  // sums its paths exactly in bytes, so it takes p2 in [p1 + 1, 31 - its largest cost] (19 for
-  // blocks 5 and 7, 27 for 3) and p1 below that.
-  int p1 = 0;
-  int p2 = 0;
-  // A match is rejected when another disparity (not a neighbour of the best) costs less than the
-  // best's / (1 - ratio / 100), as OpenCV does (cost * (100 - ratio) < best * 100). Percent, in
-  // [0, 99].
-  int uniqueness_ratio = 10;
-  // cv::filterSpeckles after matching: regions of at most this many pixels whose disparities
-  // differ from their neighbours' by more than speckle_range px are removed. 0: off.
-  int speckle_window_size = 100;
-  int speckle_range = 2;
-  // Left-right consistency: a match is dropped when the right image's best match of its right
-  // pixel differs from it by more than this many px (OpenCV's disp12MaxDiff). < 0: off.
-  int disp12_max_diff = 1;
-  // Ours: 4 (left, right, up, down) or 8 (and the diagonals) aggregation paths. 4 by default: as
-  // accurate on New Tsukuba and Aloe, and two thirds of the time (docs/stereo.md).
-  int paths = 4;
-  // Ours: which code to run (see SimdLevel).
-  SimdLevel simd = SimdLevel::kAuto;
-
-  // Each member in its range, and the combination valid for `kind`. Errors name the member under
-  // `field` (e.g. "stereo.num_disparities is 100; it must be a positive multiple of 16").
-  absl::Status Validate(std::string_view field = "stereo") const;
-  // p1 and p2 as the matcher uses them (the defaults above resolved).
-  int EffectiveP1() const;
-  int EffectiveP2() const;
-};
 
 // Grey 8-bit rectified images: core's colour view with ColorEncoding::kMono8 (any stride; rows
 // in pieces, as the server receives them, are fine). ToGrey (grey.h) makes one from colour.
@@ -129,10 +75,17 @@ class Matcher {
   // (resized). Errors name "left" or "right".
   virtual absl::Status Compute(const GreyView& left, const GreyView& right,
                                DisparityMap16* out) = 0;
-  virtual const MatcherParams& params() const = 0;
+  virtual const StereoParams& params() const = 0;
 };
 
-// Validates `params` and makes the matcher it names.
-absl::StatusOr<std::unique_ptr<Matcher>> MakeMatcher(const MatcherParams& params);
+// The threads OpenCV's matchers (and the rest of OpenCV) may use inside one call: cv::setNumThreads
+// for the whole process. A server that runs one frame per core sets 1, so that OpenCV's pool does
+// not oversubscribe the cores the other workers use.
+void SetOpenCvThreads(int threads);
+
+// Validates `params` and makes the matcher it names; `simd` picks our matcher's code
+// (FAILED_PRECONDITION for a level this CPU lacks).
+absl::StatusOr<std::unique_ptr<Matcher>> MakeMatcher(const StereoParams& params,
+                                                     SimdLevel simd = SimdLevel::kAuto);
 
 }  // namespace cloudcast::stereo

@@ -14,29 +14,13 @@
 #include "absl/status/statusor.h"
 #include "cloudcast/core/camera.h"
 #include "cloudcast/core/image.h"
+#include "cloudcast/core/stereo.h"
 #include "cloudcast/io/image_io.h"
 
 namespace cloudcast::stereo {
 
-// Both cameras' intrinsics and the right camera's pose in the left camera's frame, as OpenCV's
-// cv::stereoCalibrate gives them: a point X in left-camera coordinates is R * X + T in the right
-// camera's.
-struct StereoCalibration {
-  std::array<double, 9> k1{};  // left camera matrix, row-major: fx 0 cx / 0 fy cy / 0 0 1
-  std::vector<double>
-      d1;  // left distortion: 0, 4, 5 or 8 coefficients (k1 k2 p1 p2 [k3 [k4 k5 k6]])
-  std::array<double, 9> k2{};  // right camera matrix
-  std::vector<double> d2;      // right distortion
-  std::array<double, 9> r{};   // rotation, row-major (orthonormal, determinant +1)
-  std::array<double, 3> t{};   // translation; its unit is the baseline's unit (and so z's)
-  std::uint32_t width = 0;     // image size both cameras were calibrated at
-  std::uint32_t height = 0;
-
-  // Finite values; camera matrices with positive focal lengths, zero skew and [0 0 1] last row;
-  // 0, 4, 5 or 8 distortion coefficients; R a rotation (R^T R = I within 1e-6, det +1); T not
-  // zero; a size within Limits{}. Errors name the member under `field` (e.g. "calibration.k1[0]").
-  absl::Status Validate(std::string_view field = "calibration") const;
-};
+// The calibration is core's StereoCalibration (cloudcast/core/stereo.h), which the protocol's
+// StreamConfig.stereo.calibration fills.
 
 struct RectifierOptions {
   // cv::stereoRectify's alpha: 0 zooms so that every rectified pixel is a valid one, 1 keeps every
