@@ -27,7 +27,8 @@ Kinds (--kind), each under the namespace and with the topic names its stock ROS 
     right/image_rect        mono8, the right image in grey (cv2's BGR to grey)
     left/camera_info, right/camera_info
 Frame k of the run (0, 1, ...) is stamped --stamp-base + k seconds, so a test knows each stamp's
-frame; every message of a frame has the same stamp (ExactTime matches them) and frame_id
+frame (with --stamp-now, the stamp's last three nanosecond digits give its position in
+--frames); every message of a frame has the same stamp (ExactTime matches them) and frame_id
 tsukuba_left_optical, the right camera's too (image_geometry's StereoCameraModel asserts that
 both CameraInfos name one frame: the right P carries the offset).
 
@@ -150,7 +151,9 @@ def main():
                          "kind's namespace, e.g. disparity=2); repeatable")
     ap.add_argument("--stamp-base", type=int, default=1000, help="stamp of frame 0, seconds")
     ap.add_argument("--stamp-now", action="store_true",
-                    help="stamp each frame with the time it is published instead (latency)")
+                    help="stamp each frame with the time it is published instead (latency), the "
+                         "nanoseconds' last three digits replaced by the frame's position in "
+                         "--frames (so that a consumer's output names its frame)")
     args = ap.parse_args()
 
     rospy.init_node("tsukuba_publisher", disable_signals=False)
@@ -178,10 +181,15 @@ def main():
     k = 0
     period = 1.0 / args.rate if args.rate > 0 else 0.0
     for _ in range(args.repeat):
-        for messages, name in zip(frames, names):
+        for index, (messages, name) in enumerate(zip(frames, names)):
             if rospy.is_shutdown():
                 return
-            stamp = rospy.Time.now() if args.stamp_now else rospy.Time(args.stamp_base + k, 0)
+            if args.stamp_now:
+                ns = rospy.Time.now().to_nsec()
+                ns += index - ns % 1000  # under a microsecond off
+                stamp = rospy.Time(ns // 1_000_000_000, ns % 1_000_000_000)
+            else:
+                stamp = rospy.Time(args.stamp_base + k, 0)
             every = dict(messages, **camera_infos)
             for msg in every.values():
                 msg.header.stamp = stamp
