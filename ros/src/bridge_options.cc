@@ -73,14 +73,18 @@ const std::vector<ParamDoc>& Docs() {
        "StereoSGBM's modes) or bm (OpenCV StereoBM)"},
       {"stereo/min_disparity", "int", "(server's)", "smallest disparity searched, pixels"},
       {"stereo/num_disparities", "int", "(server's)",
-       "disparities searched from min_disparity: a positive multiple of 16, at most 512"},
-      {"stereo/block_size", "int", "(server's)", "matching block side, odd (bm: 5..51)"},
+       "disparities searched from min_disparity: a positive multiple of 16 (min_disparity + "
+       "num_disparities at most 2048)"},
+      {"stereo/block_size", "int", "(server's)",
+       "sgm: the census window, 3, 5 or 7; OpenCV's matchers: the block, odd, 1..255 (bm: 5..255)"},
       {"stereo/p1", "int", "(server's)",
-       "SGM smoothness penalty for a disparity change of 1 (0: the matcher's own)"},
+       "smoothness penalty for a disparity change of 1 (0: the matcher's own; sgm's costs are "
+       "0..12, OpenCV's 8 x block^2 by default)"},
       {"stereo/p2", "int", "(server's)",
-       "SGM penalty for larger changes, > p1 (0: the matcher's own)"},
+       "penalty for larger changes, > p1 (0: the matcher's own; sgm: at most 31 minus its largest "
+       "cost, 19 for blocks 5 and 7)"},
       {"stereo/uniqueness_ratio", "int", "(server's)",
-       "percent by which the best cost must beat the second best, 0..100"},
+       "percent by which the best cost must beat the second best, 0..99"},
       {"stereo/speckle_window_size", "int", "(server's)",
        "largest blob of disparities treated as speckle noise and invalidated; 0: no filter"},
       {"stereo/speckle_range", "int", "(server's)",
