@@ -2,23 +2,43 @@
 
 #include <diagnostic_msgs/DiagnosticArray.h>
 #include <sensor_msgs/PointCloud2.h>
+#include <stereo_msgs/DisparityImage.h>
 
 #include "absl/strings/str_cat.h"
+#include "cloudcast/proto/convert.h"
+#include "depth_input.h"
 #include "disparity_input.h"
 #include "point_cloud2.h"
+#include "stereo_input.h"
 
 namespace cloudcast::ros_bridge {
+namespace {
+
+// The stereo settings a stream of `config` gets on a server whose defaults are `defaults` (its
+// GetInfo), or on one with the core's defaults when the server did not answer.
+DisparityRange ResolveRange(const client::StreamConfig& config,
+                            const absl::StatusOr<v1::ServerInfo>& info) {
+  convert::StreamSettings defaults;
+  if (info.ok()) {
+    if (auto d = convert::Resolve(info->defaults(), convert::StreamSettings{}); d.ok()) {
+      defaults = *std::move(d);
+    }
+  }
+  DisparityRange range;
+  const StereoParams* st = &defaults.frame.stereo;
+  auto resolved = convert::Resolve(config, defaults);
+  if (resolved.ok()) st = &resolved->frame.stereo;
+  range.min_disparity = st->min_disparity;
+  range.num_disparities = st->num_disparities;
+  return range;
+}
+
+}  // namespace
 
 absl::StatusOr<std::unique_ptr<Bridge>> Bridge::Create(ros::NodeHandle nh,
                                                        ros::NodeHandle private_nh) {
   auto options = ReadBridgeOptions(private_nh);
   if (!options.ok()) return options.status();
-  if (options->input != InputKind::kDisparity) {
-    return absl::UnimplementedError(absl::StrCat(
-        "~input is '", options->input == InputKind::kDepth ? "depth" : "stereo",
-        "': this bridge takes disparity only so far (the depth and stereo-pair inputs come "
-        "with the protocol's own, issue 19)"));
-  }
   std::unique_ptr<Bridge> bridge(new Bridge(nh, *std::move(options)));
   auto info = bridge->link_->Probe();
   if (info.ok()) {
@@ -35,26 +55,52 @@ absl::StatusOr<std::unique_ptr<Bridge>> Bridge::Create(ros::NodeHandle nh,
     ROS_WARN("cloudcast: %s; frames are dropped until it answers",
              std::string(info.status().message()).c_str());
   }
-  bridge->input_ = std::make_unique<DisparityInput>(
-      bridge->nh_, bridge->options_.sync,
-      [b = bridge.get()](const OutgoingFrame& f) { b->OnFrame(f); },
-      [b = bridge.get()](const absl::Status& s) {
-        b->stats_.InputError(s);
-        ROS_ERROR_THROTTLE(5, "cloudcast: input frame refused: %s",
-                           std::string(s.message()).c_str());
-      });
-  ROS_INFO("cloudcast: subscribed to %s; publishing %s", bridge->input_->Describe().c_str(),
-           bridge->points_.getTopic().c_str());
+  if (bridge->options_.publish_disparity) {
+    bridge->disparity_range_ = ResolveRange(bridge->options_.config, info);
+  }
+  bridge->input_ = bridge->MakeInput();
+  std::string outputs = bridge->points_.getTopic();
+  if (bridge->options_.publish_disparity) {
+    absl::StrAppend(&outputs, " and ", bridge->disparity_.getTopic(), " (min_disparity ",
+                    bridge->disparity_range_.min_disparity, ", ",
+                    bridge->disparity_range_.num_disparities, " disparities)");
+  }
+  ROS_INFO("cloudcast: ~input %s: subscribed to %s; publishing %s",
+           std::string(Name(bridge->options_.input)).c_str(), bridge->input_->Describe().c_str(),
+           outputs.c_str());
   return bridge;
+}
+
+std::unique_ptr<InputSource> Bridge::MakeInput() {
+  InputSource::Sink sink = [this](const OutgoingFrame& f) { OnFrame(f); };
+  InputSource::ErrorSink error_sink = [this](const absl::Status& s) {
+    stats_.InputError(s);
+    ROS_ERROR_THROTTLE(5, "cloudcast: input frame refused: %s", std::string(s.message()).c_str());
+  };
+  switch (options_.input) {
+    case InputKind::kDepth:
+      return std::make_unique<DepthInput>(nh_, options_.sync, options_.depth_scale, std::move(sink),
+                                          std::move(error_sink));
+    case InputKind::kStereo:
+      return std::make_unique<StereoInput>(nh_, options_.sync, std::move(sink),
+                                           std::move(error_sink));
+    case InputKind::kDisparity:
+      break;
+  }
+  return std::make_unique<DisparityInput>(nh_, options_.sync, std::move(sink),
+                                          std::move(error_sink));
 }
 
 Bridge::Bridge(ros::NodeHandle nh, BridgeOptions options) : nh_(nh), options_(std::move(options)) {
   points_ = nh_.advertise<sensor_msgs::PointCloud2>("points2", 5);
+  if (options_.publish_disparity) {
+    disparity_ = nh_.advertise<stereo_msgs::DisparityImage>("disparity", 5);
+  }
   diagnostics_ = nh_.advertise<diagnostic_msgs::DiagnosticArray>("/diagnostics", 5);
   status_name_ = absl::StrCat(ros::this_node::getName(), ": cloudcast stream");
   link_ = std::make_unique<CloudLink>(
       options_, &stats_,
-      [this](client::Result&& r, const std_msgs::Header& h) { OnCloud(std::move(r), h); });
+      [this](client::Result&& r, const SentFrame& f) { OnCloud(std::move(r), f); });
   timer_ = nh_.createTimer(ros::Duration(options_.diagnostics_period_s), &Bridge::OnTimer, this);
 }
 
@@ -64,11 +110,36 @@ void Bridge::OnFrame(const OutgoingFrame& frame) {
 }
 
 // On the stream's receiver thread (roscpp's publish is thread-safe).
-void Bridge::OnCloud(client::Result&& result, const std_msgs::Header& header) {
+void Bridge::OnCloud(client::Result&& result, const SentFrame& frame) {
+  if (options_.publish_disparity) PublishDisparity(result, frame);
   sensor_msgs::PointCloud2Ptr msg = boost::make_shared<sensor_msgs::PointCloud2>();
-  ToPointCloud2(result.cloud, header, msg.get());
+  ToPointCloud2(result.cloud, frame.header, msg.get());
   points_.publish(msg);
   stats_.Published();
+}
+
+void Bridge::PublishDisparity(const client::Result& result, const SentFrame& frame) {
+  if (!result.reply.has_disparity()) {
+    stats_.PublishError(absl::DataLossError(
+        "the reply has no disparity map (a server without StereoConfig.return_disparity?)"));
+    ROS_WARN_THROTTLE(5,
+                      "cloudcast: a reply without the disparity map ~stereo/publish_disparity "
+                      "asked for");
+    return;
+  }
+  stereo_msgs::DisparityImagePtr msg = boost::make_shared<stereo_msgs::DisparityImage>();
+  absl::Status s;
+  {
+    std::lock_guard<std::mutex> lock(decompressor_mu_);
+    s = ToDisparityImage(result.reply.disparity(), frame.header, frame.camera, disparity_range_,
+                         &decompressor_, msg.get());
+  }
+  if (!s.ok()) {
+    stats_.PublishError(s);
+    ROS_ERROR_THROTTLE(5, "cloudcast: %s", std::string(s.message()).c_str());
+    return;
+  }
+  disparity_.publish(msg);
 }
 
 void Bridge::OnTimer(const ros::TimerEvent&) {

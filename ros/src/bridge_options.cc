@@ -6,9 +6,11 @@
 #include <cmath>
 #include <optional>
 #include <sstream>
+#include <tuple>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
+#include "cloudcast/core/stereo.h"
 #include "cloudcast/proto/convert.h"
 
 namespace cloudcast::ros_bridge {
@@ -19,8 +21,9 @@ const std::vector<ParamDoc>& Docs() {
       {"server", "string", "127.0.0.1:50051",
        "gRPC target of the cloudcast server (host:port, dns:///name:port, unix:///path)"},
       {"input", "string", "disparity",
-       "what the camera gives: disparity (stereo_msgs/DisparityImage + colour + camera_info); "
-       "depth and stereo are reserved for the depth-image and stereo-pair inputs"},
+       "what the camera gives: disparity (stereo_msgs/DisparityImage + colour + camera_info), "
+       "depth (a 16UC1 or 32FC1 depth image + colour + camera_info) or stereo (rectified left "
+       "and right images + both camera_infos, matched on the server)"},
       {"queue_size", "int", "5", "message_filters synchronizer queue, per input topic"},
       {"approximate_sync", "bool", "false",
        "pair the input topics with ApproximateTime instead of ExactTime"},
@@ -62,6 +65,36 @@ const std::vector<ParamDoc>& Docs() {
        "send the bearer token in this file with every call (a file, so that the token stays "
        "out of the parameter server)"},
       {"diagnostics_period", "double", "1", "seconds between two diagnostics messages"},
+      {"depth_scale", "double", "(REP 118's)",
+       "~input depth: the unit of a raw depth value, z = D * depth_scale (default 0.001 for "
+       "16UC1 millimetres, 1 for 32FC1 metres)"},
+      {"stereo/matcher", "string", "(server's)",
+       "~input stereo: sgm (cloudcast's own, the fast one), sgbm, sgbm-3way, hh (OpenCV "
+       "StereoSGBM's modes) or bm (OpenCV StereoBM)"},
+      {"stereo/min_disparity", "int", "(server's)", "smallest disparity searched, pixels"},
+      {"stereo/num_disparities", "int", "(server's)",
+       "disparities searched from min_disparity: a positive multiple of 16 (min_disparity + "
+       "num_disparities at most 2048)"},
+      {"stereo/block_size", "int", "(server's)",
+       "sgm: the census window, 3, 5 or 7; OpenCV's matchers: the block, odd, 1..255 (bm: 5..255)"},
+      {"stereo/p1", "int", "(server's)",
+       "smoothness penalty for a disparity change of 1 (0: the matcher's own; sgm's costs are "
+       "0..12, OpenCV's 8 x block^2 by default)"},
+      {"stereo/p2", "int", "(server's)",
+       "penalty for larger changes, > p1 (0: the matcher's own; sgm: at most 31 minus its largest "
+       "cost, 19 for blocks 5 and 7)"},
+      {"stereo/uniqueness_ratio", "int", "(server's)",
+       "percent by which the best cost must beat the second best, 0..99"},
+      {"stereo/speckle_window_size", "int", "(server's)",
+       "largest blob of disparities treated as speckle noise and invalidated; 0: no filter"},
+      {"stereo/speckle_range", "int", "(server's)",
+       "largest disparity variation within one connected blob, pixels"},
+      {"stereo/disp12_max_diff", "int", "(server's)",
+       "left-right consistency tolerance, pixels; -1: no check"},
+      {"stereo/paths", "int", "(server's)", "sgm: 4 or 8 aggregation paths"},
+      {"stereo/publish_disparity", "bool", "false",
+       "also publish the server's disparity map as stereo_msgs/DisparityImage on 'disparity' "
+       "(it comes back zstd-compressed with each cloud)"},
   };
   return docs;
 }
@@ -233,6 +266,84 @@ absl::Status ReadInput(const Params& p, BridgeOptions* o) {
   return absl::OkStatus();
 }
 
+// Parameters that belong to one input kind only are refused with the others, so that a setting is
+// never silently ignored.
+absl::Status OnlyFor(const ros::NodeHandle& nh, const BridgeOptions& o, InputKind kind,
+                     const std::string& prefix) {
+  if (o.input == kind) return absl::OkStatus();
+  std::vector<std::string> names;
+  if (!nh.getParamNames(names)) return absl::OkStatus();
+  const std::string full_prefix = nh.getNamespace() + "/" + prefix;
+  for (const std::string& full : names) {
+    if (full.rfind(full_prefix, 0) != 0) continue;
+    return absl::InvalidArgumentError(absl::StrCat(
+        "~", full.substr(nh.getNamespace().size() + 1), " is set but ~input is '",
+        std::string(Name(o.input)), "'; it applies to ~input ", std::string(Name(kind)), " only"));
+  }
+  return absl::OkStatus();
+}
+
+absl::Status ReadDepth(const Params& p, BridgeOptions* o) {
+  CLOUDCAST_ASSIGN_OR_RETURN(scale, p.Double("depth_scale"));
+  if (scale) {
+    if (!(std::isfinite(*scale) && *scale > 0)) {
+      return OutOfRange("depth_scale", *scale, "finite and > 0 (units of z per raw depth value)");
+    }
+    o->depth_scale = *scale;
+  }
+  return absl::OkStatus();
+}
+
+absl::Status ReadStereo(const Params& p, BridgeOptions* o) {
+  // Unset members keep the core's defaults for the check only: the config carries the set ones,
+  // and the server's defaults fill the rest.
+  StereoParams checked;
+  v1::StereoConfig* c = o->config.mutable_stereo();
+  CLOUDCAST_ASSIGN_OR_RETURN(matcher, p.String("stereo/matcher"));
+  if (matcher) {
+    if (!ParseStereoMatcher(*matcher, &checked.matcher)) {
+      std::vector<std::string> names;
+      for (StereoMatcher m : AllStereoMatchers()) names.emplace_back(Name(m));
+      return absl::InvalidArgumentError(absl::StrCat(
+          "~stereo/matcher is '", *matcher, "'; must be one of ", absl::StrJoin(names, ", ")));
+    }
+    c->set_matcher(convert::ToProto(checked.matcher));
+  }
+  const std::tuple<const char*, int StereoParams::*, void (v1::StereoConfig::*)(std::int32_t)>
+      ints[] = {
+          {"min_disparity", &StereoParams::min_disparity, &v1::StereoConfig::set_min_disparity},
+          {"num_disparities", &StereoParams::num_disparities,
+           &v1::StereoConfig::set_num_disparities},
+          {"block_size", &StereoParams::block_size, &v1::StereoConfig::set_block_size},
+          {"p1", &StereoParams::p1, &v1::StereoConfig::set_p1},
+          {"p2", &StereoParams::p2, &v1::StereoConfig::set_p2},
+          {"uniqueness_ratio", &StereoParams::uniqueness_ratio,
+           &v1::StereoConfig::set_uniqueness_ratio},
+          {"speckle_window_size", &StereoParams::speckle_window_size,
+           &v1::StereoConfig::set_speckle_window_size},
+          {"speckle_range", &StereoParams::speckle_range, &v1::StereoConfig::set_speckle_range},
+          {"disp12_max_diff", &StereoParams::disp12_max_diff,
+           &v1::StereoConfig::set_disp12_max_diff},
+          {"paths", &StereoParams::paths, &v1::StereoConfig::set_paths},
+      };
+  for (const auto& [name, member, setter] : ints) {
+    CLOUDCAST_ASSIGN_OR_RETURN(value, p.Int(absl::StrCat("stereo/", name)));
+    if (!value) continue;
+    checked.*member = *value;
+    (c->*setter)(*value);
+  }
+  // The core's rules, as the server applies them (StereoParams::Validate names the member).
+  if (absl::Status s = checked.Validate("stereo"); !s.ok()) {
+    return absl::InvalidArgumentError(absl::StrCat("~stereo/...: ", s.message()));
+  }
+  CLOUDCAST_ASSIGN_OR_RETURN(publish, p.Bool("stereo/publish_disparity"));
+  if (publish) {
+    o->publish_disparity = *publish;
+    c->set_return_disparity(*publish);
+  }
+  return absl::OkStatus();
+}
+
 absl::Status ReadStages(const Params& p, BridgeOptions* o) {
   v1::StreamConfig& c = o->config;
   CLOUDCAST_ASSIGN_OR_RETURN(delivery, p.String("delivery"));
@@ -326,25 +437,51 @@ std::string Wrapped(const std::string& text, std::size_t width, const std::strin
 
 }  // namespace
 
+std::string_view Name(InputKind kind) {
+  switch (kind) {
+    case InputKind::kDisparity:
+      return "disparity";
+    case InputKind::kDepth:
+      return "depth";
+    case InputKind::kStereo:
+      return "stereo";
+  }
+  return "?";
+}
+
 const std::vector<ParamDoc>& ParamDocs() { return Docs(); }
 
 std::string HelpText() {
   std::ostringstream os;
-  os << "cloudcast-ros-bridge: turns a ROS camera's disparity into point clouds on a cloudcast\n"
-        "server and publishes them as sensor_msgs/PointCloud2.\n\n"
+  os << "cloudcast-ros-bridge: turns a ROS camera's disparity, depth image or stereo pair into\n"
+        "point clouds on a cloudcast server and publishes them as sensor_msgs/PointCloud2.\n\n"
         "Usage: cloudcast-ros-bridge [ROS remappings, e.g. disparity:=/stereo/disparity]\n"
         "                            [_param:=value ...]\n\n"
-        "Subscribes (~input disparity; the names of stereo_image_proc's point_cloud2 nodelet):\n"
+        "Subscribes, ~input disparity (the names of stereo_image_proc's point_cloud2 nodelet):\n"
         "  disparity               stereo_msgs/DisparityImage (32FC1; z = f T / d; d below\n"
         "                          min_disparity, NaN or inf: no point)\n"
         "  left/image_rect_color   sensor_msgs/Image, rgb8 bgr8 rgba8 bgra8 or mono8, same size\n"
         "  left/camera_info        sensor_msgs/CameraInfo (P gives fx, fy, cx, cy)\n"
+        "~input depth (the names of depth_image_proc's point_cloud_xyzrgb nodelet):\n"
+        "  depth_registered/image_rect\n"
+        "                          sensor_msgs/Image, 16UC1 (mm) or 32FC1 (m), REP 118; 0, NaN,\n"
+        "                          inf: no point; registered to the colour camera\n"
+        "  rgb/image_rect_color    sensor_msgs/Image, the colour encodings above, same size\n"
+        "  rgb/camera_info         sensor_msgs/CameraInfo of the depth's pixels (P, or K)\n"
+        "~input stereo (rectified pairs; the server matches them, ~stereo/...):\n"
+        "  left/image_rect_color   sensor_msgs/Image, the colour encodings above (the points'\n"
+        "                          colour; the matcher uses its grey)\n"
+        "  right/image_rect        sensor_msgs/Image, same size (mono8 is enough)\n"
+        "  left/camera_info        sensor_msgs/CameraInfo: P gives fx, fy, cx, cy\n"
+        "  right/camera_info       sensor_msgs/CameraInfo: P[3] = -fx * baseline\n"
         "Publishes:\n"
         "  points2                 sensor_msgs/PointCloud2: x y z rgb (FLOAT32 at 0 4 8 12, PCL's\n"
-        "                          packed rgb), unorganized, dense, the disparity's header\n"
+        "                          packed rgb), unorganized, dense, the input's header\n"
+        "  disparity               (~input stereo, ~stereo/publish_disparity) stereo_msgs/\n"
+        "                          DisparityImage: the server's disparities, 1/16 pixel steps\n"
         "  /diagnostics            diagnostic_msgs/DiagnosticArray: per-stage times (decode,\n"
-        "                          pipeline, encode, queue, round trip), frames, drops,\n"
-        "                          reconnects\n\n"
+        "                          rectify, match, pipeline, encode, queue, round trip),\n"
+        "                          frames, drops, reconnects\n\n"
         "Parameters (private, e.g. _server:=10.0.0.2:50051 or <param name=\"server\"> in a "
         "launch file):\n";
   for (const ParamDoc& d : Docs()) {
@@ -356,7 +493,13 @@ std::string HelpText() {
         "  cloudcast-ros-bridge _server:=127.0.0.1:50051 disparity:=/stereo/disparity \\\n"
         "      left/image_rect_color:=/stereo/left/image_rect_color \\\n"
         "      left/camera_info:=/stereo/left/camera_info\n"
-        "  roslaunch ros/launch/cloudcast_bridge.launch camera:=/stereo server:=robot-pc:50051\n"
+        "  cloudcast-ros-bridge _input:=depth __ns:=/camera points2:=/camera/cloudcast/points\n"
+        "  cloudcast-ros-bridge _input:=stereo _stereo/matcher:=sgm _stereo/num_disparities:=160 "
+        "\\\n"
+        "      __ns:=/stereo\n"
+        "  roslaunch cloudcast_ros cloudcast_bridge.launch camera:=/stereo server:=robot-pc:50051\n"
+        "  roslaunch cloudcast_ros cloudcast_depth.launch camera:=/camera\n"
+        "  roslaunch cloudcast_ros cloudcast_stereo.launch camera:=/stereo\n"
         "Documentation: docs/ros.md\n";
   return os.str();
 }
@@ -368,6 +511,14 @@ absl::StatusOr<BridgeOptions> ReadBridgeOptions(const ros::NodeHandle& private_n
   o.client.connect_timeout = std::chrono::milliseconds(5000);
   if (absl::Status s = ReadConnection(p, &o); !s.ok()) return s;
   if (absl::Status s = ReadInput(p, &o); !s.ok()) return s;
+  if (absl::Status s = OnlyFor(private_nh, o, InputKind::kDepth, "depth_scale"); !s.ok()) return s;
+  if (absl::Status s = OnlyFor(private_nh, o, InputKind::kStereo, "stereo/"); !s.ok()) return s;
+  if (o.input == InputKind::kDepth) {
+    if (absl::Status s = ReadDepth(p, &o); !s.ok()) return s;
+  }
+  if (o.input == InputKind::kStereo) {
+    if (absl::Status s = ReadStereo(p, &o); !s.ok()) return s;
+  }
   if (absl::Status s = ReadStages(p, &o); !s.ok()) return s;
   return o;
 }

@@ -3,7 +3,9 @@
 #pragma once
 
 #include <chrono>
+#include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "absl/status/statusor.h"
@@ -16,9 +18,10 @@ class NodeHandle;
 
 namespace cloudcast::ros_bridge {
 
-// What the robot's camera gives. Only kDisparity has a protocol path yet; the other two are
-// recognised so that their parameters already have their final names.
+// What the robot's camera gives: a disparity map (stereo_image_proc's), a depth image (a depth
+// camera's, REP 118) or a rectified stereo pair that the server matches.
 enum class InputKind { kDisparity, kDepth, kStereo };
+std::string_view Name(InputKind kind);  // "disparity", "depth", "stereo"
 
 // How the input topics are paired into frames (message_filters).
 struct SyncOptions {
@@ -34,9 +37,14 @@ struct BridgeOptions {
   client::ClientOptions client;
   bool resilient = true;  // StreamOptions::resilient
   std::chrono::milliseconds reconnect_timeout{30000};
-  // The stream's passthrough, voxel grid, Draco and delivery; the camera is added per frame.
-  // Unset fields take the server's defaults.
+  // The stream's passthrough, voxel grid, Draco, delivery and (~input stereo) matcher; the camera
+  // is added per frame. Unset fields take the server's defaults.
   client::StreamConfig config;
+  // ~input depth: the unit of a raw depth value (~depth_scale); unset, REP 118's.
+  std::optional<double> depth_scale;
+  // ~input stereo: publish the server's disparity map as a stereo_msgs/DisparityImage
+  // (~stereo/publish_disparity; sets config.stereo.return_disparity).
+  bool publish_disparity = false;
   bool compress = false;  // lossless zstd uplink (row deltas): for a thin link
   double diagnostics_period_s = 1.0;
 };

@@ -19,7 +19,7 @@ client::StreamConfig ConfigFor(const client::StreamConfig& base, const CameraMod
 bool SameCamera(const CameraModel& a, const CameraModel& b) {
   return a.fx == b.fx && a.fy == b.fy && a.cx == b.cx && a.cy == b.cy && a.baseline == b.baseline &&
          a.disparity_scale == b.disparity_scale && a.disparity_offset == b.disparity_offset &&
-         a.invalid_disparities == b.invalid_disparities;
+         a.invalid_disparities == b.invalid_disparities && a.depth_scale == b.depth_scale;
 }
 
 CloudLink::CloudLink(const BridgeOptions& options, BridgeStats* stats, CloudSink on_cloud)
@@ -120,23 +120,18 @@ void CloudLink::Send(const OutgoingFrame& frame) {
   meta.sequence = next_sequence_++;
   meta.frame_id = frame.header.frame_id;
   {
-    std::lock_guard<std::mutex> lock(headers_mu_);
-    headers_[*meta.sequence] = frame.header;  // before Send: the reply may come first
+    std::lock_guard<std::mutex> lock(sent_mu_);
+    sent_[*meta.sequence] = {frame.header, frame.camera};  // before Send: the reply may come first
   }
-  absl::Status s;
-  if (options_.compress) {
-    s = stream_->Send(client::CompressRaw(frame.disparity), client::CompressRaw(frame.colour),
-                      meta);
-  } else {
-    s = stream_->Send(frame.disparity, frame.colour, meta);
-  }
+  const absl::Status s = options_.compress ? stream_->Send(client::CompressRaw(frame.images), meta)
+                                           : stream_->Send(frame.images, meta);
   if (s.ok()) {
     stats_->Sent();
     return;
   }
   {
-    std::lock_guard<std::mutex> lock(headers_mu_);
-    headers_.erase(*meta.sequence);
+    std::lock_guard<std::mutex> lock(sent_mu_);
+    sent_.erase(*meta.sequence);
   }
   stats_->NotSent(s);
   if (s.code() == absl::StatusCode::kInvalidArgument) {
@@ -155,16 +150,16 @@ void CloudLink::OnResult(client::Result&& result) {
               std::string(result.status.message()).c_str());
     return;
   }
-  std_msgs::Header header;
+  SentFrame sent;
   bool known = false;
   {
     // Replies come in send order; frames the server skipped (delivery latest) are passed over.
-    std::lock_guard<std::mutex> lock(headers_mu_);
-    auto it = headers_.find(result.sequence);
-    if (it != headers_.end()) {
-      header = it->second;
+    std::lock_guard<std::mutex> lock(sent_mu_);
+    auto it = sent_.find(result.sequence);
+    if (it != sent_.end()) {
+      sent = std::move(it->second);
       known = true;
-      headers_.erase(headers_.begin(), std::next(it));
+      sent_.erase(sent_.begin(), std::next(it));
     }
   }
   stats_->StreamDropped(result.frames_dropped);
@@ -180,7 +175,7 @@ void CloudLink::OnResult(client::Result&& result) {
                       static_cast<unsigned long long>(result.sequence));
     return;
   }
-  on_cloud_(std::move(result), header);
+  on_cloud_(std::move(result), sent);
 }
 
 }  // namespace cloudcast::ros_bridge

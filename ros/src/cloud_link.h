@@ -21,10 +21,16 @@
 
 namespace cloudcast::ros_bridge {
 
+// What the bridge keeps of a frame it sent, for its reply.
+struct SentFrame {
+  std_msgs::Header header;  // the input's: the cloud gets its stamp and frame_id
+  CameraModel camera;       // the frame's camera (a DisparityImage's f and T)
+};
+
 class CloudLink {
  public:
-  // Called on the stream's receiver thread for each cloud, with its frame's header.
-  using CloudSink = std::function<void(client::Result&&, const std_msgs::Header&)>;
+  // Called on the stream's receiver thread for each cloud, with what was kept of its frame.
+  using CloudSink = std::function<void(client::Result&&, const SentFrame&)>;
 
   CloudLink(const BridgeOptions& options, BridgeStats* stats, CloudSink on_cloud);
   // Closes the stream: the replies still due are published for up to two seconds, then the
@@ -55,8 +61,8 @@ class CloudLink {
   std::chrono::steady_clock::time_point last_open_attempt_{};
   std::uint64_t next_sequence_ = 0;  // across streams, so that headers are never confused
 
-  std::mutex headers_mu_;
-  std::map<std::uint64_t, std_msgs::Header> headers_;  // frames sent and not answered
+  std::mutex sent_mu_;
+  std::map<std::uint64_t, SentFrame> sent_;  // frames sent and not answered
 };
 
 // The stream config a frame with `camera` is sent under: `base` (the parameters) plus the camera.

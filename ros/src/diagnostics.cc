@@ -63,6 +63,8 @@ void BridgeStats::Reply(const client::Result& r) {
   ++period_clouds_;
   const auto& t = r.reply.times();
   decode_.Add(t.decode_us() / 1000.0);
+  rectify_.Add(t.rectify_us() / 1000.0);
+  match_.Add(t.match_us() / 1000.0);
   pipeline_.Add(t.pipeline_us() / 1000.0);
   encode_.Add(t.encode_us() / 1000.0);
   queue_.Add(t.queue_us() / 1000.0);
@@ -92,6 +94,13 @@ void BridgeStats::StreamClosed() {
 void BridgeStats::Published() {
   std::lock_guard<std::mutex> lock(mu_);
   ++published_;
+}
+
+void BridgeStats::PublishError(const absl::Status& s) {
+  std::lock_guard<std::mutex> lock(mu_);
+  ++publish_errors_;
+  ++period_errors_;
+  last_error_ = s.ToString();
 }
 
 diagnostic_msgs::DiagnosticArray BridgeStats::Report(const ros::Time& stamp,
@@ -125,11 +134,13 @@ diagnostic_msgs::DiagnosticArray BridgeStats::Report(const ros::Time& stamp,
   Add(&s, "clouds", std::to_string(clouds_));
   Add(&s, "frame_errors", std::to_string(frame_errors_));
   Add(&s, "clouds_published", std::to_string(published_));
+  Add(&s, "publish_errors", std::to_string(publish_errors_));
   Add(&s, "frames_dropped", std::to_string(dropped_before_ + dropped_now_));
   Add(&s, "reconnects", std::to_string(reconnects_));
   const double n = static_cast<double>(period_clouds_);
   const std::pair<const char*, Stage*> stages[] = {
-      {"decode_ms", &decode_},         {"pipeline_ms", &pipeline_},
+      {"decode_ms", &decode_},         {"rectify_ms", &rectify_},
+      {"match_ms", &match_},           {"pipeline_ms", &pipeline_},
       {"encode_ms", &encode_},         {"queue_ms", &queue_},
       {"round_trip_ms", &round_trip_}, {"bridge_decode_ms", &bridge_decode_}};
   for (const auto& [key, stage] : stages) {
@@ -143,8 +154,8 @@ diagnostic_msgs::DiagnosticArray BridgeStats::Report(const ros::Time& stamp,
   array.status.push_back(std::move(s));
 
   period_clouds_ = period_errors_ = period_sent_ = 0;
-  decode_ = pipeline_ = encode_ = queue_ = round_trip_ = bridge_decode_ = points_ = draco_bytes_ =
-      Stage{};
+  decode_ = rectify_ = match_ = pipeline_ = encode_ = queue_ = round_trip_ = bridge_decode_ =
+      points_ = draco_bytes_ = Stage{};
   period_start_ = stamp;
   return array;
 }

@@ -1,6 +1,6 @@
 // What the bridge reports on /diagnostics: its counters and the per-stage times of the replies
-// (the server's decode, pipeline, encode and queue times, the round trip, the bridge's own Draco
-// decode), as means and maxima over each diagnostics period.
+// (the server's decode, rectify and match (stereo pairs), pipeline, encode and queue times, the
+// round trip, the bridge's own Draco decode), as means and maxima over each diagnostics period.
 #pragma once
 
 #include <diagnostic_msgs/DiagnosticArray.h>
@@ -28,6 +28,7 @@ class BridgeStats {
   void Reconnected();
   void StreamClosed();  // the stream ended: its drops are added to those of the streams before
   void Published();     // a PointCloud2 went out
+  void PublishError(const absl::Status& s);  // a reply's extra (the disparity map) was unusable
 
   // The report for the period since the previous one (which it starts anew). `name` is the
   // status's name, `hardware_id` the server target.
@@ -45,14 +46,15 @@ class BridgeStats {
   std::mutex mu_;
   // Totals since start.
   std::uint64_t frames_in_ = 0, input_errors_ = 0, frames_sent_ = 0, not_sent_ = 0;
-  std::uint64_t clouds_ = 0, frame_errors_ = 0, published_ = 0;
+  std::uint64_t clouds_ = 0, frame_errors_ = 0, published_ = 0, publish_errors_ = 0;
   std::uint64_t dropped_before_ = 0, dropped_now_ = 0;
   std::uint64_t reconnects_ = 0;
   std::string last_error_;
   bool link_down_ = false;  // the last send found no stream
   // This period.
   std::uint64_t period_clouds_ = 0, period_errors_ = 0, period_sent_ = 0;
-  Stage decode_, pipeline_, encode_, queue_, round_trip_, bridge_decode_, points_, draco_bytes_;
+  Stage decode_, rectify_, match_, pipeline_, encode_, queue_, round_trip_, bridge_decode_, points_,
+      draco_bytes_;
   float position_error_bound_ = 0;
   ros::Time period_start_;
 };

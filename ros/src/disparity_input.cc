@@ -7,6 +7,7 @@
 #include <limits>
 
 #include "absl/strings/str_cat.h"
+#include "image_messages.h"
 
 namespace cloudcast::ros_bridge {
 namespace {
@@ -16,26 +17,6 @@ namespace enc = sensor_msgs::image_encodings;
 absl::Status Invalid(const std::string& message) { return absl::InvalidArgumentError(message); }
 
 bool FinitePositive(double v) { return std::isfinite(v) && v > 0; }
-
-// Width, height, step and data size of a sensor_msgs/Image of `bytes_per_pixel`.
-absl::Status CheckLayout(const sensor_msgs::Image& image, std::size_t bytes_per_pixel,
-                         const std::string& field) {
-  if (image.width == 0 || image.height == 0) {
-    return Invalid(
-        absl::StrCat(field, " is ", image.width, "x", image.height, "; must be at least 1x1"));
-  }
-  const std::size_t row = std::size_t{image.width} * bytes_per_pixel;
-  if (image.step < row) {
-    return Invalid(absl::StrCat(field, ".step is ", image.step, ", less than width x ",
-                                bytes_per_pixel, " = ", row));
-  }
-  const std::size_t needed = std::size_t{image.step} * (image.height - 1) + row;
-  if (image.data.size() < needed) {
-    return Invalid(absl::StrCat(field, ".data holds ", image.data.size(), " bytes; ", image.width,
-                                "x", image.height, " with step ", image.step, " needs ", needed));
-  }
-  return absl::OkStatus();
-}
 
 }  // namespace
 
@@ -48,35 +29,15 @@ absl::StatusOr<CameraModel> CameraFromDisparity(const stereo_msgs::DisparityImag
     return Invalid(absl::StrCat("disparity.T is ", disparity.T,
                                 "; must be finite and > 0 (the stereo baseline)"));
   }
-  const auto& P = info.P;
-  if (P[0] == 0 && P[5] == 0) {
-    return Invalid("left/camera_info.P is all zero: the camera is not calibrated");
-  }
-  if (!FinitePositive(P[0]) || !FinitePositive(P[5])) {
-    return Invalid(absl::StrCat("left/camera_info.P has fx = ", P[0], ", fy = ", P[5],
-                                "; both must be finite and > 0"));
-  }
-  if (!std::isfinite(P[2]) || !std::isfinite(P[6])) {
-    return Invalid(absl::StrCat("left/camera_info.P has cx = ", P[2], ", cy = ", P[6],
-                                "; both must be finite"));
-  }
-  // A binned or cropped CameraInfo describes another pixel grid than the disparity's.
-  if (info.binning_x > 1 || info.binning_y > 1 || info.roi.width != 0 || info.roi.height != 0) {
-    return Invalid(absl::StrCat("left/camera_info has binning ", info.binning_x, "x",
-                                info.binning_y, " and roi ", info.roi.width, "x", info.roi.height,
-                                "; binning and regions of interest are not supported"));
-  }
   const sensor_msgs::Image& image = disparity.image;
-  if (info.width != 0 && (info.width != image.width || info.height != image.height)) {
-    return Invalid(absl::StrCat("left/camera_info is ", info.width, "x", info.height,
-                                " but disparity.image is ", image.width, "x", image.height,
-                                "; they must describe the same pixels"));
-  }
+  auto pinhole =
+      PinholeFromInfo(info, "left/camera_info", image.width, image.height, "disparity.image");
+  if (!pinhole.ok()) return pinhole.status();
   CameraModel camera;
-  camera.fx = P[0];
-  camera.fy = P[5];
-  camera.cx = P[2];
-  camera.cy = P[6];
+  camera.fx = pinhole->fx;
+  camera.fy = pinhole->fy;
+  camera.cx = pinhole->cx;
+  camera.cy = pinhole->cy;
   // z = fx * baseline / d must be the message's f T / d (f is the right camera's fx in
   // stereo_image_proc, equal to the left one's after rectification, but not necessarily).
   camera.baseline = static_cast<double>(disparity.f) * disparity.T / camera.fx;
@@ -85,40 +46,6 @@ absl::StatusOr<CameraModel> CameraFromDisparity(const stereo_msgs::DisparityImag
   camera.invalid_disparities = {};  // MaskedDisparity has made them NaN
   if (absl::Status s = camera.Validate("disparity camera"); !s.ok()) return s;
   return camera;
-}
-
-absl::StatusOr<client::ColorInput> ColourFromImage(const sensor_msgs::Image& image,
-                                                   const std::string& topic) {
-  ColorEncoding encoding;
-  bool bgra = false;
-  if (image.encoding == enc::RGB8) {
-    encoding = ColorEncoding::kRGB8;
-  } else if (image.encoding == enc::BGR8) {
-    encoding = ColorEncoding::kBGR8;
-  } else if (image.encoding == enc::RGBA8) {
-    encoding = ColorEncoding::kRGBA8;
-  } else if (image.encoding == enc::MONO8) {
-    encoding = ColorEncoding::kMono8;
-  } else if (image.encoding == enc::BGRA8) {
-    encoding = ColorEncoding::kRGBA8;  // four bytes a pixel, for the layout check only
-    bgra = true;
-  } else {
-    return Invalid(absl::StrCat(topic, ".encoding is '", image.encoding,
-                                "'; the bridge takes rgb8, bgr8, rgba8, bgra8 or mono8"));
-  }
-  if (absl::Status s = CheckLayout(image, BytesPerPixel(encoding), topic); !s.ok()) return s;
-  if (bgra) {
-    return client::ColorInput(client::BgraView{image.data.data(), image.data.size(), image.width,
-                                               image.height, image.step});
-  }
-  ColorView view;
-  view.data = image.data.data();
-  view.size_bytes = image.data.size();
-  view.width = image.width;
-  view.height = image.height;
-  view.stride_bytes = image.step;
-  view.encoding = encoding;
-  return client::ColorInput(view);
 }
 
 absl::StatusOr<DisparityView> MaskedDisparity(const stereo_msgs::DisparityImage& disparity,
@@ -166,16 +93,15 @@ absl::Status ToFrame(const stereo_msgs::DisparityImage& disparity, const sensor_
   if (!camera.ok()) return camera.status();
   auto masked = MaskedDisparity(disparity, buffer);
   if (!masked.ok()) return masked.status();
-  if (colour.width != disparity.image.width || colour.height != disparity.image.height) {
-    return Invalid(absl::StrCat("left/image_rect_color is ", colour.width, "x", colour.height,
-                                " but disparity.image is ", disparity.image.width, "x",
-                                disparity.image.height, "; they must be the same size"));
+  if (absl::Status s =
+          CheckSameSize(disparity.image, "disparity.image", colour, "left/image_rect_color");
+      !s.ok()) {
+    return s;
   }
   auto view = ColourFromImage(colour, "left/image_rect_color");
   if (!view.ok()) return view.status();
   frame->camera = *std::move(camera);
-  frame->disparity = *masked;
-  frame->colour = *view;
+  frame->images = client::DisparityFrame{*masked, *view};
   frame->header = disparity.header;
   return absl::OkStatus();
 }

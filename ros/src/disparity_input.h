@@ -23,6 +23,7 @@
 #include "absl/status/statusor.h"
 #include "cloudcast/client/frame.h"
 #include "cloudcast/core/camera.h"
+#include "image_messages.h"
 #include "input_source.h"
 
 namespace cloudcast::ros_bridge {
@@ -32,11 +33,6 @@ namespace cloudcast::ros_bridge {
 // finite and positive.
 absl::StatusOr<CameraModel> CameraFromDisparity(const stereo_msgs::DisparityImage& disparity,
                                                 const sensor_msgs::CameraInfo& info);
-
-// A view of a colour image (rgb8, bgr8, rgba8, bgra8, mono8); other encodings are
-// INVALID_ARGUMENT naming `topic`'s encoding field. The view points into `image`.
-absl::StatusOr<client::ColorInput> ColourFromImage(const sensor_msgs::Image& image,
-                                                   const std::string& topic);
 
 // The disparities of `disparity` (32FC1, little endian) with every invalid value (below
 // min_disparity, or not finite) replaced by NaN, in `buffer` (reused from frame to frame): the one

@@ -1,6 +1,7 @@
 // One kind of camera input: its subscribers, their time synchronization, and the conversion of
-// each synchronized set of messages into a frame for the client library. The disparity input is
-// disparity_input.h; the depth and stereo-pair inputs will be two more classes like it.
+// each synchronized set of messages into a frame for the client library. Three classes like it:
+// disparity_input.h (stereo_msgs/DisparityImage), depth_input.h (a depth image) and
+// stereo_input.h (a rectified stereo pair, matched on the server).
 #pragma once
 
 #include <message_filters/subscriber.h>
@@ -27,10 +28,9 @@ namespace cloudcast::ros_bridge {
 // A frame ready for Stream::Send. The views point into the ROS messages (or a buffer of the
 // input), valid during the sink call only.
 struct OutgoingFrame {
-  client::DisparityInput disparity;
-  client::ColorInput colour;
-  CameraModel camera;       // this frame's camera, in cloudcast's model
-  std_msgs::Header header;  // the stamp and frame_id the cloud gets
+  client::FrameInput images;  // a DisparityFrame, DepthFrame or StereoFrame
+  CameraModel camera;         // this frame's camera, in cloudcast's model
+  std_msgs::Header header;    // the stamp and frame_id the cloud gets
 };
 
 class InputSource {

@@ -1,8 +1,9 @@
 """Processes for the ROS bridge's tests and benchmark, all on 127.0.0.1.
 
 A private ROS master on a free port (rosmaster from Debian), a cloudcast-server, the bridge,
-Debian's stereo_image_proc nodelets and the New Tsukuba publisher, each a child process with its
-log in a scratch folder, stopped (SIGINT, then SIGKILL) when the harness closes.
+Debian's stereo_image_proc and depth_image_proc nodelets and the New Tsukuba publisher, each a
+child process with its log in a scratch folder, stopped (SIGINT, then SIGKILL) when the harness
+closes.
 
 Network: everything talks to 127.0.0.1 (ROS_IP=127.0.0.1, ROS_MASTER_URI=http://127.0.0.1:PORT),
 but roscpp's and rospy's TCPROS servers bind 0.0.0.0 whatever ROS_IP says (the master's XML-RPC
@@ -41,6 +42,16 @@ def ros_missing():
         import cv2  # noqa: F401
     except ImportError as e:
         return f"a Python module is missing: {e} (python3-rospy, python3-sensor-msgs, ...)"
+    return None
+
+
+def nodelet_missing(package):
+    """Why `package`'s nodelets (stereo_image_proc, depth_image_proc) cannot load, or None."""
+    xml = f"/usr/share/{package}/nodelet_plugins.xml"
+    if not os.path.exists(xml):
+        dev = {"stereo_image_proc": "libstereo-image-proc-dev",
+               "depth_image_proc": "libdepth-image-proc-dev"}.get(package, package)
+        return f"{package}'s nodelet XML is missing ({dev}; ./scripts/setup)"
     return None
 
 
@@ -193,12 +204,17 @@ class Harness:
                 f"__ns:={namespace}"] + [f"{a}:={b}" for a, b in remaps.items()]
         return self.start(log or name, argv), node
 
-    def start_point_cloud2(self, name="point_cloud2", namespace="/stereo", params=None):
+    def start_nodelet(self, kind, name, namespace, params=None, remaps=None):
+        """`kind` (e.g. depth_image_proc/point_cloud_xyzrgb) as a standalone nodelet, node
+        `namespace`/`name`, its private parameters set first, its topics remapped by `remaps`."""
         node = f"{namespace}/{name}"
         self.set_params(node, params or {})
-        argv = [NODELET, "standalone", "stereo_image_proc/point_cloud2", f"__name:={name}",
-                f"__ns:={namespace}"]
+        argv = [NODELET, "standalone", kind, f"__name:={name}", f"__ns:={namespace}"]
+        argv += [f"{a}:={b}" for a, b in (remaps or {}).items()]
         return self.start(name, argv), node
+
+    def start_point_cloud2(self, name="point_cloud2", namespace="/stereo", params=None):
+        return self.start_nodelet("stereo_image_proc/point_cloud2", name, namespace, params)
 
     def close(self):
         for p in reversed(self.processes):

@@ -1,6 +1,8 @@
 // The bridge's conversions, without a master: DisparityImage + CameraInfo to the camera model,
-// the invalid-disparity mask, colour views, the PointCloud2 layout, the stream config, the
-// diagnostics and the --help text. The node against a real master: ros_bridge_test.py.
+// the invalid-disparity mask, colour views, depth images and stereo pairs to frames, the server's
+// disparity map back to a DisparityImage, the PointCloud2 layout, the stream config, the
+// diagnostics and the --help text. The node against a real master: ros_bridge_test.py,
+// ros_depth_test.py and ros_stereo_test.py.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -8,15 +10,20 @@
 #include <functional>
 #include <limits>
 #include <map>
+#include <optional>
 #include <string>
 #include <variant>
 #include <vector>
 
 #include "bridge_options.h"
 #include "cloud_link.h"
+#include "cloudcast/proto/convert.h"
+#include "depth_input.h"
 #include "diagnostics.h"
 #include "disparity_input.h"
+#include "disparity_output.h"
 #include "point_cloud2.h"
+#include "stereo_input.h"
 
 namespace cloudcast::ros_bridge {
 namespace {
@@ -196,7 +203,233 @@ TEST(ToFrame, KeepsTheDisparitysHeader) {
   ASSERT_TRUE(ToFrame(d, Colour("rgb8", 3), TsukubaInfo(), &buffer, &frame).ok());
   EXPECT_EQ(frame.header.frame_id, "left_optical");
   EXPECT_EQ(frame.header.stamp, ros::Time(1234, 5678));
-  EXPECT_NE(std::get_if<DisparityView>(&frame.disparity), nullptr);
+  const auto* images = std::get_if<client::DisparityFrame>(&frame.images);
+  ASSERT_NE(images, nullptr);
+  EXPECT_NE(std::get_if<DisparityView>(&images->disparity), nullptr);
+}
+
+// A 4x2 depth image of `encoding` ("16UC1" or "32FC1") with these values, rows `step` apart.
+template <typename T>
+sensor_msgs::Image Depth(const std::string& encoding, const std::vector<T>& values,
+                         std::uint32_t step = 4 * sizeof(T)) {
+  sensor_msgs::Image d;
+  d.width = 4;
+  d.height = 2;
+  d.encoding = encoding;
+  d.step = step;
+  d.header.frame_id = "rgb_optical";
+  d.data.assign(step * 2, 0xEE);
+  for (int v = 0; v < 2; ++v) {
+    std::memcpy(d.data.data() + v * step, values.data() + v * 4, 4 * sizeof(T));
+  }
+  return d;
+}
+
+TEST(CameraFromDepth, TakesPLikeImageGeometryAndKWhenPIsZero) {
+  const auto depth = Depth<std::uint16_t>("16UC1", std::vector<std::uint16_t>(8, 1000));
+  auto info = TsukubaInfo();
+  info.K = {600, 0, 319.5, 0, 601, 239.5, 0, 0, 1};
+  auto camera = CameraFromDepth(depth, info, std::nullopt);
+  ASSERT_TRUE(camera.ok()) << camera.status();
+  EXPECT_EQ(camera->fx, 615);  // P, as depth_image_proc's image_geometry model reads it
+  EXPECT_EQ(camera->fy, 610);
+  EXPECT_EQ(camera->cx, 320);
+  EXPECT_FALSE(camera->depth_scale.has_value());  // REP 118's, resolved by the server
+  info.P = {};
+  camera = CameraFromDepth(depth, info, 0.002);
+  ASSERT_TRUE(camera.ok()) << camera.status();
+  EXPECT_EQ(camera->fx, 600);
+  EXPECT_EQ(camera->fy, 601);
+  EXPECT_EQ(camera->cx, 319.5);
+  EXPECT_EQ(camera->cy, 239.5);
+  EXPECT_EQ(camera->depth_scale, 0.002);
+  info.K = {};
+  camera = CameraFromDepth(depth, info, std::nullopt);
+  ASSERT_FALSE(camera.ok());
+  EXPECT_EQ(camera.status().message(),
+            "rgb/camera_info.P and K are all zero: the camera is not calibrated");
+}
+
+TEST(CameraFromDepth, RefusesACameraInfoOfAnotherSize) {
+  auto info = TsukubaInfo();
+  info.width = 640;
+  info.height = 480;
+  auto camera = CameraFromDepth(Depth<float>("32FC1", std::vector<float>(8, 1)), info, {});
+  ASSERT_FALSE(camera.ok());
+  EXPECT_EQ(camera.status().message(),
+            "rgb/camera_info is 640x480 but depth_registered/image_rect is 4x2; they must describe "
+            "the same pixels");
+}
+
+TEST(DepthFromImage, ViewsTheMessagesPixelsWithoutACopy) {
+  // Rows 11 bytes apart: not 2-byte aligned, as a ROS message may lay them out.
+  const auto u16 = Depth<std::uint16_t>("16UC1", {0, 1, 2, 3, 4, 5, 6, 7}, 11);
+  auto view = DepthFromImage(u16);
+  ASSERT_TRUE(view.ok()) << view.status();
+  EXPECT_EQ(view->encoding, DepthEncoding::kU16);
+  EXPECT_EQ(view->data, u16.data.data());
+  EXPECT_EQ(view->stride_bytes, 11u);
+  EXPECT_EQ(view->size_bytes, 22u);
+  const auto f32 = Depth<float>("32FC1", std::vector<float>(8, 1.5f));
+  view = DepthFromImage(f32);
+  ASSERT_TRUE(view.ok()) << view.status();
+  EXPECT_EQ(view->encoding, DepthEncoding::kF32);
+}
+
+TEST(DepthFromImage, ErrorsNameTheField) {
+  auto d = Depth<std::uint16_t>("mono16", std::vector<std::uint16_t>(8, 1));
+  auto view = DepthFromImage(d);
+  ASSERT_FALSE(view.ok());
+  EXPECT_EQ(view.status().message(),
+            "depth_registered/image_rect.encoding is 'mono16'; must be 16UC1 (millimetres) or "
+            "32FC1 (metres), REP 118");
+  d.encoding = "16UC1";
+  d.is_bigendian = 1;
+  view = DepthFromImage(d);
+  ASSERT_FALSE(view.ok());
+  EXPECT_NE(view.status().message().find("depth_registered/image_rect.is_bigendian is 1"),
+            std::string::npos);
+  d.is_bigendian = 0;
+  d.step = 6;
+  view = DepthFromImage(d);
+  ASSERT_FALSE(view.ok());
+  EXPECT_EQ(view.status().message(),
+            "depth_registered/image_rect.step is 6, less than width x 2 = 8");
+}
+
+TEST(ToDepthFrame, MakesADepthFrameWithTheDepthsHeader) {
+  auto depth = Depth<float>("32FC1", std::vector<float>(8, 2));
+  depth.header.stamp = ros::Time(12, 34);
+  auto colour = Colour("rgb8", 3);
+  colour.header.frame_id = "rgb_optical";
+  OutgoingFrame frame;
+  ASSERT_TRUE(ToDepthFrame(depth, colour, TsukubaInfo(), 1.0, &frame).ok());
+  EXPECT_EQ(frame.header.stamp, ros::Time(12, 34));
+  EXPECT_EQ(frame.camera.depth_scale, 1.0);
+  const auto* images = std::get_if<client::DepthFrame>(&frame.images);
+  ASSERT_NE(images, nullptr);
+  const auto* view = std::get_if<DepthView>(&images->depth);
+  ASSERT_NE(view, nullptr);
+  EXPECT_EQ(view->data, depth.data.data());
+  EXPECT_NE(std::get_if<ColorView>(&images->colour), nullptr);
+}
+
+TEST(ToDepthFrame, RefusesAnotherFrameIdOrSize) {
+  const auto depth = Depth<float>("32FC1", std::vector<float>(8, 2));
+  auto colour = Colour("bgr8", 3);
+  colour.header.frame_id = "depth_optical";
+  OutgoingFrame frame;
+  EXPECT_EQ(ToDepthFrame(depth, colour, TsukubaInfo(), {}, &frame).message(),
+            "rgb/image_rect_color.header.frame_id is 'depth_optical' but "
+            "depth_registered/image_rect's is 'rgb_optical'; the depth image must be registered "
+            "to the colour camera");
+  colour.header.frame_id = "rgb_optical";
+  colour.height = 1;
+  EXPECT_EQ(ToDepthFrame(depth, colour, TsukubaInfo(), {}, &frame).message(),
+            "rgb/image_rect_color is 4x1 but depth_registered/image_rect is 4x2; they must be the "
+            "same size");
+}
+
+sensor_msgs::CameraInfo RightInfo(double tx) {
+  auto info = TsukubaInfo();
+  info.P[3] = tx;
+  return info;
+}
+
+TEST(CameraFromStereo, TakesTheBaselineFromTheRightP) {
+  auto camera = CameraFromStereo(TsukubaInfo(), RightInfo(-615 * 0.1), 4, 2);
+  ASSERT_TRUE(camera.ok()) << camera.status();
+  EXPECT_EQ(camera->fx, 615);
+  EXPECT_EQ(camera->fy, 610);
+  EXPECT_EQ(camera->cx, 320);
+  EXPECT_EQ(camera->cy, 240);
+  EXPECT_DOUBLE_EQ(camera->baseline, 0.1);
+  EXPECT_TRUE(camera->invalid_disparities.empty());
+}
+
+TEST(CameraFromStereo, ErrorsNameTheField) {
+  auto camera = CameraFromStereo(TsukubaInfo(), RightInfo(0), 4, 2);
+  ASSERT_FALSE(camera.ok());
+  EXPECT_EQ(camera.status().message(),
+            "right/camera_info.P[3] (Tx = -fx * baseline) is 0; must be finite and < 0 (the right "
+            "camera of the pair)");
+  auto right = RightInfo(-61.5);
+  right.P[2] = 330;  // stereo_image_proc would shift the disparities by cx - cx'
+  camera = CameraFromStereo(TsukubaInfo(), right, 4, 2);
+  ASSERT_FALSE(camera.ok());
+  EXPECT_NE(camera.status().message().find(
+                "right/camera_info.P has cx = 330 but left/camera_info.P has 320"),
+            std::string::npos)
+      << camera.status().message();
+  right = RightInfo(-61.5);
+  right.P = {};
+  camera = CameraFromStereo(TsukubaInfo(), right, 4, 2);
+  ASSERT_FALSE(camera.ok());
+  EXPECT_EQ(camera.status().message(),
+            "right/camera_info.P is all zero: the camera is not calibrated");
+}
+
+TEST(ToStereoFrame, TakesAColourLeftAndAMonoRight) {
+  auto left = Colour("bgr8", 3);
+  left.header.frame_id = "left_optical";
+  left.header.stamp = ros::Time(5, 6);
+  const auto right = Colour("mono8", 1);
+  OutgoingFrame frame;
+  ASSERT_TRUE(ToStereoFrame(left, right, TsukubaInfo(), RightInfo(-61.5), &frame).ok());
+  EXPECT_EQ(frame.header.frame_id, "left_optical");
+  EXPECT_EQ(frame.header.stamp, ros::Time(5, 6));
+  const auto* images = std::get_if<client::StereoFrame>(&frame.images);
+  ASSERT_NE(images, nullptr);
+  EXPECT_EQ(std::get<ColorView>(images->left).encoding, ColorEncoding::kBGR8);
+  EXPECT_EQ(std::get<ColorView>(images->right).encoding, ColorEncoding::kMono8);
+  auto small = Colour("mono8", 1);
+  small.width = 2;
+  small.step = 2;
+  EXPECT_EQ(ToStereoFrame(left, small, TsukubaInfo(), RightInfo(-61.5), &frame).message(),
+            "right/image_rect is 2x2 but left/image_rect_color is 4x2; they must be the same size");
+}
+
+TEST(ToDisparityImage, IsStereoImageProcsMessageFromTheServersFixedPoint) {
+  // The server's map: 1/16 pixels, 0 where nothing matched.
+  const std::vector<std::uint16_t> raw = {0, 16, 24, 1234, 2336, 0, 17, 65535};
+  DisparityView view;
+  view.data = raw.data();
+  view.size_bytes = raw.size() * 2;
+  view.width = 4;
+  view.height = 2;
+  view.stride_bytes = 8;
+  view.encoding = DisparityEncoding::kU16;
+  v1::CompressedDisparity compressed;
+  ASSERT_TRUE(convert::ToProto(view, convert::Compression{}, "test", &compressed).ok());
+  std_msgs::Header header;
+  header.frame_id = "left_optical";
+  header.stamp = ros::Time(9, 10);
+  CameraModel camera;
+  camera.fx = 615;
+  camera.baseline = 0.1;
+  PlaneDecompressor decompressor;
+  stereo_msgs::DisparityImage msg;
+  ASSERT_TRUE(ToDisparityImage(compressed, header, camera, {4, 160}, &decompressor, &msg).ok());
+  EXPECT_EQ(msg.header.frame_id, "left_optical");
+  EXPECT_EQ(msg.image.header.stamp, ros::Time(9, 10));
+  EXPECT_EQ(msg.f, 615.0f);
+  EXPECT_EQ(msg.T, 0.1f);
+  EXPECT_EQ(msg.min_disparity, 4.0f);
+  EXPECT_EQ(msg.max_disparity, 163.0f);
+  EXPECT_EQ(msg.delta_d, 1.0f / 16);
+  EXPECT_EQ(msg.image.encoding, "32FC1");
+  EXPECT_EQ(msg.image.step, 16u);
+  ASSERT_EQ(msg.image.data.size(), 32u);
+  std::vector<float> d(8);
+  std::memcpy(d.data(), msg.image.data.data(), 32);
+  const std::vector<float> expected = {3, 1, 1.5f, 77.125f, 146, 3, 1.0625f, 4095.9375f};
+  EXPECT_EQ(d, expected);  // no match: min_disparity - 1, below the message's valid range
+  // A map that is not the server's 16-bit one is refused, naming it.
+  view.encoding = DisparityEncoding::kU8;
+  view.stride_bytes = 4;
+  ASSERT_TRUE(convert::ToProto(view, convert::Compression{}, "test", &compressed).ok());
+  auto s = ToDisparityImage(compressed, header, camera, {4, 160}, &decompressor, &msg);
+  EXPECT_NE(s.message().find("reply.disparity is u8"), std::string::npos) << s.message();
 }
 
 TEST(ToPointCloud2, IsCloudcastsPointWithPclsPackedRgbAndNoAlpha) {
@@ -252,6 +485,11 @@ TEST(ConfigFor, AddsTheCameraToTheParameters) {
   EXPECT_TRUE(SameCamera(camera, other));
   other.cy += 1;
   EXPECT_FALSE(SameCamera(camera, other));
+  other = camera;
+  other.depth_scale = 0.001;
+  EXPECT_FALSE(SameCamera(camera, other));  // a new ~depth_scale reconfigures the stream
+  EXPECT_EQ(ConfigFor(base, other).camera().depth_scale(), 0.001);
+  EXPECT_FALSE(config.camera().has_depth_scale());
 }
 
 TEST(BridgeStats, ReportsTheReplysStageTimesAndCounters) {
@@ -260,6 +498,8 @@ TEST(BridgeStats, ReportsTheReplysStageTimesAndCounters) {
   stats.Sent();
   client::Result r;
   r.reply.mutable_times()->set_decode_us(1000);
+  r.reply.mutable_times()->set_rectify_us(300);
+  r.reply.mutable_times()->set_match_us(20000);
   r.reply.mutable_times()->set_pipeline_us(2500);
   r.reply.mutable_times()->set_encode_us(500);
   r.reply.mutable_times()->set_queue_us(250);
@@ -280,6 +520,8 @@ TEST(BridgeStats, ReportsTheReplysStageTimesAndCounters) {
   std::map<std::string, std::string> v;
   for (const auto& kv : s.values) v[kv.key] = kv.value;
   EXPECT_EQ(v["decode_ms_mean"], "1.000");
+  EXPECT_EQ(v["rectify_ms_mean"], "0.300");
+  EXPECT_EQ(v["match_ms_mean"], "20.000");
   EXPECT_EQ(v["pipeline_ms_mean"], "2.500");
   EXPECT_EQ(v["encode_ms_mean"], "0.500");
   EXPECT_EQ(v["queue_ms_mean"], "0.250");
@@ -300,7 +542,10 @@ TEST(HelpText, ListsEveryParameter) {
   for (const ParamDoc& d : ParamDocs()) {
     EXPECT_NE(help.find("~" + d.name + " ("), std::string::npos) << d.name;
   }
-  EXPECT_NE(help.find("points2"), std::string::npos);
+  for (const char* topic : {"points2", "depth_registered/image_rect", "rgb/camera_info",
+                            "right/image_rect", "right/camera_info", "DisparityImage"}) {
+    EXPECT_NE(help.find(topic), std::string::npos) << topic;
+  }
   EXPECT_NE(help.find("/diagnostics"), std::string::npos);
 }
 

@@ -16,12 +16,11 @@ import argparse
 import os
 import subprocess
 import sys
-import threading
-import time
 import unittest
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "testing"))
 import ros_harness  # noqa: E402
+from ros_clouds import Collector, cloud_arrays, diag_values, stamp_ns  # noqa: E402
 
 ARGS = None
 # 00001 and 01200 have no invalid pixel (01200 spans d = 6..146); 00600 and 01400 have 447 and 645
@@ -38,47 +37,6 @@ BRIDGE_PARAMS = {
     "draco/decode_speed": 10,
     "diagnostics_period": 0.5,
 }
-
-
-def cloud_arrays(msg):
-    """x, y, z (float32) and rgb (uint32) of a PointCloud2, by its field offsets."""
-    import numpy as np
-    offsets = {f.name: f.offset for f in msg.fields}
-    dtype = np.dtype({"names": ["x", "y", "z", "rgb"],
-                      "formats": ["<f4", "<f4", "<f4", "<u4"],
-                      "offsets": [offsets["x"], offsets["y"], offsets["z"], offsets["rgb"]],
-                      "itemsize": msg.point_step})
-    points = np.frombuffer(bytes(msg.data), dtype=dtype, count=msg.width * msg.height)
-    xyz = np.stack([points["x"], points["y"], points["z"]], axis=1)
-    return xyz, points["rgb"].copy()
-
-
-class Collector:
-    """Messages of one topic, by header stamp (nanoseconds)."""
-
-    def __init__(self, topic, msg_type):
-        import rospy
-        self.lock = threading.Lock()
-        self.by_stamp = {}
-        self.all = []
-        self.sub = rospy.Subscriber(topic, msg_type, self._cb, queue_size=100)
-
-    def _cb(self, msg):
-        with self.lock:
-            self.all.append(msg)
-            if hasattr(msg, "header"):
-                self.by_stamp[msg.header.stamp.to_nsec()] = msg
-
-    def wait_for(self, stamps, timeout):
-        ros_harness.wait_until(lambda: all(s in self.by_stamp for s in stamps), timeout,
-                               f"messages stamped {sorted(stamps)} (have "
-                               f"{sorted(self.by_stamp)})")
-        with self.lock:
-            return [self.by_stamp[s] for s in stamps]
-
-
-def stamp_ns(base, k):
-    return (base + k) * 1_000_000_000
 
 
 class RosBridgeTest(unittest.TestCase):
@@ -150,10 +108,7 @@ class RosBridgeTest(unittest.TestCase):
         return d, bridge, nodelet
 
     def diag_values(self):
-        with self.diagnostics.lock:
-            msgs = [m for m in self.diagnostics.all
-                    if m.status and m.status[0].name.startswith(self.bridge_node)]
-        return [{kv.key: kv.value for kv in m.status[0].values} for m in msgs]
+        return diag_values(self.diagnostics, self.bridge_node)
 
     def test_1_clouds_equal_stereo_image_procs_point_for_point(self):
         import numpy as np
@@ -233,8 +188,7 @@ class RosBridgeTest(unittest.TestCase):
         live = self.bridge_clouds.wait_for(stamps, 30)
         recorder.stop()
         ros_harness.wait_until(lambda: os.path.exists(bag), 10, "rosbag record to close " + bag)
-        with self.bridge_clouds.lock:
-            self.bridge_clouds.by_stamp.clear()
+        self.bridge_clouds.clear()
         player = self.h.start("rosbag_play", ["rosbag", "play", "--wait-for-subscribers",
                                               "--rate", "2", bag, "__name:=player"])
         try:
@@ -258,7 +212,19 @@ class RosBridgeTest(unittest.TestCase):
                                 ({"delivery": "sometimes"}, "~delivery is 'sometimes'"),
                                 ({"queue_size": "five"}, "~queue_size is"),
                                 ({"token_file": "/nonexistent/token"}, "~token_file: "),
-                                ({"input": "depth"}, "~input is 'depth'")):
+                                ({"input": "lidar"},
+                                 "~input is 'lidar'; must be disparity, depth or stereo"),
+                                ({"depth_scale": 0.001},
+                                 "~depth_scale is set but ~input is 'disparity'"),
+                                ({"stereo/matcher": "sgm"},
+                                 "~stereo/matcher is set but ~input is 'disparity'"),
+                                ({"input": "depth", "depth_scale": -1.0},
+                                 "~depth_scale is -1; must be finite and > 0"),
+                                ({"input": "stereo", "stereo/num_disparities": 100},
+                                 "stereo.num_disparities is 100; it must be a positive multiple "
+                                 "of 16"),
+                                ({"input": "stereo", "stereo/matcher": "census"},
+                                 "~stereo/matcher is 'census'; must be one of sgm, sgbm")):
             with self.subTest(params=params):
                 name = "bad_bridge_%d" % len(self.h.processes)
                 p, _ = self.h.start_bridge(name, dict(params, server=self.server), {})

@@ -1,0 +1,61 @@
+"""What the bridge's ROS tests share: collecting messages by stamp, reading a PointCloud2 into
+arrays, the publisher's stamps and the bridge's /diagnostics values."""
+
+import threading
+
+import ros_harness
+
+
+def cloud_arrays(msg):
+    """x, y, z (float32, n x 3) and rgb (uint32) of a PointCloud2, by its field offsets."""
+    import numpy as np
+    offsets = {f.name: f.offset for f in msg.fields}
+    dtype = np.dtype({"names": ["x", "y", "z", "rgb"],
+                      "formats": ["<f4", "<f4", "<f4", "<u4"],
+                      "offsets": [offsets["x"], offsets["y"], offsets["z"], offsets["rgb"]],
+                      "itemsize": msg.point_step})
+    points = np.frombuffer(bytes(msg.data), dtype=dtype, count=msg.width * msg.height)
+    xyz = np.stack([points["x"], points["y"], points["z"]], axis=1)
+    return xyz, points["rgb"].copy()
+
+
+class Collector:
+    """Messages of one topic, by header stamp (nanoseconds)."""
+
+    def __init__(self, topic, msg_type):
+        import rospy
+        self.lock = threading.Lock()
+        self.by_stamp = {}
+        self.all = []
+        self.sub = rospy.Subscriber(topic, msg_type, self._cb, queue_size=100)
+
+    def _cb(self, msg):
+        with self.lock:
+            self.all.append(msg)
+            if hasattr(msg, "header"):
+                self.by_stamp[msg.header.stamp.to_nsec()] = msg
+
+    def wait_for(self, stamps, timeout):
+        ros_harness.wait_until(lambda: all(s in self.by_stamp for s in stamps), timeout,
+                               f"messages stamped {sorted(stamps)} (have "
+                               f"{sorted(self.by_stamp)})")
+        with self.lock:
+            return [self.by_stamp[s] for s in stamps]
+
+    def clear(self):
+        with self.lock:
+            self.by_stamp.clear()
+            self.all.clear()
+
+
+def stamp_ns(base, k):
+    """The stamp of frame k of a tsukuba_publisher.py run with --stamp-base `base`."""
+    return (base + k) * 1_000_000_000
+
+
+def diag_values(diagnostics, node):
+    """The key/value dicts of `node`'s statuses on a /diagnostics Collector, oldest first."""
+    with diagnostics.lock:
+        msgs = [m for m in diagnostics.all
+                if m.status and m.status[0].name.startswith(node + ":")]
+    return [{kv.key: kv.value for kv in m.status[0].values} for m in msgs]
