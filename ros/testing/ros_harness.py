@@ -10,6 +10,7 @@ but roscpp's and rospy's TCPROS servers bind 0.0.0.0 whatever ROS_IP says (the m
 server too); only loopback addresses are ever dialled.
 """
 
+import argparse
 import os
 import shutil
 import signal
@@ -18,6 +19,7 @@ import subprocess
 import sys
 import tempfile
 import time
+import unittest
 import xmlrpc.client
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -53,6 +55,48 @@ def nodelet_missing(package):
                "depth_image_proc": "libdepth-image-proc-dev"}.get(package, package)
         return f"{package}'s nodelet XML is missing ({dev}; ./scripts/setup)"
     return None
+
+
+def parse_test_args():
+    """The ROS tests' command line: (their arguments, what is left for unittest)."""
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--bin-dir", required=True)
+    ap.add_argument("--data", required=True)
+    ap.add_argument("--ros-package-path", default="",
+                    help="the build's ROS package folder (build/ros_package), for roslaunch")
+    ap.add_argument("-k", "--keep", action="store_true", help="keep the scratch folder and logs")
+    return ap.parse_known_args()
+
+
+def skip_unless_ready(args, data_folder, nodelets=()):
+    """Exits 77 (ctest: skipped), saying why, unless ROS, the `nodelets`' packages, the data
+    (its `data_folder`) and the programs are there."""
+    why = ros_missing()
+    for package in nodelets:
+        why = why or nodelet_missing(package)
+    if why is None and not os.path.isdir(os.path.join(args.data, data_folder)):
+        why = f"the New Tsukuba data is not at {args.data}"
+    for binary in ("cloudcast-server", "cloudcast-ros-bridge"):
+        if why is None and not os.access(os.path.join(args.bin_dir, binary), os.X_OK):
+            why = f"{binary} is not built in {args.bin_dir}"
+    if why is not None:
+        print(f"SKIPPED: {why}")
+        sys.exit(77)
+
+
+def run_tests(unittest_args):
+    """unittest.main on this script's tests; exits 1 on a failure, and 77 (skipped) when every
+    test was skipped (saying the first reason)."""
+    # rospy leaves sockets to the garbage collector: its ResourceWarnings are not ours.
+    program = unittest.main(argv=[sys.argv[0]] + unittest_args, verbosity=2, warnings="ignore",
+                            exit=False)
+    result = program.result
+    if not result.wasSuccessful():
+        sys.exit(1)
+    if result.skipped and len(result.skipped) >= result.testsRun:
+        print(f"SKIPPED: {result.skipped[0][1]}")
+        sys.exit(77)
+    sys.exit(0)
 
 
 def free_port():

@@ -15,7 +15,6 @@ Exit 77 (ctest: skipped) when ROS, depth_image_proc or the data are missing.
   ros_depth_test.py --bin-dir build/bin --data ../shared/data/new_tsukuba [-k] [unittest args]
 """
 
-import argparse
 import os
 import subprocess
 import sys
@@ -249,24 +248,9 @@ class RosDepthTest(unittest.TestCase):
 
 def main():
     global ARGS
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--bin-dir", required=True)
-    ap.add_argument("--data", required=True)
-    ap.add_argument("--ros-package-path", default="",
-                    help="the build's ROS package folder (build/ros_package), for roslaunch")
-    ap.add_argument("-k", "--keep", action="store_true", help="keep the scratch folder and logs")
-    ARGS, rest = ap.parse_known_args()
-    why = ros_harness.ros_missing() or ros_harness.nodelet_missing("depth_image_proc")
-    if why is None and not os.path.isdir(os.path.join(ARGS.data, "groundtruth")):
-        why = f"the New Tsukuba data is not at {ARGS.data}"
-    for binary in ("cloudcast-server", "cloudcast-ros-bridge"):
-        if why is None and not os.access(os.path.join(ARGS.bin_dir, binary), os.X_OK):
-            why = f"{binary} is not built in {ARGS.bin_dir}"
-    if why is not None:
-        print(f"SKIPPED: {why}")
-        sys.exit(77)
-    # rospy leaves sockets to the garbage collector: its ResourceWarnings are not ours.
-    unittest.main(argv=[sys.argv[0]] + rest, verbosity=2, warnings="ignore")
+    ARGS, rest = ros_harness.parse_test_args()
+    ros_harness.skip_unless_ready(ARGS, "groundtruth", nodelets=("depth_image_proc",))
+    ros_harness.run_tests(rest)
 
 
 if __name__ == "__main__":
