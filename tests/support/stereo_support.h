@@ -6,6 +6,7 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgproc.hpp>
 #include <random>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -48,7 +49,8 @@ inline cv::Mat Texture(int width, int height, std::uint32_t seed) {
 
 // A pair whose left pixel (x, y) shows the right pixel (x - d(y), y): the right image is the left
 // texture shifted by the row's disparity, sampled with sub-pixel accuracy (bilinear). The scene
-// is wider than the images so no column of either lacks texture.
+// is wider than the images (on the right, where the right image reads up to x + d + 1) so no
+// column of either lacks texture; disparities must lie in [0, margin - 1).
 struct SyntheticPair {
   stereo::GreyImage left, right;
   std::vector<double> row_disparity;
@@ -61,11 +63,12 @@ inline SyntheticPair ShiftedPair(int width, int height, const std::vector<double
   SyntheticPair p;
   for (int y = 0; y < height; ++y) {
     const double d = bands[static_cast<std::size_t>(y) * bands.size() / height];
+    if (d < 0 || d >= margin - 1) throw std::invalid_argument("ShiftedPair: disparity out of range");
     p.row_disparity.push_back(d);
     for (int x = 0; x < width; ++x) {
-      left.at<std::uint8_t>(y, x) = scene.at<std::uint8_t>(y, x + margin);
-      // right(xr) = left(xr + d) = scene(xr + d + margin)
-      const double sx = x + d + margin;
+      left.at<std::uint8_t>(y, x) = scene.at<std::uint8_t>(y, x);
+      // right(xr) = left(xr + d) = scene(xr + d)
+      const double sx = x + d;
       const int x0 = static_cast<int>(std::floor(sx));
       const double f = sx - x0;
       const double v =
