@@ -46,14 +46,18 @@ absl::StatusOr<std::unique_ptr<Bridge>> Bridge::Create(ros::NodeHandle nh,
              bridge->options_.server.c_str(), info->instance().c_str(), info->worker_threads());
   } else if (info.status().code() == absl::StatusCode::kInvalidArgument) {
     return info.status();  // a target or TLS setting that can never work
-  } else if (info.status().code() == absl::StatusCode::kUnauthenticated ||
-             info.status().code() == absl::StatusCode::kPermissionDenied) {
-    // The server may be given the token later (it re-reads its tokens on SIGHUP): keep trying.
-    ROS_ERROR("cloudcast: the server refuses this bridge (%s); check ~token_file",
-              info.status().ToString().c_str());
   } else {
-    ROS_WARN("cloudcast: %s; frames are dropped until it answers",
-             std::string(info.status().message()).c_str());
+    // /diagnostics says why from its first report, before any frame comes.
+    bridge->stats_.LinkDown(info.status());
+    if (info.status().code() == absl::StatusCode::kUnauthenticated ||
+        info.status().code() == absl::StatusCode::kPermissionDenied) {
+      // The server may be given the token later (it re-reads its tokens on SIGHUP): keep trying.
+      ROS_ERROR("cloudcast: the server refuses this bridge (%s); check ~token_file",
+                info.status().ToString().c_str());
+    } else {
+      ROS_WARN("cloudcast: %s; frames are dropped until it answers",
+               std::string(info.status().message()).c_str());
+    }
   }
   if (bridge->options_.publish_disparity) {
     bridge->disparity_range_ = ResolveRange(bridge->options_.config, info);

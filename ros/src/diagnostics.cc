@@ -51,6 +51,12 @@ void BridgeStats::NotSent(const absl::Status& s) {
   last_error_ = s.ToString();  // with the code: UNAUTHENTICATED, ...
 }
 
+void BridgeStats::LinkDown(const absl::Status& s) {
+  std::lock_guard<std::mutex> lock(mu_);
+  link_down_ = true;
+  last_error_ = s.ToString();
+}
+
 void BridgeStats::Reply(const client::Result& r) {
   std::lock_guard<std::mutex> lock(mu_);
   if (!r.ok()) {

@@ -22,6 +22,9 @@ class BridgeStats {
   void InputError(const absl::Status& s);  // ... that could not become a frame
   void Sent();                             // a frame handed to the stream
   void NotSent(const absl::Status& s);     // no stream to send it on, or Send failed
+  // The server did not answer the bridge's first call, or refused it (a wrong token): the link
+  // is down and says why from the first report on, before any frame comes.
+  void LinkDown(const absl::Status& s);
   void Reply(const client::Result& r);     // a reply (cloud or frame error)
   // Frames dropped so far on the current stream (a reply's count), and one more reconnect of it.
   void StreamDropped(std::uint64_t frames_dropped);

@@ -537,6 +537,19 @@ TEST(BridgeStats, ReportsTheReplysStageTimesAndCounters) {
   EXPECT_NE(next.status[0].message.find("no stream"), std::string::npos);
 }
 
+// A refusal of the bridge's first call (a wrong token) is reported before any frame comes.
+TEST(BridgeStats, ALinkDownFromTheStartIsAnErrorNamingWhy) {
+  BridgeStats stats;
+  stats.LinkDown(absl::UnauthenticatedError("the bearer token is not valid for this server"));
+  auto array = stats.Report(ros::Time(1, 0), "bridge", "x");
+  ASSERT_EQ(array.status.size(), 1u);
+  EXPECT_EQ(array.status[0].level, diagnostic_msgs::DiagnosticStatus::ERROR);
+  std::map<std::string, std::string> v;
+  for (const auto& kv : array.status[0].values) v[kv.key] = kv.value;
+  EXPECT_NE(v["last_error"].find("UNAUTHENTICATED"), std::string::npos) << v["last_error"];
+  EXPECT_EQ(v["frames_not_sent"], "0");
+}
+
 TEST(HelpText, ListsEveryParameter) {
   const std::string help = HelpText();
   for (const ParamDoc& d : ParamDocs()) {
