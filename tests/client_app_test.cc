@@ -34,6 +34,7 @@
 #include "app/viewer.h"
 #include "cloudcast/client/client.h"
 #include "cloudcast/client/opencv.h"
+#include "cloudcast/core/stereo.h"
 #include "cloudcast/datasets/synthetic.h"
 #include "cloudcast/io/cloud_io.h"
 #include "cloudcast/sources/frame_source.h"
@@ -557,12 +558,37 @@ TEST_F(ClientProgramTest, HelpDocumentsEveryFlagWithDefaults) {
                            "--json",
                            "--progress",
                            "--quiet",
+                           "--input",
+                           "--depth-glob",
+                           "--right-glob",
+                           "--depth-video",
+                           "--right-video",
+                           "--depth",
+                           "--right",
+                           "--matcher",
+                           "--min-disparity",
+                           "--num-disparities",
+                           "--block-size",
+                           "--p1",
+                           "--p2",
+                           "--uniqueness-ratio",
+                           "--speckle-window-size",
+                           "--speckle-range",
+                           "--disp12-max-diff",
+                           "--paths",
+                           "--return-disparity",
                            "Examples:"}) {
     EXPECT_NE(r.out.find(flag), std::string::npos) << flag;
   }
-  for (const char* default_shown :
-       {"--server HOST:PORT=localhost:50051", "--fps FLOAT=0", "--in-flight INT:INT in [1 - 64]=2",
-        "--leaf FLOAT=0.03", "--snapshot-after N=10", "--record-format TEXT:{pcd,ply,drc}=pcd"}) {
+  for (const std::string& default_shown : std::vector<std::string>{
+           "--server HOST:PORT=localhost:50051", "--fps FLOAT=0",
+           "--in-flight INT:INT in [1 - 64]=2", "--leaf FLOAT=0.03", "--snapshot-after N=10",
+           "--record-format TEXT:{pcd,ply,drc}=pcd",
+           // The matcher's defaults are StereoParams{}'s.
+           "--input TEXT:{disparity,depth,stereo}=disparity",
+           "--num-disparities INT=" + std::to_string(StereoParams{}.num_disparities),
+           "--block-size INT=" + std::to_string(StereoParams{}.block_size),
+           "--matcher TEXT:{sgm,sgbm,sgbm-3way,hh,bm}=sgm"}) {
     EXPECT_NE(r.out.find(default_shown), std::string::npos) << default_shown;
   }
 }
@@ -588,6 +614,22 @@ TEST_F(ClientProgramTest, BadFlagsAndFilesGiveClearErrors) {
       {{"--min", "5", "--max", "1"}, 2, "--min (5) must not exceed --max (1)"},
       {{"--synthetic", "64x48", "--tsukuba", "x"}, 2, "choose one source"},
       {{"--disparity-glob", "d/*.png"}, 2, "needs --colour-glob"},
+      {{"--input", "lidar"}, 2, "--input"},
+      {{"--input", "stereo", "--colour-glob", "c/*.png"}, 2, "needs --right-glob (--input stereo)"},
+      {{"--depth-glob", "d/*.png", "--colour-glob", "c/*.png"},
+       2,
+       "--depth-glob does not apply to --input disparity (it takes --disparity-glob and "
+       "--colour-glob)"},
+      {{"--right", "r.png"}, 2, "--right does not apply to --input disparity"},
+      {{"--matcher", "sgbm"}, 2, "--matcher applies to --input stereo only"},
+      {{"--input", "depth", "--block-size", "7"}, 2, "--block-size applies to --input stereo"},
+      {{"--input", "stereo", "--num-disparities", "100"}, 2, "--num-disparities is 100"},
+      {{"--input", "stereo", "--matcher", "bm", "--block-size", "3"}, 2, "--block-size is 3"},
+      {{"--input", "stereo", "--matcher", "census"}, 2, "--matcher"},
+      {{"--open", Path("x.pcd"), "--input", "depth"}, 2, "--input does not apply to --open"},
+      {{"--input", "depth", "--depth", Path("d/1.png"), "--colour", Path("c/1.png"), "--no-window"},
+       1,
+       "--depth: depth image"},
       {{"--no-window", "--snapshot", Path("a.png")}, 2, "--snapshot needs a window"},
       {{"--snapshot", Path("a.jpg")}, 2, "must end in .png"},
       {{"--json", Path("no/such/dir/x.json"), "--no-window"}, 2, "does not exist"},
@@ -614,6 +656,109 @@ TEST_F(ClientProgramTest, BadFlagsAndFilesGiveClearErrors) {
     ASSERT_TRUE(r.exited) << r;
     EXPECT_EQ(r.code, c.code) << r;
     EXPECT_NE(r.err.find(c.message), std::string::npos) << r;
+  }
+}
+
+// Every --input through the shared server, headless: the clouds come back, the summary and the
+// JSON say which input went, and a stereo pair's lines carry the server's match time. New
+// Tsukuba's depth frames are its ground-truth disparity converted, so they give the disparity
+// frames' clouds.
+TEST_F(ClientProgramTest, StreamsEveryInputKind) {
+  std::vector<std::string> source = {"--synthetic", "320x240"};
+  if (cloudcast::testing::HaveTsukuba()) source = {"--tsukuba", cloudcast::testing::TsukubaDir()};
+  std::map<std::string, double> points;
+  for (const std::string input : {"disparity", "depth", "stereo"}) {
+    SCOPED_TRACE(input);
+    const std::string json = Path(input + ".json");
+    const RunResult r =
+        Run(Join(source, {"--input", input, "--server", shared_target(), "--no-window", "--frames",
+                          "3", "--lossless", "--print-frames", "--progress", "0", "--json", json}),
+            "env -u DISPLAY");
+    ASSERT_TRUE(r.exited && r.code == 0) << r;
+    EXPECT_NE(r.out.find("frames: sent 3, received 3, dropped 0, errors 0"), std::string::npos)
+        << r;
+    EXPECT_NE(r.out.find("input: " + input), std::string::npos) << r;
+    EXPECT_EQ(r.out.find("  rectify ") != std::string::npos, input == "stereo") << r;
+    EXPECT_EQ(r.out.find("  match ") != std::string::npos, input == "stereo") << r;
+    const Json j = Json::parse(ReadText(json));
+    EXPECT_EQ(j["source"]["input"], input);
+    EXPECT_EQ(j["frames"]["errors"], 0);
+    points[input] = j["mean_points_per_frame"].get<double>();
+    EXPECT_GT(points[input], 1000) << input;
+  }
+  if (cloudcast::testing::HaveTsukuba()) {
+    // The same z = f * b / d on both sides; float rounding may move a point across a voxel edge.
+    EXPECT_NEAR(points["depth"], points["disparity"], 0.01 * points["disparity"]);
+  }
+}
+
+// A stereo pair given as files (a glob per camera), with the matcher tuned and the disparity
+// map asked back: every frame is matched.
+TEST_F(ClientProgramTest, StreamsStereoGlobsWithMatcherFlags) {
+  fs::create_directories(dir_ / "l");
+  fs::create_directories(dir_ / "r");
+  auto synthetic =
+      sources::OpenSynthetic(320, 240, DisparityEncoding::kF32, sources::FrameKind::kStereo);
+  ASSERT_TRUE(synthetic.ok()) << synthetic.status();
+  for (int i = 0; i < 2; ++i) {
+    sources::SourceFrame pair;
+    ASSERT_TRUE(*(*synthetic)->Next(&pair));
+    cv::imwrite(Path("l/" + std::to_string(i) + ".png"), pair.colour());
+    cv::imwrite(Path("r/" + std::to_string(i) + ".png"), pair.right());
+  }
+  const RunResult r = Run({"--input",
+                           "stereo",
+                           "--colour-glob",
+                           Path("l/*.png"),
+                           "--right-glob",
+                           Path("r/*.png"),
+                           "--matcher",
+                           "sgbm",
+                           "--num-disparities",
+                           "64",
+                           "--block-size",
+                           "5",
+                           "--return-disparity",
+                           "--baseline",
+                           std::to_string(kSyntheticStereoBaseline),
+                           "--server",
+                           shared_target(),
+                           "--no-window",
+                           "--lossless",
+                           "--print-frames",
+                           "--progress",
+                           "0"},
+                          "env -u DISPLAY");
+  ASSERT_TRUE(r.exited && r.code == 0) << r;
+  EXPECT_NE(r.out.find("frames: sent 2, received 2, dropped 0, errors 0"), std::string::npos) << r;
+  EXPECT_NE(r.out.find("(+ disparity map)"), std::string::npos) << r;
+}
+
+// The robot example: --help, a bad --input named, and every kind's frames answered with clouds
+// (the synthetic scene as each kind; a stereo pair's replies carry the server's match time).
+TEST_F(ClientProgramTest, RobotExampleSendsEveryInputKind) {
+  const std::string example = BinDir() + "/cloudcast-robot-example";
+  if (!fs::exists(example)) GTEST_SKIP() << example << " is not built";
+  const RunResult help = RunProgram(example, {"--help"});
+  ASSERT_TRUE(help.exited && help.code == 0) << help;
+  EXPECT_NE(help.out.find("--input KIND"), std::string::npos) << help;
+  const RunResult bad = RunProgram(example, {"--input", "lidar"});
+  EXPECT_EQ(bad.code, 2) << bad;
+  EXPECT_NE(bad.err.find("--input must be disparity, depth or stereo"), std::string::npos) << bad;
+  const RunResult misplaced = RunProgram(example, {"--matcher", "sgbm"});
+  EXPECT_EQ(misplaced.code, 2) << misplaced;
+  EXPECT_NE(misplaced.err.find("--matcher applies to --input stereo only"), std::string::npos)
+      << misplaced;
+  for (const std::string input : {"disparity", "depth", "stereo"}) {
+    SCOPED_TRACE(input);
+    std::vector<std::string> args = {"--input", input, shared_target(), "2"};
+    if (input == "stereo") args.insert(args.begin(), {"--matcher", "sgm"});
+    const RunResult r = RunProgram(example, args);
+    ASSERT_TRUE(r.exited && r.code == 0) << r;
+    EXPECT_NE(r.out.find("frame 1: "), std::string::npos) << r;
+    EXPECT_EQ(r.out.find(" 0 points"), std::string::npos) << r;
+    EXPECT_EQ(r.out.find("server matched the pair") != std::string::npos, input == "stereo") << r;
+    EXPECT_NE(r.out.find("stream finished: OK"), std::string::npos) << r;
   }
 }
 

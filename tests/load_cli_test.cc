@@ -14,6 +14,8 @@
 
 #include "cloudcast/load/null_server.h"
 #include "support/program_support.h"
+#include "support/server_fixture.h"
+#include "support/test_support.h"
 #include "support/waiting.h"
 
 extern char** environ;
@@ -53,6 +55,12 @@ TEST_F(LoadCliTest, BadFlagsExitTwoNamingTheFlag) {
       {{"--lb", "random"}, "--lb"},
       {{"--reconnect-timeout", "3"}, "--resilient"},
       {{"--resilient", "--reconnect-timeout", "0"}, "--reconnect-timeout"},
+      {{"--input", "lidar"}, "--input"},
+      {{"--matcher", "sgbm"}, "--matcher applies to --input stereo only"},
+      {{"--input", "stereo", "--num-disparities", "100"}, "--num-disparities is 100"},
+      {{"--input", "stereo", "--matcher", "census"}, "--matcher"},
+      {{"--depth-glob", "z/*.png"}, "--depth-glob does not apply to --input disparity"},
+      {{"--input", "stereo", "--colour-glob", "c/*.png"}, "needs --right-glob"},
   };
   for (const auto& [args, flag] : cases) {
     std::vector<std::string> full = {"--server", null_->address(), "--synthetic", "64x48"};
@@ -62,6 +70,48 @@ TEST_F(LoadCliTest, BadFlagsExitTwoNamingTheFlag) {
     EXPECT_FALSE(r.crashed()) << r;
     EXPECT_NE(r.code, 0) << args[0] << "\n" << r;
     EXPECT_NE((r.out + r.err).find(flag), std::string::npos) << args[0] << "\n" << r;
+  }
+}
+
+// Every --input against a real server: every frame is answered with a cloud, none with an
+// error, and the report says what the frames held.
+TEST_F(LoadCliTest, EveryInputKindIsAnsweredByARealServer) {
+  const std::unique_ptr<server::Server> server = StartTestServer();
+  ASSERT_NE(server, nullptr);
+  std::vector<std::string> source = {"--synthetic", "320x240", "--synthetic-frames", "2"};
+  if (HaveTsukuba()) source = {"--tsukuba", TsukubaDir()};
+  for (const std::string input : {"disparity", "depth", "stereo"}) {
+    SCOPED_TRACE(input);
+    std::vector<std::string> args = {"--server",
+                                     server->address(),
+                                     "--input",
+                                     input,
+                                     "--streams",
+                                     "2",
+                                     "--fps",
+                                     "0",
+                                     "--frames",
+                                     "6",
+                                     "--lossless",
+                                     "--json",
+                                     Path(input + ".json"),
+                                     "-q"};
+    args.insert(args.end(), source.begin(), source.end());
+    if (input == "stereo") args.insert(args.end(), {"--matcher", "sgm", "--num-disparities", "64"});
+    const RunResult r = Run(args);
+    ASSERT_EQ(r.code, 0) << r;
+    EXPECT_NE(r.out.find(" " + input + " frames, "), std::string::npos) << r;
+    const json j = json::parse(ReadText(Path(input + ".json")));
+    EXPECT_EQ(j["frames"]["answered"], 6) << j["frames"];
+    EXPECT_EQ(j["frames"]["frameErrors"], 0) << j["errorDistribution"];
+    // Clouds came back, not empty replies: a few KB of Draco each.
+    EXPECT_GT(j["frames"]["bytesReceived"].get<double>(), 6 * 1000.0) << j["frames"];
+    EXPECT_EQ(j["options"]["input"], input);
+    if (input == "stereo") {
+      EXPECT_NE(j["options"]["config"].get<std::string>().find("num_disparities: 64"),
+                std::string::npos)
+          << j["options"]["config"];
+    }
   }
 }
 

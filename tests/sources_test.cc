@@ -650,5 +650,197 @@ TEST(UplinkTest, ImagesTheProtocolCannotCarryNameTheImage) {
   EXPECT_EQ(proto.colour().raw().encoding(), v1::COLOR_BGR8);
 }
 
+// ---------------------------------------------------------------------------------------------
+// Depth and stereo frames: every source reads them, the uplink carries them.
+
+TEST(FrameKindTest, KindsHaveNamesAndRoles) {
+  EXPECT_EQ(FrameKindNames(), (std::vector<std::string>{"disparity", "depth", "stereo"}));
+  for (const std::string& name : FrameKindNames()) {
+    FrameKind kind = FrameKind::kDisparity;
+    ASSERT_TRUE(ParseFrameKind(name, &kind)) << name;
+    EXPECT_EQ(Name(kind), name);
+  }
+  FrameKind kind = FrameKind::kDepth;
+  EXPECT_FALSE(ParseFrameKind("pointcloud", &kind));
+  EXPECT_EQ(kind, FrameKind::kDepth);  // left alone
+  EXPECT_EQ(RolesOf(FrameKind::kDepth),
+            (std::vector<ImageRole>{ImageRole::kDepth, ImageRole::kColour}));
+  // The left image of a pair is the colour one, as in the protocol.
+  EXPECT_EQ(RolesOf(FrameKind::kStereo),
+            (std::vector<ImageRole>{ImageRole::kColour, ImageRole::kRight}));
+  EXPECT_EQ(RoleFlag(ImageRole::kRight, "-glob"), "--right-glob");
+  EXPECT_EQ(RoleFlag(ImageRole::kDepth, ""), "--depth");
+}
+
+SourceOptions OfKind(FrameKind kind) {
+  SourceOptions o;
+  o.kind = kind;
+  return o;
+}
+
+TEST(SyntheticKindsTest, DepthIsTheExactDisparitysAndThePairIsRectified) {
+  auto disparity = OpenSynthetic(64, 48, DisparityEncoding::kF32);
+  auto depth = OpenSynthetic(64, 48, DisparityEncoding::kF32, FrameKind::kDepth);
+  auto stereo = OpenSynthetic(64, 48, DisparityEncoding::kF32, FrameKind::kStereo);
+  ASSERT_TRUE(disparity.ok() && depth.ok() && stereo.ok());
+  SourceFrame d, z, pair;
+  ASSERT_TRUE(*(*disparity)->Next(&d) && *(*depth)->Next(&z) && *(*stereo)->Next(&pair));
+  ASSERT_EQ(z.kind, FrameKind::kDepth);
+  ASSERT_EQ(z.depth().type(), CV_32FC1);
+  EXPECT_TRUE(SameMat(z.colour(), d.colour()));
+  const CameraModel& camera = (*depth)->info().camera;
+  int valid = 0;
+  for (int v = 0; v < 48; ++v) {
+    for (int u = 0; u < 64; ++u) {
+      const float disp = d.disparity().at<float>(v, u), metres = z.depth().at<float>(v, u);
+      if (disp == 0) {
+        EXPECT_EQ(metres, 0.0f) << u << "," << v;  // no measurement either way
+        continue;
+      }
+      ++valid;
+      EXPECT_NEAR(metres, camera.fx * camera.baseline / disp, 1e-4 * metres) << u << "," << v;
+    }
+  }
+  EXPECT_GT(valid, 64 * 48 / 2);
+
+  // The pair: the left image is the disparity frame's colour, the right one the view from the
+  // right camera (kSyntheticStereoBaseline away), which the source's camera states.
+  ASSERT_EQ(pair.kind, FrameKind::kStereo);
+  EXPECT_TRUE(SameMat(pair.colour(), d.colour()));
+  ASSERT_EQ(pair.right().size(), pair.colour().size());
+  EXPECT_GT(cv::norm(pair.right(), pair.colour(), cv::NORM_L1), 0);
+  EXPECT_EQ((*stereo)->info().camera.baseline, kSyntheticStereoBaseline);
+  EXPECT_NE((*stereo)->info().description.find("stereo"), std::string::npos);
+}
+
+TEST_F(SourceTest, DepthAndRightImagesComeFromGlobsAndStills) {
+  fs::create_directories(dir_ / "z");
+  fs::create_directories(dir_ / "c");
+  fs::create_directories(dir_ / "r");
+  for (int i = 1; i <= 2; ++i) {
+    cv::Mat mm(6, 8, CV_16UC1, cv::Scalar(1000 * i));
+    cv::imwrite(Path("z/" + std::to_string(i) + ".png"), mm);
+    cv::imwrite(Path("c/" + std::to_string(i) + ".png"), TestColour(8, 6, i));
+    cv::imwrite(Path("r/" + std::to_string(i) + ".png"), TestColour(8, 6, 10 + i));
+  }
+  auto depth =
+      OpenGlobs({{ImageRole::kDepth, Path("z/*.png")}, {ImageRole::kColour, Path("c/*.png")}},
+                OfKind(FrameKind::kDepth));
+  ASSERT_TRUE(depth.ok()) << depth.status();
+  const std::vector<SourceFrame> frames = Drain(**depth);
+  ASSERT_EQ(frames.size(), 2u);
+  EXPECT_EQ(frames[1].depth().type(), CV_16UC1);
+  EXPECT_EQ(frames[1].depth().at<std::uint16_t>(0, 0), 2000);
+  EXPECT_TRUE(SameMat(frames[1].colour(), TestColour(8, 6, 2)));
+
+  auto stereo =
+      OpenStill({{ImageRole::kColour, Path("c/1.png")}, {ImageRole::kRight, Path("r/1.png")}},
+                OfKind(FrameKind::kStereo));
+  ASSERT_TRUE(stereo.ok()) << stereo.status();
+  SourceFrame pair;
+  ASSERT_TRUE(*(*stereo)->Next(&pair));
+  EXPECT_TRUE(SameMat(pair.colour(), TestColour(8, 6, 1)));
+  EXPECT_TRUE(SameMat(pair.right(), TestColour(8, 6, 11)));
+
+  // An 8-bit image is no depth; a role the kind lacks, or one it misses, is named.
+  auto eight =
+      OpenStill({{ImageRole::kDepth, Path("c/1.png")}, {ImageRole::kColour, Path("c/1.png")}},
+                OfKind(FrameKind::kDepth));
+  ASSERT_FALSE(eight.ok());
+  EXPECT_NE(eight.status().message().find("--depth: depth image"), std::string::npos)
+      << eight.status();
+  auto missing = OpenGlobs({{ImageRole::kColour, Path("c/*.png")}}, OfKind(FrameKind::kStereo));
+  ASSERT_FALSE(missing.ok());
+  EXPECT_NE(missing.status().message().find("no --right-glob given"), std::string::npos)
+      << missing.status();
+  auto foreign = OpenGlobs({{ImageRole::kColour, Path("c/*.png")},
+                            {ImageRole::kRight, Path("r/*.png")},
+                            {ImageRole::kDepth, Path("z/*.png")}},
+                           OfKind(FrameKind::kStereo));
+  ASSERT_FALSE(foreign.ok());
+  EXPECT_NE(foreign.status().message().find("--depth-glob does not apply to stereo frames"),
+            std::string::npos)
+      << foreign.status();
+}
+
+TEST(TsukubaKindsTest, StereoSendsTheRightImagesAndDepthTheConvertedGroundTruth) {
+  if (!cloudcast::testing::HaveTsukuba()) GTEST_SKIP() << "no New Tsukuba data";
+  const std::string dir = cloudcast::testing::TsukubaDir();
+  auto disparity = OpenTsukuba(dir, "daylight", SourceOptions{});
+  auto stereo = OpenTsukuba(dir, "daylight", OfKind(FrameKind::kStereo));
+  SourceOptions depth_options = OfKind(FrameKind::kDepth);
+  depth_options.baseline = 0.1;  // the paper's 10 cm: metres
+  auto depth = OpenTsukuba(dir, "daylight", depth_options);
+  ASSERT_TRUE(disparity.ok() && stereo.ok() && depth.ok());
+  EXPECT_EQ((*stereo)->info().frames_per_pass, (*disparity)->info().frames_per_pass);
+  EXPECT_EQ((*depth)->info().camera.baseline, 0.1);
+  SourceFrame d, pair, z;
+  ASSERT_TRUE(*(*disparity)->Next(&d) && *(*stereo)->Next(&pair) && *(*depth)->Next(&z));
+  EXPECT_EQ(pair.name, d.name);
+  EXPECT_TRUE(SameMat(pair.colour(), d.colour()));
+  EXPECT_TRUE(
+      SameMat(pair.right(), cv::imread(tsukuba::RightColourPath(dir, "00001"), cv::IMREAD_COLOR)));
+  ASSERT_EQ(z.depth().type(), CV_32FC1);
+  for (int v = 0; v < d.disparity().rows; v += 7) {
+    for (int u = 0; u < d.disparity().cols; u += 5) {
+      const int disp = d.disparity().at<std::uint8_t>(v, u);
+      const float metres = z.depth().at<float>(v, u);
+      if (disp == 0) {
+        EXPECT_EQ(metres, 0.0f);
+      } else {
+        EXPECT_FLOAT_EQ(metres, static_cast<float>(615.0 * 0.1 / disp)) << u << "," << v;
+      }
+    }
+  }
+}
+
+TEST(UplinkTest, DepthAndStereoFramesTravelInTheirOwnFields) {
+  auto depth = OpenSynthetic(64, 48, DisparityEncoding::kF32, FrameKind::kDepth);
+  auto stereo = OpenSynthetic(64, 48, DisparityEncoding::kF32, FrameKind::kStereo);
+  ASSERT_TRUE(depth.ok() && stereo.ok());
+  SourceFrame z, pair;
+  ASSERT_TRUE(*(*depth)->Next(&z) && *(*stereo)->Next(&pair));
+  UplinkFrame uplink;
+
+  ASSERT_TRUE(uplink.Encode(z, {Uplink::kRaw}).ok());
+  EXPECT_EQ(uplink.kind(), FrameKind::kDepth);
+  EXPECT_TRUE(std::holds_alternative<client::DepthFrame>(uplink.input()));
+  v1::Frame raw;
+  ASSERT_TRUE(uplink.ToProto(&raw).ok());
+  EXPECT_EQ(raw.depth().raw().pixels().size(), 64u * 48 * 4);
+  EXPECT_EQ(raw.depth().raw().encoding(), v1::DEPTH_F32);
+  EXPECT_FALSE(raw.has_disparity());
+
+  ASSERT_TRUE(uplink.Encode(z, {Uplink::kZstd}).ok());
+  v1::Frame zstd;
+  ASSERT_TRUE(uplink.ToProto(&zstd).ok());
+  EXPECT_TRUE(zstd.depth().has_compressed());
+
+  // Float depth as TIFF, exactly.
+  ASSERT_TRUE(uplink.Encode(z, {Uplink::kPng}).ok());
+  EXPECT_TRUE(uplink.float_disparity_as_tiff());
+  v1::Frame tiff;
+  ASSERT_TRUE(uplink.ToProto(&tiff).ok());
+  EXPECT_TRUE(SameMat(Decode(tiff.depth().encoded(), cv::IMREAD_UNCHANGED), z.depth()));
+
+  // A pair: the left image in colour, the right in right; jpeg makes both JPEG.
+  ASSERT_TRUE(uplink.Encode(pair, {Uplink::kRaw}).ok());
+  const client::FrameInput input = uplink.input();
+  ASSERT_TRUE(std::holds_alternative<client::StereoFrame>(input));
+  v1::Frame raw_pair;
+  ASSERT_TRUE(uplink.ToProto(&raw_pair).ok());
+  EXPECT_EQ(raw_pair.colour().raw().pixels().size(), 64u * 48 * 3);
+  EXPECT_EQ(raw_pair.right().raw().pixels().size(), 64u * 48 * 3);
+  ASSERT_TRUE(uplink.Encode(pair, {Uplink::kJpeg}).ok());
+  v1::Frame jpeg;
+  ASSERT_TRUE(uplink.ToProto(&jpeg).ok());
+  EXPECT_EQ(jpeg.colour().encoded().substr(0, 2), "\xff\xd8");
+  EXPECT_EQ(jpeg.right().encoded().substr(0, 2), "\xff\xd8");
+  ASSERT_TRUE(uplink.Encode(pair, {Uplink::kPng}).ok());
+  v1::Frame png;
+  ASSERT_TRUE(uplink.ToProto(&png).ok());
+  EXPECT_TRUE(SameMat(Decode(png.right().encoded(), cv::IMREAD_COLOR), pair.right()));
+}
+
 }  // namespace
 }  // namespace cloudcast::sources

@@ -400,7 +400,8 @@ absl::StatusOr<SyntheticFrame> SyntheticScene::Render(const SyntheticOptions& op
   const double baseline = frame.camera.baseline;
 
   // Bring every shape into the camera frame of this pose once.
-  const CameraPose pose = PoseForFrame(options.frame);
+  CameraPose pose = PoseForFrame(options.frame);
+  pose.position = pose.position + options.eye_x * pose.world_from_cam.c0;
   std::vector<PosedShape> posed;
   posed.reserve(shapes_.size());
   for (std::size_t i = 0; i < shapes_.size(); ++i) {

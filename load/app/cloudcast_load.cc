@@ -9,6 +9,7 @@
 #include <spdlog/fmt/fmt.h>
 
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -16,11 +17,14 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <map>
+#include <memory>
 #include <thread>
 
 #include "cloudcast/cli/checks.h"
 #include "cloudcast/cli/connection_flags.h"
 #include "cloudcast/cli/stage_flags.h"
+#include "cloudcast/cli/stereo_flags.h"
 #include "cloudcast/core/limits.h"
 #include "cloudcast/load/fleet.h"
 #include "cloudcast/load/frame_store.h"
@@ -77,7 +81,9 @@ struct Flags {
   std::uint64_t seed = FleetDefaults().seed;
   int scheduler_threads = FleetDefaults().scheduler_threads;
   // Frames
-  std::string tsukuba, disparity_glob, colour_glob, synthetic;
+  std::string input = cloudcast::cli::kDefaultInput;
+  std::string tsukuba, disparity_glob, colour_glob, depth_glob, right_glob, synthetic;
+  std::unique_ptr<cloudcast::cli::StereoFlags> stereo;
   std::string illumination = FrameDefaults().source.illumination;
   int synthetic_frames = FrameDefaults().synthetic_frames;
   std::string encoding = cloudcast::sources::Name(FrameDefaults().uplink.encoding);
@@ -227,7 +233,10 @@ std::unique_ptr<cloudcast::cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
 
   const std::string frames =
       "Frames (prepared before the run; default: New Tsukuba when present, else synthetic 640x480)";
-  app.add_option("--tsukuba", f.tsukuba, "A New Tsukuba folder (every frame in it)")
+  cloudcast::cli::AddInputFlag(app, &f.input, cloudcast::sources::FrameKindNames(), frames);
+  app.add_option("--tsukuba", f.tsukuba,
+                 "A New Tsukuba folder (every frame in it): --input stereo sends its left + right "
+                 "images, --input depth its ground truth as float depth")
       ->type_name("DIR")
       ->group(frames);
   app.add_option("--illumination", f.illumination, "New Tsukuba illumination folder")
@@ -237,10 +246,20 @@ std::unique_ptr<cloudcast::cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
                  "Disparity images, a glob in quotes, natural order")
       ->type_name("GLOB")
       ->group(frames);
-  app.add_option("--colour-glob", f.colour_glob, "Colour images paired with --disparity-glob")
+  app.add_option("--colour-glob", f.colour_glob,
+                 "Colour images (stereo: the left ones) paired with the other glob")
       ->type_name("GLOB")
       ->group(frames);
-  app.add_option("--synthetic", f.synthetic, "The synthetic scene at WIDTHxHEIGHT")
+  app.add_option("--depth-glob", f.depth_glob,
+                 "--input depth: depth images (16-bit PNG mm, float TIFF/PFM m), a glob in quotes")
+      ->type_name("GLOB")
+      ->group(frames);
+  app.add_option("--right-glob", f.right_glob,
+                 "--input stereo: the right images of rectified pairs, paired with --colour-glob")
+      ->type_name("GLOB")
+      ->group(frames);
+  app.add_option("--synthetic", f.synthetic,
+                 "The synthetic scene at WIDTHxHEIGHT, as frames of --input")
       ->check(
           cloudcast::cli::SizeCheck(cloudcast::Limits{}.max_side, cloudcast::Limits{}.max_pixels))
       ->type_name("WxH")
@@ -252,8 +271,8 @@ std::unique_ptr<cloudcast::cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
       ->group(frames);
   app.add_option("--encoding", f.encoding,
                  "How images travel: raw pixels; zstd (lossless: row deltas + zstd, cheap for "
-                 "the server); png (lossless: PNG, float disparities TIFF); jpeg (colour JPEG, "
-                 "disparity as png)")
+                 "the server); png (lossless: PNG, float disparities and depths TIFF); jpeg "
+                 "(colour images JPEG, disparity and depth as png)")
       ->check(CLI::IsMember(cloudcast::sources::UplinkNames()))
       ->capture_default_str()
       ->group(frames);
@@ -269,6 +288,8 @@ std::unique_ptr<cloudcast::cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
   const std::string stages = "Camera and stages (stage flags left out: the server's defaults)";
   auto stage_flags = std::make_unique<cloudcast::cli::StageFlags>(
       app, cloudcast::cli::StageFlags::Groups{stages, stages, stages});
+  f.stereo = std::make_unique<cloudcast::cli::StereoFlags>(
+      app, "Stereo matcher (--input stereo; flags left out: the server's defaults)");
 
   const std::string soak = "Server memory and soak";
   app.add_option("--watch-memory", f.watch_memory,
@@ -356,11 +377,40 @@ int main(int argc, char** argv) {
     std::cerr << "cloudcast-load: " << message << "\n";
     return kExitUsage;
   };
-  const int sources = !f.tsukuba.empty() + !f.disparity_glob.empty() + !f.synthetic.empty();
-  if (sources > 1) return usage("give one of --tsukuba, --disparity-glob, --synthetic");
-  if (!f.colour_glob.empty() && f.disparity_glob.empty()) {
-    return usage("--colour-glob needs --disparity-glob");
+  // The globs a kind takes: its roles' (--disparity-glob + --colour-glob, ...).
+  using cloudcast::sources::FrameKind;
+  using cloudcast::sources::ImageRole;
+  FrameKind kind = FrameKind::kDisparity;
+  cloudcast::sources::ParseFrameKind(f.input, &kind);  // checked by IsMember
+  const std::map<ImageRole, const std::string*> globs = {{ImageRole::kDisparity, &f.disparity_glob},
+                                                         {ImageRole::kColour, &f.colour_glob},
+                                                         {ImageRole::kDepth, &f.depth_glob},
+                                                         {ImageRole::kRight, &f.right_glob}};
+  const std::vector<ImageRole>& roles = cloudcast::sources::RolesOf(kind);
+  bool any_glob = false;
+  for (const auto& [role, path] : globs) {
+    if (path->empty()) continue;
+    any_glob = true;
+    if (std::find(roles.begin(), roles.end(), role) == roles.end()) {
+      return usage(cloudcast::sources::RoleFlag(role, "-glob") + " does not apply to --input " +
+                   f.input);
+    }
   }
+  if (any_glob) {
+    for (ImageRole role : roles) {
+      if (globs.at(role)->empty()) {
+        return usage("--input " + f.input + " needs " +
+                     cloudcast::sources::RoleFlag(role, "-glob") + " with the other glob");
+      }
+    }
+  }
+  const int sources = !f.tsukuba.empty() + any_glob + !f.synthetic.empty();
+  if (sources > 1) return usage("give one of --tsukuba, the globs, --synthetic");
+  if (kind != FrameKind::kStereo && f.stereo->AnyGiven()) {
+    return usage(f.stereo->GivenFlags().front() + " applies to --input stereo only (this is " +
+                 "--input " + f.input + ")");
+  }
+  if (absl::Status s = f.stereo->Check(); !s.ok()) return usage(std::string(s.message()));
   if (f.duration_s == 0 && f.frames == 0) {
     return usage("--duration 0 needs --frames N: a run must be bounded");
   }
@@ -402,9 +452,15 @@ int main(int argc, char** argv) {
   load::FrameSourceOptions source;
   source.source.tsukuba_dir = f.tsukuba;
   source.source.illumination = f.illumination;
-  using cloudcast::sources::ImageRole;
-  if (!f.disparity_glob.empty()) source.source.globs[ImageRole::kDisparity] = f.disparity_glob;
-  if (!f.colour_glob.empty()) source.source.globs[ImageRole::kColour] = f.colour_glob;
+  for (const auto& [role, path] : globs) {
+    if (!path->empty()) source.source.globs[role] = *path;
+  }
+  source.kind = kind;
+  // New Tsukuba's depth frames are made from its disparity with the camera the stream uses.
+  if (auto camera = stages->Apply(cloudcast::FrameSettings{}); camera.ok()) {
+    if (stages->Given("--focal")) source.focal = camera->pipeline.camera.fx;
+    if (stages->Given("--baseline")) source.baseline = camera->pipeline.camera.baseline;
+  }
   if (!f.synthetic.empty()) {
     cloudcast::cli::ParseSize(f.synthetic, &source.source.synthetic_width,
                               &source.source.synthetic_height);
@@ -467,6 +523,7 @@ int main(int argc, char** argv) {
   else
     o.config.mutable_camera()->clear_cy();
   o.config.set_delivery(f.lossless ? cloudcast::v1::DELIVERY_ALL : cloudcast::v1::DELIVERY_LATEST);
+  if (f.stereo->AnyGiven()) *o.config.mutable_stereo() = f.stereo->GivenStereoConfig();
 
   // Signals: blocked before any thread starts, taken by sigwait on a thread of ours.
   sigset_t signals;
@@ -547,6 +604,7 @@ int main(int argc, char** argv) {
       {"drain-timeout", o.drain_timeout.count()},
       {"delivery", f.lossless ? "all" : "latest"},
       {"encoding", f.encoding},
+      {"input", f.input},
       {"frames-source", store->description()},
       {"seed", f.seed},
       {"config", o.config.ShortDebugString()},

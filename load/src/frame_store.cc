@@ -45,7 +45,11 @@ std::string Label(const sources::SourceInfo& info) {
 absl::StatusOr<FrameStore> FrameStore::Prepare(const FrameSourceOptions& o) {
   sources::SourceSpec spec = o.source;
   spec.synthetic_encoding = DisparityEncoding::kU16;
-  auto source = sources::OpenSource(spec, sources::SourceOptions{});
+  sources::SourceOptions options;
+  options.kind = o.kind;
+  options.focal = o.focal;
+  options.baseline = o.baseline;
+  auto source = sources::OpenSource(spec, options);
   if (!source.ok()) return source.status();
   const sources::SourceInfo& info = (*source)->info();
   const std::uint64_t frames =
@@ -64,9 +68,11 @@ absl::StatusOr<FrameStore> FrameStore::Prepare(const FrameSourceOptions& o) {
     store.AddTail(f);
   }
   store.camera_ = info.camera;
-  store.description_ = fmt::format(
-      "{} ({} frames, {}x{}), {}, {:.0f} KB per frame", Label(info), store.size(), info.width,
-      info.height, sources::Name(o.uplink.encoding), store.MeanRequestBytes() / 1024);
+  store.kind_ = o.kind;
+  store.description_ =
+      fmt::format("{} ({} {} frames, {}x{}), {}, {:.0f} KB per frame", Label(info), store.size(),
+                  sources::Name(o.kind), info.width, info.height, sources::Name(o.uplink.encoding),
+                  store.MeanRequestBytes() / 1024);
   return store;
 }
 

@@ -91,9 +91,12 @@ bool IsLosslessCodec(const std::string& fourcc) {
 std::string TsukubaFolder(const std::string& dir, ImageRole role, const std::string& illumination) {
   switch (role) {
     case ImageRole::kDisparity:
+    case ImageRole::kDepth:  // no depth maps: the ground-truth disparity, converted
       return (fs::path(dir) / "groundtruth" / "disparity_maps" / "left").string();
     case ImageRole::kColour:
       return (fs::path(dir) / "illumination" / illumination / "left").string();
+    case ImageRole::kRight:
+      return (fs::path(dir) / "illumination" / illumination / "right").string();
   }
   return dir;
 }

@@ -20,7 +20,6 @@ namespace {
 namespace fs = std::filesystem;
 using internal::CheckSameSize;
 using internal::ReadImage;
-using internal::RoleFlag;
 
 std::uint64_t Bytes(const std::vector<cv::Mat>& images) {
   std::uint64_t n = 0;
@@ -38,11 +37,13 @@ struct FramePaths {
 
 class ImageListSource : public FrameSource {
  public:
+  // `depth_from_disparity`: the depth role's files are disparity maps, converted (New Tsukuba).
   ImageListSource(std::vector<FramePaths> frames, std::vector<std::string> flags,
-                  const SourceOptions& options)
+                  const SourceOptions& options, bool depth_from_disparity = false)
       : frames_(std::move(frames)),
         flags_(std::move(flags)),
         options_(options),
+        depth_from_disparity_(depth_from_disparity),
         caching_(options.loop && options.cache_bytes > 0) {}
 
   // Loads the first frame, so that size errors show before streaming and info() has a size.
@@ -57,6 +58,7 @@ class ImageListSource : public FrameSource {
     info_.frames_per_pass = frames_.size();
     info_.looped = options_.loop;
     info_.camera = CameraModel::PclCompatible(info_.width, info_.height, options_.focal);
+    info_.camera.baseline = options_.baseline;
     return absl::OkStatus();
   }
 
@@ -104,8 +106,15 @@ class ImageListSource : public FrameSource {
     const std::vector<ImageRole>& roles = RolesOf(options_.kind);
     std::vector<cv::Mat> images;
     for (std::size_t r = 0; r < roles.size(); ++r) {
-      auto m = ReadImage(roles[r], f.paths[r], flags_[r]);
+      const bool converted = depth_from_disparity_ && roles[r] == ImageRole::kDepth;
+      auto m = ReadImage(converted ? ImageRole::kDisparity : roles[r], f.paths[r], flags_[r]);
       if (!m.ok()) return m.status();
+      if (converted) {
+        CameraModel camera;
+        camera.fx = camera.fy = options_.focal;
+        camera.baseline = options_.baseline;
+        *m = internal::DepthFromDisparity(*m, camera);
+      }
       images.push_back(*std::move(m));
     }
     if (absl::Status s = CheckSameSize(options_.kind, images, f.paths); !s.ok()) return s;
@@ -115,6 +124,7 @@ class ImageListSource : public FrameSource {
   std::vector<FramePaths> frames_;
   std::vector<std::string> flags_;  // one per role, for errors
   SourceOptions options_;
+  bool depth_from_disparity_;
   std::optional<std::vector<cv::Mat>> first_;
   std::size_t position_ = 0;
   std::uint64_t produced_ = 0;
@@ -180,53 +190,99 @@ const char* EncodingName(DisparityEncoding e) {
 
 class SyntheticSource : public FrameSource {
  public:
-  SyntheticSource(std::uint32_t width, std::uint32_t height, DisparityEncoding encoding)
-      : scene_(SyntheticScene::Default()) {
+  SyntheticSource(std::uint32_t width, std::uint32_t height, DisparityEncoding encoding,
+                  FrameKind kind)
+      : scene_(SyntheticScene::Default()), kind_(kind) {
     options_.width = width;
     options_.height = height;
-    options_.disparity_encoding = encoding;
+    // Depth is computed from exact disparities; a stereo pair needs none.
+    options_.disparity_encoding =
+        kind == FrameKind::kDisparity ? encoding : DisparityEncoding::kF32;
   }
 
   absl::Status Init() {
-    options_.frame = 0;
-    auto f = scene_.Render(options_);
+    auto f = Render(0);
     if (!f.ok()) {
       return absl::InvalidArgumentError(absl::StrCat("--synthetic ", options_.width, "x",
                                                      options_.height, ": ", f.status().message()));
     }
-    first_ = std::make_shared<SyntheticFrame>(*std::move(f));
+    first_ = *std::move(f);
     info_.kind = "synthetic";
     info_.width = options_.width;
     info_.height = options_.height;
-    info_.camera = first_->camera;
-    info_.description =
-        absl::StrCat("synthetic scene ", options_.width, "x", options_.height, " (",
-                     EncodingName(options_.disparity_encoding), " disparity), endless");
+    info_.camera = first_->left.camera;
+    if (kind_ == FrameKind::kStereo) info_.camera.baseline = kSyntheticStereoBaseline;
+    const std::string what =
+        kind_ == FrameKind::kDisparity
+            ? absl::StrCat(EncodingName(options_.disparity_encoding), " disparity")
+            : std::string(kind_ == FrameKind::kDepth ? "float depth" : "stereo pairs");
+    info_.description = absl::StrCat("synthetic scene ", options_.width, "x", options_.height, " (",
+                                     what, "), endless");
     return absl::OkStatus();
   }
 
   absl::StatusOr<bool> Next(SourceFrame* frame) override {
-    std::shared_ptr<SyntheticFrame> f = std::move(first_);
-    options_.frame = produced_;
+    std::shared_ptr<Rendered> f = std::move(first_);
+    const std::uint64_t index = produced_;
     if (f == nullptr) {
-      auto rendered = scene_.Render(options_);
+      auto rendered = Render(index);
       if (!rendered.ok()) return rendered.status();
-      f = std::make_shared<SyntheticFrame>(*std::move(rendered));
+      f = *std::move(rendered);
     }
-    const int h = static_cast<int>(f->height), w = static_cast<int>(f->width);
-    frame->kind = FrameKind::kDisparity;
-    frame->images = {cv::Mat(h, w, MatType(options_.disparity_encoding), f->disparity.data()),
-                     cv::Mat(h, w, CV_8UC3, f->colour.data())};
-    frame->name = absl::StrCat("synthetic_", options_.frame);
+    SyntheticFrame& left = f->left;
+    const int h = static_cast<int>(left.height), w = static_cast<int>(left.width);
+    const cv::Mat colour(h, w, CV_8UC3, left.colour.data());
+    frame->kind = kind_;
+    switch (kind_) {
+      case FrameKind::kDisparity:
+        frame->images = {cv::Mat(h, w, MatType(options_.disparity_encoding), left.disparity.data()),
+                         colour};
+        break;
+      case FrameKind::kDepth:
+        frame->images = {f->depth, colour};
+        break;
+      case FrameKind::kStereo:
+        frame->images = {colour, cv::Mat(h, w, CV_8UC3, f->right.colour.data())};
+        break;
+    }
+    frame->name = absl::StrCat("synthetic_", index);
     frame->index = produced_++;
     frame->keep_alive = std::move(f);
     return true;
   }
 
  private:
+  // One frame's renders: the left view, and what the kind adds to it.
+  struct Rendered {
+    SyntheticFrame left;
+    SyntheticFrame right;  // kStereo
+    cv::Mat depth;         // kDepth
+  };
+
+  absl::StatusOr<std::shared_ptr<Rendered>> Render(std::uint64_t index) {
+    auto r = std::make_shared<Rendered>();
+    SyntheticOptions o = options_;
+    o.frame = index;
+    auto left = scene_.Render(o);
+    if (!left.ok()) return left.status();
+    r->left = *std::move(left);
+    if (kind_ == FrameKind::kStereo) {
+      o.eye_x = kSyntheticStereoBaseline;
+      auto right = scene_.Render(o);
+      if (!right.ok()) return right.status();
+      r->right = *std::move(right);
+    } else if (kind_ == FrameKind::kDepth) {
+      const cv::Mat d(static_cast<int>(r->left.height), static_cast<int>(r->left.width), CV_32FC1,
+                      r->left.disparity.data());
+      r->depth = internal::DepthFromDisparity(d, r->left.camera);
+    }
+    return r;
+  }
+
   SyntheticScene scene_;
+  FrameKind kind_;
   SyntheticOptions options_;
-  std::shared_ptr<SyntheticFrame> first_;
+  std::shared_ptr<Rendered> first_;
   std::uint64_t produced_ = 0;
 };
 
@@ -346,7 +402,8 @@ absl::StatusOr<std::unique_ptr<FrameSource>> OpenTsukuba(const std::string& dir,
   }
   const std::size_t n = frames.size();
   auto source = std::make_unique<ImageListSource>(
-      std::move(frames), std::vector<std::string>(roles.size(), "--tsukuba"), options);
+      std::move(frames), std::vector<std::string>(roles.size(), "--tsukuba"), options,
+      /*depth_from_disparity=*/true);
   if (absl::Status s = source->Init("tsukuba", absl::StrCat("New Tsukuba folder ", dir, " (",
                                                             illumination, "): ", n, " frames"));
       !s.ok()) {
@@ -410,8 +467,9 @@ absl::StatusOr<std::unique_ptr<FrameSource>> OpenStill(const RolePaths& files,
 
 absl::StatusOr<std::unique_ptr<FrameSource>> OpenSynthetic(std::uint32_t width,
                                                            std::uint32_t height,
-                                                           DisparityEncoding encoding) {
-  auto source = std::make_unique<SyntheticSource>(width, height, encoding);
+                                                           DisparityEncoding encoding,
+                                                           FrameKind kind) {
+  auto source = std::make_unique<SyntheticSource>(width, height, encoding, kind);
   if (absl::Status s = source->Init(); !s.ok()) return s;
   return std::unique_ptr<FrameSource>(std::move(source));
 }
@@ -432,7 +490,7 @@ std::vector<std::string> SourceSpec::Given() const {
                                       {stills, ""}}) {
     std::vector<std::string> flags;
     for (const auto& [role, path] : paths) {
-      if (!path.empty()) flags.push_back(internal::RoleFlag(role, suffix));
+      if (!path.empty()) flags.push_back(RoleFlag(role, suffix));
     }
     if (!flags.empty()) given.push_back(absl::StrJoin(flags, " + "));
   }
@@ -460,15 +518,10 @@ absl::StatusOr<std::unique_ptr<FrameSource>> OpenSource(const SourceSpec& spec,
   if (!synthetic && LooksLikeTsukuba(dir, spec.illumination, options.kind)) {
     return OpenTsukuba(dir, spec.illumination, options);
   }
-  if (options.kind != FrameKind::kDisparity) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("the synthetic scene renders disparity frames, not ", Name(options.kind),
-                     " frames; give files or videos"));
-  }
-  return synthetic
-             ? OpenSynthetic(spec.synthetic_width, spec.synthetic_height, spec.synthetic_encoding)
-             : OpenSynthetic(kDefaultSyntheticWidth, kDefaultSyntheticHeight,
-                             spec.synthetic_encoding);
+  return synthetic ? OpenSynthetic(spec.synthetic_width, spec.synthetic_height,
+                                   spec.synthetic_encoding, options.kind)
+                   : OpenSynthetic(kDefaultSyntheticWidth, kDefaultSyntheticHeight,
+                                   spec.synthetic_encoding, options.kind);
 }
 
 }  // namespace cloudcast::sources

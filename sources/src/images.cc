@@ -35,11 +35,17 @@ absl::Status CheckDisparity(const cv::Mat& m, const std::string& what, const std
   return absl::OkStatus();
 }
 
-}  // namespace
-
-std::string RoleFlag(ImageRole role, const std::string& suffix) {
-  return absl::StrCat("--", Name(role), suffix);
+absl::Status CheckDepth(const cv::Mat& m, const std::string& what, const std::string& flag) {
+  if (m.channels() != 1 || (m.depth() != CV_16U && m.depth() != CV_32F)) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        flag, ": depth ", what, " is ", cv::typeToString(m.type()),
+        "; a depth image has one channel of 16-bit millimetres (16UC1 PNG) or float metres "
+        "(32FC1 TIFF/PFM)"));
+  }
+  return absl::OkStatus();
 }
+
+}  // namespace
 
 absl::StatusOr<std::vector<std::string>> PathsPerRole(FrameKind kind, const RolePaths& paths,
                                                       const std::string& suffix) {
@@ -74,7 +80,14 @@ absl::StatusOr<cv::Mat> ReadImage(ImageRole role, const std::string& path,
       if (absl::Status s = CheckDisparity(m, absl::StrCat("image ", path), flag); !s.ok()) return s;
       return m;
     }
-    case ImageRole::kColour: {
+    case ImageRole::kDepth: {
+      cv::Mat m = cv::imread(path, cv::IMREAD_UNCHANGED);  // millimetres or metres as stored
+      if (m.empty()) return Unreadable(path, flag, "16-bit PNG, TIFF, PFM, ...");
+      if (absl::Status s = CheckDepth(m, absl::StrCat("image ", path), flag); !s.ok()) return s;
+      return m;
+    }
+    case ImageRole::kColour:
+    case ImageRole::kRight: {
       // IMREAD_COLOR gives 8-bit BGR for every input: RGBA (New Tsukuba, alpha down to 0) loses
       // its alpha, grey is expanded, 16-bit is scaled, as the server would do with the file.
       cv::Mat m = cv::imread(path, cv::IMREAD_COLOR);
@@ -85,7 +98,26 @@ absl::StatusOr<cv::Mat> ReadImage(ImageRole role, const std::string& path,
   return absl::InternalError("unknown image role");
 }
 
-bool NeedsLosslessVideo(ImageRole role) { return role == ImageRole::kDisparity; }
+cv::Mat DepthFromDisparity(const cv::Mat& disparity, const CameraModel& camera) {
+  cv::Mat d;
+  disparity.convertTo(d, CV_64F);
+  cv::Mat depth(disparity.size(), CV_32FC1);
+  const double fb = camera.fx * camera.baseline;
+  for (int v = 0; v < d.rows; ++v) {
+    const double* in = d.ptr<double>(v);
+    float* out = depth.ptr<float>(v);
+    for (int u = 0; u < d.cols; ++u) {
+      // Raw 0 is "no match" for every disparity encoding; so is a disparity behind the camera.
+      const double scaled = in[u] * camera.disparity_scale + camera.disparity_offset;
+      out[u] = in[u] == 0 || !(scaled > 0) ? 0.0f : static_cast<float>(fb / scaled);
+    }
+  }
+  return depth;
+}
+
+bool NeedsLosslessVideo(ImageRole role) {
+  return role == ImageRole::kDisparity || role == ImageRole::kDepth;
+}
 
 absl::StatusOr<cv::Mat> FromVideo(ImageRole role, cv::Mat frame, const std::string& flag,
                                   const std::string& path, bool first,
@@ -120,7 +152,16 @@ absl::StatusOr<cv::Mat> FromVideo(ImageRole role, cv::Mat frame, const std::stri
       }
       return frame;
     }
-    case ImageRole::kColour: {
+    case ImageRole::kDepth: {
+      // Decoders hand 16-bit grey (FFV1 gray16le) back as it is; anything else is no depth.
+      if (absl::Status s = CheckDepth(frame, absl::StrCat("video ", path, "'s frames"), flag);
+          !s.ok()) {
+        return s;
+      }
+      return frame;
+    }
+    case ImageRole::kColour:
+    case ImageRole::kRight: {
       if (frame.depth() != CV_8U) {
         cv::Mat c8;
         frame.convertTo(c8, CV_8U, 1.0 / 257.0);

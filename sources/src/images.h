@@ -8,12 +8,10 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "cloudcast/core/camera.h"
 #include "cloudcast/sources/frame.h"
 
 namespace cloudcast::sources::internal {
-
-// The flag that names `role`'s input of one sort: RoleFlag(kColour, "-video") is "--colour-video".
-std::string RoleFlag(ImageRole role, const std::string& suffix);
 
 // The paths of `paths` for each role of `kind`, in RolesOf order; InvalidArgument naming the flag
 // of a role that has none, or of a role the kind does not have (`suffix` makes the flags:
@@ -26,6 +24,11 @@ absl::StatusOr<std::vector<std::string>> PathsPerRole(FrameKind kind, const Role
 // name the file: NotFound for a missing one, InvalidArgument for one that does not decode or
 // does not fit the role.
 absl::StatusOr<cv::Mat> ReadImage(ImageRole role, const std::string& path, const std::string& flag);
+
+// The depth (CV_32FC1, z = fx * baseline / d in the baseline's unit, 0 where there is no
+// disparity) that `disparity` gives through `camera` (its scale and offset applied): the same z
+// the server computes from the disparity, so both kinds of one frame give one cloud.
+cv::Mat DepthFromDisparity(const cv::Mat& disparity, const CameraModel& camera);
 
 // Whether a video of `role` must keep its values exactly (a lossy codec is warned about).
 bool NeedsLosslessVideo(ImageRole role);

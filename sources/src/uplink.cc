@@ -32,22 +32,53 @@ absl::Status DisparityToProto(const client::DisparityInput& input, v1::Disparity
   return absl::InternalError("disparity: an input kind the uplink does not make");
 }
 
-absl::Status ColourToProto(const client::ColorInput& input, v1::ColorImage* image) {
-  if (const auto* raw = std::get_if<ColorView>(&input)) {
-    return convert::ToProto(*raw, "colour", image->mutable_raw());
+absl::Status DepthToProto(const client::DepthInput& input, v1::DepthImage* image) {
+  if (const auto* raw = std::get_if<DepthView>(&input)) {
+    return convert::ToProto(*raw, "depth", image->mutable_raw());
   }
-  if (const auto* bgra = std::get_if<client::BgraView>(&input)) {
-    return convert::BgraToProto(bgra->data, bgra->size_bytes, bgra->width, bgra->height,
-                                bgra->stride_bytes, "colour", image->mutable_raw());
-  }
-  if (const auto* z = std::get_if<client::CompressedColorView>(&input)) {
-    return convert::ToProto(z->view, z->compression, "colour", image->mutable_compressed());
+  if (const auto* z = std::get_if<client::CompressedDepthView>(&input)) {
+    return convert::ToProto(z->view, z->compression, "depth", image->mutable_compressed());
   }
   if (const auto* file = std::get_if<client::EncodedImage>(&input)) {
     image->set_encoded(std::string(file->bytes));
     return absl::OkStatus();
   }
-  return absl::InternalError("colour: an input kind the uplink does not make");
+  return absl::InternalError("depth: an input kind the uplink does not make");
+}
+
+absl::Status ColourToProto(const client::ColorInput& input, const char* what,
+                           v1::ColorImage* image) {
+  if (const auto* raw = std::get_if<ColorView>(&input)) {
+    return convert::ToProto(*raw, what, image->mutable_raw());
+  }
+  if (const auto* bgra = std::get_if<client::BgraView>(&input)) {
+    return convert::BgraToProto(bgra->data, bgra->size_bytes, bgra->width, bgra->height,
+                                bgra->stride_bytes, what, image->mutable_raw());
+  }
+  if (const auto* z = std::get_if<client::CompressedColorView>(&input)) {
+    return convert::ToProto(z->view, z->compression, what, image->mutable_compressed());
+  }
+  if (const auto* file = std::get_if<client::EncodedImage>(&input)) {
+    image->set_encoded(std::string(file->bytes));
+    return absl::OkStatus();
+  }
+  return absl::InternalError(absl::StrCat(what, ": an input kind the uplink does not make"));
+}
+
+bool Encoded(Uplink u) { return u == Uplink::kPng || u == Uplink::kJpeg; }
+
+// A colour image (or a stereo pair's right one) as kRaw / kZstd views it.
+absl::Status ColourView(const cv::Mat& m, const char* what, bool zstd, client::ColorInput* out) {
+  absl::StatusOr<client::ColorInput> input = client::ColorFromMat(m, what);
+  if (!input.ok()) return input.status();
+  *out = zstd ? client::CompressRaw(*input) : *std::move(input);  // BGRA stays raw (as BGR)
+  return absl::OkStatus();
+}
+
+// A colour image as kPng / kJpeg encode it.
+absl::StatusOr<std::string> ColourFile(const cv::Mat& m, const UplinkOptions& options) {
+  return options.encoding == Uplink::kJpeg ? client::EncodeJpeg(m, options.jpeg_quality)
+                                           : client::EncodePng(m, options.png_compression);
 }
 
 }  // namespace
@@ -79,70 +110,108 @@ const std::vector<std::string>& UplinkNames() {
 }
 
 absl::Status UplinkFrame::Encode(const SourceFrame& frame, const UplinkOptions& options) {
+  kind_ = frame.kind;
   encoding_ = options.encoding;
   float_as_tiff_ = false;
-  disparity_mat_ = cv::Mat();
-  colour_mat_ = cv::Mat();
-  disparity_file_.clear();
+  geometry_mat_ = colour_mat_ = right_mat_ = cv::Mat();
+  geometry_file_.clear();
   colour_file_.clear();
-  if (frame.kind != FrameKind::kDisparity) {
-    return absl::UnimplementedError(
-        absl::StrCat("the uplink does not carry ", Name(frame.kind), " frames yet"));
-  }
-  const cv::Mat& d = frame.disparity();
+  right_file_.clear();
   const cv::Mat& c = frame.colour();
+  const bool stereo = kind_ == FrameKind::kStereo;
+  // What gives the points depth: a disparity or depth image; a stereo pair has none.
+  const cv::Mat& g = kind_ == FrameKind::kDepth ? frame.depth() : frame.disparity();
+  const char* left = stereo ? "left" : "colour";
   if (encoding_ == Uplink::kRaw || encoding_ == Uplink::kZstd) {
-    absl::StatusOr<client::DisparityInput> d_input = client::DisparityFromMat(d);
-    if (!d_input.ok()) return d_input.status();
-    absl::StatusOr<client::ColorInput> c_input = client::ColorFromMat(c);
-    if (!c_input.ok()) return c_input.status();
-    disparity_mat_ = d;  // the views point into these
-    colour_mat_ = c;
-    disparity_view_ = *std::move(d_input);
-    colour_view_ = *std::move(c_input);
-    if (encoding_ == Uplink::kZstd) {
-      disparity_view_ = client::CompressRaw(disparity_view_);
-      colour_view_ = client::CompressRaw(colour_view_);  // a BGRA colour stays raw (as BGR)
+    const bool zstd = encoding_ == Uplink::kZstd;
+    if (kind_ == FrameKind::kDisparity) {
+      absl::StatusOr<client::DisparityInput> d = client::DisparityFromMat(g);
+      if (!d.ok()) return d.status();
+      disparity_view_ = zstd ? client::CompressRaw(*d) : *std::move(d);
+    } else if (kind_ == FrameKind::kDepth) {
+      absl::StatusOr<client::DepthInput> d = client::DepthFromMat(g);
+      if (!d.ok()) return d.status();
+      depth_view_ = zstd ? client::CompressRaw(*d) : *std::move(d);
     }
+    if (absl::Status s = ColourView(c, left, zstd, &colour_view_); !s.ok()) return s;
+    if (stereo) {
+      if (absl::Status s = ColourView(frame.right(), "right", zstd, &right_view_); !s.ok()) {
+        return s;
+      }
+    }
+    geometry_mat_ = stereo ? cv::Mat() : g;  // the views point into these
+    colour_mat_ = c;
+    right_mat_ = frame.right();
     return absl::OkStatus();
   }
-  // PNG has no float samples; TIFF keeps them exactly.
-  float_as_tiff_ = d.depth() == CV_32F;
-  absl::StatusOr<std::string> df = float_as_tiff_ ? client::EncodeImage(d, ".tiff")
-                                                  : client::EncodePng(d, options.png_compression);
-  if (!df.ok()) return df.status();
-  absl::StatusOr<std::string> cf = encoding_ == Uplink::kJpeg
-                                       ? client::EncodeJpeg(c, options.jpeg_quality)
-                                       : client::EncodePng(c, options.png_compression);
+  if (!stereo) {
+    // PNG has no float samples; TIFF keeps them exactly.
+    float_as_tiff_ = g.depth() == CV_32F;
+    absl::StatusOr<std::string> gf = float_as_tiff_ ? client::EncodeImage(g, ".tiff")
+                                                    : client::EncodePng(g, options.png_compression);
+    if (!gf.ok()) return gf.status();
+    geometry_file_ = *std::move(gf);
+  }
+  absl::StatusOr<std::string> cf = ColourFile(c, options);
   if (!cf.ok()) return cf.status();
-  disparity_file_ = *std::move(df);
   colour_file_ = *std::move(cf);
+  if (stereo) {
+    absl::StatusOr<std::string> rf = ColourFile(frame.right(), options);
+    if (!rf.ok()) return rf.status();
+    right_file_ = *std::move(rf);
+  }
   return absl::OkStatus();
 }
 
 client::FrameInput UplinkFrame::input() const {
+  switch (kind_) {
+    case FrameKind::kDisparity:
+      return client::DisparityFrame{disparity(), colour()};
+    case FrameKind::kDepth:
+      return client::DepthFrame{depth(), colour()};
+    case FrameKind::kStereo:
+      return client::StereoFrame{colour(), right()};
+  }
   return client::DisparityFrame{disparity(), colour()};
 }
 
 client::DisparityInput UplinkFrame::disparity() const {
-  if (encoding_ == Uplink::kPng || encoding_ == Uplink::kJpeg) {
-    return client::EncodedImage{disparity_file_};
-  }
+  if (Encoded(encoding_)) return client::EncodedImage{geometry_file_};
   return disparity_view_;
 }
 
+client::DepthInput UplinkFrame::depth() const {
+  if (Encoded(encoding_)) return client::EncodedImage{geometry_file_};
+  return depth_view_;
+}
+
 client::ColorInput UplinkFrame::colour() const {
-  if (encoding_ == Uplink::kPng || encoding_ == Uplink::kJpeg) {
-    return client::EncodedImage{colour_file_};
-  }
+  if (Encoded(encoding_)) return client::EncodedImage{colour_file_};
   return colour_view_;
 }
 
+client::ColorInput UplinkFrame::right() const {
+  if (Encoded(encoding_)) return client::EncodedImage{right_file_};
+  return right_view_;
+}
+
 absl::Status UplinkFrame::ToProto(v1::Frame* frame) const {
-  if (absl::Status s = DisparityToProto(disparity(), frame->mutable_disparity()); !s.ok()) {
-    return s;
+  switch (kind_) {
+    case FrameKind::kDisparity:
+      if (absl::Status s = DisparityToProto(disparity(), frame->mutable_disparity()); !s.ok()) {
+        return s;
+      }
+      return ColourToProto(colour(), "colour", frame->mutable_colour());
+    case FrameKind::kDepth:
+      if (absl::Status s = DepthToProto(depth(), frame->mutable_depth()); !s.ok()) return s;
+      return ColourToProto(colour(), "colour", frame->mutable_colour());
+    case FrameKind::kStereo:
+      if (absl::Status s = ColourToProto(colour(), "left", frame->mutable_colour()); !s.ok()) {
+        return s;
+      }
+      return ColourToProto(right(), "right", frame->mutable_right());
   }
-  return ColourToProto(colour(), frame->mutable_colour());
+  return absl::InternalError("unknown frame kind");
 }
 
 }  // namespace cloudcast::sources

@@ -19,7 +19,7 @@ class VideoSource : public FrameSource {
         paths_(std::move(paths)),
         options_(options),
         captures_(roles_.size()) {
-    for (ImageRole role : roles_) flags_.push_back(internal::RoleFlag(role, "-video"));
+    for (ImageRole role : roles_) flags_.push_back(RoleFlag(role, "-video"));
   }
 
   absl::Status Init() {

@@ -26,6 +26,7 @@
 #include <vector>
 
 #include "absl/status/status.h"
+#include "absl/strings/str_join.h"
 #include "app/recorder.h"
 #include "app/session.h"
 #include "app/stats.h"
@@ -33,6 +34,7 @@
 #include "cloudcast/cli/checks.h"
 #include "cloudcast/cli/connection_flags.h"
 #include "cloudcast/cli/stage_flags.h"
+#include "cloudcast/cli/stereo_flags.h"
 #include "cloudcast/client/config.h"
 #include "cloudcast/core/camera.h"
 #include "cloudcast/core/draco_codec.h"
@@ -75,10 +77,10 @@ struct Flags {
   // Source
   std::string tsukuba;
   std::string illumination = sources::SourceSpec{}.illumination;
-  std::string disparity_glob, colour_glob;
-  std::string disparity_video, colour_video;
+  std::string input = cli::kDefaultInput;
+  // A path per role of each sort: --disparity-glob, --right-video, --depth, ...
+  sources::RolePaths globs, videos, stills;
   std::string synthetic;
-  std::string disparity, colour;
   bool loop = false;
   std::uint64_t frames = 0;
 
@@ -93,6 +95,9 @@ struct Flags {
 
   // TLS and the bearer token (cli::ConnectionFlags), read after parsing.
   client::ChannelSecurity security;
+
+  // The matcher flags (--input stereo).
+  std::unique_ptr<cli::StereoFlags> stereo;
 
   // Camera and stages: cli::StageFlags.
 
@@ -137,13 +142,79 @@ std::string MissingFolder(const std::string& flag, const std::string& path) {
 
 // ---------------------------------------------------------------------------------------------
 
+using cli::AddInputFlag;
+using sources::ImageRole;
+
+// The sorts of file inputs, each a flag per role: --disparity-glob, --depth-video, --right, ...
+struct RoleSort {
+  const char* suffix;
+  sources::RolePaths Flags::*paths;
+};
+constexpr RoleSort kRoleSorts[] = {
+    {"-glob", &Flags::globs}, {"-video", &Flags::videos}, {"", &Flags::stills}};
+constexpr ImageRole kRoles[] = {ImageRole::kDisparity, ImageRole::kColour, ImageRole::kDepth,
+                                ImageRole::kRight};
+
+std::string RoleHelp(ImageRole role, const std::string& suffix) {
+  const bool glob = suffix == "-glob", video = suffix == "-video";
+  switch (role) {
+    case ImageRole::kDisparity:
+      if (glob) {
+        return "Disparity images, a glob in quotes (e.g. 'd/*.png'), natural sort order; 8/16-bit "
+               "PNG/TIFF or float TIFF/PFM";
+      }
+      if (video) {
+        return "Disparity video; must be lossless (PNG in .avi, FFV1 in .mkv): lossy codecs "
+               "change disparities (warned)";
+      }
+      return "One disparity image, sent again and again with --colour (endless)";
+    case ImageRole::kColour:
+      if (glob) {
+        return "Colour images (of a stereo pair: the left ones) paired with the other glob in "
+               "sorted order (the counts must match)";
+      }
+      if (video) {
+        return "Colour video (stereo: the left one) paired frame by frame with the other video "
+               "(HuffYUV in .avi: exact, and decodes faster than PNG stills)";
+      }
+      return "The colour image for --disparity or --depth, or the left image for --right";
+    case ImageRole::kDepth:
+      if (glob) {
+        return "--input depth: depth images, a glob in quotes; 16-bit PNG (millimetres) or float "
+               "TIFF/PFM (metres)";
+      }
+      if (video) return "--input depth: a lossless 16-bit depth video (FFV1 gray16 in .mkv)";
+      return "--input depth: one depth image, sent again and again with --colour (endless)";
+    case ImageRole::kRight:
+      if (glob) {
+        return "--input stereo: the right images of rectified pairs, a glob in quotes, paired "
+               "with --colour-glob (the left images)";
+      }
+      if (video) return "--input stereo: the right video, paired with --colour-video (the left)";
+      return "--input stereo: one right image, sent again and again with --colour (the left)";
+  }
+  return "";
+}
+
+void AddRoleFlags(CLI::App& app, Flags& f, const std::string& group) {
+  for (const RoleSort& sort : kRoleSorts) {
+    for (ImageRole role : kRoles) {
+      app.add_option(sources::RoleFlag(role, sort.suffix), (f.*sort.paths)[role],
+                     RoleHelp(role, sort.suffix))
+          ->type_name(std::string(sort.suffix) == "-glob" ? "GLOB" : "FILE")
+          ->group(group);
+    }
+  }
+}
+
 // The stage flags go in the middle of --help, so AddFlags registers them too.
 std::unique_ptr<cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
   const std::string source = "Source (one of; default below)";
   app.add_option("--tsukuba", f.tsukuba,
-                 "A New Tsukuba folder: groundtruth/disparity_maps/left/*.png "
-                 "with illumination/<illumination>/left/*.png, paired by frame "
-                 "number")
+                 "A New Tsukuba folder: groundtruth/disparity_maps/left/*.png with "
+                 "illumination/<illumination>/left/*.png, paired by frame number; --input "
+                 "stereo sends the left + right images (illumination/<illumination>/right), "
+                 "--input depth the ground truth as float depth (focal x baseline / disparity)")
       ->type_name("DIR")
       ->group(source);
   app.add_option("--illumination", f.illumination,
@@ -151,39 +222,13 @@ std::unique_ptr<cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
       ->capture_default_str()
       ->type_name("NAME")
       ->group(source);
-  app.add_option("--disparity-glob", f.disparity_glob,
-                 "Disparity images, a glob in quotes (e.g. 'd/*.png'), natural "
-                 "sort order; 8/16-bit PNG/TIFF or float TIFF/PFM")
-      ->type_name("GLOB")
-      ->group(source);
-  app.add_option("--colour-glob", f.colour_glob,
-                 "Colour images paired with --disparity-glob in sorted order (the "
-                 "counts must match)")
-      ->type_name("GLOB")
-      ->group(source);
-  app.add_option("--disparity-video", f.disparity_video,
-                 "Disparity video; must be lossless (PNG in .avi, FFV1 in .mkv): "
-                 "lossy codecs change disparities (warned)")
-      ->type_name("FILE")
-      ->group(source);
-  app.add_option("--colour-video", f.colour_video,
-                 "Colour video paired frame by frame with --disparity-video (HuffYUV "
-                 "in .avi: exact, and decodes faster than PNG stills)")
-      ->type_name("FILE")
-      ->group(source);
+  AddInputFlag(app, &f.input, sources::FrameKindNames(), source);
+  AddRoleFlags(app, f, source);
   app.add_option("--synthetic", f.synthetic,
-                 "The synthetic scene at WIDTHxHEIGHT, camera moving frame by "
-                 "frame; endless")
+                 "The synthetic scene at WIDTHxHEIGHT, camera moving frame by frame, as frames of "
+                 "--input (a stereo pair's right image rendered from the right camera); endless")
       ->check(SizeCheck(Limits{}.max_side, Limits{}.max_pixels))
       ->type_name("WxH")
-      ->group(source);
-  app.add_option("--disparity", f.disparity,
-                 "One disparity image, sent again and again with --colour "
-                 "(endless)")
-      ->type_name("FILE")
-      ->group(source);
-  app.add_option("--colour", f.colour, "The colour image for --disparity")
-      ->type_name("FILE")
       ->group(source);
   app.add_option("--open", f.open,
                  "View local cloud files (.pcd, .ply, .drc) instead of streaming; "
@@ -242,6 +287,8 @@ std::unique_ptr<cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
   const std::string stages = "Camera and stages (stage flags left out: the server's defaults)";
   auto stage_flags =
       std::make_unique<cli::StageFlags>(app, cli::StageFlags::Groups{stages, stages, stages});
+  f.stereo = std::make_unique<cli::StereoFlags>(
+      app, "Stereo matcher (--input stereo; flags left out: the server's defaults)");
 
   const std::string viewer = "Viewer";
   app.add_flag("--no-window", f.no_window,
@@ -332,26 +379,43 @@ StreamConfig BuildConfig(const Flags& f, const cli::StageFlags& stages,
     config.mutable_camera()->clear_cy();
   }
   config.set_delivery(f.lossless ? v1::DELIVERY_ALL : v1::DELIVERY_LATEST);
+  if (f.stereo->AnyGiven()) *config.mutable_stereo() = f.stereo->GivenStereoConfig();
   return config;
 }
 
+// The paths of the role flags given (CLI11 leaves the others empty).
+sources::RolePaths Given(const sources::RolePaths& paths) {
+  sources::RolePaths given;
+  for (const auto& [role, path] : paths) {
+    if (!path.empty()) given[role] = path;
+  }
+  return given;
+}
+
+sources::FrameKind InputKind(const Flags& f) {
+  sources::FrameKind kind = sources::FrameKind::kDisparity;
+  sources::ParseFrameKind(f.input, &kind);  // checked by --input's IsMember
+  return kind;
+}
+
 // Opens the source the flags name, or the default one.
-absl::StatusOr<std::unique_ptr<sources::FrameSource>> OpenSource(const Flags& f) {
-  using sources::ImageRole;
+absl::StatusOr<std::unique_ptr<sources::FrameSource>> OpenSource(const Flags& f,
+                                                                 const cli::StageFlags& stages) {
   sources::SourceSpec spec;
   spec.tsukuba_dir = f.tsukuba;
   spec.illumination = f.illumination;
-  for (auto& [paths, disparity, colour] :
-       {std::tuple<sources::RolePaths&, const std::string&, const std::string&>{
-            spec.globs, f.disparity_glob, f.colour_glob},
-        {spec.videos, f.disparity_video, f.colour_video},
-        {spec.stills, f.disparity, f.colour}}) {
-    if (!disparity.empty()) paths[ImageRole::kDisparity] = disparity;
-    if (!colour.empty()) paths[ImageRole::kColour] = colour;
-  }
+  spec.globs = Given(f.globs);
+  spec.videos = Given(f.videos);
+  spec.stills = Given(f.stills);
   if (!f.synthetic.empty()) ParseSize(f.synthetic, &spec.synthetic_width, &spec.synthetic_height);
   sources::SourceOptions options;
+  options.kind = InputKind(f);
   options.loop = f.loop;
+  // New Tsukuba's depth frames are made from its disparity with the camera the stream uses.
+  if (auto camera = stages.Apply(FrameSettings{}); camera.ok()) {
+    if (stages.Given("--focal")) options.focal = camera->pipeline.camera.fx;
+    if (stages.Given("--baseline")) options.baseline = camera->pipeline.camera.baseline;
+  }
   const bool by_default = spec.Given().empty();
   // Ten frames go by in a blink: the default source is endless, like the synthetic scene.
   if (by_default) options.loop = true;
@@ -370,8 +434,9 @@ absl::StatusOr<std::unique_ptr<sources::FrameSource>> OpenSource(const Flags& f)
   return sources::LimitFrames(*std::move(source), f.frames);
 }
 
-// One line per reply, for --print-frames (the demo's per-frame latency).
-void PrintFrameLine(const Result& r) {
+// One line per reply, for --print-frames (the demo's per-frame latency); stereo pairs add the
+// server's rectify and match times, and a disparity map sent back is noted.
+void PrintFrameLine(const Result& r, bool stereo) {
   const double latency_ms = std::chrono::duration<double, std::milli>(r.latency()).count();
   if (!r.ok()) {
     std::printf("frame %6llu  error: %s\n", static_cast<unsigned long long>(r.sequence),
@@ -379,14 +444,20 @@ void PrintFrameLine(const Result& r) {
   } else {
     const auto& c = r.reply.counts();
     const auto& t = r.reply.times();
+    // A stereo pair's matching is most of its server time: it goes before the other stages.
+    const std::string stereo_times =
+        stereo ? fmt::format("rectify {:5.2f}  match {:6.2f}  ", t.rectify_us() / 1000.0,
+                             t.match_us() / 1000.0)
+               : std::string();
     std::printf(
         "frame %6llu  %7llu valid  %7llu passthrough  %6llu voxels  %6.1f KB  server "
-        "decode %5.2f  pipeline %5.2f  draco %5.2f ms  latency %6.2f ms\n",
+        "decode %5.2f  %spipeline %5.2f  draco %5.2f ms  latency %6.2f ms%s\n",
         static_cast<unsigned long long>(r.sequence),
         static_cast<unsigned long long>(c.valid_points()),
         static_cast<unsigned long long>(c.after_passthrough()),
         static_cast<unsigned long long>(c.after_voxel_grid()), r.draco_bytes() / 1024.0,
-        t.decode_us() / 1000.0, t.pipeline_us() / 1000.0, t.encode_us() / 1000.0, latency_ms);
+        t.decode_us() / 1000.0, stereo_times.c_str(), t.pipeline_us() / 1000.0,
+        t.encode_us() / 1000.0, latency_ms, r.reply.has_disparity() ? "  (+ disparity map)" : "");
   }
   std::fflush(stdout);
 }
@@ -463,8 +534,9 @@ int Run(const Flags& f, const cli::StageFlags& stages) {
 
   const bool windowed = !f.no_window;
   const bool interactive = windowed && !f.hidden && f.snapshot.empty();
-  auto source = OpenSource(f);
+  auto source = OpenSource(f, stages);
   if (!source.ok()) return Fail(source.status());
+  const bool stereo = InputKind(f) == sources::FrameKind::kStereo;
   sources::FrameSource& src = **source;
   spdlog::info("source: {}{}", src.info().description, src.info().looped ? ", looped" : "");
   for (const std::string& w : src.info().warnings) spdlog::warn("{}", w);
@@ -512,7 +584,7 @@ int Run(const Flags& f, const cli::StageFlags& stages) {
   std::mutex record_mu;
   absl::Status record_status;
   auto on_result = [&](Result& result) {
-    if (f.print_frames) PrintFrameLine(result);
+    if (f.print_frames) PrintFrameLine(result, stereo);
     if (recorder) {
       absl::Status s = recorder->Save(result);
       if (!s.ok()) {
@@ -526,7 +598,7 @@ int Run(const Flags& f, const cli::StageFlags& stages) {
 
   auto session = Session::Start(options, &src, &stats, on_result);
   if (!session.ok()) return Fail(session.status());
-  spdlog::info("streaming to {}: {}, {} images, delivery {}", f.server,
+  spdlog::info("streaming {} frames to {}: {}, {} images, delivery {}", f.input, f.server,
                f.fps > 0 ? fmt::format("{} frames/s", f.fps)
                          : fmt::format("as fast as answered ({} in flight)", f.in_flight),
                f.encoding, f.lossless ? "all (lossless)" : "latest");
@@ -553,7 +625,8 @@ int Run(const Flags& f, const cli::StageFlags& stages) {
 
   const StatsSnapshot snapshot = stats.Snapshot();
   std::string summary = "source: " + src.info().description +
-                        (src.info().looped ? ", looped\n" : "\n") +
+                        (src.info().looped ? ", looped\n" : "\n") + "input: " + f.input +
+                        (stereo ? " pairs, matched by the server\n" : " frames\n") +
                         StreamStats::SummaryText(snapshot, windowed);
   if (windowed) {
     summary +=
@@ -572,6 +645,7 @@ int Run(const Flags& f, const cli::StageFlags& stages) {
     j["status"] = status.ok() ? std::string("ok") : std::string(status.message());
     j["server"] = f.server;
     j["source"] = {{"kind", src.info().kind},
+                   {"input", f.input},
                    {"description", src.info().description},
                    {"width", src.info().width},
                    {"height", src.info().height}};
@@ -580,6 +654,7 @@ int Run(const Flags& f, const cli::StageFlags& stages) {
                      {"in_flight", f.in_flight},
                      {"delivery", f.lossless ? "all" : "latest"},
                      {"encoding", f.encoding},
+                     {"input", f.input},
                      {"window", windowed}};
     j.update(StreamStats::ToJson(snapshot, windowed));
     if (windowed) j["viewer_skipped"] = mailbox.skipped();
@@ -601,9 +676,10 @@ int Run(const Flags& f, const cli::StageFlags& stages) {
 int ClientMain(int argc, char** argv) {
   Flags f;
   CLI::App app(
-      "cloudcast-client: streams stereo frames (disparity + colour) to a cloudcast server and\n"
-      "shows the filtered point clouds it sends back, live, in an OpenGL window; or records\n"
-      "them, or just measures the stream. It also opens local .pcd/.ply/.drc files.\n\n"
+      "cloudcast-client: streams frames to a cloudcast server (--input: disparity + colour,\n"
+      "depth + colour, or a rectified stereo pair the server matches) and shows the filtered\n"
+      "point clouds it sends back, live, in an OpenGL window; or records them, or just measures\n"
+      "the stream. It also opens local .pcd/.ply/.drc files.\n\n"
       "Default source: the New Tsukuba frames in $CLOUDCAST_DATA, else ../shared/data/new_tsukuba\n"
       "next to the checkout (looped), else the synthetic scene 640x480: endless either way.\n"
       "The camera always goes with the stream; stage flags left out take the server's defaults\n"
@@ -612,6 +688,9 @@ int ClientMain(int argc, char** argv) {
       "  cloudcast-server &                                  # serves on :50051\n"
       "  cloudcast-client                                    # live view of the default source\n"
       "  cloudcast-client --tsukuba ../shared/data/new_tsukuba --loop --fps 30\n"
+      "  cloudcast-client --tsukuba ../shared/data/new_tsukuba --input stereo --matcher sgbm\n"
+      "  cloudcast-client --input depth --depth-glob 'depth/*.png' --colour-glob 'rgb/*.png' \\\n"
+      "    --focal 525 --cx 319.5 --cy 239.5\n"
       "  cloudcast-client --synthetic 1280x720 --leaf 0.05 --encoding jpeg\n"
       "  cloudcast-client --disparity-glob 'd/*.png' --colour-glob 'c/*.png' --lossless \\\n"
       "    --record out --record-format drc --no-window --json stats.json\n"
@@ -639,30 +718,46 @@ int ClientMain(int argc, char** argv) {
                  message.c_str());
     return kExitUsage;
   };
-  // One source at most; paired flags come together.
-  const std::vector<std::vector<const char*>> sources = {{"--tsukuba"},
-                                                         {"--disparity-glob", "--colour-glob"},
-                                                         {"--disparity-video", "--colour-video"},
-                                                         {"--synthetic"},
-                                                         {"--disparity", "--colour"},
-                                                         {"--open"}};
+  // One source at most; a sort of files (globs, videos, stills) gives every image of the kind.
+  const sources::FrameKind kind = InputKind(f);
+  const std::vector<ImageRole>& roles = sources::RolesOf(kind);
   std::vector<std::string> given;
-  for (const auto& kind : sources) {
-    std::string names;
-    for (const char* name : kind) {
-      if (app.count(name) > 0) names += (names.empty() ? "" : " + ") + std::string(name);
+  for (const char* single : {"--tsukuba", "--synthetic", "--open"}) {
+    if (app.count(single) > 0) given.emplace_back(single);
+  }
+  for (const RoleSort& sort : kRoleSorts) {
+    std::vector<std::string> names;
+    for (ImageRole role : kRoles) {
+      const std::string flag = sources::RoleFlag(role, sort.suffix);
+      if (app.count(flag) == 0) continue;
+      if (std::find(roles.begin(), roles.end(), role) == roles.end()) {
+        std::vector<std::string> wanted;
+        for (ImageRole r : roles) wanted.push_back(sources::RoleFlag(r, sort.suffix));
+        return usage(fmt::format("{} does not apply to --input {} (it takes {})", flag, f.input,
+                                 absl::StrJoin(wanted, " and ")));
+      }
+      names.push_back(flag);
     }
     if (names.empty()) continue;
-    given.push_back(names);
-    for (const char* name : kind) {
-      if (app.count(name) == 0) {
-        return usage(fmt::format("{} needs {}", names, name));
+    for (ImageRole role : roles) {
+      const std::string flag = sources::RoleFlag(role, sort.suffix);
+      if (app.count(flag) == 0) {
+        return usage(
+            fmt::format("{} needs {} (--input {})", absl::StrJoin(names, " + "), flag, f.input));
       }
     }
+    given.push_back(fmt::format("{}", absl::StrJoin(names, " + ")));
   }
   if (given.size() > 1) {
     return usage(fmt::format("choose one source: {} and {} were both given", given[0], given[1]));
   }
+  if (kind != sources::FrameKind::kStereo && f.stereo->AnyGiven()) {
+    return usage(
+        fmt::format("{} applies to --input stereo only (the server matches stereo "
+                    "pairs; this is --input {})",
+                    f.stereo->GivenFlags().front(), f.input));
+  }
+  if (absl::Status s = f.stereo->Check(); !s.ok()) return usage(std::string(s.message()));
   if (f.no_window) {
     for (const char* flag : {"--open", "--snapshot", "--hidden", "--window"}) {
       if (app.count(flag) > 0)
@@ -678,8 +773,8 @@ int ClientMain(int argc, char** argv) {
     return usage(std::string(security.status().message()));
   }
   if (!f.open.empty()) {
-    for (const char* flag :
-         {"--record", "--json", "--lossless", "--fps", "--frames", "--loop", "--server"}) {
+    for (const char* flag : {"--record", "--json", "--lossless", "--fps", "--frames", "--loop",
+                             "--server", "--input"}) {
       if (app.count(flag) > 0) return usage(fmt::format("{} does not apply to --open", flag));
     }
   }

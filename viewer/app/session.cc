@@ -172,7 +172,7 @@ void Session::SendLoop() {
     }
     if (uplink.float_disparity_as_tiff() && !tiff_noted) {
       tiff_noted = true;
-      spdlog::info("float disparities are sent as TIFF (PNG has no float samples)");
+      spdlog::info("float disparities and depths are sent as TIFF (PNG has no float samples)");
     }
     const std::uint64_t bytes_before = stream_->image_bytes_sent();
     const absl::Status status = stream_->Send(uplink.input(), meta);

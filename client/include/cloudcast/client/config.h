@@ -19,6 +19,8 @@ using convert::SetVoxelGrid;
 // max_position_error 0 (the DracoOptions default) stays unset: the server then uses a quarter of
 // the voxel leaf, as the core pipeline does.
 using convert::SetDraco;
+// The stereo matcher's settings (StreamConfig.stereo) for frames that are stereo pairs.
+using convert::SetStereo;
 // Camera, passthrough and voxel grid of `options` (its limits are the server's business).
 // Draco and delivery stay at the server defaults.
 using convert::MakeStreamConfig;

@@ -20,7 +20,17 @@ struct SyntheticOptions {
   // kF32: exact disparities. kU16: fixed point with scale 1/16 (as stereo matchers output).
   // kU8: rounded to whole pixels, 0 (invalid) where the disparity exceeds 255.
   DisparityEncoding disparity_encoding = DisparityEncoding::kF32;
+  // Render from a camera moved this far along its own x axis (the scene's unit): with a stereo
+  // baseline, the right camera of a pair rectified by construction, whose colour is the right
+  // image (and whose disparity is the right view's, for the frame's camera baseline of 1).
+  double eye_x = 0;
 };
+
+// The baseline of the synthetic stereo pairs (eye_x of their right image): half the frames'
+// camera baseline, so that at 640 px their disparities (at most 116 px, on the nearest floor)
+// fit the matchers' default 128 disparities. The stream's camera needs this baseline for the
+// points to land on the scene.
+inline constexpr double kSyntheticStereoBaseline = 0.5;
 
 // One rendered frame. It owns its pixels; the views point into them.
 struct SyntheticFrame {
@@ -54,6 +64,7 @@ class SyntheticScene {
   struct Shape;
   std::vector<Shape> shapes_;
   SyntheticScene();
+
  public:
   ~SyntheticScene();
   SyntheticScene(const SyntheticScene&);

@@ -28,6 +28,11 @@ struct FrameSourceOptions {
   // synthetic scene at 640x480). One pass of a finite source is sent; the synthetic scene's
   // disparity is 16-bit here, as a camera's fixed-point disparity (so png and jpeg carry it).
   sources::SourceSpec source;
+  // What the frames hold (--input): disparity + colour, depth + colour, or a stereo pair.
+  sources::FrameKind kind = sources::FrameKind::kDisparity;
+  // The camera of file sources; New Tsukuba's depth frames are computed with it.
+  double focal = sources::SourceOptions{}.focal;
+  double baseline = sources::SourceOptions{}.baseline;
   int synthetic_frames = 10;  // distinct synthetic frames (the camera moves from one to the next)
   sources::UplinkOptions uplink;
 };
@@ -52,7 +57,9 @@ class FrameStore {
 
   // The camera the frames were made with (the StreamConfig's camera section).
   const CameraModel& camera() const { return camera_; }
-  // e.g. "New Tsukuba (10 frames, 640x480), raw".
+  // What the frames hold.
+  sources::FrameKind kind() const { return kind_; }
+  // e.g. "New Tsukuba (10 stereo frames, 640x480), raw, 1200 KB per frame".
   const std::string& description() const { return description_; }
 
  private:
@@ -62,6 +69,7 @@ class FrameStore {
   // Owned strings, so their slices can be static (no refcount, no copy) for the store's life.
   std::vector<std::shared_ptr<const std::string>> tails_;
   CameraModel camera_;
+  sources::FrameKind kind_ = sources::FrameKind::kDisparity;
   std::string description_;
 };
 

@@ -25,7 +25,9 @@ absl::StatusOr<std::vector<std::string>> Glob(const std::string& pattern);
 std::string FourccToString(int fourcc);
 bool IsLosslessCodec(const std::string& fourcc);
 
-// The folder of a New Tsukuba tree that holds `role`'s images for the left camera.
+// The folder of a New Tsukuba tree that holds `role`'s images: the left camera's, but for kRight.
+// The data set has no depth maps: kDepth is the ground-truth disparity's folder (OpenTsukuba
+// converts it).
 std::string TsukubaFolder(const std::string& dir, ImageRole role, const std::string& illumination);
 // Whether `dir` holds the New Tsukuba layout for `kind` (each role's folder exists).
 bool LooksLikeTsukuba(const std::string& dir, const std::string& illumination,

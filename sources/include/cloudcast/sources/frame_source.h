@@ -64,13 +64,18 @@ struct SourceOptions {
   // With `loop`: keep the decoded frames of image sources in memory (while they fit in
   // cache_bytes), so later passes cost no decoding.
   std::uint64_t cache_bytes = std::uint64_t{512} << 20;
-  // Focal length (pixels) of the suggested camera for file and video sources.
+  // Focal length (pixels) and baseline of the suggested camera for file and video sources; New
+  // Tsukuba's depth frames are computed from its ground-truth disparity with them.
   double focal = CameraModel{}.fx;
+  double baseline = CameraModel{}.baseline;
 };
 
 // A New Tsukuba folder (the original layout), each role's images from its folder
-// (disparity: groundtruth/disparity_maps/left, colour: illumination/<illumination>/left), paired
-// by their frame numbers, in frame order; frames are named tsukuba_NNNNN.
+// (disparity: groundtruth/disparity_maps/left, colour: illumination/<illumination>/left, right:
+// illumination/<illumination>/right), paired by their frame numbers, in frame order; frames are
+// named tsukuba_NNNNN. Depth frames: the data set has no depth maps, so the ground-truth
+// disparity is converted (z = focal * baseline / d, float, 0 where d is 0), which gives the
+// disparity frames' points.
 absl::StatusOr<std::unique_ptr<FrameSource>> OpenTsukuba(const std::string& dir,
                                                          const std::string& illumination,
                                                          const SourceOptions& options);
@@ -90,11 +95,14 @@ absl::StatusOr<std::unique_ptr<FrameSource>> OpenVideos(const RolePaths& videos,
 absl::StatusOr<std::unique_ptr<FrameSource>> OpenStill(const RolePaths& files,
                                                        const SourceOptions& options);
 
-// The synthetic scene at width x height (disparity + colour), its disparity in `encoding`; the
-// camera moves with the frame index and frames are named synthetic_N. Endless.
+// The synthetic scene at width x height as frames of `kind`: disparity (in `encoding`) + colour;
+// its exact depth (float, the scene's unit) + colour; or a stereo pair, the right image rendered
+// from the right camera (kSyntheticStereoBaseline to the right, the camera's baseline in info()),
+// so the pair is rectified by construction.
+// The camera moves with the frame index and frames are named synthetic_N. Endless.
 absl::StatusOr<std::unique_ptr<FrameSource>> OpenSynthetic(
-    std::uint32_t width, std::uint32_t height,
-    DisparityEncoding encoding = DisparityEncoding::kF32);
+    std::uint32_t width, std::uint32_t height, DisparityEncoding encoding = DisparityEncoding::kF32,
+    FrameKind kind = FrameKind::kDisparity);
 
 // Stops `source` after `max_frames` frames (0: no limit).
 std::unique_ptr<FrameSource> LimitFrames(std::unique_ptr<FrameSource> source,
@@ -104,9 +112,9 @@ std::unique_ptr<FrameSource> LimitFrames(std::unique_ptr<FrameSource> source,
 struct SourceSpec {
   std::string tsukuba_dir;                // --tsukuba
   std::string illumination = "daylight";  // --illumination: New Tsukuba's colour folder
-  RolePaths globs;                        // --disparity-glob, --colour-glob
-  RolePaths videos;                       // --disparity-video, --colour-video
-  RolePaths stills;                       // --disparity, --colour: one frame, repeated
+  RolePaths globs;                        // --disparity-glob, --colour-glob, --depth-glob, ...
+  RolePaths videos;                       // --disparity-video, --colour-video, ...
+  RolePaths stills;                       // --disparity, --colour, --depth, --right: one frame
   std::uint32_t synthetic_width = 0;      // --synthetic WxH
   std::uint32_t synthetic_height = 0;
   DisparityEncoding synthetic_encoding = DisparityEncoding::kF32;
@@ -120,9 +128,9 @@ inline constexpr std::uint32_t kDefaultSyntheticWidth = 640;
 inline constexpr std::uint32_t kDefaultSyntheticHeight = 480;
 
 // Opens the source `spec` names. With none: the New Tsukuba frames of DefaultTsukubaDir() when
-// they are there, else the synthetic scene at 640x480. InvalidArgument naming the flags when
-// several sources are given, or a role's flag misses its partner ("--disparity-glob needs
-// --colour-glob").
+// they are there, else the synthetic scene at 640x480 (of options.kind). InvalidArgument naming
+// the flags when several sources are given, or a role's flag misses its partner ("no
+// --colour-glob given: disparity frames need --disparity-glob and --colour-glob").
 absl::StatusOr<std::unique_ptr<FrameSource>> OpenSource(const SourceSpec& spec,
                                                         const SourceOptions& options);
 

@@ -19,9 +19,10 @@ enum class Uplink {
   kRaw,   // pixels as they are: the fastest on loopback and fast links
   kZstd,  // both images compressed losslessly (row deltas + zstd): about a third of raw, and
           // cheap on both sides
-  kPng,   // both images as files, losslessly: PNG, and TIFF for a float disparity (PNG has no
-          // float samples)
-  kJpeg,  // colour as JPEG (lossy), disparity as with kPng: the thinnest uplink
+  kPng,   // both images as files, losslessly: PNG, and TIFF for a float disparity or depth (PNG
+          // has no float samples)
+  kJpeg,  // colour (and a stereo pair's right image) as JPEG (lossy), disparity and depth as
+          // with kPng: the thinnest uplink
 };
 // "raw", "zstd", "png", "jpeg" (what the --encoding flags accept).
 bool ParseUplink(std::string_view name, Uplink* out);
@@ -34,31 +35,39 @@ struct UplinkOptions {
   int png_compression = 1;                         // 0..9, kPng and kJpeg's disparity
 };
 
-// One frame's images as the uplink carries them. Raw and zstd frames view the source's Mats
-// (held here, so they stay alive); zstd is compressed by whoever consumes the images (Send, or
-// ToProto), so nothing is compressed twice; png and jpeg frames are encoded by Encode.
+// One frame's images as the uplink carries them, of any kind (disparity + colour, depth +
+// colour, a stereo pair). Raw and zstd frames view the source's Mats (held here, so they stay
+// alive); zstd is compressed by whoever consumes the images (Send, or ToProto), so nothing is
+// compressed twice; png and jpeg frames are encoded by Encode.
 class UplinkFrame {
  public:
   // Prepares `frame` for `options`. Errors name the image ("disparity Mat has type ...").
   absl::Status Encode(const SourceFrame& frame, const UplinkOptions& options);
 
+  FrameKind kind() const { return kind_; }
   // As client inputs, for Stream::Send. They view this object: keep it until Send returns.
   // input() is the whole frame (the kind's client::FrameInput alternative).
   client::FrameInput input() const;
+  // Its images, each as a view of its Mat (kRaw, kZstd) or as a file; those the kind has
+  // (colour() is a stereo pair's left image).
   client::DisparityInput disparity() const;
+  client::DepthInput depth() const;
   client::ColorInput colour() const;
+  client::ColorInput right() const;
   // Writes the images into `frame`'s image fields (cloudcast-load's prepared requests).
   absl::Status ToProto(v1::Frame* frame) const;
 
-  // A float disparity went as TIFF (kPng and kJpeg), worth a note to the user once.
+  // A float disparity or depth went as TIFF (kPng and kJpeg), worth a note to the user once.
   bool float_disparity_as_tiff() const { return float_as_tiff_; }
 
  private:
+  FrameKind kind_ = FrameKind::kDisparity;
   Uplink encoding_ = Uplink::kRaw;
-  cv::Mat disparity_mat_, colour_mat_;  // kRaw, kZstd
+  cv::Mat geometry_mat_, colour_mat_, right_mat_;  // kRaw, kZstd
   client::DisparityInput disparity_view_;
-  client::ColorInput colour_view_;
-  std::string disparity_file_, colour_file_;  // kPng, kJpeg
+  client::DepthInput depth_view_;
+  client::ColorInput colour_view_, right_view_;
+  std::string geometry_file_, colour_file_, right_file_;  // kPng, kJpeg
   bool float_as_tiff_ = false;
 };
 
