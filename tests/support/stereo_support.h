@@ -49,8 +49,9 @@ inline cv::Mat Texture(int width, int height, std::uint32_t seed) {
 
 // A pair whose left pixel (x, y) shows the right pixel (x - d(y), y): the right image is the left
 // texture shifted by the row's disparity, sampled with sub-pixel accuracy (bilinear). The scene
-// is wider than the images (on the right, where the right image reads up to x + d + 1) so no
-// column of either lacks texture; disparities must lie in [0, margin - 1).
+// is wider than the images by a margin on each side (the right image reads from x + d to
+// x + d + 1, and d may be negative) so no column of either lacks texture; disparities must lie
+// in [-margin, margin - 1).
 struct SyntheticPair {
   stereo::GreyImage left, right;
   std::vector<double> row_disparity;
@@ -58,17 +59,19 @@ struct SyntheticPair {
 inline SyntheticPair ShiftedPair(int width, int height, const std::vector<double>& bands,
                                  std::uint32_t seed) {
   const int margin = 300;
-  const cv::Mat scene = Texture(width + margin, height, seed);
+  const cv::Mat scene = Texture(width + 2 * margin, height, seed);
   cv::Mat left(height, width, CV_8UC1), right(height, width, CV_8UC1);
   SyntheticPair p;
   for (int y = 0; y < height; ++y) {
     const double d = bands[static_cast<std::size_t>(y) * bands.size() / height];
-    if (d < 0 || d >= margin - 1) throw std::invalid_argument("ShiftedPair: disparity out of range");
+    if (d < -margin || d >= margin - 1) {
+      throw std::invalid_argument("ShiftedPair: disparity out of range");
+    }
     p.row_disparity.push_back(d);
     for (int x = 0; x < width; ++x) {
-      left.at<std::uint8_t>(y, x) = scene.at<std::uint8_t>(y, x);
-      // right(xr) = left(xr + d) = scene(xr + d)
-      const double sx = x + d;
+      left.at<std::uint8_t>(y, x) = scene.at<std::uint8_t>(y, x + margin);
+      // right(xr) = left(xr + d) = scene(xr + d + margin)
+      const double sx = x + d + margin;
       const int x0 = static_cast<int>(std::floor(sx));
       const double f = sx - x0;
       const double v =
