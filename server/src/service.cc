@@ -1,18 +1,19 @@
 #include "service.h"
 
-#include <arpa/inet.h>
 #include <malloc.h>
 
 #include <algorithm>
 #include <optional>
 #include <string>
 #include <unordered_map>
+#include <vector>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
-#include "admission.h"
+#include "call_helpers.h"
 #include "draco/core/draco_version.h"
 #include "spdlog/spdlog.h"
+#include "request_reader.h"
 #include "stream_queue.h"
 
 #ifndef CLOUDCAST_VERSION
@@ -20,39 +21,6 @@
 #endif
 
 namespace cloudcast::server {
-namespace {
-
-using Clock = std::chrono::steady_clock;
-
-std::int64_t UnixNanos() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(
-             std::chrono::system_clock::now().time_since_epoch())
-      .count();
-}
-
-double Seconds(Clock::duration d) { return std::chrono::duration<double>(d).count(); }
-
-grpc::Status Unparsable(const char* what, std::size_t bytes) {
-  return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
-                      absl::StrCat("the request could not be parsed as a cloudcast.v1.", what, " (",
-                                   bytes, " bytes): not a valid protobuf message"));
-}
-
-// Serializes a reply for gRPC; false only on a message too large for protobuf (2 GB).
-bool Serialize(const google::protobuf::Message& message, grpc::ByteBuffer* bytes) {
-  bool own_buffer;
-  return grpc::SerializationTraits<google::protobuf::Message>::Serialize(message, bytes,
-                                                                         &own_buffer)
-      .ok();
-}
-
-grpc::Status ToGrpc(const absl::Status& s) {
-  // absl and gRPC share the canonical code numbers.
-  return grpc::Status(static_cast<grpc::StatusCode>(s.code()), std::string(s.message()));
-}
-
-}  // namespace
-
 // ---------------------------------------------------------------------------------------------
 // One Stream call: gRPC's op sequencing around the stream's StreamQueue.
 //
@@ -69,20 +37,20 @@ class CloudCastService::StreamReactor final
     : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer> {
  public:
   StreamReactor(CloudCastService* service, grpc::CallbackServerContext* context,
-                Admission::Ticket ticket, Caller caller)
+                AdmittedCall call)
       : service_(service),
-        ticket_(std::move(ticket)),
+        ticket_(std::move(call.ticket)),
         context_(context),
-        caller_(std::move(caller)),
+        caller_(std::move(call.caller)),
         peer_(caller_.label),
         client_key_(caller_.fair_key),
-        call_key_(service->next_call_key_.fetch_add(1)),
+        call_key_(call.call_key),
         settings_(caller_.defaults),
         queue_(service->options_.max_queued_frames),
         last_activity_(Clock::now()),
         last_frame_(last_activity_) {
-    service_->LogCall(spdlog::level::info, "stream from {} opened ({} active)", peer_,
-                      service_->active_streams());
+    service_->call_log_.Log(spdlog::level::info, "stream from {} opened ({} active)", peer_,
+                            service_->active_streams());
     service_->Register(this);
     std::unique_lock<std::mutex> lock(mu_);
     if (service_->draining()) closing_ = Draining();
@@ -146,8 +114,8 @@ class CloudCastService::StreamReactor final
   void OnDone() override {
     {
       std::lock_guard<std::mutex> lock(mu_);
-      service_->LogCall(spdlog::level::info, "stream from {} done: {} replies, {} dropped", peer_,
-                        queue_.written(), queue_.dropped());
+      service_->call_log_.Log(spdlog::level::info, "stream from {} done: {} replies, {} dropped",
+                              peer_, queue_.written(), queue_.dropped());
       ticket_.Release();  // already released where Finish was decided, unless none was
     }
     service_->Unregister(this);
@@ -221,9 +189,7 @@ class CloudCastService::StreamReactor final
     std::unique_ptr<v1::CloudReply> spare_cloud;
     std::shared_ptr<const StreamSettings> settings;
     Arrival arrival;
-    std::uint64_t charged = 0;     // bytes taken from the server's memory budget
-    std::uint64_t pixels = 0;      // the worker pool's cost of the frame
-    std::uint64_t work_bytes = 0;  // its work memory (EstimateFrameMemory)
+    FrameCharge charge;  // its memory in the server's budget, and its cost to the worker pool
   };
 
   // The calls decided under mu_, made by Pump after it is released.
@@ -312,7 +278,7 @@ class CloudCastService::StreamReactor final
   // Frees the request's pixels now (so a free slot costs no memory) and keeps the reply's cloud
   // buffer for the next frame.
   void Release(Job* job) {
-    Uncharge(job);
+    job->charge.Release();
     job->in.Clear();
     job->out.Clear();
     job->reader.Clear();
@@ -321,11 +287,6 @@ class CloudCastService::StreamReactor final
     job->reply.Clear();
     job->settings.reset();
     free_.push_back(job);
-  }
-
-  void Uncharge(Job* job) {
-    service_->memory_.Give(job->charged);
-    job->charged = 0;
   }
 
   // A message arrived: a config takes effect at once; a frame or an error reply joins the queue.
@@ -346,30 +307,21 @@ class CloudCastService::StreamReactor final
       }
       case v1::StreamRequest::kFrame: {
         last_frame_ = last_activity_;
-        if (absl::Status s = CheckTenantPixels(caller_, job->request.frame()); !s.ok()) {
-          const std::uint64_t sequence = job->request.frame().sequence();
-          const std::string frame_id = job->request.frame().frame_id();
+        const v1::Frame& frame = job->request.frame();
+        auto charge =
+            service_->admitter_.AdmitFrame(caller_, frame, bytes, settings_->frame.stereo);
+        if (!charge.ok()) {
+          // Answered in order with the stream's other frames; the stream goes on.
+          const std::uint64_t sequence = frame.sequence();
+          const std::string frame_id = frame.frame_id();
           job->request.Clear();
-          FillError(s, v1::ERROR_KIND_FRAME, sequence, frame_id, job->reply.mutable_error());
+          FillError(charge.status(), v1::ERROR_KIND_FRAME, sequence, frame_id,
+                    job->reply.mutable_error());
           queue_.PushReply(job);
           service_->NoteQueued(queue_.held());
           return;
         }
-        FrameMemoryCost cost = EstimateFrameMemory(job->request.frame(), settings_->frame.stereo);
-        std::uint64_t charged = 0;
-        if (absl::Status s = service_->ChargeFrame(bytes, &cost, &charged); !s.ok()) {
-          const v1::Frame& f = job->request.frame();
-          const std::uint64_t sequence = f.sequence();
-          const std::string frame_id = f.frame_id();
-          job->request.Clear();
-          FillError(s, v1::ERROR_KIND_FRAME, sequence, frame_id, job->reply.mutable_error());
-          queue_.PushReply(job);
-          service_->NoteQueued(queue_.held());
-          return;
-        }
-        job->charged = charged;
-        job->pixels = std::max<std::uint64_t>(cost.pixels, 1);
-        job->work_bytes = cost.work_bytes;
+        job->charge = *std::move(charge);
         job->settings = settings_;
         job->delivery = settings_->delivery;
         job->arrival = {last_activity_, UnixNanos()};
@@ -416,7 +368,8 @@ class CloudCastService::StreamReactor final
       // Fair between clients (weighted by pixels) and between the streams of one; the frame's
       // work memory waits for room in the pool's.
       if (!service_->pool_.Submit([this, job](std::size_t worker) { Work(job, worker); },
-                                  client_key_, call_key_, job->pixels, job->work_bytes)) {
+                                  client_key_, call_key_, job->charge.pixels(),
+                                  job->charge.work_bytes())) {
         // The pool is stopping: the server is past its grace period.
         queue_.Processed(job);
         Release(job);
@@ -474,7 +427,7 @@ class CloudCastService::StreamReactor final
       job->request.Clear();
       job->reader.Clear();
     }
-    Uncharge(job);  // atomic: no lock needed
+    job->charge.Release();  // atomic: no lock needed
     {
       std::unique_lock<std::mutex> lock(mu_);
       last_activity_ = Clock::now();
@@ -524,20 +477,14 @@ class RejectedStream final : public grpc::ServerBidiReactor<grpc::ByteBuffer, gr
 
 CloudCastService::CloudCastService(const ServerOptions& options, Metrics* metrics)
     : options_(options),
-      memory_(options.memory_budget_bytes),
-      admission_(Admission::Limits{options.max_streams, options.ResolvedMaxStreamsPerClient(),
-                                   options.max_streams, options.ResolvedMaxProcessPerClient()}),
       default_settings_(std::make_shared<const StreamSettings>(options.StreamDefaults())),
       metrics_(metrics),
+      call_log_(options.log_calls_per_second, &metrics->log_lines_suppressed),
+      admitter_(options_, default_settings_, metrics, &call_log_),
       runner_(options.ResolvedThreads(), metrics, options.ResolvedInstance(),
               options.large_frame_pixels),
       pool_(options.ResolvedThreads(),
-            WorkerPool::Limits{options.work_memory_bytes, options.large_frame_pixels}),
-      call_log_(options.log_calls_per_second) {
-  for (const std::string& proxy : options.trusted_proxies) {
-    trusted_proxies_.push_back(proxy.find(':') == std::string::npos ? "ipv4:" + proxy
-                                                                    : "ipv6:[" + proxy + "]");
-  }
+            WorkerPool::Limits{options.work_memory_bytes, options.large_frame_pixels}) {
   housekeeping_ = std::thread([this] { Housekeeping(); });
 }
 
@@ -545,28 +492,13 @@ CloudCastService::~CloudCastService() { StopWorkers(); }
 
 grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* CloudCastService::Stream(
     grpc::CallbackServerContext* context) {
-  if (draining_.load()) {
-    metrics_->streams_rejected_shutdown.Increment();
-    return new RejectedStream(
-        grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
-  }
-  auto caller = Identify(context);
-  if (!caller.ok()) return new RejectedStream(ToGrpc(caller.status()));
-  Admission::Refusal refusal;
-  auto ticket = admission_.Admit(Admission::Kind::kStream, caller->client, &refusal);
-  // A full server makes room for a new client by ending a stream that sends nothing.
-  if (!ticket.ok() && refusal == Admission::Refusal::kServerFull && ShedQuietStream(*caller)) {
-    ticket = admission_.Admit(Admission::Kind::kStream, caller->client, &refusal);
-  }
-  if (!ticket.ok()) {
-    metrics_->streams_rejected_limit.Increment();
-    LogCall(spdlog::level::warn, "stream from {} refused: {}", caller->label,
-            std::string(ticket.status().message()));
-    return new RejectedStream(ToGrpc(ticket.status()));
-  }
+  auto call = admitter_.AdmitCall(Admission::Kind::kStream, context, [this](const Caller& c) {
+    return ShedQuietStream(c);
+  });
+  if (!call.ok()) return new RejectedStream(ToGrpc(call.status()));
   metrics_->streams_accepted.Increment();
   metrics_->active_streams.Increment();
-  return new StreamReactor(this, context, *std::move(ticket), *std::move(caller));
+  return new StreamReactor(this, context, *std::move(call));
 }
 
 grpc::ServerUnaryReactor* CloudCastService::Process(grpc::CallbackServerContext* context,
@@ -574,6 +506,11 @@ grpc::ServerUnaryReactor* CloudCastService::Process(grpc::CallbackServerContext*
                                                     grpc::ByteBuffer* reply_bytes) {
   grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
   const Arrival arrival{Clock::now(), UnixNanos()};
+  auto admitted = admitter_.AdmitCall(Admission::Kind::kProcess, context);
+  if (!admitted.ok()) {
+    reactor->Finish(ToGrpc(admitted.status()));
+    return reactor;
+  }
   // The request and its reply live until the worker is done with them.
   struct Call {
     RequestReader reader;  // holds the raw pixels in gRPC's slices until the worker is done
@@ -581,73 +518,50 @@ grpc::ServerUnaryReactor* CloudCastService::Process(grpc::CallbackServerContext*
     v1::CloudReply reply;
     std::shared_ptr<const StreamSettings> settings;
     Admission::Ticket ticket;
-    MemoryBudget* memory = nullptr;
-    std::uint64_t charged = 0;
-    ~Call() {
-      if (memory != nullptr) memory->Give(charged);
-    }
+    FrameCharge charge;
   };
-  // Before anything is parsed: a caller without a valid token costs nothing more.
-  auto caller = Identify(context);
-  if (!caller.ok()) {
-    reactor->Finish(ToGrpc(caller.status()));
-    return reactor;
-  }
   auto call = std::make_shared<Call>();
-  call->memory = &memory_;
+  call->ticket = std::move(admitted->ticket);
+  // The place goes before the status: a client that has it may call again at once.
+  auto finish = [&](grpc::Status status) {
+    call->ticket.Release();
+    reactor->Finish(std::move(status));
+    return reactor;
+  };
   const std::size_t bytes = request_bytes->Length();
   grpc::ByteBuffer copy(*request_bytes);  // shares the slices
   if (!call->reader.Parse(&copy, &call->request)) {
     metrics_->process_requests_unparsable.Increment();
-    reactor->Finish(Unparsable("ProcessRequest", bytes));
-    return reactor;
+    return finish(Unparsable("ProcessRequest", bytes));
   }
   metrics_->bytes_received.Increment(static_cast<double>(bytes));
-  // A stereo pair's matcher memory depends on its settings, resolved only later: the request's
-  // disparity count and matcher, else the defaults (an invalid config is refused anyway).
-  StereoParams stereo = default_settings_->frame.stereo;
-  const v1::StereoConfig& asked = call->request.config().stereo();
-  if (asked.has_num_disparities()) stereo.num_disparities = asked.num_disparities();
-  if (asked.matcher() != v1::STEREO_MATCHER_UNSPECIFIED) {
-    convert::FromProto(asked.matcher(), "", &stereo.matcher).IgnoreError();
-  }
-  FrameMemoryCost cost = EstimateFrameMemory(call->request.frame(), stereo);
-  if (absl::Status s = ChargeFrame(bytes, &cost, &call->charged); !s.ok()) {
-    metrics_->FrameErrors(s.code()).Increment();
-    RefuseLater(reactor, caller->client, ToGrpc(s));
-    return reactor;
-  }
-  if (draining_.load()) {
-    reactor->Finish(grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
-    return reactor;
-  }
-  auto settings = convert::Resolve(call->request.config(), *caller->defaults);
+  // Resolved before the frame is weighed, as a stream's config is: a stereo pair's matcher
+  // memory depends on its settings.
+  auto settings = convert::Resolve(call->request.config(), *admitted->caller.defaults);
   if (!settings.ok()) {
     metrics_->FrameErrors(settings.status().code()).Increment();
-    reactor->Finish(ToGrpc(settings.status()));
-    return reactor;
-  }
-  if (absl::Status s = CheckTenantPixels(*caller, call->request.frame()); !s.ok()) {
-    metrics_->FrameErrors(s.code()).Increment();
-    reactor->Finish(ToGrpc(s));
-    return reactor;
+    return finish(ToGrpc(settings.status()));
   }
   call->settings = std::make_shared<const StreamSettings>(*std::move(settings));
-  // Each call holds its frame until a worker is done with it; bound them like streams.
-  auto ticket = admission_.Admit(Admission::Kind::kProcess, caller->client);
-  if (!ticket.ok()) {
-    reactor->Finish(ToGrpc(ticket.status()));
+  bool for_memory = false;
+  auto charge = admitter_.AdmitFrame(admitted->caller, call->request.frame(), bytes,
+                                     call->settings->frame.stereo, &for_memory);
+  if (!charge.ok()) {
+    metrics_->FrameErrors(charge.status().code()).Increment();
+    if (!for_memory) return finish(ToGrpc(charge.status()));
+    RefuseLater(reactor, std::make_shared<Admission::Ticket>(std::move(call->ticket)),
+                ToGrpc(charge.status()));
     return reactor;
   }
-  call->ticket = *std::move(ticket);
+  call->charge = *std::move(charge);
   active_process_calls_.fetch_add(1);
-  const std::uint64_t pixels = std::max<std::uint64_t>(cost.pixels, 1);
   const bool submitted = pool_.Submit(
       [this, reactor, reply_bytes, arrival, call](std::size_t worker) {
         const absl::Status status =
             runner_.Run(worker, call->request.frame(), &call->reader.pixels(),
                         call->settings->frame, arrival, &call->reply);
         call->reader.Clear();
+        call->charge.Release();
         grpc::Status result;
         if (status.ok()) {
           call->reply.set_send_time_unix_ns(UnixNanos());
@@ -661,9 +575,10 @@ grpc::ServerUnaryReactor* CloudCastService::Process(grpc::CallbackServerContext*
         reactor->Finish(std::move(result));
         ProcessCallDone();
       },
-      caller->fair_key, next_call_key_.fetch_add(1), pixels, cost.work_bytes);
+      admitted->caller.fair_key, admitted->call_key, call->charge.pixels(),
+      call->charge.work_bytes());
   if (!submitted) {
-    reactor->Finish(grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
+    finish(grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
     ProcessCallDone();
   }
   return reactor;
@@ -672,7 +587,7 @@ grpc::ServerUnaryReactor* CloudCastService::Process(grpc::CallbackServerContext*
 grpc::ServerUnaryReactor* CloudCastService::GetInfo(grpc::CallbackServerContext* context,
                                                     const v1::GetInfoRequest* /*request*/,
                                                     v1::ServerInfo* info) {
-  if (auto caller = Identify(context); !caller.ok()) {
+  if (auto caller = admitter_.Identify(context); !caller.ok()) {
     grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
     reactor->Finish(ToGrpc(caller.status()));
     return reactor;
@@ -717,116 +632,7 @@ grpc::ServerUnaryReactor* CloudCastService::GetInfo(grpc::CallbackServerContext*
 }
 
 void CloudCastService::SetTenants(std::shared_ptr<const TenantDirectory> tenants) {
-  std::lock_guard<std::mutex> lock(tenants_mu_);
-  tenants_ = std::move(tenants);
-}
-
-absl::StatusOr<CloudCastService::Caller> CloudCastService::Identify(
-    grpc::CallbackServerContext* context) {
-  std::shared_ptr<const TenantDirectory> tenants;
-  {
-    std::lock_guard<std::mutex> lock(tenants_mu_);
-    tenants = tenants_;
-  }
-  Caller caller;
-  if (tenants == nullptr) {
-    caller.client.key = PeerHost(context->peer());
-    caller.label = context->peer();
-    if (std::string forwarded = ForwardedClient(context, caller.client.key); !forwarded.empty()) {
-      caller.label = absl::StrCat(context->peer(), " for ", forwarded);
-      caller.client.key = std::move(forwarded);
-    }
-    caller.defaults = default_settings_;
-    caller.fair_key = std::hash<std::string>{}(caller.client.key);
-    return caller;
-  }
-  auto tenant = tenants->Authenticate(context->client_metadata());
-  if (!tenant.ok()) {
-    // Debug level: a stranger must not be able to flood the log. The metric counts them.
-    metrics_->calls_unauthenticated.Increment();
-    spdlog::debug("call from {} refused: {}", context->peer(),
-                  std::string(tenant.status().message()));
-    return tenant.status();
-  }
-  caller.tenant = *std::move(tenant);
-  caller.client.key = "tenant:" + caller.tenant->name;
-  caller.client.tenant = caller.tenant->name;
-  caller.client.max_streams = caller.tenant->max_streams;
-  caller.client.max_process = caller.tenant->max_process_in_flight;
-  caller.label = absl::StrCat(context->peer(), " (tenant ", caller.tenant->name, ")");
-  caller.fair_key = std::hash<std::string>{}(caller.client.key);
-  if (caller.tenant->max_pixels > 0 && caller.tenant->max_pixels < options_.limits.max_pixels) {
-    // The core checks every image against these, whatever its encoding.
-    auto defaults = std::make_shared<StreamSettings>(*default_settings_);
-    defaults->frame.pipeline.limits.max_pixels = caller.tenant->max_pixels;
-    caller.defaults = std::move(defaults);
-  } else {
-    caller.defaults = default_settings_;
-  }
-  return caller;
-}
-
-absl::Status CloudCastService::CheckTenantPixels(const Caller& caller, const v1::Frame& frame) {
-  if (caller.tenant == nullptr || caller.tenant->max_pixels == 0) return absl::OkStatus();
-  // FramePixels reads the sizes a frame states (raw, compressed) or its image header (PNG,
-  // JPEG); what it cannot tell is caught by the core's check against caller.defaults' limits.
-  const std::uint64_t pixels = FramePixels(frame);
-  if (pixels <= caller.tenant->max_pixels) return absl::OkStatus();
-  return absl::ResourceExhaustedError(absl::StrCat(
-      "frame.disparity: ", pixels, " pixels (width x height) is over the limit of tenant '",
-      caller.tenant->name, "': ", caller.tenant->max_pixels,
-      " pixels per frame (max_pixels in --tokens-file)"));
-}
-
-std::string CloudCastService::ForwardedClient(grpc::CallbackServerContext* context,
-                                              const std::string& peer_host) const {
-  if (std::find(trusted_proxies_.begin(), trusted_proxies_.end(), peer_host) ==
-      trusted_proxies_.end()) {
-    return "";
-  }
-  // "client, proxy1, proxy2", or several headers: the last entry is the one the trusted proxy
-  // itself added (a client may send its own header first).
-  const auto range = context->client_metadata().equal_range("x-forwarded-for");
-  if (range.first == range.second) return "";
-  auto last = range.first;
-  for (auto it = range.first; it != range.second; ++it) last = it;
-  std::string_view value(last->second.data(), last->second.size());
-  if (const std::size_t comma = value.rfind(','); comma != std::string_view::npos) {
-    value.remove_prefix(comma + 1);
-  }
-  while (!value.empty() && value.front() == ' ') value.remove_prefix(1);
-  while (!value.empty() && value.back() == ' ') value.remove_suffix(1);
-  const std::string address(value);
-  in_addr v4{};
-  in6_addr v6{};
-  if (inet_pton(AF_INET, address.c_str(), &v4) == 1) return "ipv4:" + address;
-  if (inet_pton(AF_INET6, address.c_str(), &v6) == 1) return "ipv6:[" + address + "]";
-  return "";
-}
-
-absl::Status CloudCastService::ChargeFrame(std::size_t request_bytes, FrameMemoryCost* cost,
-                                           std::uint64_t* charged) {
-  *charged = 0;
-  const Limits& limits = options_.limits;
-  if (cost->pixels > limits.max_pixels || cost->max_side > limits.max_side) {
-    cost->decoded_bytes = cost->work_bytes = 0;
-  }
-  if (cost->work_bytes > options_.work_memory_bytes) {
-    metrics_->frames_refused_work_memory.Increment();
-    return absl::ResourceExhaustedError(absl::StrCat(
-        "frame: ", cost->pixels, " pixels need about ", cost->work_bytes >> 20,
-        " MB to process (the decoded images and the pipeline's working memory, estimated from "
-        "the frame's header before decoding), more than the server's work memory of ",
-        options_.work_memory_bytes >> 20, " MB (--work-memory-mb); send smaller frames"));
-  }
-  // Held until a worker is done with it: the request as received, and what it decodes to.
-  const std::uint64_t bytes = request_bytes + cost->decoded_bytes;
-  if (!memory_.TryTake(bytes)) {
-    metrics_->frames_refused_memory_budget.Increment();
-    return MemoryExhausted(bytes);
-  }
-  *charged = bytes;
-  return absl::OkStatus();
+  admitter_.SetTenants(std::move(tenants));
 }
 
 bool CloudCastService::ShedQuietStream(const Caller& newcomer) {
@@ -866,8 +672,8 @@ bool CloudCastService::ShedQuietStream(const Caller& newcomer) {
                          ") and this stream sent no frame for ", static_cast<int>(s),
                          " s: ended to make room for another client (--shed-quiet-after)")))) {
       metrics_->streams_shed.Increment();
-      LogCall(spdlog::level::info, "stream of {} shed after {} s without a frame, for {}",
-              q.stream->client(), s, newcomer.label);
+      call_log_.Log(spdlog::level::info, "stream of {} shed after {} s without a frame, for {}",
+                    q.stream->client(), s, newcomer.label);
       shed = true;
       break;
     }
@@ -877,37 +683,19 @@ bool CloudCastService::ShedQuietStream(const Caller& newcomer) {
 }
 
 void CloudCastService::RefuseLater(grpc::ServerUnaryReactor* reactor,
-                                   const Admission::Client& client, grpc::Status status) {
-  auto ticket = options_.refusal_delay.count() > 0 && !draining_.load()
-                    ? admission_.Admit(Admission::Kind::kProcess, client)
-                    : absl::StatusOr<Admission::Ticket>(absl::UnavailableError("no delay"));
-  if (!ticket.ok()) {
+                                   std::shared_ptr<Admission::Ticket> ticket,
+                                   grpc::Status status) {
+  if (options_.refusal_delay.count() == 0 || admitter_.draining()) {
+    ticket->Release();
     reactor->Finish(std::move(status));
     return;
   }
   active_process_calls_.fetch_add(1);
-  auto held = std::make_shared<Admission::Ticket>(*std::move(ticket));
-  delayed_.RunAt(Clock::now() + options_.refusal_delay, [this, reactor, held, status] {
-    held->Release();
+  delayed_.RunAt(Clock::now() + options_.refusal_delay, [this, reactor, ticket, status] {
+    ticket->Release();
     reactor->Finish(status);
     ProcessCallDone();
   });
-}
-
-template <typename... Args>
-void CloudCastService::LogCall(spdlog::level::level_enum level,
-                               spdlog::format_string_t<Args...> format, Args&&... args) {
-  if (!spdlog::should_log(level)) return;
-  std::uint64_t suppressed = 0;
-  if (!call_log_.Allow(&suppressed)) {
-    metrics_->log_lines_suppressed.Increment();
-    return;
-  }
-  if (suppressed > 0) {
-    spdlog::log(level, "({} per-call log lines left out: over --log-calls-per-second {})",
-                suppressed, options_.log_calls_per_second);
-  }
-  spdlog::log(level, format, std::forward<Args>(args)...);
 }
 
 void CloudCastService::NoteQueued(std::uint32_t held) {
@@ -931,7 +719,7 @@ void CloudCastService::Unregister(StreamReactor* stream) {
 }
 
 void CloudCastService::StartDraining() {
-  draining_.store(true);
+  admitter_.StartDraining();
   delayed_.Flush();  // refusals waiting out their delay are answered now
   std::vector<StreamReactor*> streams;
   {
@@ -952,13 +740,6 @@ bool CloudCastService::WaitForCalls(Clock::time_point deadline) {
   std::unique_lock<std::mutex> lock(streams_mu_);
   return streams_cv_.wait_until(
       lock, deadline, [this] { return streams_.empty() && active_process_calls_.load() == 0; });
-}
-
-absl::Status CloudCastService::MemoryExhausted(std::size_t bytes) const {
-  return absl::ResourceExhaustedError(absl::StrCat(
-      "the server's memory budget for frames in flight is in use (", memory_.held() >> 20, " of ",
-      memory_.limit() >> 20, " MB, --memory-budget-mb): this frame of ", bytes,
-      " bytes was not processed; send it again later"));
 }
 
 void CloudCastService::ProcessCallDone() {
