@@ -5,8 +5,11 @@
 // WorkerPool of `threads` workers, each with its own FrameProcessor (a core Pipeline is not
 // thread-safe). A housekeeping thread ends idle streams.
 //
-// One StreamReactor per Stream call: a thin shell that sequences gRPC's reads, writes and Finish
-// around the stream's StreamQueue, which holds the delivery policy (see stream_queue.h).
+// Both RPCs that carry frames are admitted by one CallAdmitter (call_admitter.h: draining,
+// caller, place; then per frame the tenant's pixels and memory). One StreamReactor per Stream
+// call (stream_reactor.h) sequences gRPC's reads, writes and Finish around the stream's
+// StreamQueue (the delivery policy) and StreamLifecycle (its one state). OpenStreams holds the
+// calls open, for housekeeping, draining, shedding and shutdown.
 #pragma once
 
 #include <grpcpp/grpcpp.h>
@@ -30,7 +33,8 @@
 #include "delayed_actions.h"
 #include "frame_processor.h"
 #include "metrics.h"
-#include "spdlog/spdlog.h"
+#include "open_streams.h"
+#include "stream_reactor.h"
 #include "tenants.h"
 #include "worker_pool.h"
 
@@ -80,25 +84,14 @@ class CloudCastService final : public CallbackBase {
   int worker_threads() const { return static_cast<int>(pool_.size()); }
   // The most frames one stream held at once (waiting + in work + replies not yet written), over
   // all streams since the start or the last reset. Tests check it against max_queued_frames.
-  std::uint32_t queued_frames_high_water() const { return queued_high_water_.load(); }
-  void ResetQueuedFramesHighWater() { queued_high_water_.store(0); }
+  std::uint32_t queued_frames_high_water() const { return streams_.queued_high_water(); }
+  void ResetQueuedFramesHighWater() { streams_.ResetQueuedHighWater(); }
 
  private:
-  class StreamReactor;
-
-  // When the server is full: ends the stream that has been quiet longest (no frame for
-  // --shed-quiet-after or more) of the client holding the most streams, not `newcomer`'s; true
-  // if one was ended (its place is free).
-  bool ShedQuietStream(const Caller& newcomer);
   // Finishes a Process call refused for memory after --refusal-delay, holding the call's place
   // meanwhile (at once while the server drains).
   void RefuseLater(grpc::ServerUnaryReactor* reactor, std::shared_ptr<Admission::Ticket> ticket,
                    grpc::Status status);
-
-  void NoteQueued(std::uint32_t held);
-  void ProcessCallDone();
-  void Register(StreamReactor* stream);
-  void Unregister(StreamReactor* stream);
   void Housekeeping();
 
   const ServerOptions options_;
@@ -109,19 +102,16 @@ class CloudCastService final : public CallbackBase {
   // Before pool_: the workers use it until the pool is stopped.
   FrameRunner runner_;
   WorkerPool pool_;
-
+  OpenStreams streams_;
+  const StreamServices stream_services_;
   // After admitter_ and metrics_, which its actions use: it is destroyed (and runs what is left)
   // before them.
   DelayedActions delayed_;
 
-  std::atomic<int> active_process_calls_{0};
-  std::atomic<std::uint32_t> queued_high_water_{0};
-
-  // Open streams, for the idle check and draining. Lock order: streams_mu_, then a stream's own.
-  std::mutex streams_mu_;
-  std::condition_variable streams_cv_;
-  std::set<StreamReactor*> streams_;
-  bool stop_housekeeping_ = false;
+  // The housekeeping thread: ends idle streams, gives memory back (MemoryHousekeeping).
+  std::mutex housekeeping_mu_;
+  std::condition_variable housekeeping_cv_;
+  bool stop_housekeeping_ = false;  // under housekeeping_mu_
   std::thread housekeeping_;
   std::once_flag stop_once_;
 };
