@@ -167,5 +167,42 @@ TEST(ServerLimitsTest, IdleStreamIsEndedWithDeadlineExceeded) {
   EXPECT_EQ(server->metrics().streams_idle_timeout.Value(), 2.0);
 }
 
+// A Process call over its client's share is refused and counted as a Stream is (one admission
+// path): the first call holds the client's only place while its memory refusal waits out
+// --refusal-delay, so the second finds the share taken.
+TEST(ServerLimitsTest, ProcessOverItsClientShareIsRefusedAndCounted) {
+  ServerOptions options = testing::TestServerOptions();
+  options.memory_budget_bytes = std::uint64_t{1} << 20;  // a raw 640x480 frame (1.2 MB) never fits
+  options.max_process_per_client = 1;
+  options.refusal_delay = std::chrono::minutes(1);  // held until the drain below answers it
+  auto server = testing::StartTestServer(options);
+  ASSERT_NE(server, nullptr);
+  auto stub = testing::NewStub(*server);
+  v1::ProcessRequest request;
+  *request.mutable_frame() = MakeFrame(Frames().front(), 1);
+  auto held = std::async(std::launch::async, [&] {
+    v1::CloudReply reply;
+    grpc::ClientContext ctx;
+    return stub->Process(&ctx, request, &reply);
+  });
+  // Nothing announces that the first call was refused and now waits: its counter says so.
+  ASSERT_TRUE(testing::Eventually(
+      [&] { return server->metrics().frames_refused_memory_budget.Value() == 1.0; }));
+  v1::ProcessRequest small;
+  *small.mutable_frame() = MakeFrame(Frames().front(), 2, Input::kPng);
+  v1::CloudReply reply;
+  grpc::ClientContext ctx;
+  const grpc::Status refused = stub->Process(&ctx, small, &reply);
+  EXPECT_EQ(refused.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << refused.error_message();
+  EXPECT_NE(refused.error_message().find("--max-process-per-client"), std::string::npos)
+      << refused.error_message();
+  EXPECT_EQ(server->metrics().process_rejected_limit.Value(), 1.0);
+  server->StartDraining();  // answers the held call now
+  const grpc::Status first = held.get();
+  EXPECT_EQ(first.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << first.error_message();
+  EXPECT_NE(first.error_message().find("--memory-budget-mb"), std::string::npos)
+      << first.error_message();
+}
+
 }  // namespace
 }  // namespace cloudcast::server

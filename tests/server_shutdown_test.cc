@@ -17,6 +17,7 @@
 #include <thread>
 #include <vector>
 
+#include "metrics.h"
 #include "service.h"
 #include "support/server_support.h"
 #include "support/waiting.h"
@@ -209,6 +210,32 @@ TEST(ServerShutdownTest, ShutdownUnderLoadDrainsTheStreamsAndCutsOnlyTheStuckOne
   EXPECT_EQ(stuck_status.error_message().find(kDrained), std::string::npos)
       << stuck_status.error_message();
   server.reset();  // the destructor after Shutdown is a no-op
+}
+
+// Stream and Process are admitted by one path (CallAdmitter): a call that arrives while the server
+// drains is refused UNAVAILABLE before its frame is weighed (no memory charged, no memory
+// refusal), and counted in its RPC's refusal metric.
+TEST(ServerShutdownTest, CallsWhileDrainingAreRefusedAndCountedBeforeTheirFrameIsCharged) {
+  ServerOptions options = testing::TestServerOptions();
+  options.memory_budget_bytes = std::uint64_t{1} << 20;  // a raw 640x480 frame (1.2 MB) never fits
+  auto server = testing::StartTestServer(options);
+  ASSERT_NE(server, nullptr);
+  auto stub = testing::NewStub(*server);
+  server->StartDraining();
+  const StreamResult stream = RunStream(*stub, {FrameRequest(MakeFrame(Frames()[0], 1))});
+  EXPECT_EQ(stream.status.error_code(), grpc::StatusCode::UNAVAILABLE)
+      << stream.status.error_message();
+  v1::ProcessRequest request;
+  *request.mutable_frame() = MakeFrame(Frames()[0], 2);
+  v1::CloudReply reply;
+  grpc::ClientContext ctx;
+  const grpc::Status process = stub->Process(&ctx, request, &reply);
+  EXPECT_EQ(process.error_code(), grpc::StatusCode::UNAVAILABLE) << process.error_message();
+  const Metrics& m = server->metrics();
+  EXPECT_EQ(m.streams_rejected_shutdown.Value(), 1.0);
+  EXPECT_EQ(m.process_rejected_shutdown.Value(), 1.0);
+  EXPECT_EQ(m.frames_refused_memory_budget.Value(), 0.0);
+  EXPECT_EQ(server->metrics().FrameErrors(absl::StatusCode::kResourceExhausted).Value(), 0.0);
 }
 
 TEST(ServerShutdownTest, StartFailsCleanlyOnABusyAddress) {

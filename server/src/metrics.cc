@@ -96,6 +96,11 @@ Metrics::Metrics()
                                         "Stream calls refused: --max-streams reached")),
       streams_rejected_shutdown(NewCounter(*registry_, "cloudcast_streams_rejected_shutdown_total",
                                            "Stream calls refused: shutting down")),
+      process_rejected_limit(NewCounter(*registry_, "cloudcast_process_rejected_limit_total",
+                                        "Process calls refused: the server's or the client's "
+                                        "limit of Process calls in flight reached")),
+      process_rejected_shutdown(NewCounter(*registry_, "cloudcast_process_rejected_shutdown_total",
+                                           "Process calls refused: shutting down")),
       streams_idle_timeout(NewCounter(*registry_, "cloudcast_streams_idle_timeout_total",
                                       "Stream calls ended by the idle timeout")),
       streams_cancelled(NewCounter(*registry_, "cloudcast_streams_cancelled_total",

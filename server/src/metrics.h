@@ -42,6 +42,10 @@ class Metrics {
   prometheus::Counter& streams_accepted;
   prometheus::Counter& streams_rejected_limit;     // over --max-streams
   prometheus::Counter& streams_rejected_shutdown;  // arrived while shutting down
+  // Process calls refused the same ways: at a limit (the server's or the client's share), or
+  // while shutting down. Both RPCs are admitted by one path (CallAdmitter).
+  prometheus::Counter& process_rejected_limit;
+  prometheus::Counter& process_rejected_shutdown;
   prometheus::Counter& streams_idle_timeout;
   // Streams the client cancelled (a rapid reset shows here), and quiet streams the server ended
   // to make room for a new client when it was full (--shed-quiet-after).

@@ -1,0 +1,118 @@
+// One Stream call: gRPC's op sequencing around the stream's StreamQueue (the delivery policy,
+// stream_queue.h) and its StreamLifecycle (the one state it is in, stream_lifecycle.h). The call
+// was admitted before the reactor exists (CallAdmitter::AdmitCall); each frame it reads is
+// admitted by CallAdmitter::AdmitFrame and then runs on the worker pool.
+//
+// Lifetime: the reactor counts references: one for gRPC (dropped in OnDone), one per frame in
+// the worker pool, one per OpenStreams snapshot that holds it. The last Unref deletes it, so a
+// worker can still touch its stream after gRPC is done with the call.
+//
+// Locking: mu_ guards the state. Every decision to call StartRead / StartWrite / Finish /
+// TryCancel is taken under mu_; the calls themselves are made after mu_ is released, under
+// ops_mu_, which is taken before mu_ is let go. So the calls reach gRPC in the order they were
+// decided and none comes after Finish. (Reactions are not run inline by gRPC for non-inlineable
+// reactors, so holding ops_mu_ across the calls cannot deadlock.)
+#pragma once
+
+#include <grpcpp/grpcpp.h>
+
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "call_admitter.h"
+#include "call_log.h"
+#include "cloudcast/server/options.h"
+#include "frame_processor.h"
+#include "metrics.h"
+#include "open_streams.h"
+#include "stream_lifecycle.h"
+#include "stream_queue.h"
+#include "worker_pool.h"
+
+namespace cloudcast::server {
+
+// What a stream uses of the service; all of it outlives every stream.
+struct StreamServices {
+  const ServerOptions* options;
+  Metrics* metrics;
+  CallAdmitter* admitter;
+  FrameRunner* runner;
+  WorkerPool* pool;
+  OpenStreams* streams;
+  CallLog* log;
+};
+
+class StreamReactor final : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer> {
+ public:
+  StreamReactor(const StreamServices& services, grpc::CallbackServerContext* context,
+                AdmittedCall call);
+
+  void OnReadDone(bool ok) override;
+  void OnWriteDone(bool ok) override;
+  void OnCancel() override;
+  void OnDone() override;
+
+  void Ref() { refs_.fetch_add(1, std::memory_order_relaxed); }
+  void Unref() {
+    if (refs_.fetch_sub(1, std::memory_order_acq_rel) == 1) delete this;
+  }
+
+  // Ends the stream if nothing moved on it for the idle timeout (housekeeping).
+  void CheckIdle(std::chrono::steady_clock::time_point now);
+  // Stops reading; the frames already held are answered, then the stream ends (UNAVAILABLE).
+  void BeginDrain();
+  // How long the stream has sent no frame, when it holds none either and is neither ending nor
+  // closing: a stream the server may shed to make room for a new client.
+  std::optional<std::chrono::steady_clock::duration> QuietFor(
+      std::chrono::steady_clock::time_point now);
+  // Ends the stream with `status` to free its place; false when it is ending already.
+  bool Shed(grpc::Status status);
+  const std::string& client() const { return caller_.client.key; }
+
+ private:
+  struct Job;
+  struct Ops;
+
+  ~StreamReactor() override;
+
+  void Pump(std::unique_lock<std::mutex>& lock, bool cancel = false);
+  void Break();
+  Job* Acquire();
+  void Release(Job* job);
+  void Accept(Job* job, std::size_t bytes);
+  void AcceptFrame(Job* job, std::size_t bytes);
+  void QueueError(Job* job, v1::ErrorKind kind, const absl::Status& status);
+  void FillError(const absl::Status& status, v1::ErrorKind kind, std::uint64_t sequence,
+                 const std::string& frame_id, v1::FrameError* error);
+  void Dispatch();
+  void StartWriteIfReady(Ops* ops);
+  void Work(Job* job, std::size_t worker);
+
+  const StreamServices services_;
+  Admission::Ticket ticket_;  // this stream's place among the server's and its client's
+  grpc::CallbackServerContext* const context_;
+  const Caller caller_;
+  const std::uint64_t call_key_;  // the worker pool's key of the call
+  std::atomic<int> refs_{1};
+
+  std::mutex ops_mu_;  // see the file comment
+  std::mutex mu_;
+  StreamLifecycle lifecycle_;
+  std::vector<std::unique_ptr<Job>> jobs_;  // every slot this stream ever needed
+  std::vector<Job*> free_;
+  std::shared_ptr<const StreamSettings> settings_;
+  StreamQueue queue_;
+  Job* reading_ = nullptr;
+  Job* writing_ = nullptr;
+  std::uint64_t messages_read_ = 0;  // none yet: --first-message-timeout applies
+  std::chrono::steady_clock::time_point last_activity_;
+  std::chrono::steady_clock::time_point last_frame_;  // the last frame read, or the opening
+};
+
+}  // namespace cloudcast::server
