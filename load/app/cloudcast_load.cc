@@ -23,6 +23,7 @@
 
 #include "cloudcast/cli/checks.h"
 #include "cloudcast/cli/connection_flags.h"
+#include "cloudcast/cli/role_flags.h"
 #include "cloudcast/cli/stage_flags.h"
 #include "cloudcast/cli/stereo_flags.h"
 #include "cloudcast/core/limits.h"
@@ -82,7 +83,9 @@ struct Flags {
   int scheduler_threads = FleetDefaults().scheduler_threads;
   // Frames
   std::string input = cloudcast::cli::kDefaultInput;
-  std::string tsukuba, disparity_glob, colour_glob, depth_glob, right_glob, synthetic;
+  std::string tsukuba, synthetic;
+  // --disparity-glob, --colour-glob, --depth-glob, --right-glob
+  std::unique_ptr<cloudcast::cli::RoleFlags> globs;
   std::unique_ptr<cloudcast::cli::StereoFlags> stereo;
   std::string illumination = FrameDefaults().source.illumination;
   int synthetic_frames = FrameDefaults().synthetic_frames;
@@ -242,22 +245,8 @@ std::unique_ptr<cloudcast::cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
   app.add_option("--illumination", f.illumination, "New Tsukuba illumination folder")
       ->capture_default_str()
       ->group(frames);
-  app.add_option("--disparity-glob", f.disparity_glob,
-                 "Disparity images, a glob in quotes, natural order")
-      ->type_name("GLOB")
-      ->group(frames);
-  app.add_option("--colour-glob", f.colour_glob,
-                 "Colour images (stereo: the left ones) paired with the other glob")
-      ->type_name("GLOB")
-      ->group(frames);
-  app.add_option("--depth-glob", f.depth_glob,
-                 "--input depth: depth images (16-bit PNG mm, float TIFF/PFM m), a glob in quotes")
-      ->type_name("GLOB")
-      ->group(frames);
-  app.add_option("--right-glob", f.right_glob,
-                 "--input stereo: the right images of rectified pairs, paired with --colour-glob")
-      ->type_name("GLOB")
-      ->group(frames);
+  f.globs = std::make_unique<cloudcast::cli::RoleFlags>(
+      app, std::vector<cloudcast::cli::FileSort>{cloudcast::cli::FileSort::kGlob}, frames);
   app.add_option("--synthetic", f.synthetic,
                  "The synthetic scene at WIDTHxHEIGHT, as frames of --input")
       ->check(
@@ -377,33 +366,12 @@ int main(int argc, char** argv) {
     std::cerr << "cloudcast-load: " << message << "\n";
     return kExitUsage;
   };
-  // The globs a kind takes: its roles' (--disparity-glob + --colour-glob, ...).
   using cloudcast::sources::FrameKind;
-  using cloudcast::sources::ImageRole;
   FrameKind kind = FrameKind::kDisparity;
   cloudcast::sources::ParseFrameKind(f.input, &kind);  // checked by IsMember
-  const std::map<ImageRole, const std::string*> globs = {{ImageRole::kDisparity, &f.disparity_glob},
-                                                         {ImageRole::kColour, &f.colour_glob},
-                                                         {ImageRole::kDepth, &f.depth_glob},
-                                                         {ImageRole::kRight, &f.right_glob}};
-  const std::vector<ImageRole>& roles = cloudcast::sources::RolesOf(kind);
-  bool any_glob = false;
-  for (const auto& [role, path] : globs) {
-    if (path->empty()) continue;
-    any_glob = true;
-    if (std::find(roles.begin(), roles.end(), role) == roles.end()) {
-      return usage(cloudcast::sources::RoleFlag(role, "-glob") + " does not apply to --input " +
-                   f.input);
-    }
-  }
-  if (any_glob) {
-    for (ImageRole role : roles) {
-      if (globs.at(role)->empty()) {
-        return usage("--input " + f.input + " needs " +
-                     cloudcast::sources::RoleFlag(role, "-glob") + " with the other glob");
-      }
-    }
-  }
+  absl::StatusOr<std::vector<std::string>> globs = f.globs->Check(kind);
+  if (!globs.ok()) return usage(std::string(globs.status().message()));
+  const bool any_glob = !globs->empty();
   const int sources = !f.tsukuba.empty() + any_glob + !f.synthetic.empty();
   if (sources > 1) return usage("give one of --tsukuba, the globs, --synthetic");
   if (kind != FrameKind::kStereo && f.stereo->AnyGiven()) {
@@ -452,9 +420,7 @@ int main(int argc, char** argv) {
   load::FrameSourceOptions source;
   source.source.tsukuba_dir = f.tsukuba;
   source.source.illumination = f.illumination;
-  for (const auto& [role, path] : globs) {
-    if (!path->empty()) source.source.globs[role] = *path;
-  }
+  source.source.globs = f.globs->Given(cloudcast::cli::FileSort::kGlob);
   source.kind = kind;
   // New Tsukuba's depth frames are made from its disparity with the camera the stream uses.
   if (auto camera = stages->Apply(cloudcast::FrameSettings{}); camera.ok()) {

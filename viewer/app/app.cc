@@ -33,6 +33,7 @@
 #include "app/viewer.h"
 #include "cloudcast/cli/checks.h"
 #include "cloudcast/cli/connection_flags.h"
+#include "cloudcast/cli/role_flags.h"
 #include "cloudcast/cli/stage_flags.h"
 #include "cloudcast/cli/stereo_flags.h"
 #include "cloudcast/client/config.h"
@@ -78,8 +79,8 @@ struct Flags {
   std::string tsukuba;
   std::string illumination = sources::SourceSpec{}.illumination;
   std::string input = cli::kDefaultInput;
-  // A path per role of each sort: --disparity-glob, --right-video, --depth, ...
-  sources::RolePaths globs, videos, stills;
+  // A flag per role of each sort of file: --disparity-glob, --right-video, --depth, ...
+  std::unique_ptr<cli::RoleFlags> files;
   std::string synthetic;
   bool loop = false;
   std::uint64_t frames = 0;
@@ -143,69 +144,6 @@ std::string MissingFolder(const std::string& flag, const std::string& path) {
 // ---------------------------------------------------------------------------------------------
 
 using cli::AddInputFlag;
-using sources::ImageRole;
-
-// The sorts of file inputs, each a flag per role: --disparity-glob, --depth-video, --right, ...
-struct RoleSort {
-  const char* suffix;
-  sources::RolePaths Flags::*paths;
-};
-constexpr RoleSort kRoleSorts[] = {
-    {"-glob", &Flags::globs}, {"-video", &Flags::videos}, {"", &Flags::stills}};
-constexpr ImageRole kRoles[] = {ImageRole::kDisparity, ImageRole::kColour, ImageRole::kDepth,
-                                ImageRole::kRight};
-
-std::string RoleHelp(ImageRole role, const std::string& suffix) {
-  const bool glob = suffix == "-glob", video = suffix == "-video";
-  switch (role) {
-    case ImageRole::kDisparity:
-      if (glob) {
-        return "Disparity images, a glob in quotes (e.g. 'd/*.png'), natural sort order; 8/16-bit "
-               "PNG/TIFF or float TIFF/PFM";
-      }
-      if (video) {
-        return "Disparity video; must be lossless (PNG in .avi, FFV1 in .mkv): lossy codecs "
-               "change disparities (warned)";
-      }
-      return "One disparity image, sent again and again with --colour (endless)";
-    case ImageRole::kColour:
-      if (glob) {
-        return "Colour images (of a stereo pair: the left ones) paired with the other glob in "
-               "sorted order (the counts must match)";
-      }
-      if (video) {
-        return "Colour video (stereo: the left one) paired frame by frame with the other video "
-               "(HuffYUV in .avi: exact, and decodes faster than PNG stills)";
-      }
-      return "The colour image for --disparity or --depth, or the left image for --right";
-    case ImageRole::kDepth:
-      if (glob) {
-        return "--input depth: depth images, a glob in quotes; 16-bit PNG (millimetres) or float "
-               "TIFF/PFM (metres)";
-      }
-      if (video) return "--input depth: a lossless 16-bit depth video (FFV1 gray16 in .mkv)";
-      return "--input depth: one depth image, sent again and again with --colour (endless)";
-    case ImageRole::kRight:
-      if (glob) {
-        return "--input stereo: the right images of rectified pairs, a glob in quotes, paired "
-               "with --colour-glob (the left images)";
-      }
-      if (video) return "--input stereo: the right video, paired with --colour-video (the left)";
-      return "--input stereo: one right image, sent again and again with --colour (the left)";
-  }
-  return "";
-}
-
-void AddRoleFlags(CLI::App& app, Flags& f, const std::string& group) {
-  for (const RoleSort& sort : kRoleSorts) {
-    for (ImageRole role : kRoles) {
-      app.add_option(sources::RoleFlag(role, sort.suffix), (f.*sort.paths)[role],
-                     RoleHelp(role, sort.suffix))
-          ->type_name(std::string(sort.suffix) == "-glob" ? "GLOB" : "FILE")
-          ->group(group);
-    }
-  }
-}
 
 // The stage flags go in the middle of --help, so AddFlags registers them too.
 std::unique_ptr<cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
@@ -223,7 +161,9 @@ std::unique_ptr<cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
       ->type_name("NAME")
       ->group(source);
   AddInputFlag(app, &f.input, sources::FrameKindNames(), source);
-  AddRoleFlags(app, f, source);
+  f.files = std::make_unique<cli::RoleFlags>(
+      app, std::vector<cli::FileSort>{cli::FileSort::kGlob, cli::FileSort::kVideo, cli::FileSort::kStill},
+      source);
   app.add_option("--synthetic", f.synthetic,
                  "The synthetic scene at WIDTHxHEIGHT, camera moving frame by frame, as frames of "
                  "--input (a stereo pair's right image rendered from the right camera); endless")
@@ -383,15 +323,6 @@ StreamConfig BuildConfig(const Flags& f, const cli::StageFlags& stages,
   return config;
 }
 
-// The paths of the role flags given (CLI11 leaves the others empty).
-sources::RolePaths Given(const sources::RolePaths& paths) {
-  sources::RolePaths given;
-  for (const auto& [role, path] : paths) {
-    if (!path.empty()) given[role] = path;
-  }
-  return given;
-}
-
 sources::FrameKind InputKind(const Flags& f) {
   sources::FrameKind kind = sources::FrameKind::kDisparity;
   sources::ParseFrameKind(f.input, &kind);  // checked by --input's IsMember
@@ -404,9 +335,9 @@ absl::StatusOr<std::unique_ptr<sources::FrameSource>> OpenSource(const Flags& f,
   sources::SourceSpec spec;
   spec.tsukuba_dir = f.tsukuba;
   spec.illumination = f.illumination;
-  spec.globs = Given(f.globs);
-  spec.videos = Given(f.videos);
-  spec.stills = Given(f.stills);
+  spec.globs = f.files->Given(cli::FileSort::kGlob);
+  spec.videos = f.files->Given(cli::FileSort::kVideo);
+  spec.stills = f.files->Given(cli::FileSort::kStill);
   if (!f.synthetic.empty()) ParseSize(f.synthetic, &spec.synthetic_width, &spec.synthetic_height);
   sources::SourceOptions options;
   options.kind = InputKind(f);
@@ -720,34 +651,13 @@ int ClientMain(int argc, char** argv) {
   };
   // One source at most; a sort of files (globs, videos, stills) gives every image of the kind.
   const sources::FrameKind kind = InputKind(f);
-  const std::vector<ImageRole>& roles = sources::RolesOf(kind);
   std::vector<std::string> given;
   for (const char* single : {"--tsukuba", "--synthetic", "--open"}) {
     if (app.count(single) > 0) given.emplace_back(single);
   }
-  for (const RoleSort& sort : kRoleSorts) {
-    std::vector<std::string> names;
-    for (ImageRole role : kRoles) {
-      const std::string flag = sources::RoleFlag(role, sort.suffix);
-      if (app.count(flag) == 0) continue;
-      if (std::find(roles.begin(), roles.end(), role) == roles.end()) {
-        std::vector<std::string> wanted;
-        for (ImageRole r : roles) wanted.push_back(sources::RoleFlag(r, sort.suffix));
-        return usage(fmt::format("{} does not apply to --input {} (it takes {})", flag, f.input,
-                                 absl::StrJoin(wanted, " and ")));
-      }
-      names.push_back(flag);
-    }
-    if (names.empty()) continue;
-    for (ImageRole role : roles) {
-      const std::string flag = sources::RoleFlag(role, sort.suffix);
-      if (app.count(flag) == 0) {
-        return usage(
-            fmt::format("{} needs {} (--input {})", absl::StrJoin(names, " + "), flag, f.input));
-      }
-    }
-    given.push_back(fmt::format("{}", absl::StrJoin(names, " + ")));
-  }
+  absl::StatusOr<std::vector<std::string>> files = f.files->Check(kind);
+  if (!files.ok()) return usage(std::string(files.status().message()));
+  given.insert(given.end(), files->begin(), files->end());
   if (given.size() > 1) {
     return usage(fmt::format("choose one source: {} and {} were both given", given[0], given[1]));
   }
