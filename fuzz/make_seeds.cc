@@ -83,6 +83,35 @@ cv::Mat Grey() {
   return m;
 }
 
+// A depth image of the scene in millimetres (ROS 16UC1): 3 to 12 m, the same invalid pixels.
+cv::Mat DepthU16() {
+  const cv::Mat d = DisparityU8();
+  cv::Mat m(kH, kW, CV_16UC1);
+  for (std::uint32_t v = 0; v < kH; ++v)
+    for (std::uint32_t u = 0; u < kW; ++u) {
+      const int disparity = d.at<std::uint8_t>(v, u);
+      m.at<std::uint16_t>(v, u) = disparity == 0 ? 0 : 615000 / disparity;
+    }
+  return m;
+}
+// A stereo pair: a textured view `shift` pixels along (the right view is the left one's texture
+// 4 pixels on: disparity 4 everywhere), wide enough for the smallest search (16 disparities).
+constexpr std::uint32_t kStereoW = 40;
+cv::Mat StereoView(std::uint32_t shift, int type) {
+  cv::Mat grey(kH, kStereoW, CV_8UC1);
+  for (std::uint32_t v = 0; v < kH; ++v)
+    for (std::uint32_t u = 0; u < kStereoW; ++u)
+      grey.at<std::uint8_t>(v, u) = (((u + shift) * 73 + v * 151) * 2654435761u) >> 24;
+  if (type == CV_8UC1) return grey;
+  cv::Mat bgr(kH, kStereoW, CV_8UC3);
+  for (std::uint32_t v = 0; v < kH; ++v)
+    for (std::uint32_t u = 0; u < kStereoW; ++u) {
+      const std::uint8_t g = grey.at<std::uint8_t>(v, u);
+      bgr.at<cv::Vec3b>(v, u) = cv::Vec3b(g, 255 - g, g / 2);
+    }
+  return bgr;
+}
+
 std::string Encode(const std::string& ext, const cv::Mat& m, std::vector<int> params = {}) {
   std::vector<std::uint8_t> out;
   if (!cv::imencode(ext, m, out, params)) {
@@ -142,6 +171,56 @@ v1::Frame MakeFrame(As disparity_as, const cv::Mat& disparity, DisparityEncoding
   return f;
 }
 
+// A frame whose depth comes from a depth image (raw or zstd) or a stereo pair (raw, or zstd
+// with the colour of the left view), with a colour image of the same size.
+v1::Frame DepthFrame(As depth_as, const cv::Mat& depth, DepthEncoding encoding,
+                     std::uint64_t sequence) {
+  v1::Frame f;
+  f.set_sequence(sequence);
+  f.set_frame_id("seed-" + std::to_string(sequence));
+  const DepthView view = View(depth, encoding);
+  if (depth_as == As::kRaw) {
+    Check(convert::ToProto(view, "depth", f.mutable_depth()->mutable_raw()));
+  } else {
+    Check(convert::ToProto(view, convert::Compression{v1::COMPRESSION_ZSTD_DELTA_LEFT, 1}, "depth",
+                           f.mutable_depth()->mutable_compressed()));
+  }
+  Check(convert::ToProto(View(ColourBgr(), ColorEncoding::kBGR8), "c",
+                         f.mutable_colour()->mutable_raw()));
+  return f;
+}
+v1::Frame StereoFrame(As as, int type, std::uint64_t sequence) {
+  v1::Frame f;
+  f.set_sequence(sequence);
+  f.set_frame_id("seed-" + std::to_string(sequence));
+  const ColorEncoding e = type == CV_8UC1 ? ColorEncoding::kMono8 : ColorEncoding::kBGR8;
+  const cv::Mat left = StereoView(0, type), right = StereoView(4, type);
+  const convert::Compression zstd{v1::COMPRESSION_ZSTD_DELTA_ROWS, 1};
+  if (as == As::kRaw) {
+    Check(convert::ToProto(View(left, e), "c", f.mutable_colour()->mutable_raw()));
+    Check(convert::ToProto(View(right, e), "r", f.mutable_right()->mutable_raw()));
+  } else {
+    Check(convert::ToProto(View(left, e), zstd, "c", f.mutable_colour()->mutable_compressed()));
+    Check(convert::ToProto(View(right, e), zstd, "r", f.mutable_right()->mutable_compressed()));
+  }
+  return f;
+}
+
+// The smallest search, so that the seeds' pairs are wide enough for it, and a camera that puts
+// their disparity of 4 at z = 30 * 0.4 / 4 = 3, inside the default passthrough.
+v1::StreamConfig StereoConfig(v1::StereoMatcher matcher) {
+  v1::StreamConfig c;
+  c.mutable_stereo()->set_matcher(matcher);
+  c.mutable_stereo()->set_num_disparities(16);
+  v1::CameraModel* m = c.mutable_camera();
+  m->set_fx(30);
+  m->set_fy(30);
+  m->set_cx(20);
+  m->set_cy(6);
+  m->set_baseline(0.4);
+  return c;
+}
+
 std::vector<std::pair<std::string, v1::Frame>> Frames() {
   const cv::Mat d8 = DisparityU8(), d16 = DisparityU16(), df = DisparityF32();
   const cv::Mat bgr = ColourBgr(), bgra = ColourBgra(), grey = Grey();
@@ -185,6 +264,14 @@ void StreamSeeds() {
     *r.mutable_frame() = frame;
     Write(h, "frame_" + name, r.SerializeAsString());
   }
+  r.Clear();
+  *r.mutable_frame() = DepthFrame(As::kRaw, DepthU16(), DepthEncoding::kU16, 7);
+  Write(h, "frame_depth_u16", r.SerializeAsString());
+  *r.mutable_frame() = StereoFrame(As::kRaw, CV_8UC1, 8);  // the defaults' search: too narrow
+  Write(h, "frame_stereo_mono", r.SerializeAsString());
+  r.Clear();
+  *r.mutable_config() = StereoConfig(v1::STEREO_MATCHER_SGM);
+  Write(h, "config_stereo", r.SerializeAsString());
 }
 
 void ProcessSeeds() {
@@ -239,6 +326,41 @@ void ProcessSeeds() {
   Write(h, "defaults_png", r.SerializeAsString());
   *r.mutable_frame() = frames[4].second;
   Write(h, "defaults_zstd", r.SerializeAsString());
+  // Depth images: millimetres, and float metres through zstd.
+  *r.mutable_frame() = DepthFrame(As::kRaw, DepthU16(), DepthEncoding::kU16, 7);
+  Write(h, "depth_u16_raw", r.SerializeAsString());
+  cv::Mat metres;
+  DepthU16().convertTo(metres, CV_32F, 0.001);
+  metres.at<float>(2, 3) = NAN;
+  *r.mutable_frame() = DepthFrame(As::kCompressed, metres, DepthEncoding::kF32, 8);
+  Write(h, "depth_f32_zstd", r.SerializeAsString());
+  // Stereo pairs through every matcher: ours (4 and 8 paths, the disparity sent back), OpenCV's
+  // SGBM and BM, and a pair rectified with a calibration first.
+  *r.mutable_config() = StereoConfig(v1::STEREO_MATCHER_SGM);
+  *r.mutable_frame() = StereoFrame(As::kRaw, CV_8UC1, 9);
+  Write(h, "stereo_sgm_mono", r.SerializeAsString());
+  r.mutable_config()->mutable_stereo()->set_paths(8);
+  r.mutable_config()->mutable_stereo()->set_return_disparity(true);
+  *r.mutable_frame() = StereoFrame(As::kCompressed, CV_8UC3, 10);
+  Write(h, "stereo_sgm8_bgr_zstd", r.SerializeAsString());
+  *r.mutable_config() = StereoConfig(v1::STEREO_MATCHER_OPENCV_SGBM);
+  *r.mutable_frame() = StereoFrame(As::kRaw, CV_8UC3, 11);
+  Write(h, "stereo_sgbm_bgr", r.SerializeAsString());
+  *r.mutable_config() = StereoConfig(v1::STEREO_MATCHER_OPENCV_BM);
+  r.mutable_config()->mutable_stereo()->set_block_size(5);
+  *r.mutable_frame() = StereoFrame(As::kRaw, CV_8UC1, 12);
+  Write(h, "stereo_bm_mono", r.SerializeAsString());
+  *r.mutable_config() = StereoConfig(v1::STEREO_MATCHER_SGM);
+  v1::StereoCalibration* cal = r.mutable_config()->mutable_stereo()->mutable_calibration();
+  cal->set_width(kStereoW);
+  cal->set_height(kH);
+  for (auto* k : {cal->mutable_left_k(), cal->mutable_right_k()})
+    for (double x : {30.0, 0.0, 20.0, 0.0, 30.0, 6.0, 0.0, 0.0, 1.0}) k->Add(x);
+  for (double x : {0.01, -0.002, 0.0, 0.0}) cal->add_left_d(x);
+  for (double x : {1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0}) cal->add_r(x);
+  for (double x : {-0.4, 0.0, 0.0}) cal->add_t(x);
+  *r.mutable_frame() = StereoFrame(As::kRaw, CV_8UC1, 13);
+  Write(h, "stereo_calibrated", r.SerializeAsString());
 }
 
 std::string Le16(std::uint32_t v) {

@@ -38,6 +38,7 @@
 #include "draco/point_cloud/point_cloud.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "support/sanitizers.h"
 
 namespace cloudcast {
 namespace {
@@ -159,22 +160,13 @@ DracoOptions Options(int speed, int bits, float max_error = 0.0f) {
 // child exits 0 when `body` returns true. A regression that makes Draco allocate gigabytes (as
 // it did: 24 GB for one flipped byte) then fails this test instead of dragging a shared machine
 // into the OOM killer. Sanitizers reserve terabytes of address space, so there is no limit then.
-#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
-#define CLOUDCAST_NO_AS_LIMIT 1
-#elif defined(__has_feature)
-#if __has_feature(address_sanitizer) || __has_feature(thread_sanitizer) || \
-    __has_feature(memory_sanitizer)
-#define CLOUDCAST_NO_AS_LIMIT 1
-#endif
-#endif
-
 template <typename Body>
 [[noreturn]] void RunWithMemoryLimit(Body body) {
-#ifndef CLOUDCAST_NO_AS_LIMIT
-  const rlim_t limit = rlim_t{2} << 30;
-  rlimit rl{limit, limit};
-  if (::setrlimit(RLIMIT_AS, &rl) != 0) std::fprintf(stderr, "setrlimit failed\n");
-#endif
+  if constexpr (!testing::kUnderAnySanitizer) {
+    const rlim_t limit = rlim_t{2} << 30;
+    rlimit rl{limit, limit};
+    if (::setrlimit(RLIMIT_AS, &rl) != 0) std::fprintf(stderr, "setrlimit failed\n");
+  }
   const bool ok = body();
   std::fflush(stderr);
   std::_Exit(ok ? 0 : 1);

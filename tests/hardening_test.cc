@@ -29,6 +29,7 @@
 #include "cloudcast/testing/metrics_scrape.h"
 #include "cloudcast/v1/cloudcast.grpc.pb.h"
 #include "support/replica_support.h"
+#include "support/sanitizers.h"
 
 namespace cloudcast {
 namespace {
@@ -508,12 +509,12 @@ std::uint64_t ResidentBytes(pid_t pid) {
 // it stayed after they left. Now each is bounded near its stated limit, and memory goes back to
 // the OS once they are gone.
 TEST(HardeningMemoryTest, StreamsThatStopReadingHoldBoundedMemoryAndGiveItBack) {
-#if defined(__SANITIZE_ADDRESS__)
-  // The server under test is built the same way. ASan's redzones enlarge every block and its
-  // quarantine holds freed memory back on purpose (256 MB by default), so RSS then measures
-  // ASan, not the server: the bounds hold in the normal build, where this test runs in CI.
-  GTEST_SKIP() << "RSS bounds are not meaningful under ASan (redzones and quarantine)";
-#endif
+  if (testing::kUnderAddressSanitizer) {
+    // The server under test is built the same way. ASan's redzones enlarge every block and its
+    // quarantine holds freed memory back on purpose (256 MB by default), so RSS then measures
+    // ASan, not the server: the bounds hold in the normal build, where this test runs in CI.
+    GTEST_SKIP() << "RSS bounds are not meaningful under ASan (redzones and quarantine)";
+  }
   const std::string log = ::testing::TempDir() + "/memory_server.log";
   const int port = testing::FreeLoopbackPort();
   testing::ServerProcess server("127.0.0.1:" + std::to_string(port), "memory", {}, log);

@@ -239,7 +239,8 @@ inline void Pixel(const RowContext<kPlanes>& c, int x, typename V::T p1, typenam
     min[i] = V::Set1(255);
   }
   std::uint8_t* s1 = c.s1 + x * dp;
-  std::uint8_t* totals = c.totals + x * dp;
+  // The forward pass has no totals (c.totals is null): offsetting a null pointer is undefined.
+  std::uint8_t* totals = kForward ? nullptr : c.totals + x * dp;
   T total_min = V::Set1(255);
   T packed_min = V::Set1(255);  // kPackedChoice: 16-bit total * 256 + index
   if constexpr (!kForward) {
