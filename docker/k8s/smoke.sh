@@ -35,7 +35,27 @@ while [ $# -gt 0 ]; do
 done
 bin_dir=$(cd "$bin_dir" && pwd)
 
-if ! command -v podman >/dev/null || ! podman info >/dev/null 2>&1; then
+# Every podman call is bounded. A podman process killed while it held one of libpod's locks
+# leaves that lock taken, and each later call that needs it waits forever: here `podman kube play`
+# once hung until ctest's 900 s timeout with an empty log, and the killed run left its pod
+# behind. Bounded, the smoke fails in minutes, says why, and still removes what it made.
+podman_budget=${CLOUDCAST_PODMAN_TIMEOUT:-120}
+podman() {
+  local rc=0
+  timeout -k 10 "$podman_budget" podman "$@" || rc=$?
+  if [ "$rc" = 124 ] || [ "$rc" = 137 ]; then
+    echo "smoke.sh: 'podman $*' did not return in $podman_budget s: a libpod lock is probably held" \
+      "by a podman process that was killed; with no other podman running, 'podman system" \
+      "renumber' frees it" >&2
+  fi
+  return "$rc"
+}
+
+command -v podman >/dev/null || { echo "smoke.sh: SKIPPED: podman is not installed" >&2; exit 77; }
+info_rc=0
+podman info >/dev/null 2>&1 || info_rc=$?
+if [ "$info_rc" = 124 ] || [ "$info_rc" = 137 ]; then exit 1; fi  # hung: a failure, not a skip
+if [ "$info_rc" != 0 ]; then
   echo "smoke.sh: SKIPPED: podman cannot run here (scripts/setup installs it)" >&2
   exit 77
 fi
@@ -86,7 +106,7 @@ step "npm packages (js-yaml) in $work"
 step "runtime image $tag from $bin_dir"
 "$repo/docker/runtime-image.sh" --bin-dir "$bin_dir" --tag "$tag" --log "$run/build.log"
 step "HAProxy image $proxy_tag (Containerfile.tools)"
-podman build --network host --format docker -f "$repo/docker/Containerfile.tools" --target haproxy \
+podman_budget=900 podman build --network host --format docker -f "$repo/docker/Containerfile.tools" --target haproxy \
   -t "$proxy_tag" "$repo/docker" >"$run/build-haproxy.log" 2>&1 ||
   { tail -30 "$run/build-haproxy.log" >&2; exit 1; }
 
