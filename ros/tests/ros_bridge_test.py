@@ -194,13 +194,15 @@ class RosBridgeTest(unittest.TestCase):
         recorder.stop()
         ros_harness.wait_until(lambda: os.path.exists(bag), 10, "rosbag record to close " + bag)
         self.bridge_clouds.clear()
+        # --keep-alive: a player that exits right after its last publish can take messages still
+        # in its outgoing queues with it (a megabyte of image per frame; rosbag2 has the same,
+        # ros2/rosbag2#571). Once 3 of 4 frames came back, the last one missing. The player stays
+        # up until the bridge has answered every frame; a frame the bridge loses still fails.
         player = self.h.start("rosbag_play", ["rosbag", "play", "--wait-for-subscribers",
-                                              "--rate", "2", bag, "__name:=player"])
-        try:
-            player.popen.wait(60)
-        except subprocess.TimeoutExpired:
-            self.fail("rosbag play did not finish in 60 s:\n" + self.h.logs())
-        played = self.bridge_clouds.wait_for(stamps, 30)
+                                              "--keep-alive", "--rate", "2", bag,
+                                              "__name:=player"])
+        played = self.bridge_clouds.wait_for(stamps, 60)
+        player.stop()
         for frame, a, b in zip(FRAMES, live, played):
             with self.subTest(frame=frame):
                 self.assertEqual(a.header.stamp, b.header.stamp)
