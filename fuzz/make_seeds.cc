@@ -136,12 +136,18 @@ ImageView<Encoding> View(const cv::Mat& m, Encoding e) {
 // Frames, each image as raw / encoded / compressed.
 enum class As { kRaw, kEncoded, kCompressed };
 
-v1::Frame MakeFrame(As disparity_as, const cv::Mat& disparity, DisparityEncoding de, As colour_as,
-                    const cv::Mat& colour, ColorEncoding ce, v1::Compression codec,
-                    std::uint64_t sequence) {
+// An empty frame named after its sequence number.
+v1::Frame NumberedFrame(std::uint64_t sequence) {
   v1::Frame f;
   f.set_sequence(sequence);
   f.set_frame_id("seed-" + std::to_string(sequence));
+  return f;
+}
+
+v1::Frame MakeFrame(As disparity_as, const cv::Mat& disparity, DisparityEncoding de, As colour_as,
+                    const cv::Mat& colour, ColorEncoding ce, v1::Compression codec,
+                    std::uint64_t sequence) {
+  v1::Frame f = NumberedFrame(sequence);
   f.set_capture_time_unix_ns(1'700'000'000'000'000'000 + sequence);
   const convert::Compression compression{codec, 1};
   switch (disparity_as) {
@@ -175,9 +181,7 @@ v1::Frame MakeFrame(As disparity_as, const cv::Mat& disparity, DisparityEncoding
 // with the colour of the left view), with a colour image of the same size.
 v1::Frame DepthFrame(As depth_as, const cv::Mat& depth, DepthEncoding encoding,
                      std::uint64_t sequence) {
-  v1::Frame f;
-  f.set_sequence(sequence);
-  f.set_frame_id("seed-" + std::to_string(sequence));
+  v1::Frame f = NumberedFrame(sequence);
   const DepthView view = View(depth, encoding);
   if (depth_as == As::kRaw) {
     Check(convert::ToProto(view, "depth", f.mutable_depth()->mutable_raw()));
@@ -190,9 +194,7 @@ v1::Frame DepthFrame(As depth_as, const cv::Mat& depth, DepthEncoding encoding,
   return f;
 }
 v1::Frame StereoFrame(As as, int type, std::uint64_t sequence) {
-  v1::Frame f;
-  f.set_sequence(sequence);
-  f.set_frame_id("seed-" + std::to_string(sequence));
+  v1::Frame f = NumberedFrame(sequence);
   const ColorEncoding e = type == CV_8UC1 ? ColorEncoding::kMono8 : ColorEncoding::kBGR8;
   const cv::Mat left = StereoView(0, type), right = StereoView(4, type);
   const convert::Compression zstd{v1::COMPRESSION_ZSTD_DELTA_ROWS, 1};
