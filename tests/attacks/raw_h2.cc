@@ -8,6 +8,7 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <algorithm>
 #include <cstring>
 #include <vector>
 
@@ -128,7 +129,7 @@ bool SplitHostPort(const std::string& target, std::string* host, int* port) {
 }
 
 absl::StatusOr<std::unique_ptr<RawH2Connection>> RawH2Connection::Connect(
-    const std::string& host, int port, const std::string& source) {
+    const std::string& host, int port, const std::string& source, WindowPolicy window) {
   sockaddr_in to{};
   to.sin_family = AF_INET;
   to.sin_port = htons(static_cast<std::uint16_t>(port));
@@ -161,7 +162,7 @@ absl::StatusOr<std::unique_ptr<RawH2Connection>> RawH2Connection::Connect(
   }
   const int one = 1;
   setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
-  std::unique_ptr<RawH2Connection> c(new RawH2Connection(fd));
+  std::unique_ptr<RawH2Connection> c(new RawH2Connection(fd, window));
   const std::string preface =
       std::string("PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n") + Frame(kSettings, 0, 0, "");
   if (!c->Write(preface, std::chrono::steady_clock::now() + std::chrono::seconds(2))) {
@@ -170,15 +171,26 @@ absl::StatusOr<std::unique_ptr<RawH2Connection>> RawH2Connection::Connect(
   return c;
 }
 
-RawH2Connection::RawH2Connection(int fd) : fd_(fd) {
+RawH2Connection::RawH2Connection(int fd, WindowPolicy window)
+    : fd_(fd), window_(window), rate_last_(std::chrono::steady_clock::now()) {
   reader_ = std::thread([this] { Read(); });
 }
 
 RawH2Connection::~RawH2Connection() {
   stop_.store(true);
   shutdown(fd_, SHUT_RDWR);
-  reader_.join();
+  if (reader_.joinable()) reader_.join();
   close(fd_);
+}
+
+void RawH2Connection::StopReading() {
+  stop_.store(true);
+  if (reader_.joinable()) reader_.join();
+}
+
+void RawH2Connection::ResetOnClose() {
+  const linger l{1, 0};
+  setsockopt(fd_, SOL_SOCKET, SO_LINGER, &l, sizeof l);
 }
 
 ConnectionStats RawH2Connection::stats() const {
@@ -190,6 +202,112 @@ bool RawH2Connection::Write(std::string_view bytes,
                             std::chrono::steady_clock::time_point deadline) {
   std::lock_guard<std::mutex> lock(write_mu_);
   return WriteLocked(bytes, deadline);
+}
+
+bool RawH2Connection::OpenStream(std::uint32_t stream, std::string_view header_block,
+                                 bool end_stream, std::chrono::steady_clock::time_point deadline) {
+  {
+    std::lock_guard<std::mutex> lock(stats_mu_);
+    streams_[stream].send_window = peer_initial_window_;
+  }
+  return Write(Frame(kHeaders, kEndHeaders | (end_stream ? kEndStream : 0), stream, header_block),
+               deadline);
+}
+
+bool RawH2Connection::StreamEnded(std::uint32_t stream) const {
+  std::lock_guard<std::mutex> lock(stats_mu_);
+  const auto it = streams_.find(stream);
+  return it == streams_.end() || it->second.ended;
+}
+
+bool RawH2Connection::SendData(std::uint32_t stream, std::string_view bytes, bool end_stream,
+                               std::chrono::steady_clock::time_point deadline) {
+  for (;;) {
+    std::size_t n = 0;
+    {
+      std::unique_lock<std::mutex> lock(stats_mu_);
+      for (;;) {
+        const auto it = streams_.find(stream);
+        if (closed_.load() || it == streams_.end() || it->second.ended) return false;
+        if (bytes.empty()) break;  // END_STREAM alone needs no window
+        const std::int64_t room = std::min(conn_send_window_, it->second.send_window);
+        if (room > 0) {
+          n = std::min({bytes.size(), peer_max_frame_, static_cast<std::size_t>(room)});
+          conn_send_window_ -= static_cast<std::int64_t>(n);
+          it->second.send_window -= static_cast<std::int64_t>(n);
+          break;
+        }
+        const auto now = std::chrono::steady_clock::now();
+        if (now >= deadline) return false;
+        // Bounded waits: the reader does not signal a closed connection.
+        window_cv_.wait_until(lock, std::min(deadline, now + std::chrono::milliseconds(100)));
+      }
+    }
+    const bool last = n == bytes.size();
+    if (!Write(Frame(kData, last && end_stream ? kEndStream : 0, stream, bytes.substr(0, n)),
+               deadline)) {
+      return false;
+    }
+    bytes.remove_prefix(n);
+    if (last) return true;
+  }
+}
+
+void RawH2Connection::CountMessages(Stream* s, const unsigned char* p, std::size_t n) {
+  while (n > 0) {
+    if (s->prefix_have < 5) {
+      const std::size_t take = std::min<std::size_t>(5 - s->prefix_have, n);
+      std::memcpy(s->prefix + s->prefix_have, p, take);
+      s->prefix_have += take;
+      p += take;
+      n -= take;
+      if (s->prefix_have == 5) {
+        s->body_left = Get32(s->prefix + 1);
+        if (s->body_left == 0) {
+          ++stats_.messages_received;
+          s->prefix_have = 0;
+        }
+      }
+      continue;
+    }
+    const std::size_t take = static_cast<std::size_t>(std::min<std::uint64_t>(s->body_left, n));
+    s->body_left -= take;
+    p += take;
+    n -= take;
+    if (s->body_left == 0) {
+      ++stats_.messages_received;
+      s->prefix_have = 0;
+    }
+  }
+}
+
+std::string RawH2Connection::PacedWindowUpdates(std::chrono::steady_clock::time_point now) {
+  if (window_.mode != WindowPolicy::kRate) return "";
+  const double dt = std::chrono::duration<double>(now - rate_last_).count();
+  rate_last_ = now;
+  // At most a second's worth (or one frame's) saved up while nothing was owed.
+  rate_budget_ = std::min(rate_budget_ + window_.bytes_per_second * dt,
+                          std::max(window_.bytes_per_second, 16384.0));
+  const std::uint64_t give =
+      std::min<std::uint64_t>(static_cast<std::uint64_t>(rate_budget_), conn_owed_);
+  if (give == 0) return "";
+  rate_budget_ -= static_cast<double>(give);
+  conn_owed_ -= give;
+  stats_.window_given_back += give;
+  std::string out = WindowUpdate(0, static_cast<std::uint32_t>(give));
+  // The same amount to the streams that are owed it, round robin.
+  std::uint64_t left = give;
+  auto it = streams_.upper_bound(rate_next_stream_);
+  for (std::size_t visited = 0; left > 0 && visited < 2 * streams_.size(); ++visited, ++it) {
+    if (it == streams_.end()) it = streams_.begin();
+    if (it->second.owed == 0) continue;
+    const std::uint64_t g = std::min(left, it->second.owed);
+    it->second.owed -= g;
+    left -= g;
+    rate_next_stream_ = it->first;
+    out += WindowUpdate(it->first, static_cast<std::uint32_t>(g));
+  }
+  return out;
 }
 
 bool RawH2Connection::WriteLocked(std::string_view bytes,
@@ -221,13 +339,28 @@ void RawH2Connection::Read() {
   std::vector<unsigned char> in;
   std::size_t at = 0;
   unsigned char buf[65536];
+  // Paced window updates need a finer tick than a reader's 100 ms.
+  const int tick_ms = window_.mode == WindowPolicy::kRate ? 20 : 100;
   while (!stop_.load()) {
     pollfd p{fd_, POLLIN, 0};
-    if (poll(&p, 1, 100) <= 0) continue;
+    const int ready = poll(&p, 1, tick_ms);
+    if (window_.mode == WindowPolicy::kRate) {
+      std::string updates;
+      {
+        std::lock_guard<std::mutex> lock(stats_mu_);
+        updates = PacedWindowUpdates(std::chrono::steady_clock::now());
+      }
+      if (!updates.empty()) {
+        std::lock_guard<std::mutex> lock(write_mu_);
+        WriteLocked(updates, std::chrono::steady_clock::now() + std::chrono::seconds(1));
+      }
+    }
+    if (ready <= 0) continue;
     const ssize_t n = recv(fd_, buf, sizeof buf, 0);
     if (n <= 0) {
       if (n < 0 && (errno == EAGAIN || errno == EINTR)) continue;
       closed_.store(true);
+      window_cv_.notify_all();
       return;
     }
     in.insert(in.end(), buf, buf + n);
@@ -248,7 +381,32 @@ void RawH2Connection::Read() {
       ++stats_.frames_read;
       switch (type) {
         case kSettings:
-          if ((flags & kAck) == 0) replies += Frame(kSettings, kAck, 0, "");
+          if ((flags & kAck) == 0) {
+            for (std::size_t i = 0; i + 6 <= length; i += 6) {
+              const std::uint16_t id = static_cast<std::uint16_t>((payload[i] << 8) | payload[i + 1]);
+              const std::uint32_t value = Get32(payload + i + 2);
+              if (id == 0x4) {  // SETTINGS_INITIAL_WINDOW_SIZE: applies to open streams too
+                const std::int64_t delta = std::int64_t{value} - peer_initial_window_;
+                peer_initial_window_ = value;
+                for (auto& entry : streams_) entry.second.send_window += delta;
+              } else if (id == 0x5) {  // SETTINGS_MAX_FRAME_SIZE
+                peer_max_frame_ = value;
+              }
+            }
+            replies += Frame(kSettings, kAck, 0, "");
+            window_cv_.notify_all();
+          }
+          break;
+        case kWindowUpdate:
+          if (length == 4) {
+            const std::uint32_t increment = Get32(payload) & 0x7fffffffu;
+            if (stream == 0) {
+              conn_send_window_ += increment;
+            } else if (auto it = streams_.find(stream); it != streams_.end()) {
+              it->second.send_window += increment;
+            }
+            window_cv_.notify_all();
+          }
           break;
         case kPing:
           if ((flags & kAck) == 0 && length == 8) {
@@ -256,21 +414,57 @@ void RawH2Connection::Read() {
                 Frame(kPing, kAck, 0, std::string_view(reinterpret_cast<const char*>(payload), 8));
           }
           break;
-        case kData:
+        case kData: {
+          stats_.data_bytes_received += length;
+          Stream* s = nullptr;
+          if (auto it = streams_.find(stream); it != streams_.end()) s = &it->second;
+          if (s != nullptr && length > 0) {
+            // A padded frame: its pad length first, its padding last (counted for flow control).
+            std::size_t skip = 0, pad = 0;
+            if ((flags & 0x8) != 0) {
+              skip = 1;
+              pad = payload[0];
+            }
+            if (length >= skip + pad) CountMessages(s, payload + skip, length - skip - pad);
+          }
+          if (s != nullptr && (flags & kEndStream) != 0 && !s->ended) {
+            s->ended = true;
+            ++stats_.streams_ended;
+            window_cv_.notify_all();
+          }
           if (length > 0) {
-            replies += WindowUpdate(0, static_cast<std::uint32_t>(length));
-            replies += WindowUpdate(stream, static_cast<std::uint32_t>(length));
+            if (window_.mode == WindowPolicy::kAsReceived) {
+              replies += WindowUpdate(0, static_cast<std::uint32_t>(length));
+              replies += WindowUpdate(stream, static_cast<std::uint32_t>(length));
+              stats_.window_given_back += length;
+            } else {
+              conn_owed_ += length;
+              if (s != nullptr) s->owed += length;
+            }
           }
           break;
+        }
         case kGoAway:
           ++stats_.goaways;
           if (length >= 8) stats_.last_goaway_code = Get32(payload + 4);
           break;
         case kRstStream:
           ++stats_.rst_streams_received;
+          if (auto it = streams_.find(stream); it != streams_.end() && !it->second.ended) {
+            it->second.ended = true;
+            ++stats_.streams_ended;
+            window_cv_.notify_all();
+          }
           break;
         case kHeaders:
           ++stats_.headers_received;
+          if ((flags & kEndStream) != 0) {  // trailers (or a trailers-only answer)
+            if (auto it = streams_.find(stream); it != streams_.end() && !it->second.ended) {
+              it->second.ended = true;
+              ++stats_.streams_ended;
+              window_cv_.notify_all();
+            }
+          }
           break;
         default:
           break;
