@@ -157,7 +157,9 @@ step "replicas on ${ips// /, } (gRPC :$grpc_port, metrics :$metrics_port), balan
   echo "backend cloudcast"
   echo "  # Each Stream call (an h2 stream) goes to the next replica."
   echo "  balance roundrobin"
-  echo "  http-reuse always"
+  echo "  # Backend connections of its own for each client connection (issue 30: a shared one froze"
+  echo "  # every client behind one whose stream could not drain; docker/haproxy/backend-local.cfg)."
+  echo "  http-reuse never"
   i=1
   for ip in $ips; do
     echo "  server replica$i $ip:$grpc_port proto h2 check inter 1s"

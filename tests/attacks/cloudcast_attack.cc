@@ -479,8 +479,8 @@ json RawStreams(const Common& c, const char* name, const RawStreamsOptions& o,
       if (!call.conn->SendData(call.stream, first, false, deadline)) return;
       configs_sent.fetch_add(1);
       bytes_sent.fetch_add(first.size());
-      const auto period = o.fps > 0 ? std::chrono::duration<double>(1.0 / o.fps)
-                                    : std::chrono::duration<double>(0);
+      const auto period =
+          o.fps > 0 ? std::chrono::duration<double>(1.0 / o.fps) : std::chrono::duration<double>(0);
       auto next = Clock::now();
       for (std::uint64_t n = 0; Clock::now() < deadline; ++n) {
         std::string bytes = o.churn ? ConfigMessage(o.leaf, static_cast<int>(n + 1)) : "";

@@ -7,8 +7,8 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
-#include <cerrno>
 #include <algorithm>
+#include <cerrno>
 #include <cstring>
 #include <vector>
 
@@ -128,8 +128,10 @@ bool SplitHostPort(const std::string& target, std::string* host, int* port) {
   }
 }
 
-absl::StatusOr<std::unique_ptr<RawH2Connection>> RawH2Connection::Connect(
-    const std::string& host, int port, const std::string& source, WindowPolicy window) {
+absl::StatusOr<std::unique_ptr<RawH2Connection>> RawH2Connection::Connect(const std::string& host,
+                                                                          int port,
+                                                                          const std::string& source,
+                                                                          WindowPolicy window) {
   sockaddr_in to{};
   to.sin_family = AF_INET;
   to.sin_port = htons(static_cast<std::uint16_t>(port));
@@ -383,7 +385,8 @@ void RawH2Connection::Read() {
         case kSettings:
           if ((flags & kAck) == 0) {
             for (std::size_t i = 0; i + 6 <= length; i += 6) {
-              const std::uint16_t id = static_cast<std::uint16_t>((payload[i] << 8) | payload[i + 1]);
+              const std::uint16_t id =
+                  static_cast<std::uint16_t>((payload[i] << 8) | payload[i + 1]);
               const std::uint32_t value = Get32(payload + i + 2);
               if (id == 0x4) {  // SETTINGS_INITIAL_WINDOW_SIZE: applies to open streams too
                 const std::int64_t delta = std::int64_t{value} - peer_initial_window_;

@@ -78,10 +78,10 @@ struct ConnectionStats {
   std::uint32_t last_goaway_code = 0;
   std::uint64_t rst_streams_received = 0;
   std::uint64_t headers_received = 0;
-  std::uint64_t data_bytes_received = 0;   // DATA payloads
-  std::uint64_t window_given_back = 0;     // WINDOW_UPDATE increments sent (connection level)
-  std::uint64_t messages_received = 0;     // whole gRPC messages in DATA, every stream
-  std::uint64_t streams_ended = 0;         // streams the peer ended (END_STREAM or RST_STREAM)
+  std::uint64_t data_bytes_received = 0;  // DATA payloads
+  std::uint64_t window_given_back = 0;    // WINDOW_UPDATE increments sent (connection level)
+  std::uint64_t messages_received = 0;    // whole gRPC messages in DATA, every stream
+  std::uint64_t streams_ended = 0;        // streams the peer ended (END_STREAM or RST_STREAM)
 };
 
 class RawH2Connection {
