@@ -731,14 +731,20 @@ TEST_F(ProxyIsolationTest, WindowsReturnedAt4KBPerSecondFreezeNoOtherClient) {
 }
 #endif
 
-// Defect 2, trigger B, and defect 7: a client that sends a new StreamConfig before every frame
-// (tens of MB a second of replies), then leaves. Before: every client behind the proxy frozen for
-// about 120 s (3 of 3 runs), and 3 to 4 of its streams still open on the server meanwhile.
+// Defect 2, trigger B, and defect 7: a client that sends a new StreamConfig before every frame,
+// as fast as flow control lets it (4 calls on 2 connections; its frames zstd-compressed, a few
+// hundred bytes each that decode to 640x640), reading every reply, then leaves. It locks its own
+// calls up: HAProxy 2.6 reads its connection in order and stops at a stream whose buffer is full,
+// so its WINDOW_UPDATEs wait behind the frames it sent ahead while the server waits for its window.
+// Before: every client behind the proxy frozen (the tester: about 120 s, 3 of 3 runs), and 3 to 4
+// of its streams still open on the server meanwhile. Now its calls alone stall, until the proxy's
+// `timeout client` (5 s) ends them: the attack lasts at least 6 s.
 TEST_F(ProxyIsolationTest, AConfigChurningClientThatLeavesFreezesNoOtherClient) {
   Recovery r;
-  const Figures f = RunAndWatch(
-      "config churn, then the client leaves",
-      {{{"config-churn", "--source", "127.0.0.2", "--calls", "4", "--connections", "2"}}}, &r);
+  const Figures f = RunAndWatch("config churn, then the client leaves",
+                                {{{"config-churn", "--source", "127.0.0.2", "--calls", "4",
+                                   "--connections", "2", "--encoding", "zstd"}}},
+                                &r, std::max(kAttackSeconds, 6.0));
   ExpectUnharmed(f);
   ExpectRecovered(f, r);
 }

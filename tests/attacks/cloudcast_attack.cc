@@ -497,6 +497,9 @@ json RawStreams(const Common& c, const char* name, const RawStreamsOptions& o,
     });
   }
   for (auto& t : threads) t.join();
+  // Calls the server or a proxy ended do not end the attack: the client stays until its time is
+  // up (bounded by the deadline), and then leaves.
+  std::this_thread::sleep_until(deadline);
   // How the client leaves. A program that exits stops reading first: replies still arriving
   // then stay unread, and its kernel resets the connection when the socket closes (a program
   // that read everything ends with a FIN, after whatever it had not yet sent).
