@@ -15,6 +15,7 @@
 
 #include <CLI/CLI.hpp>
 #include <cstdlib>
+#include <cstring>
 #include <iostream>
 #include <string>
 #include <thread>
@@ -41,10 +42,28 @@ void KeepFrameBuffersOnTheHeap() {
   mallopt(M_TRIM_THRESHOLD, 16 << 20);
 }
 
+// gRPC 1.51's default TCP read path (its "tcp_read_chunks" experiment) sizes the next read
+// buffer from what the last burst of reads brought, without a bound: a client that floods faster
+// than the server parses (a CONTINUATION flood) grows it past a gigabyte, and past 2 GiB its int
+// arithmetic goes negative, no buffer is allocated and an assertion aborts the process
+// (tcp_posix.cc:894; issue 30, defect 5: 3 of 5 floods). The older path clamps every read buffer
+// to 4 MiB (grpc.experimental.tcp_max_read_chunk_size); measured under a flood, the untouched
+// read buffers went from 0.6-1.3 GB to 64 MB. gRPC reads the variable once, when it starts: it is
+// set before any gRPC object exists. An operator's own setting of that experiment is kept.
+void BoundTcpReadBuffers() {
+  const char* current = std::getenv("GRPC_EXPERIMENTS");
+  if (current != nullptr && std::strstr(current, "tcp_read_chunks") != nullptr) return;
+  const std::string value = current != nullptr && *current != '\0'
+                                ? std::string(current) + ",-tcp_read_chunks"
+                                : std::string("-tcp_read_chunks");
+  setenv("GRPC_EXPERIMENTS", value.c_str(), 1);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   KeepFrameBuffersOnTheHeap();
+  BoundTcpReadBuffers();
   CLI::App app{
       "cloudcast-server: stereo frames (disparity + colour) in, filtered and Draco-compressed "
       "point clouds out, over gRPC (cloudcast.v1.CloudCast). Health checking and reflection are "
