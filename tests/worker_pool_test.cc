@@ -145,18 +145,23 @@ TEST(WorkerPoolTest, LargeTasksLeaveAWorkerForTheRest) {
   };
   for (int i = 0; i < 4; ++i) ASSERT_TRUE(pool.Submit(large, /*client=*/1, i, /*cost=*/1000));
   // The small one is queued behind four large ones of another client, and still runs at once.
-  std::atomic<bool> small_ran{false};
+  bool small_ran = false;
   ASSERT_TRUE(pool.Submit(
       [&](std::size_t) {
-        std::lock_guard<std::mutex> lock(mu);
-        order.push_back("small");
-        small_ran.store(true);
+        {
+          std::lock_guard<std::mutex> lock(mu);
+          order.push_back("small");
+          small_ran = true;
+        }
+        cv.notify_all();  // the large ones wake, see no release and wait on
       },
       /*client=*/2, /*call=*/9, /*cost=*/10));
-  for (int i = 0; i < 500 && !small_ran.load(); ++i) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  {
+    // Waits on the small task itself; the deadline only turns a hang into a failure.
+    std::unique_lock<std::mutex> lock(mu);
+    EXPECT_TRUE(cv.wait_for(lock, std::chrono::seconds(30), [&] { return small_ran; }))
+        << "a small task waited behind large ones on every worker";
   }
-  EXPECT_TRUE(small_ran.load()) << "a small task waited behind large ones on every worker";
   {
     std::lock_guard<std::mutex> lock(mu);
     release = true;
@@ -222,8 +227,23 @@ TEST(WorkerPoolTest, AClientLeavesAWorkerWhileAnotherIsActive) {
   }
 }
 
+// A clock the test moves by hand: the limiter's one-second window passes without sleeping.
+class FakeClock {
+ public:
+  LogLimiter::Now Now() {
+    return [this] { return now_.load(); };
+  }
+  void Advance(std::chrono::milliseconds d) { now_.store(now_.load() + d); }
+
+ private:
+  // Far from the steady clock's epoch, as a real one is: a window's start is never special.
+  std::atomic<LogLimiter::Clock::time_point> now_{LogLimiter::Clock::time_point{} +
+                                                  std::chrono::hours(1)};
+};
+
 TEST(LogLimiterTest, LetsPerSecondLinesThroughAndSaysHowManyWereLeftOut) {
-  LogLimiter limiter(3);
+  FakeClock clock;
+  LogLimiter limiter(3, clock.Now());
   std::uint64_t suppressed = 99;
   for (int i = 0; i < 3; ++i) {
     EXPECT_TRUE(limiter.Allow(&suppressed));
@@ -231,9 +251,37 @@ TEST(LogLimiterTest, LetsPerSecondLinesThroughAndSaysHowManyWereLeftOut) {
   }
   for (int i = 0; i < 5; ++i) EXPECT_FALSE(limiter.Allow(&suppressed));
   EXPECT_EQ(limiter.total_suppressed(), 5u);
-  std::this_thread::sleep_for(std::chrono::milliseconds(1100));
+  // Still the same second, a millisecond before its end.
+  clock.Advance(std::chrono::milliseconds(999));
+  EXPECT_FALSE(limiter.Allow(&suppressed));
+  EXPECT_EQ(limiter.total_suppressed(), 6u);
+  // A second after the window's first line, the next window opens.
+  clock.Advance(std::chrono::milliseconds(1));
   EXPECT_TRUE(limiter.Allow(&suppressed));
-  EXPECT_EQ(suppressed, 5u);  // the first line of the next second says so
+  EXPECT_EQ(suppressed, 6u);  // the first line of the next second says so
+  EXPECT_TRUE(limiter.Allow(&suppressed));
+  EXPECT_EQ(suppressed, 0u);  // and only the first
+  EXPECT_TRUE(limiter.Allow(&suppressed));
+  EXPECT_FALSE(limiter.Allow(&suppressed));
+  EXPECT_EQ(limiter.total_suppressed(), 7u);
+}
+
+// A window lasts a second from its first line, not from the last window's end: after a quiet
+// spell the next line opens a full window of its own.
+TEST(LogLimiterTest, AWindowStartsAtItsFirstLine) {
+  FakeClock clock;
+  LogLimiter limiter(2, clock.Now());
+  std::uint64_t suppressed = 0;
+  EXPECT_TRUE(limiter.Allow(&suppressed));
+  clock.Advance(std::chrono::milliseconds(2500));
+  EXPECT_TRUE(limiter.Allow(&suppressed));  // opens a window at 2.5 s
+  clock.Advance(std::chrono::milliseconds(900));
+  EXPECT_TRUE(limiter.Allow(&suppressed));
+  EXPECT_FALSE(limiter.Allow(&suppressed));  // 3.4 s: still the window of 2.5 s
+  clock.Advance(std::chrono::milliseconds(100));
+  EXPECT_TRUE(limiter.Allow(&suppressed));  // 3.5 s: a new one
+  EXPECT_EQ(suppressed, 1u);
+  EXPECT_EQ(limiter.total_suppressed(), 1u);
 }
 
 }  // namespace
