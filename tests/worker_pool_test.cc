@@ -172,27 +172,55 @@ TEST(WorkerPoolTest, LargeTasksLeaveAWorkerForTheRest) {
   EXPECT_EQ(order.size(), 5u);
 }
 
+// Tasks that count how many of them run at once. A task that starts first waits (on the others,
+// up to a generous 30 s) until `expected` have run together, then works for 20 ms: two tasks that
+// only sleep need not overlap on a loaded machine, and a pool that lets two run at once would be
+// seen running one. The 20 ms are the window in which a task the pool should have held back, had
+// it started, would be counted.
+class Concurrency {
+ public:
+  explicit Concurrency(int expected) : expected_(expected) {}
+
+  void Run() {
+    {
+      std::unique_lock<std::mutex> lock(mu_);
+      most_ = std::max(most_, ++running_);
+      cv_.notify_all();
+      if (!cv_.wait_for(lock, std::chrono::seconds(30),
+                        [&] { return most_ >= expected_ || gave_up_; })) {
+        gave_up_ = true;  // the others go on at once; most() says how many ran together
+      }
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));  // the work
+    std::lock_guard<std::mutex> lock(mu_);
+    --running_;
+  }
+
+  int most() const {
+    std::lock_guard<std::mutex> lock(mu_);
+    return most_;
+  }
+
+ private:
+  const int expected_;
+  mutable std::mutex mu_;
+  std::condition_variable cv_;
+  int running_ = 0, most_ = 0;
+  bool gave_up_ = false;
+};
+
 // Defect 4: tasks start only while their stated work memory fits beside the running ones'; the
 // pool never states more in use than its limit (but for a lone task, which always may start).
 TEST(WorkerPoolTest, TasksStartOnlyWhileTheirWorkMemoryFits) {
   WorkerPool pool(4, WorkerPool::Limits{/*work_memory_bytes=*/100, /*large_cost=*/~0ull});
-  std::mutex mu;
-  int running = 0, most_running = 0;
+  Concurrency tasks(/*expected=*/2);
   for (int i = 0; i < 12; ++i) {
-    ASSERT_TRUE(pool.Submit(
-        [&](std::size_t) {
-          {
-            std::lock_guard<std::mutex> lock(mu);
-            most_running = std::max(most_running, ++running);
-          }
-          std::this_thread::sleep_for(std::chrono::milliseconds(20));
-          std::lock_guard<std::mutex> lock(mu);
-          --running;
-        },
-        /*client=*/static_cast<std::uint64_t>(i % 3), i, /*cost=*/1, /*work_bytes=*/40));
+    ASSERT_TRUE(pool.Submit([&](std::size_t) { tasks.Run(); },
+                            /*client=*/static_cast<std::uint64_t>(i % 3), i, /*cost=*/1,
+                            /*work_bytes=*/40));
   }
   pool.Stop();
-  EXPECT_EQ(most_running, 2);  // 2 x 40 fit in 100, 3 x 40 do not
+  EXPECT_EQ(tasks.most(), 2);  // 2 x 40 fit in 100, 3 x 40 do not
   EXPECT_LE(pool.work_bytes_high_water(), 100u);
   EXPECT_EQ(pool.work_bytes_in_use(), 0u);
 }
@@ -204,26 +232,16 @@ TEST(WorkerPoolTest, AClientLeavesAWorkerWhileAnotherIsActive) {
   for (const bool other_active : {false, true}) {
     SCOPED_TRACE(other_active ? "another client active" : "alone");
     WorkerPool pool(2);
-    std::mutex mu;
-    int running = 0, most = 0;
+    Concurrency tasks(/*expected=*/other_active ? 1 : 2);
     if (other_active) {
       ASSERT_TRUE(pool.Submit([](std::size_t) {}, /*client=*/2, 1, 1));
     }
     for (int i = 0; i < 8; ++i) {
-      ASSERT_TRUE(pool.Submit(
-          [&](std::size_t) {
-            {
-              std::lock_guard<std::mutex> lock(mu);
-              most = std::max(most, ++running);
-            }
-            std::this_thread::sleep_for(std::chrono::milliseconds(20));
-            std::lock_guard<std::mutex> lock(mu);
-            --running;
-          },
-          /*client=*/1, /*call=*/1 + i % 2, /*cost=*/1));
+      ASSERT_TRUE(pool.Submit([&](std::size_t) { tasks.Run(); }, /*client=*/1,
+                              /*call=*/1 + i % 2, /*cost=*/1));
     }
     pool.Stop();
-    EXPECT_EQ(most, other_active ? 1 : 2);
+    EXPECT_EQ(tasks.most(), other_active ? 1 : 2);
   }
 }
 
