@@ -592,6 +592,15 @@ TEST_F(AttackTest, RapidResetAgainstTheServerAloneDoesNotFloodItsLog) {
 // frame, whether its client had sent it (its Write returned) before the signal.
 constexpr double kShutdownToleranceS = 1.0;
 
+}  // namespace
+}  // namespace cloudcast
+
+// The synchronous stub (the tests above use the Fleet); included here, with the test that uses it.
+#include "cloudcast/v1/cloudcast.grpc.pb.h"
+
+namespace cloudcast {
+namespace {
+
 class SignalledStream {
  public:
   SignalledStream(const std::string& target, double fps, std::uint64_t max_frames)
