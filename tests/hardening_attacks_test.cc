@@ -581,7 +581,6 @@ TEST_F(AttackTest, RapidResetAgainstTheServerAloneDoesNotFloodItsLog) {
   EXPECT_GT(Metric("cloudcast_streams_cancelled_total"), 0);
 }
 
-
 // Issue 30, defect 6: SIGTERM during a rapid reset against the server alone. The tester's run: the
 // shutdown took 9.1 s against a 5 s grace, and the paced DELIVERY_ALL stream ended with "Cancelling
 // all calls", 2 frames it had sent before the signal unanswered. The bar: the process exits 0
@@ -605,7 +604,8 @@ namespace {
 class SignalledStream {
  public:
   SignalledStream(const std::string& target, double fps, std::uint64_t max_frames)
-      : period_(std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1 / fps))),
+      : period_(
+            std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1 / fps))),
         frames_(max_frames) {
     grpc::ChannelArguments args;
     args.SetInt("cloudcast.test.signalled_stream", 1);  // a connection of its own
@@ -835,9 +835,10 @@ TEST_F(AttackTest, SigtermDuringARapidResetEndsWithinTheGraceAndLosesNoFrameSent
     EXPECT_GT(a.unanswered_before.front(), a.last_answered)
         << "frames sent before the signal were left unanswered before frame " << a.last_answered
         << ", which was answered:" << missing;
-    std::printf("  not answered when the server ended the call, left to the client library's "
-                "resend:%s\n",
-                missing.c_str());
+    std::printf(
+        "  not answered when the server ended the call, left to the client library's "
+        "resend:%s\n",
+        missing.c_str());
   }
 }
 

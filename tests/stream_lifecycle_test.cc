@@ -91,7 +91,7 @@ TEST(StreamLifecycleTest, ADrainAnswersTheReadStartedAndWaitsForItUntilToldNotTo
   StreamLifecycle s;
   s.Drain(Unavailable());
   EXPECT_EQ(s.state(), State::kClosing);
-  EXPECT_FALSE(s.reading());     // no new read
+  EXPECT_FALSE(s.reading());      // no new read
   EXPECT_TRUE(s.answers_read());  // the one started is answered
   bool cancelled = true;
   EXPECT_FALSE(s.Finish(/*nothing_held=*/true, &cancelled, /*read_started=*/true));

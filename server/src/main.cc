@@ -3,8 +3,8 @@
 // SIGINT / SIGTERM start a graceful shutdown: health checks go NOT_SERVING, new calls are refused,
 // frames in flight get --shutdown-grace seconds, then the process exits 0, at the latest half a
 // second after the grace period (Server::Shutdown), whatever the clients do. A second signal
-// exits at once. SIGHUP re-reads the TLS files and the tokens file (a bad one is logged and the one in
-// use stays). Signals are taken by sigwait on the main thread, never inside a signal handler.
+// exits at once. SIGHUP re-reads the TLS files and the tokens file (a bad one is logged and the one
+// in use stays). Signals are taken by sigwait on the main thread, never inside a signal handler.
 //
 // Exit status: 0 after a shutdown, 1 when the server cannot start (address in use), 2 for a
 // usage error: a bad flag, an unknown --config key, a missing or bad TLS or tokens file.

@@ -260,14 +260,16 @@ bool Server::Shutdown(std::chrono::milliseconds grace) {
   // their clients cancelled are not waited for: nothing more can reach those clients.
   const bool drained = service_->WaitForCalls(deadline);
   if (drained) {
-    spdlog::info("every call answered in {} ms", std::chrono::duration_cast<std::chrono::milliseconds>(
-                                                     std::chrono::steady_clock::now() - start)
-                                                     .count());
+    spdlog::info("every call answered in {} ms",
+                 std::chrono::duration_cast<std::chrono::milliseconds>(
+                     std::chrono::steady_clock::now() - start)
+                     .count());
   } else {
     const auto [streams, process] = service_->CallsInFlight();
-    spdlog::warn("grace period over: cancelling the calls still in flight ({} streams, {} "
-                 "Process calls)",
-                 streams, process);
+    spdlog::warn(
+        "grace period over: cancelling the calls still in flight ({} streams, {} "
+        "Process calls)",
+        streams, process);
   }
   // Then gRPC's Shutdown with no further wait: it cancels the calls left and closes every
   // connection left (idle ones: a client that keeps a connection open, or one that never
@@ -276,9 +278,8 @@ bool Server::Shutdown(std::chrono::milliseconds grace) {
   // gRPC thousands of calls to finish, seconds of work on 2 busy cores (9.1 s in all against a
   // 5 s grace, issue 30). So it runs on a thread of its own, waited for until the grace period
   // plus kShutdownOverrun.
-  grpc_shutdown_ = std::async(std::launch::async, [this] {
-    server_->Shutdown(std::chrono::system_clock::now());
-  });
+  grpc_shutdown_ = std::async(std::launch::async,
+                              [this] { server_->Shutdown(std::chrono::system_clock::now()); });
   grpc_finished_ =
       grpc_shutdown_.wait_until(deadline + kShutdownOverrun) == std::future_status::ready;
   if (grpc_finished_) {
@@ -286,9 +287,10 @@ bool Server::Shutdown(std::chrono::milliseconds grace) {
   } else {
     // Every reply and status the service wrote went out before (the calls that still had
     // something to deliver at the deadline were cancelled; their clients see UNAVAILABLE).
-    spdlog::warn("gRPC has not finished the calls its clients abandoned {} ms after the grace "
-                 "period: not waiting for it",
-                 kShutdownOverrun.count());
+    spdlog::warn(
+        "gRPC has not finished the calls its clients abandoned {} ms after the grace "
+        "period: not waiting for it",
+        kShutdownOverrun.count());
   }
   shut_down_ = true;
   spdlog::info("shut down in {} ms", std::chrono::duration_cast<std::chrono::milliseconds>(
@@ -302,8 +304,9 @@ void Server::StopAfterGrpc() {
   grpc_shutdown_.get();
   // gRPC's shutdown notification is in the queue once its Shutdown has returned.
   grpc_completion_queue_shutdown(shutdown_cq_);
-  while (grpc_completion_queue_next(shutdown_cq_, gpr_inf_future(GPR_CLOCK_MONOTONIC), nullptr)
-             .type != GRPC_QUEUE_SHUTDOWN) {
+  while (
+      grpc_completion_queue_next(shutdown_cq_, gpr_inf_future(GPR_CLOCK_MONOTONIC), nullptr).type !=
+      GRPC_QUEUE_SHUTDOWN) {
   }
   grpc_completion_queue_destroy(shutdown_cq_);
   shutdown_cq_ = nullptr;

@@ -36,7 +36,7 @@ CloudCastService::CloudCastService(const ServerOptions& options, Metrics* metric
               options.large_frame_pixels),
       pool_(options.ResolvedThreads(),
             WorkerPool::Limits{options.work_memory_bytes, options.large_frame_pixels}),
-      stream_services_{&options_, metrics_,   &admitter_, &runner_,
+      stream_services_{&options_, metrics_,  &admitter_, &runner_,
                        &pool_,    &streams_, &call_log_, &calls_changed_} {
   housekeeping_ = std::thread([this] { Housekeeping(); });
 }
@@ -230,8 +230,8 @@ bool CloudCastService::WaitForCalls(Clock::time_point deadline) {
 
 std::pair<int, int> CloudCastService::CallsInFlight() {
   const OpenStreams::Snapshot streams = streams_.Take();
-  const auto unsettled = std::count_if(streams.begin(), streams.end(),
-                                       [](StreamReactor* s) { return !s->Settled(); });
+  const auto unsettled =
+      std::count_if(streams.begin(), streams.end(), [](StreamReactor* s) { return !s->Settled(); });
   return {static_cast<int>(unsettled), process_calls_.load()};
 }
 

@@ -75,7 +75,8 @@ class StreamLifecycle {
   // broken or ending, once `nothing_held` when closing or half-closed (a drained call also once
   // no `read_started` is awaited). Only when no write is outstanding (a Finish must wait for it).
   // `cancelled` gets whether the call was broken.
-  std::optional<grpc::Status> Finish(bool nothing_held, bool* cancelled, bool read_started = false) {
+  std::optional<grpc::Status> Finish(bool nothing_held, bool* cancelled,
+                                     bool read_started = false) {
     *cancelled = state_ == State::kBroken;
     const bool settled = nothing_held && !(read_started && awaiting_read_);
     const bool now = state_ == State::kBroken || state_ == State::kEnding ||
@@ -95,7 +96,7 @@ class StreamLifecycle {
   State state_ = State::kReading;
   bool drained_from_reading_ = false;  // closing for a drain that stopped reading (Drain)
   bool awaiting_read_ = false;         // the drain waits for a read already started
-  grpc::Status status_;  // the status of the current state
+  grpc::Status status_;                // the status of the current state
 };
 
 }  // namespace cloudcast::server

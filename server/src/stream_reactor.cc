@@ -208,7 +208,8 @@ void StreamReactor::Pump(std::unique_lock<std::mutex>& lock, bool cancel) {
   // End the call when its time has come (never with a write outstanding).
   if (!lifecycle_.finished() && writing_ == nullptr) {
     bool cancelled = false;
-    ops.finish = lifecycle_.Finish(queue_.Empty(), &cancelled, /*read_started=*/reading_ != nullptr);
+    ops.finish =
+        lifecycle_.Finish(queue_.Empty(), &cancelled, /*read_started=*/reading_ != nullptr);
     // The stream's place is free once its end is decided: a client that has its status and
     // opens the next stream at once must not be refused for this one (OnDone, where the ticket
     // went before, may run after the client already holds the status). A stream the client
