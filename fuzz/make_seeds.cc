@@ -363,6 +363,26 @@ void ProcessSeeds() {
   for (double x : {-0.4, 0.0, 0.0}) cal->add_t(x);
   *r.mutable_frame() = StereoFrame(As::kRaw, CV_8UC1, 13);
   Write(h, "stereo_calibrated", r.SerializeAsString());
+  // Pairs at the edge of their disparity range, for each of OpenCV's modes (issue 30: a 64x16
+  // pair with 128 disparities aborted the server inside OpenCV's SGBM_3WAY): 32 disparities
+  // leave the 40-pixel pair 3 columns past a 5-pixel block, 48 none (refused before matching).
+  struct Edge {
+    v1::StereoMatcher matcher;
+    const char* name;
+  };
+  for (const Edge& e : {Edge{v1::STEREO_MATCHER_OPENCV_SGBM_3WAY, "sgbm3way"},
+                        Edge{v1::STEREO_MATCHER_OPENCV_SGBM, "sgbm"},
+                        Edge{v1::STEREO_MATCHER_OPENCV_HH, "hh"},
+                        Edge{v1::STEREO_MATCHER_OPENCV_BM, "bm"}}) {
+    for (int disparities : {32, 48}) {
+      *r.mutable_config() = StereoConfig(e.matcher);
+      r.mutable_config()->mutable_stereo()->set_num_disparities(disparities);
+      r.mutable_config()->mutable_stereo()->set_block_size(5);
+      *r.mutable_frame() = StereoFrame(As::kRaw, CV_8UC1, 14);
+      Write(h, std::string("stereo_") + e.name + "_edge_" + std::to_string(disparities),
+            r.SerializeAsString());
+    }
+  }
 }
 
 std::string Le16(std::uint32_t v) {

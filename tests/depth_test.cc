@@ -211,6 +211,41 @@ TEST(DepthConversion, ZeroNanAndInfinityMeanNoMeasurement) {
   EXPECT_EQ(counts.pixels, 6u);
 }
 
+// Issue 30, defect 8: a depth behind the camera or too small to be a distance is no measurement,
+// as a negative disparity is none. Before, -5 m and 1e-45 m made points (22,794 behind the camera
+// in the tester's frame with the passthrough off).
+TEST(DepthConversion, NonPositiveAndSubnormalDepthsMeanNoMeasurement) {
+  const float denormal = std::numeric_limits<float>::denorm_min();  // 1.4e-45
+  const std::vector<float> values = {-5.0f, denormal, -denormal, 1e-39f, 2.0f,
+                                     std::numeric_limits<float>::min(), -0.001f, 0.5f};
+  DepthFrame f = MakeDepthFrame(values, 8, 1);
+  CameraModel camera;
+  camera.cx = 0;
+  camera.cy = 0;
+  PipelineOptions o;
+  o.camera = camera;
+  o.passthrough.enabled = false;
+  o.voxel.enabled = false;
+  Pipeline pipeline;
+  PointCloud cloud;
+  StageCounts counts;
+  ASSERT_TRUE(pipeline.Run(o, f.depth, f.colour, &cloud, &counts).ok());
+  ASSERT_EQ(cloud.size(), 3u);
+  EXPECT_EQ(cloud.points[0].z, 2.0f);
+  EXPECT_EQ(cloud.points[1].z, std::numeric_limits<float>::min());
+  EXPECT_EQ(cloud.points[2].z, 0.5f);
+  EXPECT_EQ(counts.valid_points, 3u);
+  // The organized conversion agrees: NaN where there is no measurement.
+  PointCloud organized;
+  ASSERT_TRUE(ConvertToOrganized(camera, f.depth, f.colour, &organized).ok());
+  for (std::size_t i : {0, 1, 2, 3, 6}) EXPECT_TRUE(std::isnan(organized.points[i].z)) << i;
+  // The rule is on z in metres: a scale that makes a raw depth subnormal takes it out too.
+  camera.depth_scale = 1e-9;
+  o.camera = camera;
+  ASSERT_TRUE(pipeline.Run(o, f.depth, f.colour, &cloud, &counts).ok());
+  EXPECT_EQ(counts.valid_points, 2u) << "2 and 0.5 stay; min() * 1e-9 is subnormal";
+}
+
 // Passthrough on each axis, negative mode, voxel grid on and off, every colour encoding: the
 // fused pipeline equals organized conversion + PassThrough + VoxelGrid, point for point in order.
 TEST(DepthPipeline, FusedEqualsStaged) {

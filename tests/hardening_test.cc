@@ -770,5 +770,181 @@ TEST_F(HardeningTest, ATrustedProxyNamesTheClientInXForwardedFor) {
   EXPECT_NE(std::string(s.message()).find("--trusted-proxy 'proxy.local'"), std::string::npos) << s;
 }
 
+// Issue 30, defect 1: one 2 KB Process call aborted the server. A 64x16 mono8 pair with OpenCV's
+// SGBM_3WAY and 128 disparities made OpenCV throw from a destructor (buffer_area.cpp:32), which no
+// catch can hold: terminate, SIGABRT. Pairs narrower than their disparity range, for every
+// matcher, must each get an error naming the field, and the server must go on.
+TEST_F(HardeningTest, StereoPairsNarrowerThanTheirDisparitiesAreRefusedNotFatal) {
+  auto stub = v1::CloudCast::NewStub(channel_);
+  auto image = [](std::uint32_t w, std::uint32_t h, int shift, v1::ColorImage* out) {
+    v1::RawColor* raw = out->mutable_raw();
+    raw->set_encoding(v1::COLOR_MONO8);
+    raw->set_width(w);
+    raw->set_height(h);
+    std::string pixels(std::size_t{w} * h, '\0');
+    for (std::uint32_t y = 0; y < h; ++y) {
+      for (std::uint32_t x = 0; x < w; ++x) {
+        pixels[std::size_t{y} * w + x] = static_cast<char>(((x + shift) * 37 + y * 11) * 13 & 0xFF);
+      }
+    }
+    raw->set_pixels(std::move(pixels));
+  };
+  struct Case {
+    std::uint32_t width, height;
+    int disparities;
+  };
+  // The tester's three fatal sizes, and the edges of "wider than num_disparities + block_size"
+  // (block 5 here) and of StereoBM's "block below the height".
+  const Case cases[] = {{64, 16, 128}, {100, 8, 112}, {1024, 64, 2048}, {133, 8, 128},
+                        {134, 8, 128}, {16, 16, 16},  {48, 4, 32},      {48, 5, 32}, {48, 6, 32}};
+  const v1::StereoMatcher matchers[] = {
+      v1::STEREO_MATCHER_OPENCV_SGBM_3WAY, v1::STEREO_MATCHER_OPENCV_SGBM,
+      v1::STEREO_MATCHER_OPENCV_HH, v1::STEREO_MATCHER_OPENCV_BM, v1::STEREO_MATCHER_SGM};
+  for (const v1::StereoMatcher matcher : matchers) {
+    for (const Case& k : cases) {
+      v1::ProcessRequest request;
+      v1::StereoConfig* stereo = request.mutable_config()->mutable_stereo();
+      stereo->set_matcher(matcher);
+      stereo->set_num_disparities(k.disparities);
+      stereo->set_block_size(5);
+      image(k.width, k.height, 0, request.mutable_frame()->mutable_colour());
+      image(k.width, k.height, 3, request.mutable_frame()->mutable_right());
+      grpc::ClientContext ctx;
+      ctx.set_deadline(std::chrono::system_clock::now() + seconds(30));
+      v1::CloudReply reply;
+      const grpc::Status status = stub->Process(&ctx, request, &reply);
+      const std::string what = v1::StereoMatcher_Name(matcher) + " " + std::to_string(k.width) +
+                               "x" + std::to_string(k.height) + " with " +
+                               std::to_string(k.disparities) + " disparities";
+      ASSERT_NE(status.error_code(), grpc::StatusCode::UNAVAILABLE)
+          << what << ": the server is gone: " << status.error_message();
+      // Ours takes any size; OpenCV's need width > num_disparities + block_size.
+      const bool too_narrow = matcher != v1::STEREO_MATCHER_SGM &&
+                              k.width <= static_cast<std::uint32_t>(k.disparities) + 5;
+      const bool too_short = matcher == v1::STEREO_MATCHER_OPENCV_BM && k.height <= 5;
+      if (too_narrow || too_short) {
+        // No pixel of the left image has its whole disparity range and block in the right one
+        // (or StereoBM's block is taller than the pair).
+        EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT)
+            << what << ": " << status.error_message();
+        const char* field =
+            too_narrow ? "config.stereo.num_disparities" : "config.stereo.block_size";
+        EXPECT_NE(status.error_message().find(field), std::string::npos)
+            << what << ": " << status.error_message();
+      } else {
+        // Matched, or refused for its work (the volume limit), never a crash.
+        EXPECT_TRUE(status.ok() || status.error_code() == grpc::StatusCode::RESOURCE_EXHAUSTED)
+            << what << ": " << status.error_message();
+      }
+    }
+  }
+  // The server is still there for everyone.
+  auto client = client::Client::Connect(server_->address());
+  ASSERT_TRUE(client.ok());
+  EXPECT_TRUE((*client)->Process(Frame().disparity_view(), Frame().colour_view()).ok());
+}
+
+// Issue 30, defect 8: DEPTH_F32 values of -5 and 1e-45 counted as valid and made points (22,794
+// behind the camera with the passthrough off). Depths behind the camera or subnormal are no
+// measurement, as negative disparities are none.
+TEST_F(HardeningTest, DepthsBehindTheCameraMakeNoPoints) {
+  auto stub = v1::CloudCast::NewStub(channel_);
+  const std::uint32_t w = 64, h = 48;
+  std::vector<float> depth(std::size_t{w} * h);
+  std::size_t positive = 0;
+  for (std::size_t i = 0; i < depth.size(); ++i) {
+    switch (i % 4) {
+      case 0: depth[i] = -5.0f; break;
+      case 1: depth[i] = 1e-45f; break;
+      case 2: depth[i] = -0.5f; break;
+      default: depth[i] = 1.5f; ++positive;
+    }
+  }
+  v1::ProcessRequest request;
+  request.mutable_config()->mutable_passthrough()->set_enabled(false);
+  request.mutable_config()->mutable_voxel_grid()->set_enabled(false);
+  v1::RawDepth* raw = request.mutable_frame()->mutable_depth()->mutable_raw();
+  raw->set_encoding(v1::DEPTH_F32);
+  raw->set_width(w);
+  raw->set_height(h);
+  raw->set_pixels(std::string(reinterpret_cast<const char*>(depth.data()), depth.size() * 4));
+  v1::RawColor* colour = request.mutable_frame()->mutable_colour()->mutable_raw();
+  colour->set_encoding(v1::COLOR_MONO8);
+  colour->set_width(w);
+  colour->set_height(h);
+  colour->set_pixels(std::string(std::size_t{w} * h, '\x80'));
+  grpc::ClientContext ctx;
+  ctx.set_deadline(std::chrono::system_clock::now() + seconds(30));
+  v1::CloudReply reply;
+  const grpc::Status status = stub->Process(&ctx, request, &reply);
+  ASSERT_TRUE(status.ok()) << status.error_message();
+  EXPECT_EQ(reply.counts().valid_points(), positive);
+  EXPECT_EQ(reply.point_count(), positive);
+}
+
+// Issue 30, defect 3: stereo work was undercharged. A 4096x16 pair with 2048 disparities, SGBM_3WAY
+// and block 255 (a 128 KB request) took 2,147 MB and 7.6 s of one worker; the estimate charged
+// OpenCV's SGBM modes nothing for their costs (about 9 MB a frame). Now each matcher's allocation
+// is charged against --work-memory-mb before matching, and the block counts in the matching
+// volume (ServerLimits.max_stereo_volume, which bounds a frame's matching time).
+TEST_F(HardeningTest, StereoPairsAreChargedWhatTheirMatcherTakes) {
+  auto stub = v1::CloudCast::NewStub(channel_);
+  auto request_for = [](v1::StereoMatcher matcher, std::uint32_t w, std::uint32_t h,
+                        int disparities, int block) {
+    v1::ProcessRequest request;
+    v1::StereoConfig* stereo = request.mutable_config()->mutable_stereo();
+    stereo->set_matcher(matcher);
+    stereo->set_num_disparities(disparities);
+    stereo->set_block_size(block);
+    for (v1::ColorImage* image : {request.mutable_frame()->mutable_colour(),
+                                  request.mutable_frame()->mutable_right()}) {
+      v1::RawColor* raw = image->mutable_raw();
+      raw->set_encoding(v1::COLOR_MONO8);
+      raw->set_width(w);
+      raw->set_height(h);
+      std::string pixels(std::size_t{w} * h, '\0');
+      for (std::size_t i = 0; i < pixels.size(); ++i) pixels[i] = static_cast<char>(i * 131 % 251);
+      raw->set_pixels(std::move(pixels));
+    }
+    return request;
+  };
+  for (const v1::StereoMatcher matcher :
+       {v1::STEREO_MATCHER_OPENCV_SGBM_3WAY, v1::STEREO_MATCHER_OPENCV_SGBM,
+        v1::STEREO_MATCHER_OPENCV_HH}) {
+    grpc::ClientContext ctx;
+    ctx.set_deadline(std::chrono::system_clock::now() + seconds(30));
+    v1::CloudReply reply;
+    const grpc::Status status =
+        stub->Process(&ctx, request_for(matcher, 4096, 16, 2048, 255), &reply);
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED)
+        << v1::StereoMatcher_Name(matcher) << ": " << status.error_message();
+    EXPECT_NE(status.error_message().find("--work-memory-mb"), std::string::npos)
+        << status.error_message();
+  }
+  // Within memory, the block still counts in the matching work: 2048x64 with 256 disparities and
+  // block 255 is 2048 x (64 + 2040) x 256 = 1.1 billion cells, over the default 2^27.
+  {
+    server::ServerOptions options;
+    options.work_memory_bytes = std::uint64_t{4} << 30;
+    Start(options);
+    stub = v1::CloudCast::NewStub(channel_);
+    grpc::ClientContext ctx;
+    ctx.set_deadline(std::chrono::system_clock::now() + seconds(30));
+    v1::CloudReply reply;
+    const grpc::Status status =
+        stub->Process(&ctx, request_for(v1::STEREO_MATCHER_OPENCV_SGBM, 2048, 64, 256, 255), &reply);
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << status.error_message();
+    EXPECT_NE(status.error_message().find("ServerLimits.max_stereo_volume"), std::string::npos)
+        << status.error_message();
+  }
+  // A camera's pair at the defaults is taken as before.
+  grpc::ClientContext ctx;
+  ctx.set_deadline(std::chrono::system_clock::now() + seconds(30));
+  v1::CloudReply reply;
+  const grpc::Status ok =
+      stub->Process(&ctx, request_for(v1::STEREO_MATCHER_OPENCV_SGBM, 640, 480, 128, 5), &reply);
+  EXPECT_TRUE(ok.ok()) << ok.error_message();
+}
+
 }  // namespace
 }  // namespace cloudcast

@@ -238,6 +238,71 @@ TEST(ServerShutdownTest, CallsWhileDrainingAreRefusedAndCountedBeforeTheirFrameI
   EXPECT_EQ(server->metrics().FrameErrors(absl::StatusCode::kResourceExhausted).Value(), 0.0);
 }
 
+// Issue 30, defect 6: a stream's client may send a frame just as the drain begins; the server was
+// reading it (the read is always started while there is room), and dropped it when it came. Now
+// it is answered, and the stream ends after it. (The drain waits up to a second for such a read:
+// the frame is written at once here.)
+TEST(ServerShutdownTest, AFrameArrivingAsTheDrainBeginsIsAnsweredBeforeTheStreamEnds) {
+  auto server = testing::StartTestServer();
+  ASSERT_NE(server, nullptr);
+  auto stub = testing::NewStub(*server);
+  grpc::ClientContext ctx;
+  SetDeadline(&ctx, seconds(60));
+  auto stream = stub->Stream(&ctx);
+  ASSERT_TRUE(stream->Write(ConfigRequest(ConfigFor(Params{}, v1::DELIVERY_ALL))));
+  ASSERT_TRUE(stream->Write(FrameRequest(MakeFrame(Frames()[0], 1))));
+  v1::StreamReply reply;
+  ASSERT_TRUE(stream->Read(&reply));  // answered: the server is reading the next message now
+  EXPECT_EQ(reply.cloud().sequence(), 1u);
+  server->StartDraining();
+  const bool written = stream->Write(FrameRequest(MakeFrame(Frames()[1], 2)));
+  std::vector<v1::StreamReply> after;
+  while (stream->Read(&reply)) after.push_back(reply);
+  const grpc::Status status = stream->Finish();
+  EXPECT_TRUE(written);
+  ASSERT_EQ(after.size(), 1u) << "the frame that arrived as the drain began was not answered";
+  ASSERT_TRUE(after[0].has_cloud()) << after[0].error().message();
+  EXPECT_EQ(after[0].cloud().sequence(), 2u);
+  EXPECT_TRUE(CloudMatches(Reference(Frames()[1], Params{}), after[0].cloud()));
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::UNAVAILABLE) << status.error_message();
+  EXPECT_NE(status.error_message().find(kDrained), std::string::npos) << status.error_message();
+  // One message only: nothing is read after it.
+  EXPECT_TRUE(server->Shutdown(seconds(10)));
+}
+
+// A stream that sends nothing more holds the drain for its read no longer than a second (not
+// its grace period); a stream its client cancelled is not waited for at all.
+TEST(ServerShutdownTest, AnIdleStreamHoldsTheDrainOnlyBrieflyAndACancelledOneNotAtAll) {
+  auto server = testing::StartTestServer();
+  ASSERT_NE(server, nullptr);
+  auto stub = testing::NewStub(*server);
+  grpc::ClientContext idle_ctx;
+  SetDeadline(&idle_ctx, seconds(60));
+  auto idle = stub->Stream(&idle_ctx);
+  ASSERT_TRUE(idle->Write(FrameRequest(MakeFrame(Frames()[0], 1))));
+  v1::StreamReply reply;
+  ASSERT_TRUE(idle->Read(&reply));
+  grpc::ClientContext cancelled_ctx;
+  SetDeadline(&cancelled_ctx, seconds(60));
+  auto cancelled = stub->Stream(&cancelled_ctx);
+  ASSERT_TRUE(cancelled->Write(FrameRequest(MakeFrame(Frames()[0], 1))));
+  ASSERT_TRUE(cancelled->Read(&reply));
+  cancelled_ctx.TryCancel();
+  while (cancelled->Read(&reply)) {
+  }
+  EXPECT_EQ(cancelled->Finish().error_code(), grpc::StatusCode::CANCELLED);
+  // A grace far longer than the wait: a shutdown that waits for the idle stream's read until
+  // its grace is over fails.
+  auto shutdown = std::async(std::launch::async, [&] { return server->Shutdown(seconds(120)); });
+  EXPECT_FALSE(idle->Read(&reply));
+  const grpc::Status status = idle->Finish();
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::UNAVAILABLE) << status.error_message();
+  EXPECT_NE(status.error_message().find(kDrained), std::string::npos) << status.error_message();
+  ASSERT_EQ(shutdown.wait_for(seconds(60)), std::future_status::ready)
+      << "Shutdown waited for an idle stream's read, or for a cancelled stream";
+  EXPECT_TRUE(shutdown.get());
+}
+
 TEST(ServerShutdownTest, StartFailsCleanlyOnABusyAddress) {
   auto first = testing::StartTestServer();
   ASSERT_NE(first, nullptr);

@@ -85,5 +85,68 @@ TEST(StreamLifecycleTest, NothingMovesAFinishedCall) {
   EXPECT_FALSE(s.Finish(true, &cancelled));
 }
 
+// Issue 30, defect 6: a drain answers the message of a read already started (its client sent it
+// before it could know of the drain) and waits for that read, until told to stop waiting.
+TEST(StreamLifecycleTest, ADrainAnswersTheReadStartedAndWaitsForItUntilToldNotTo) {
+  StreamLifecycle s;
+  s.Drain(Unavailable());
+  EXPECT_EQ(s.state(), State::kClosing);
+  EXPECT_FALSE(s.reading());      // no new read
+  EXPECT_TRUE(s.answers_read());  // the one started is answered
+  bool cancelled = true;
+  EXPECT_FALSE(s.Finish(/*nothing_held=*/true, &cancelled, /*read_started=*/true));
+  EXPECT_FALSE(s.Finish(/*nothing_held=*/false, &cancelled, /*read_started=*/true));
+  s.StopAwaitingRead();
+  EXPECT_TRUE(s.answers_read());  // still answered if it comes before the end
+  auto status = s.Finish(/*nothing_held=*/true, &cancelled, /*read_started=*/true);
+  ASSERT_TRUE(status);
+  EXPECT_EQ(status->error_code(), grpc::StatusCode::UNAVAILABLE);
+  EXPECT_FALSE(cancelled);
+  EXPECT_FALSE(s.answers_read());  // finished
+}
+
+TEST(StreamLifecycleTest, ADrainWithNoReadStartedEndsOnceNothingIsHeld) {
+  StreamLifecycle s;
+  s.Drain(Unavailable());
+  bool cancelled = true;
+  EXPECT_FALSE(s.Finish(/*nothing_held=*/false, &cancelled));
+  EXPECT_TRUE(s.Finish(/*nothing_held=*/true, &cancelled, /*read_started=*/false));
+}
+
+// Only a drain of a stream that was reading answers a late read: not past bytes that did not
+// parse (closing already), not a half-closed stream (no read can deliver), not once ending or
+// broken.
+TEST(StreamLifecycleTest, OnlyADrainOfAReadingStreamAnswersALateRead) {
+  {
+    StreamLifecycle s;
+    s.Close(Unavailable());  // unparsable bytes
+    s.Drain(Unavailable());
+    EXPECT_FALSE(s.answers_read());
+    bool cancelled;
+    EXPECT_TRUE(s.Finish(true, &cancelled, /*read_started=*/true));  // nothing awaited
+  }
+  {
+    StreamLifecycle s;
+    s.HalfClose();
+    s.Drain(Unavailable());
+    EXPECT_EQ(s.state(), State::kClosing);
+    EXPECT_FALSE(s.answers_read());
+  }
+  {
+    StreamLifecycle s;
+    s.Drain(Unavailable());
+    EXPECT_TRUE(s.End(Idle()));
+    EXPECT_FALSE(s.answers_read());
+    bool cancelled;
+    EXPECT_TRUE(s.Finish(false, &cancelled, /*read_started=*/true));  // ending: at once
+  }
+  {
+    StreamLifecycle s;
+    s.Drain(Unavailable());
+    EXPECT_TRUE(s.Break());
+    EXPECT_FALSE(s.answers_read());
+  }
+}
+
 }  // namespace
 }  // namespace cloudcast::server

@@ -145,18 +145,23 @@ TEST(WorkerPoolTest, LargeTasksLeaveAWorkerForTheRest) {
   };
   for (int i = 0; i < 4; ++i) ASSERT_TRUE(pool.Submit(large, /*client=*/1, i, /*cost=*/1000));
   // The small one is queued behind four large ones of another client, and still runs at once.
-  std::atomic<bool> small_ran{false};
+  bool small_ran = false;
   ASSERT_TRUE(pool.Submit(
       [&](std::size_t) {
-        std::lock_guard<std::mutex> lock(mu);
-        order.push_back("small");
-        small_ran.store(true);
+        {
+          std::lock_guard<std::mutex> lock(mu);
+          order.push_back("small");
+          small_ran = true;
+        }
+        cv.notify_all();  // the large ones wake, see no release and wait on
       },
       /*client=*/2, /*call=*/9, /*cost=*/10));
-  for (int i = 0; i < 500 && !small_ran.load(); ++i) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  {
+    // Waits on the small task itself; the deadline only turns a hang into a failure.
+    std::unique_lock<std::mutex> lock(mu);
+    EXPECT_TRUE(cv.wait_for(lock, std::chrono::seconds(30), [&] { return small_ran; }))
+        << "a small task waited behind large ones on every worker";
   }
-  EXPECT_TRUE(small_ran.load()) << "a small task waited behind large ones on every worker";
   {
     std::lock_guard<std::mutex> lock(mu);
     release = true;
@@ -167,27 +172,55 @@ TEST(WorkerPoolTest, LargeTasksLeaveAWorkerForTheRest) {
   EXPECT_EQ(order.size(), 5u);
 }
 
+// Tasks that count how many of them run at once. A task that starts first waits (on the others,
+// up to a generous 30 s) until `expected` have run together, then works for 20 ms: two tasks that
+// only sleep need not overlap on a loaded machine, and a pool that lets two run at once would be
+// seen running one. The 20 ms are the window in which a task the pool should have held back, had
+// it started, would be counted.
+class Concurrency {
+ public:
+  explicit Concurrency(int expected) : expected_(expected) {}
+
+  void Run() {
+    {
+      std::unique_lock<std::mutex> lock(mu_);
+      most_ = std::max(most_, ++running_);
+      cv_.notify_all();
+      if (!cv_.wait_for(lock, std::chrono::seconds(30),
+                        [&] { return most_ >= expected_ || gave_up_; })) {
+        gave_up_ = true;  // the others go on at once; most() says how many ran together
+      }
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));  // the work
+    std::lock_guard<std::mutex> lock(mu_);
+    --running_;
+  }
+
+  int most() const {
+    std::lock_guard<std::mutex> lock(mu_);
+    return most_;
+  }
+
+ private:
+  const int expected_;
+  mutable std::mutex mu_;
+  std::condition_variable cv_;
+  int running_ = 0, most_ = 0;
+  bool gave_up_ = false;
+};
+
 // Defect 4: tasks start only while their stated work memory fits beside the running ones'; the
 // pool never states more in use than its limit (but for a lone task, which always may start).
 TEST(WorkerPoolTest, TasksStartOnlyWhileTheirWorkMemoryFits) {
   WorkerPool pool(4, WorkerPool::Limits{/*work_memory_bytes=*/100, /*large_cost=*/~0ull});
-  std::mutex mu;
-  int running = 0, most_running = 0;
+  Concurrency tasks(/*expected=*/2);
   for (int i = 0; i < 12; ++i) {
-    ASSERT_TRUE(pool.Submit(
-        [&](std::size_t) {
-          {
-            std::lock_guard<std::mutex> lock(mu);
-            most_running = std::max(most_running, ++running);
-          }
-          std::this_thread::sleep_for(std::chrono::milliseconds(20));
-          std::lock_guard<std::mutex> lock(mu);
-          --running;
-        },
-        /*client=*/static_cast<std::uint64_t>(i % 3), i, /*cost=*/1, /*work_bytes=*/40));
+    ASSERT_TRUE(pool.Submit([&](std::size_t) { tasks.Run(); },
+                            /*client=*/static_cast<std::uint64_t>(i % 3), i, /*cost=*/1,
+                            /*work_bytes=*/40));
   }
   pool.Stop();
-  EXPECT_EQ(most_running, 2);  // 2 x 40 fit in 100, 3 x 40 do not
+  EXPECT_EQ(tasks.most(), 2);  // 2 x 40 fit in 100, 3 x 40 do not
   EXPECT_LE(pool.work_bytes_high_water(), 100u);
   EXPECT_EQ(pool.work_bytes_in_use(), 0u);
 }
@@ -199,31 +232,36 @@ TEST(WorkerPoolTest, AClientLeavesAWorkerWhileAnotherIsActive) {
   for (const bool other_active : {false, true}) {
     SCOPED_TRACE(other_active ? "another client active" : "alone");
     WorkerPool pool(2);
-    std::mutex mu;
-    int running = 0, most = 0;
+    Concurrency tasks(/*expected=*/other_active ? 1 : 2);
     if (other_active) {
       ASSERT_TRUE(pool.Submit([](std::size_t) {}, /*client=*/2, 1, 1));
     }
     for (int i = 0; i < 8; ++i) {
-      ASSERT_TRUE(pool.Submit(
-          [&](std::size_t) {
-            {
-              std::lock_guard<std::mutex> lock(mu);
-              most = std::max(most, ++running);
-            }
-            std::this_thread::sleep_for(std::chrono::milliseconds(20));
-            std::lock_guard<std::mutex> lock(mu);
-            --running;
-          },
-          /*client=*/1, /*call=*/1 + i % 2, /*cost=*/1));
+      ASSERT_TRUE(pool.Submit([&](std::size_t) { tasks.Run(); }, /*client=*/1,
+                              /*call=*/1 + i % 2, /*cost=*/1));
     }
     pool.Stop();
-    EXPECT_EQ(most, other_active ? 1 : 2);
+    EXPECT_EQ(tasks.most(), other_active ? 1 : 2);
   }
 }
 
+// A clock the test moves by hand: the limiter's one-second window passes without sleeping.
+class FakeClock {
+ public:
+  LogLimiter::Now Now() {
+    return [this] { return now_.load(); };
+  }
+  void Advance(std::chrono::milliseconds d) { now_.store(now_.load() + d); }
+
+ private:
+  // Far from the steady clock's epoch, as a real one is: a window's start is never special.
+  std::atomic<LogLimiter::Clock::time_point> now_{LogLimiter::Clock::time_point{} +
+                                                  std::chrono::hours(1)};
+};
+
 TEST(LogLimiterTest, LetsPerSecondLinesThroughAndSaysHowManyWereLeftOut) {
-  LogLimiter limiter(3);
+  FakeClock clock;
+  LogLimiter limiter(3, clock.Now());
   std::uint64_t suppressed = 99;
   for (int i = 0; i < 3; ++i) {
     EXPECT_TRUE(limiter.Allow(&suppressed));
@@ -231,9 +269,37 @@ TEST(LogLimiterTest, LetsPerSecondLinesThroughAndSaysHowManyWereLeftOut) {
   }
   for (int i = 0; i < 5; ++i) EXPECT_FALSE(limiter.Allow(&suppressed));
   EXPECT_EQ(limiter.total_suppressed(), 5u);
-  std::this_thread::sleep_for(std::chrono::milliseconds(1100));
+  // Still the same second, a millisecond before its end.
+  clock.Advance(std::chrono::milliseconds(999));
+  EXPECT_FALSE(limiter.Allow(&suppressed));
+  EXPECT_EQ(limiter.total_suppressed(), 6u);
+  // A second after the window's first line, the next window opens.
+  clock.Advance(std::chrono::milliseconds(1));
   EXPECT_TRUE(limiter.Allow(&suppressed));
-  EXPECT_EQ(suppressed, 5u);  // the first line of the next second says so
+  EXPECT_EQ(suppressed, 6u);  // the first line of the next second says so
+  EXPECT_TRUE(limiter.Allow(&suppressed));
+  EXPECT_EQ(suppressed, 0u);  // and only the first
+  EXPECT_TRUE(limiter.Allow(&suppressed));
+  EXPECT_FALSE(limiter.Allow(&suppressed));
+  EXPECT_EQ(limiter.total_suppressed(), 7u);
+}
+
+// A window lasts a second from its first line, not from the last window's end: after a quiet
+// spell the next line opens a full window of its own.
+TEST(LogLimiterTest, AWindowStartsAtItsFirstLine) {
+  FakeClock clock;
+  LogLimiter limiter(2, clock.Now());
+  std::uint64_t suppressed = 0;
+  EXPECT_TRUE(limiter.Allow(&suppressed));
+  clock.Advance(std::chrono::milliseconds(2500));
+  EXPECT_TRUE(limiter.Allow(&suppressed));  // opens a window at 2.5 s
+  clock.Advance(std::chrono::milliseconds(900));
+  EXPECT_TRUE(limiter.Allow(&suppressed));
+  EXPECT_FALSE(limiter.Allow(&suppressed));  // 3.4 s: still the window of 2.5 s
+  clock.Advance(std::chrono::milliseconds(100));
+  EXPECT_TRUE(limiter.Allow(&suppressed));  // 3.5 s: a new one
+  EXPECT_EQ(suppressed, 1u);
+  EXPECT_EQ(limiter.total_suppressed(), 1u);
 }
 
 }  // namespace

@@ -61,7 +61,12 @@ struct DepthConstants {
   bool Depth(float raw, float* m) const {
     if (!IsFinite(raw)) return false;
     if (depth_image) {
-      if (raw == 0.0f) return false;
+      // A measurement is a distance in front of the camera: z = raw * sz positive and a normal
+      // float. 0 is REP 118's "no measurement"; a negative depth is behind the camera (as a
+      // negative disparity, never a point); a subnormal one is no distance (and is flushed to
+      // zero by SIMD and GPU code). depth_image_proc checks only isfinite: for the depths a
+      // camera sends (0 or positive) the points are the same, bit for bit.
+      if (!(raw * sz >= std::numeric_limits<float>::min())) return false;
       *m = raw;
       return true;
     }

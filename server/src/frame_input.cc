@@ -6,6 +6,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "cloudcast/proto/convert.h"
+#include "cloudcast/stereo/budget.h"
 
 namespace cloudcast::server {
 namespace {
@@ -215,6 +216,7 @@ namespace {
 // which are in the message already).
 struct ImageCost {
   std::uint64_t pixels = 0;
+  std::uint32_t width = 0, height = 0;
   std::uint32_t max_side = 0;
   std::uint64_t decoded_bytes = 0;
 };
@@ -223,19 +225,22 @@ template <typename Image, typename Encoding>
 ImageCost CostOf(const Image& image) {
   ImageCost c;
   if (image.has_raw()) {
-    c.pixels = std::uint64_t{image.raw().width()} * image.raw().height();
-    c.max_side = std::max(image.raw().width(), image.raw().height());
+    c.width = image.raw().width();
+    c.height = image.raw().height();
   } else if (image.has_compressed()) {
-    c.pixels = std::uint64_t{image.compressed().width()} * image.compressed().height();
-    c.max_side = std::max(image.compressed().width(), image.compressed().height());
+    c.width = image.compressed().width();
+    c.height = image.compressed().height();
+  } else if (image.has_encoded()) {
+    const char* format = nullptr;
+    if (!SniffImageSize(image.encoded(), &c.width, &c.height, &format)) c.width = c.height = 0;
+  }
+  c.pixels = std::uint64_t{c.width} * c.height;
+  c.max_side = std::max(c.width, c.height);
+  if (image.has_compressed()) {
     Encoding e{};
     const bool known = convert::FromProto(image.compressed().encoding(), "", &e).ok();
     c.decoded_bytes = c.pixels * (known ? BytesPerPixel(e) : 4);
   } else if (image.has_encoded()) {
-    std::uint32_t w = 0, h = 0;
-    const char* format = nullptr;
-    if (SniffImageSize(image.encoded(), &w, &h, &format)) c.pixels = std::uint64_t{w} * h;
-    c.max_side = std::max(w, h);
     c.decoded_bytes = c.pixels * kEncodedImageBytesPerPixel / 2;
   }
   return c;
@@ -263,11 +268,10 @@ FrameMemoryCost EstimateFrameMemory(const v1::Frame& frame, const StereoParams& 
   cost.decoded_bytes = g.decoded_bytes + c.decoded_bytes;
   cost.work_bytes = cost.decoded_bytes + cost.pixels * kWorkBytesPerPixel;
   if (frame.has_right()) {
-    const std::uint64_t per_cost = stereo.matcher == StereoMatcher::kSgm       ? 1
-                                   : stereo.matcher == StereoMatcher::kOpenCvHH ? 4
-                                                                                : 0;
-    const auto disparities = static_cast<std::uint64_t>(std::max(stereo.num_disparities, 0));
-    cost.work_bytes += cost.pixels * (12 + per_cost * disparities);
+    // The two grey images and the disparity map, and what the matcher allocates for this size
+    // (OpenCV's SGBM modes were charged nothing before: 2 GB for a 128 KB request).
+    cost.work_bytes += cost.pixels * 12 + stereo::MatchWorkBytes(stereo, std::max(g.width, c.width),
+                                                                 std::max(g.height, c.height));
   }
   return cost;
 }

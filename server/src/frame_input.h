@@ -86,9 +86,9 @@ struct FrameMemoryCost {
 inline constexpr std::uint64_t kWorkBytesPerPixel = 128;
 inline constexpr std::uint64_t kEncodedImageBytesPerPixel = 16;
 // A stereo pair also costs its matcher's memory: `stereo` are the settings it will be matched
-// with (its stream's, or its Process call's). Measured per pixel and disparity: ours keeps one
-// byte, OpenCV's MODE_HH four (two 16-bit volumes); SGBM, SGBM_3WAY and BM keep rows only. Plus
-// the grey, rectified and disparity images: 12 bytes a pixel.
+// with (its stream's, or its Process call's), weighed by stereo::MatchWorkBytes for each matcher
+// (cloudcast/stereo/budget.h: the block size counts for OpenCV's SGBM modes). Plus the grey,
+// rectified and disparity images: 12 bytes a pixel.
 FrameMemoryCost EstimateFrameMemory(const v1::Frame& frame,
                                     const StereoParams& stereo = StereoParams{});
 

@@ -4,9 +4,11 @@
 
 #include <algorithm>
 #include <chrono>
+#include <exception>
 #include <string>
 #include <utility>
 
+#include "absl/strings/str_cat.h"
 #include "cloudcast/core/draco_codec.h"
 
 namespace cloudcast::server {
@@ -144,8 +146,23 @@ absl::Status FrameRunner::Run(std::size_t worker, const v1::Frame& frame,
   const double cpu0 = ThreadCpuSeconds();
   FrameCosts costs;
   std::unique_lock<std::mutex> scratch(scratch_mu_[worker]);
-  const absl::Status status =
-      processors_[worker]->Process(frame, in_place, settings, reply, &costs);
+  absl::Status status;
+  // No exception may leave a worker (it would end the process): each is this frame's error.
+  // The inputs of every library call are bounded before it (OpenCV's matchers: budget.h), so
+  // this is the last line, not the first.
+  try {
+    status = processors_[worker]->Process(frame, in_place, settings, reply, &costs);
+  } catch (const std::exception& e) {
+    status = absl::InternalError(
+        absl::StrCat("frame ", frame.sequence(), ": the server failed processing it: ", e.what()));
+  } catch (...) {
+    status = absl::InternalError(
+        absl::StrCat("frame ", frame.sequence(), ": the server failed processing it"));
+  }
+  if (!status.ok() && status.code() == absl::StatusCode::kInternal) {
+    // Its scratch may be half-built: start the next frame on a fresh one.
+    processors_[worker] = std::make_unique<FrameProcessor>(&rectifiers_);
+  }
   // Scratch sized for a huge frame would stay resident for the frames after it.
   if (EstimateFrameMemory(frame).pixels > keep_scratch_pixels_) {
     processors_[worker] = std::make_unique<FrameProcessor>(&rectifiers_);

@@ -36,7 +36,8 @@ CloudCastService::CloudCastService(const ServerOptions& options, Metrics* metric
               options.large_frame_pixels),
       pool_(options.ResolvedThreads(),
             WorkerPool::Limits{options.work_memory_bytes, options.large_frame_pixels}),
-      stream_services_{&options_, metrics_, &admitter_, &runner_, &pool_, &streams_, &call_log_} {
+      stream_services_{&options_, metrics_,  &admitter_, &runner_,
+                       &pool_,    &streams_, &call_log_, &calls_changed_} {
   housekeeping_ = std::thread([this] { Housekeeping(); });
 }
 
@@ -105,7 +106,7 @@ grpc::ServerUnaryReactor* CloudCastService::Process(grpc::CallbackServerContext*
     return reactor;
   }
   call->charge = *std::move(charge);
-  streams_.ProcessStarted();
+  ProcessStarted();
   const bool submitted = pool_.Submit(
       [this, reactor, reply_bytes, arrival, call](std::size_t worker) {
         const absl::Status status =
@@ -124,13 +125,13 @@ grpc::ServerUnaryReactor* CloudCastService::Process(grpc::CallbackServerContext*
         }
         call->ticket.Release();
         reactor->Finish(std::move(result));
-        streams_.ProcessDone();
+        ProcessDone();
       },
       admitted->caller.fair_key, admitted->call_key, call->charge.pixels(),
       call->charge.work_bytes());
   if (!submitted) {
     finish(grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
-    streams_.ProcessDone();
+    ProcessDone();
   }
   return reactor;
 }
@@ -194,24 +195,55 @@ void CloudCastService::RefuseLater(grpc::ServerUnaryReactor* reactor,
     reactor->Finish(std::move(status));
     return;
   }
-  streams_.ProcessStarted();
+  ProcessStarted();
   delayed_.RunAt(Clock::now() + options_.refusal_delay, [this, reactor, ticket, status] {
     ticket->Release();
     reactor->Finish(status);
-    streams_.ProcessDone();
+    ProcessDone();
   });
 }
 
-void CloudCastService::StartDraining() {
+void CloudCastService::StartDraining(std::chrono::milliseconds read_wait) {
   admitter_.StartDraining();
   delayed_.Flush();  // refusals waiting out their delay are answered now
-  const OpenStreams::Snapshot streams = streams_.Take();
-  spdlog::info("draining {} open streams", streams.size());
-  for (StreamReactor* s : streams) s->BeginDrain();
+  {
+    const OpenStreams::Snapshot streams = streams_.Take();
+    spdlog::info("draining {} open streams", streams.size());
+    for (StreamReactor* s : streams) s->BeginDrain();
+  }
+  // The housekeeping thread ends the wait for the reads started.
+  {
+    std::lock_guard<std::mutex> lock(housekeeping_mu_);
+    drain_reads_until_ = Clock::now() + read_wait;
+  }
+  housekeeping_cv_.notify_all();
 }
 
 bool CloudCastService::WaitForCalls(Clock::time_point deadline) {
-  return streams_.WaitUntilIdle(deadline);
+  return calls_changed_.WaitUntil(deadline, [this] {
+    if (process_calls_.load() > 0) return false;
+    const OpenStreams::Snapshot streams = streams_.Take();
+    return std::all_of(streams.begin(), streams.end(),
+                       [](StreamReactor* s) { return s->Settled(); });
+  });
+}
+
+std::pair<int, int> CloudCastService::CallsInFlight() {
+  const OpenStreams::Snapshot streams = streams_.Take();
+  const auto unsettled =
+      std::count_if(streams.begin(), streams.end(), [](StreamReactor* s) { return !s->Settled(); });
+  return {static_cast<int>(unsettled), process_calls_.load()};
+}
+
+void CloudCastService::ProcessStarted() {
+  process_calls_.fetch_add(1);
+  streams_.ProcessStarted();
+}
+
+void CloudCastService::ProcessDone() {
+  process_calls_.fetch_sub(1);
+  streams_.ProcessDone();
+  calls_changed_.Notify();
 }
 
 void CloudCastService::StopWorkers() {
@@ -233,16 +265,35 @@ void CloudCastService::Housekeeping() {
       std::chrono::milliseconds(10), std::chrono::milliseconds(1000));
   MemoryHousekeeping memory([this] { runner_.ReleaseIdleScratch(); });
   std::unique_lock<std::mutex> lock(housekeeping_mu_);
-  while (!housekeeping_cv_.wait_for(lock, tick, [this] { return stop_housekeeping_; })) {
-    lock.unlock();
-    {
-      const bool idle = streams_.idle();
-      const OpenStreams::Snapshot streams = streams_.Take();
-      memory.Tick(idle, tick);
-      const Clock::time_point now = Clock::now();
-      for (StreamReactor* s : streams) s->CheckIdle(now);
+  Clock::time_point next_tick = Clock::now() + tick;
+  while (!stop_housekeeping_) {
+    const Clock::time_point now = Clock::now();
+    if (drain_reads_until_ && now >= *drain_reads_until_) {
+      // The drain waits no longer for the reads its streams had started.
+      drain_reads_until_.reset();
+      lock.unlock();
+      {
+        const OpenStreams::Snapshot streams = streams_.Take();
+        for (StreamReactor* s : streams) s->StopAwaitingRead();
+      }
+      lock.lock();
+      continue;
     }
-    lock.lock();
+    if (now >= next_tick) {
+      next_tick = now + tick;
+      lock.unlock();
+      {
+        const bool idle = streams_.idle();
+        const OpenStreams::Snapshot streams = streams_.Take();
+        memory.Tick(idle, tick);
+        for (StreamReactor* s : streams) s->CheckIdle(now);
+      }
+      lock.lock();
+      continue;
+    }
+    // Woken early to stop, and when a drain begins.
+    housekeeping_cv_.wait_until(
+        lock, drain_reads_until_ ? std::min(next_tick, *drain_reads_until_) : next_tick);
   }
 }
 

@@ -20,9 +20,11 @@
 #include <cstdint>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <set>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include "admission.h"
@@ -68,12 +70,19 @@ class CloudCastService final : public CallbackBase {
   void SetTenants(std::shared_ptr<const TenantDirectory> tenants);
 
   // Shutdown, step 1: new Stream and Process calls get UNAVAILABLE; every open stream stops
-  // reading, answers the frames it already holds and ends with UNAVAILABLE.
-  void StartDraining();
+  // reading, answers the frames it already holds and ends with UNAVAILABLE. A message a stream
+  // was reading when the drain began (its client sent it before it could know) is answered too;
+  // the stream waits for it at most `read_wait`.
+  void StartDraining(std::chrono::milliseconds read_wait);
   bool draining() const { return admitter_.draining(); }
-  // Waits until every Stream call is done (OnDone) and every Process call has finished, or
-  // `deadline` passes; true if none is left.
+  // Waits until every call that can still deliver something is done, or `deadline` passes; true
+  // if none is left. A Stream call is done at OnDone, or once it is settled
+  // (StreamReactor::Settled: cancelled by its client, or ended having read nothing): gRPC may
+  // take long to finish such calls (a rapid reset leaves thousands), and nobody waits for their
+  // status. A Process call is done once it has finished.
   bool WaitForCalls(std::chrono::steady_clock::time_point deadline);
+  // The calls WaitForCalls still waits for: streams, Process calls.
+  std::pair<int, int> CallsInFlight();
   // Runs the frames still queued, then joins the workers and the housekeeping thread. Call once
   // the gRPC server has shut down. Idempotent.
   void StopWorkers();
@@ -93,6 +102,9 @@ class CloudCastService final : public CallbackBase {
   void RefuseLater(grpc::ServerUnaryReactor* reactor, std::shared_ptr<Admission::Ticket> ticket,
                    grpc::Status status);
   void Housekeeping();
+  // A Process call (or a refusal held back) begins and ends: counted for WaitForCalls.
+  void ProcessStarted();
+  void ProcessDone();
 
   const ServerOptions options_;
   const std::shared_ptr<const StreamSettings> default_settings_;
@@ -103,6 +115,8 @@ class CloudCastService final : public CallbackBase {
   FrameRunner runner_;
   WorkerPool pool_;
   OpenStreams streams_;
+  std::atomic<int> process_calls_{0};  // Process calls open, and refusals held back
+  CallsChanged calls_changed_;
   const StreamServices stream_services_;
   // After admitter_ and metrics_, which its actions use: it is destroyed (and runs what is left)
   // before them.
@@ -112,6 +126,8 @@ class CloudCastService final : public CallbackBase {
   std::mutex housekeeping_mu_;
   std::condition_variable housekeeping_cv_;
   bool stop_housekeeping_ = false;  // under housekeeping_mu_
+  // When the drain stops waiting for the reads its streams had started (under housekeeping_mu_).
+  std::optional<std::chrono::steady_clock::time_point> drain_reads_until_;
   std::thread housekeeping_;
   std::once_flag stop_once_;
 };

@@ -3,6 +3,7 @@
 #include <utility>
 
 #include "absl/strings/str_cat.h"
+#include "cloudcast/stereo/budget.h"
 
 namespace cloudcast::server {
 namespace {
@@ -56,16 +57,19 @@ absl::Status StereoStage::Match(const ColorView& left, const ColorView& right,
                                 const FrameSettings& settings, const CameraModel& camera,
                                 std::uint64_t max_volume, MatchedPair* out) {
   const StereoParams& params = settings.stereo;
-  const std::uint64_t volume =
-      std::uint64_t{left.width} * left.height * static_cast<std::uint64_t>(params.num_disparities);
+  if (auto s = stereo::CheckMatchable(params, left.width, left.height, "config.stereo"); !s.ok()) {
+    return s;
+  }
+  const std::uint64_t volume = stereo::MatchVolume(params, left.width, left.height);
   if (volume > max_volume) {
     return absl::ResourceExhaustedError(absl::StrCat(
         "frame.right: a ", left.width, "x", left.height, " stereo pair with ",
-        params.num_disparities,
-        " disparities (config.stereo.num_disparities) is a matching volume "
-        "of ",
-        volume, "; this server's limit is ", max_volume,
-        " (ServerLimits.max_stereo_volume): send smaller images or fewer disparities"));
+        params.num_disparities, " disparities (config.stereo.num_disparities) and block_size ",
+        params.block_size, " is a matching volume of ", volume,
+        " (width x (height + 8 x block_size) x num_disparities); this server's limit is ",
+        max_volume,
+        " (ServerLimits.max_stereo_volume): send smaller images, fewer disparities or a smaller "
+        "block"));
   }
   const Clock::time_point t0 = Clock::now();
   ColorView l = left, r = right;

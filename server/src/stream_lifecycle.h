@@ -6,7 +6,9 @@
 //   kHalfClosed  the client closed its side (or the read side failed): the frames held are
 //                answered, then the call ends OK
 //   kClosing     reading stopped for good (the server drains, or bytes did not parse): the frames
-//                held are answered, then the call ends with the closing status
+//                held are answered, then the call ends with the closing status. A drain (Drain)
+//                also answers the message of a read already started, which its client sent
+//                before it could know, and waits for that read until StopAwaitingRead
 //   kEnding      the server ends the call now (idle, or shed for a new client) with its status,
 //                without waiting for the frames held
 //   kBroken      the client cancelled, or a write failed: nothing more is written; ends CANCELLED
@@ -29,9 +31,15 @@ class StreamLifecycle {
   enum class State { kReading, kHalfClosed, kClosing, kEnding, kBroken, kFinished };
 
   State state() const { return state_; }
-  // Whether the next message may be read (room for it aside), and whether one that arrives is
-  // answered.
+  // Whether the next message may be read (room for it aside).
   bool reading() const { return state_ == State::kReading; }
+  // Whether a message that arrives on a read already started is answered: while reading, and
+  // while closing for a drain (the client sent it before it could know of the drain; it is in the
+  // server's transport already). Dropped otherwise: past bytes that did not parse, or once the
+  // call is ending, broken or finished.
+  bool answers_read() const {
+    return state_ == State::kReading || (state_ == State::kClosing && drained_from_reading_);
+  }
   // Whether the server may still end the call (idle timeout, shedding).
   bool may_end() const { return state_ < State::kEnding; }
   // Whether the call may be shed to make room: it is neither ending nor closing.
@@ -40,6 +48,16 @@ class StreamLifecycle {
 
   void HalfClose() { MoveTo(State::kHalfClosed, grpc::Status::OK); }
   void Close(grpc::Status status) { MoveTo(State::kClosing, std::move(status)); }
+  // Closing because the server drains: as Close, and a read already started is answered
+  // (answers_read) and waited for (Finish's `read_started`) until StopAwaitingRead.
+  void Drain(grpc::Status status) {
+    const bool was_reading = state_ == State::kReading;
+    Close(std::move(status));
+    if (was_reading) drained_from_reading_ = awaiting_read_ = true;
+  }
+  // The drain waits no longer for a read already started (it may never complete: a client that
+  // sends nothing more). Its message is still answered if it arrives before the call finishes.
+  void StopAwaitingRead() { awaiting_read_ = false; }
   // False (nothing changes) when the call is ending, broken or finished already.
   bool End(grpc::Status status) {
     if (!may_end()) return false;
@@ -54,12 +72,15 @@ class StreamLifecycle {
   }
 
   // The status to Finish with now, if it is time (then the state is kFinished): at once when
-  // broken or ending, once `nothing_held` when closing or half-closed. Only when no write is
-  // outstanding (a Finish must wait for it). `cancelled` gets whether the call was broken.
-  std::optional<grpc::Status> Finish(bool nothing_held, bool* cancelled) {
+  // broken or ending, once `nothing_held` when closing or half-closed (a drained call also once
+  // no `read_started` is awaited). Only when no write is outstanding (a Finish must wait for it).
+  // `cancelled` gets whether the call was broken.
+  std::optional<grpc::Status> Finish(bool nothing_held, bool* cancelled,
+                                     bool read_started = false) {
     *cancelled = state_ == State::kBroken;
+    const bool settled = nothing_held && !(read_started && awaiting_read_);
     const bool now = state_ == State::kBroken || state_ == State::kEnding ||
-                     (nothing_held && (state_ == State::kClosing || state_ == State::kHalfClosed));
+                     (settled && (state_ == State::kClosing || state_ == State::kHalfClosed));
     if (!now) return std::nullopt;
     state_ = State::kFinished;
     return std::move(status_);
@@ -73,7 +94,9 @@ class StreamLifecycle {
   }
 
   State state_ = State::kReading;
-  grpc::Status status_;  // the status of the current state
+  bool drained_from_reading_ = false;  // closing for a drain that stopped reading (Drain)
+  bool awaiting_read_ = false;         // the drain waits for a read already started
+  grpc::Status status_;                // the status of the current state
 };
 
 }  // namespace cloudcast::server

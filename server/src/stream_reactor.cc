@@ -86,8 +86,8 @@ void StreamReactor::OnReadDone(bool ok) {
   if (!ok) {
     lifecycle_.HalfClose();  // the client closed its side, or the call is gone
     Release(job);
-  } else if (!lifecycle_.reading()) {
-    Release(job);  // read after the stream began to close: not answered
+  } else if (!lifecycle_.answers_read()) {
+    Release(job);  // read after the stream began to end: not answered
   } else if (!parsed) {
     // The stream cannot be trusted past bytes it cannot parse: answer what it holds, then end.
     services_.metrics->stream_requests_unparsable.Increment();
@@ -111,6 +111,7 @@ void StreamReactor::OnWriteDone(bool ok) {
   Release(job);
   if (!ok) Break();  // cancelled, or the client went away
   Pump(lock);
+  if (!ok) Abandon();
 }
 
 void StreamReactor::OnCancel() {
@@ -121,6 +122,7 @@ void StreamReactor::OnCancel() {
   services_.metrics->streams_cancelled.Increment();
   Break();
   Pump(lock);
+  Abandon();
 }
 
 void StreamReactor::OnDone() {
@@ -132,7 +134,19 @@ void StreamReactor::OnDone() {
   }
   services_.streams->Remove(this);
   services_.metrics->active_streams.Decrement();
+  services_.calls_changed->Notify();
   Unref();
+}
+
+bool StreamReactor::Settled() {
+  if (abandoned()) return true;
+  std::lock_guard<std::mutex> lock(mu_);
+  return lifecycle_.finished() && messages_read_ == 0;
+}
+
+void StreamReactor::Abandon() {
+  abandoned_.store(true, std::memory_order_release);
+  services_.calls_changed->Notify();
 }
 
 void StreamReactor::CheckIdle(Clock::time_point now) {
@@ -160,7 +174,13 @@ void StreamReactor::CheckIdle(Clock::time_point now) {
 
 void StreamReactor::BeginDrain() {
   std::unique_lock<std::mutex> lock(mu_);
-  lifecycle_.Close(Draining());
+  lifecycle_.Drain(Draining());
+  Pump(lock);
+}
+
+void StreamReactor::StopAwaitingRead() {
+  std::unique_lock<std::mutex> lock(mu_);
+  lifecycle_.StopAwaitingRead();
   Pump(lock);
 }
 
@@ -188,7 +208,8 @@ void StreamReactor::Pump(std::unique_lock<std::mutex>& lock, bool cancel) {
   // End the call when its time has come (never with a write outstanding).
   if (!lifecycle_.finished() && writing_ == nullptr) {
     bool cancelled = false;
-    ops.finish = lifecycle_.Finish(queue_.Empty(), &cancelled);
+    ops.finish =
+        lifecycle_.Finish(queue_.Empty(), &cancelled, /*read_started=*/reading_ != nullptr);
     // The stream's place is free once its end is decided: a client that has its status and
     // opens the next stream at once must not be refused for this one (OnDone, where the ticket
     // went before, may run after the client already holds the status). A stream the client
@@ -206,12 +227,16 @@ void StreamReactor::Pump(std::unique_lock<std::mutex>& lock, bool cancel) {
     lock.unlock();
     return;
   }
-  std::lock_guard<std::mutex> order(ops_mu_);
-  lock.unlock();
-  if (ops.write != nullptr) StartWrite(&ops.write->out);
-  if (ops.read != nullptr) StartRead(&ops.read->in);
-  if (ops.cancel) context_->TryCancel();
-  if (ops.finish) Finish(*std::move(ops.finish));
+  const bool settles = ops.finish && messages_read_ == 0;  // see Settled()
+  {
+    std::lock_guard<std::mutex> order(ops_mu_);
+    lock.unlock();
+    if (ops.write != nullptr) StartWrite(&ops.write->out);
+    if (ops.read != nullptr) StartRead(&ops.read->in);
+    if (ops.cancel) context_->TryCancel();
+    if (ops.finish) Finish(*std::move(ops.finish));
+  }
+  if (settles) services_.calls_changed->Notify();  // without ops_mu_: Settled() takes mu_
 }
 
 // The call can no longer be written to: everything it holds is let go (also after Finish: a

@@ -18,6 +18,7 @@
 
 #include <atomic>
 #include <chrono>
+#include <condition_variable>
 #include <cstdint>
 #include <memory>
 #include <mutex>
@@ -37,6 +38,26 @@
 
 namespace cloudcast::server {
 
+// Wakes whoever waits for the calls to settle (CloudCastService::WaitForCalls, at shutdown): a
+// call state it checks changed. Notify after the change; WaitUntil checks `settled` under the
+// lock Notify takes, so no change is missed. Thread-safe.
+class CallsChanged {
+ public:
+  void Notify() {
+    { std::lock_guard<std::mutex> lock(mu_); }
+    cv_.notify_all();
+  }
+  template <typename Settled>
+  bool WaitUntil(std::chrono::steady_clock::time_point deadline, Settled settled) {
+    std::unique_lock<std::mutex> lock(mu_);
+    return cv_.wait_until(lock, deadline, settled);
+  }
+
+ private:
+  std::mutex mu_;
+  std::condition_variable cv_;
+};
+
 // What a stream uses of the service; all of it outlives every stream.
 struct StreamServices {
   const ServerOptions* options;
@@ -46,6 +67,7 @@ struct StreamServices {
   WorkerPool* pool;
   OpenStreams* streams;
   CallLog* log;
+  CallsChanged* calls_changed;  // told when a stream is abandoned or done
 };
 
 class StreamReactor final : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer> {
@@ -65,8 +87,11 @@ class StreamReactor final : public grpc::ServerBidiReactor<grpc::ByteBuffer, grp
 
   // Ends the stream if nothing moved on it for the idle timeout (housekeeping).
   void CheckIdle(std::chrono::steady_clock::time_point now);
-  // Stops reading; the frames already held are answered, then the stream ends (UNAVAILABLE).
+  // Stops reading; the frames already held are answered, then the stream ends (UNAVAILABLE). A
+  // read already started is answered too, and waited for until StopAwaitingRead: its client sent
+  // that message before it could know of the drain.
   void BeginDrain();
+  void StopAwaitingRead();
   // How long the stream has sent no frame, when it holds none either and is neither ending nor
   // closing: a stream the server may shed to make room for a new client.
   std::optional<std::chrono::steady_clock::duration> QuietFor(
@@ -74,6 +99,14 @@ class StreamReactor final : public grpc::ServerBidiReactor<grpc::ByteBuffer, grp
   // Ends the stream with `status` to free its place; false when it is ending already.
   bool Shed(grpc::Status status);
   const std::string& client() const { return caller_.client.key; }
+  // Nothing more can reach the client: it cancelled the call, or a write failed.
+  bool abandoned() const { return abandoned_.load(std::memory_order_acquire); }
+  // Whether shutdown may stop waiting for this stream before gRPC has finished it (OnDone): it
+  // is abandoned, or it has ended (its status handed to gRPC) having read nothing, so its status
+  // answers nothing. A rapid reset leaves gRPC thousands of such calls to finish, seconds of
+  // work on a busy machine. A stream that read messages is waited for until its status is out.
+  // Takes the stream's lock; told through StreamServices::calls_changed.
+  bool Settled();
 
  private:
   struct Job;
@@ -83,6 +116,7 @@ class StreamReactor final : public grpc::ServerBidiReactor<grpc::ByteBuffer, grp
 
   void Pump(std::unique_lock<std::mutex>& lock, bool cancel = false);
   void Break();
+  void Abandon();  // without mu_
   Job* Acquire();
   void Release(Job* job);
   void Accept(Job* job, std::size_t bytes);
@@ -100,6 +134,7 @@ class StreamReactor final : public grpc::ServerBidiReactor<grpc::ByteBuffer, grp
   const Caller caller_;
   const std::uint64_t call_key_;  // the worker pool's key of the call
   std::atomic<int> refs_{1};
+  std::atomic<bool> abandoned_{false};
 
   std::mutex ops_mu_;  // see the file comment
   std::mutex mu_;

@@ -5,6 +5,7 @@
 #include <opencv2/core.hpp>
 
 #include "absl/strings/str_cat.h"
+#include "cloudcast/stereo/budget.h"
 #include "matcher_internal.h"
 
 namespace cloudcast::stereo {
@@ -48,6 +49,10 @@ class OpenCvMatcher final : public Matcher {
 
   absl::Status Compute(const GreyView& left, const GreyView& right, DisparityMap16* out) override {
     if (absl::Status s = CheckPair(left, right); !s.ok()) return s;
+    // Below this OpenCV reads out of bounds or aborts from a destructor (budget.h).
+    if (absl::Status s = CheckMatchable(params_, left.width, left.height, "stereo"); !s.ok()) {
+      return s;
+    }
     // MODE_HH keeps every pixel's 16-bit costs for the frame.
     if (params_.matcher == StereoMatcher::kOpenCvHH) {
       if (absl::Status s =

@@ -11,6 +11,7 @@
 #include <cstring>
 #include <memory>
 
+#include "cloudcast/stereo/budget.h"
 #include "matcher_internal.h"
 #include "sgm_kernels.h"
 #include "speckle.h"
@@ -71,6 +72,9 @@ class SgmMatcher final : public Matcher {
 
   absl::Status Compute(const GreyView& left, const GreyView& right, DisparityMap16* out) override {
     if (absl::Status s = CheckPair(left, right); !s.ok()) return s;
+    if (absl::Status s = CheckMatchable(params_, left.width, left.height, "stereo"); !s.ok()) {
+      return s;
+    }
     if (absl::Status s = CheckVolume(left.width, left.height, RoundUpDp(), 1, "the sgm matcher");
         !s.ok()) {
       return s;

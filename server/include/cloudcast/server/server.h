@@ -7,6 +7,7 @@
 
 #include <chrono>
 #include <condition_variable>
+#include <future>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -41,14 +42,29 @@ class Server {
   const ServerOptions& options() const { return options_; }
 
   // Shutdown, first step (Shutdown() does it too): health checks answer NOT_SERVING, new calls
-  // get UNAVAILABLE, open streams stop reading, answer what they hold and end (UNAVAILABLE).
+  // get UNAVAILABLE, open streams stop reading, answer what they hold (and the message they were
+  // reading, which their client sent before it could know) and end (UNAVAILABLE).
   void StartDraining();
 
-  // Graceful shutdown: StartDraining(), then gRPC's Shutdown with a deadline of `grace` (frames
-  // still in flight then are cancelled), then the worker pool is drained and joined. Returns
-  // within about `grace` plus one frame's processing time. Idempotent; thread-safe.
-  void Shutdown(std::chrono::milliseconds grace);
-  void Shutdown() { Shutdown(options_.shutdown_grace); }
+  // Graceful shutdown, in at most `grace` + kShutdownOverrun:
+  //   1. StartDraining(), and gRPC stops taking connections and calls (GOAWAY on every
+  //      connection; the calls it made but had not handed to the service yet are failed);
+  //   2. every call that can still deliver something is waited for, until `grace` is over;
+  //   3. gRPC's Shutdown cancels the calls left and waits for gRPC to finish every call it made,
+  //      until `grace` + kShutdownOverrun; then the worker pool is drained and joined.
+  // Returns true when all of it is done. False when gRPC had not finished by then: calls that
+  // nobody waits for any more (a rapid reset leaves gRPC thousands, which 1.51 cannot bound)
+  // still hold it. Every reply and status the service wrote is out by then; the process may exit
+  // without destroying the server (cloudcast-server's main does). The destructor waits for gRPC.
+  // Idempotent (a second call returns the first one's result); thread-safe.
+  bool Shutdown(std::chrono::milliseconds grace);
+  bool Shutdown() { return Shutdown(options_.shutdown_grace); }
+  // How long past its grace a Shutdown may last: gRPC's own part, after the calls left are
+  // cancelled.
+  static constexpr std::chrono::milliseconds kShutdownOverrun{500};
+  // How long a drain waits for the message a stream was reading when it began (at most half the
+  // grace).
+  static constexpr std::chrono::milliseconds kDrainReadWait{1000};
 
   // Blocks until Shutdown() has finished.
   void Wait();
@@ -68,6 +84,10 @@ class Server {
   explicit Server(const ServerOptions& options);
   // Undoes a Start() that failed half-way.
   void Abandon();
+  // StartDraining, waiting at most `read_wait` for the messages the streams were reading.
+  void Drain(std::chrono::milliseconds read_wait);
+  // Shutdown's last step, once gRPC's Shutdown has returned.
+  void StopAfterGrpc();
 
   const ServerOptions options_;
   // Before server_: gRPC's certificate watcher reads the copies it holds until the server is gone.
@@ -75,6 +95,10 @@ class Server {
   std::unique_ptr<Metrics> metrics_;
   std::unique_ptr<CloudCastService> service_;
   std::unique_ptr<grpc::Server> server_;
+  // Shutdown's: the queue of gRPC's shutdown notification, and gRPC's Shutdown running on a
+  // thread of its own (it has no bound under a flood).
+  grpc_completion_queue* shutdown_cq_ = nullptr;
+  std::future<void> grpc_shutdown_;
   std::unique_ptr<MetricsHttpServer> metrics_http_;
   int port_ = 0;
   int metrics_port_ = 0;
@@ -84,6 +108,7 @@ class Server {
   std::mutex shutdown_mu_;
   std::condition_variable shutdown_cv_;
   bool shut_down_ = false;
+  bool grpc_finished_ = false;  // Shutdown's result
 };
 
 // The health-checking service name of CloudCast ("cloudcast.v1.CloudCast"); the empty name
