@@ -10,7 +10,7 @@
 // (the house rule against timing assertions gives way here to the criterion it was filed with).
 //
 // Two builds of this file: hardening_attacks_test (long: 20 s attacks, the RSS read exactly 10 s
-// after) and hardening_attacks_short_test (integration: short attacks, the RSS polled until it is
+// after) and hardening_attacks_short_test (long tier too: short attacks, the RSS polled until it is
 // back, for at most 10 s). CLOUDCAST_ATTACK_SECONDS says which.
 #include <fcntl.h>
 #include <grpcpp/grpcpp.h>
@@ -789,15 +789,6 @@ TEST_F(AttackTest, RapidResetAgainstTheServerAloneDoesNotFloodItsLog) {
 // The paced stream is a plain synchronous client (not the Fleet): the test must know, frame by
 // frame, whether its client had sent it (its Write returned) before the signal.
 constexpr double kShutdownToleranceS = 1.0;
-
-}  // namespace
-}  // namespace cloudcast
-
-// The synchronous stub (the tests above use the Fleet); included here, with the test that uses it.
-#include "cloudcast/v1/cloudcast.grpc.pb.h"
-
-namespace cloudcast {
-namespace {
 
 class SignalledStream {
  public:
