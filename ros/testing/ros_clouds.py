@@ -36,9 +36,14 @@ class Collector:
                 self.by_stamp[msg.header.stamp.to_nsec()] = msg
 
     def wait_for(self, stamps, timeout):
-        ros_harness.wait_until(lambda: all(s in self.by_stamp for s in stamps), timeout,
-                               f"messages stamped {sorted(stamps)} (have "
-                               f"{sorted(self.by_stamp)})")
+        try:
+            ros_harness.wait_until(lambda: all(s in self.by_stamp for s in stamps), timeout,
+                                   f"messages stamped {sorted(stamps)}")
+        except TimeoutError as e:
+            # What had come by the timeout, not by the call (which an f-string argument says).
+            with self.lock:
+                have = sorted(self.by_stamp)
+            raise TimeoutError(f"{e} (have {have})") from None
         with self.lock:
             return [self.by_stamp[s] for s in stamps]
 
