@@ -41,6 +41,7 @@
 #include "cloudcast/proto/convert.h"
 #include "cloudcast/testing/metrics_scrape.h"
 #include "cloudcast/v1/cloudcast.grpc.pb.h"
+#include "support/proc_status.h"
 #include "support/replica_support.h"
 
 #ifndef CLOUDCAST_ATTACK_SECONDS
@@ -68,19 +69,7 @@ constexpr double kMaxRetainedMb = 64;
 
 void Sleep(Clock::duration d) { std::this_thread::sleep_for(d); }
 
-std::uint64_t ResidentBytes(pid_t pid) {
-  std::ifstream status("/proc/" + std::to_string(pid) + "/status");
-  std::string key;
-  while (status >> key) {
-    if (key == "VmRSS:") {
-      std::uint64_t kb = 0;
-      status >> kb;
-      return kb * 1024;
-    }
-    status.ignore(1 << 20, '\n');
-  }
-  return 0;
-}
+using testing::ResidentBytes;
 
 std::uint64_t FileBytes(const std::string& path) {
   struct stat st {};

@@ -28,6 +28,7 @@
 #include "cloudcast/server/server.h"
 #include "cloudcast/testing/metrics_scrape.h"
 #include "cloudcast/v1/cloudcast.grpc.pb.h"
+#include "support/proc_status.h"
 #include "support/replica_support.h"
 #include "support/sanitizers.h"
 
@@ -489,20 +490,7 @@ void Pause(milliseconds d) {
   cv.wait_for(lock, d, [] { return false; });
 }
 
-// The resident memory of a process, from /proc, in bytes.
-std::uint64_t ResidentBytes(pid_t pid) {
-  std::ifstream status("/proc/" + std::to_string(pid) + "/status");
-  std::string key;
-  while (status >> key) {
-    if (key == "VmRSS:") {
-      std::uint64_t kb = 0;
-      status >> kb;
-      return kb * 1024;
-    }
-    status.ignore(1 << 20, '\n');
-  }
-  return 0;
-}
+using testing::ResidentBytes;
 
 // Defect 3: a DELIVERY_ALL stream whose client stops reading held 37-57 MB in the server (gRPC's
 // transport buffers, far more than max_queued_frames frames), 60 of them 2.6-3.5 GB, and most of

@@ -10,30 +10,18 @@
 #include <unistd.h>
 
 #include <cstdint>
-#include <fstream>
 #include <string>
 #include <vector>
 
 #include "cloudcast/stereo/budget.h"
 #include "cloudcast/stereo/matcher.h"
+#include "support/proc_status.h"
 #include "support/sanitizers.h"
 
 namespace cloudcast::stereo {
 namespace {
 
-std::uint64_t PeakVirtualBytes() {
-  std::ifstream status("/proc/self/status");
-  std::string key;
-  while (status >> key) {
-    if (key == "VmPeak:") {
-      std::uint64_t kb = 0;
-      status >> kb;
-      return kb * 1024;
-    }
-    status.ignore(1 << 20, '\n');
-  }
-  return 0;
-}
+std::uint64_t PeakVirtualBytes() { return cloudcast::testing::ProcStatusBytes("VmPeak:"); }
 
 std::vector<std::uint8_t> Texture(std::uint32_t w, std::uint32_t h, int shift) {
   std::vector<std::uint8_t> p(std::size_t{w} * h);
