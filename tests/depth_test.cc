@@ -189,22 +189,33 @@ TEST(DepthConversion, OtherDepthScalesFollowTheSameFormula) {
   ExpectEqualsDepthImageProc<float>(0.01);            // centimetres in float
 }
 
-TEST(DepthConversion, ZeroNanAndInfinityMeanNoMeasurement) {
-  const float nan = std::numeric_limits<float>::quiet_NaN();
-  const float inf = std::numeric_limits<float>::infinity();
-  const std::vector<float> values = {0.0f, nan, inf, -inf, 2.0f, -0.0f};
-  DepthFrame f = MakeDepthFrame(values, 6, 1);
-  CameraModel camera;
-  camera.cx = 0;
-  camera.cy = 0;
+// One row of float depths through the fused pipeline with both filters off: every valid depth's
+// point, in order.
+void RunUnfiltered(const DepthFrame& f, const CameraModel& camera, PointCloud* cloud,
+                   StageCounts* counts) {
   PipelineOptions o;
   o.camera = camera;
   o.passthrough.enabled = false;
   o.voxel.enabled = false;
   Pipeline pipeline;
+  ASSERT_TRUE(pipeline.Run(o, f.depth, f.colour, cloud, counts).ok());
+}
+
+CameraModel OriginCamera() {
+  CameraModel camera;
+  camera.cx = 0;
+  camera.cy = 0;
+  return camera;
+}
+
+TEST(DepthConversion, ZeroNanAndInfinityMeanNoMeasurement) {
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  const float inf = std::numeric_limits<float>::infinity();
+  const std::vector<float> values = {0.0f, nan, inf, -inf, 2.0f, -0.0f};
+  DepthFrame f = MakeDepthFrame(values, 6, 1);
   PointCloud cloud;
   StageCounts counts;
-  ASSERT_TRUE(pipeline.Run(o, f.depth, f.colour, &cloud, &counts).ok());
+  RunUnfiltered(f, OriginCamera(), &cloud, &counts);
   ASSERT_EQ(cloud.size(), 1u);
   EXPECT_EQ(cloud.points[0].z, 2.0f);
   EXPECT_EQ(counts.valid_points, 1u);
@@ -219,17 +230,10 @@ TEST(DepthConversion, NonPositiveAndSubnormalDepthsMeanNoMeasurement) {
   const std::vector<float> values = {-5.0f, denormal, -denormal, 1e-39f, 2.0f,
                                      std::numeric_limits<float>::min(), -0.001f, 0.5f};
   DepthFrame f = MakeDepthFrame(values, 8, 1);
-  CameraModel camera;
-  camera.cx = 0;
-  camera.cy = 0;
-  PipelineOptions o;
-  o.camera = camera;
-  o.passthrough.enabled = false;
-  o.voxel.enabled = false;
-  Pipeline pipeline;
+  CameraModel camera = OriginCamera();
   PointCloud cloud;
   StageCounts counts;
-  ASSERT_TRUE(pipeline.Run(o, f.depth, f.colour, &cloud, &counts).ok());
+  RunUnfiltered(f, camera, &cloud, &counts);
   ASSERT_EQ(cloud.size(), 3u);
   EXPECT_EQ(cloud.points[0].z, 2.0f);
   EXPECT_EQ(cloud.points[1].z, std::numeric_limits<float>::min());
@@ -241,8 +245,7 @@ TEST(DepthConversion, NonPositiveAndSubnormalDepthsMeanNoMeasurement) {
   for (std::size_t i : {0, 1, 2, 3, 6}) EXPECT_TRUE(std::isnan(organized.points[i].z)) << i;
   // The rule is on z in metres: a scale that makes a raw depth subnormal takes it out too.
   camera.depth_scale = 1e-9;
-  o.camera = camera;
-  ASSERT_TRUE(pipeline.Run(o, f.depth, f.colour, &cloud, &counts).ok());
+  RunUnfiltered(f, camera, &cloud, &counts);
   EXPECT_EQ(counts.valid_points, 2u) << "2 and 0.5 stay; min() * 1e-9 is subnormal";
 }
 

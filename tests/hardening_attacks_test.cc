@@ -69,6 +69,22 @@ constexpr double kMaxRetainedMb = 64;
 
 void Sleep(Clock::duration d) { std::this_thread::sleep_for(d); }
 
+// A raw frame of the synthetic scene (disparity + colour), as a camera stream sends one; its
+// camera in `camera` when asked.
+v1::Frame SyntheticRawFrame(std::uint32_t width, std::uint32_t height,
+                            CameraModel* camera = nullptr) {
+  SyntheticOptions o;
+  o.width = width;
+  o.height = height;
+  const SyntheticFrame f = *SyntheticScene::Default().Render(o);
+  if (camera != nullptr) *camera = f.camera;
+  v1::Frame frame;
+  EXPECT_TRUE(
+      convert::ToProto(f.disparity_view(), "d", frame.mutable_disparity()->mutable_raw()).ok());
+  EXPECT_TRUE(convert::ToProto(f.colour_view(), "c", frame.mutable_colour()->mutable_raw()).ok());
+  return frame;
+}
+
 using testing::ResidentBytes;
 
 std::uint64_t FileBytes(const std::string& path) {
@@ -287,16 +303,9 @@ class AttackTest : public ::testing::Test {
   // A paced stream: 30 fps DELIVERY_ALL 640x480 for `duration`, latency from the intended times.
   static const load::FrameStore& PacedFrames() {
     static const load::FrameStore store = [] {
-      SyntheticOptions o;
-      o.width = 640;
-      o.height = 480;
-      const SyntheticFrame f = *SyntheticScene::Default().Render(o);
-      v1::Frame frame;
-      EXPECT_TRUE(
-          convert::ToProto(f.disparity_view(), "d", frame.mutable_disparity()->mutable_raw()).ok());
-      EXPECT_TRUE(
-          convert::ToProto(f.colour_view(), "c", frame.mutable_colour()->mutable_raw()).ok());
-      return load::FrameStore::FromFrames({frame}, f.camera, "synthetic 640x480 raw");
+      CameraModel camera;
+      v1::Frame frame = SyntheticRawFrame(640, 480, &camera);
+      return load::FrameStore::FromFrames({frame}, camera, "synthetic 640x480 raw");
     }();
     return store;
   }
@@ -600,17 +609,8 @@ class ProxyIsolationTest : public AttackTest {
   // own), at most `timeout`.
   grpc::Status ProcessOnce(int n, milliseconds timeout) {
     static const v1::ProcessRequest request = [] {
-      SyntheticOptions o;
-      o.width = 160;
-      o.height = 120;
-      const SyntheticFrame f = *SyntheticScene::Default().Render(o);
       v1::ProcessRequest r;
-      EXPECT_TRUE(convert::ToProto(f.disparity_view(), "d",
-                                   r.mutable_frame()->mutable_disparity()->mutable_raw())
-                      .ok());
-      EXPECT_TRUE(
-          convert::ToProto(f.colour_view(), "c", r.mutable_frame()->mutable_colour()->mutable_raw())
-              .ok());
+      *r.mutable_frame() = SyntheticRawFrame(160, 120);
       return r;
     }();
     grpc::ChannelArguments args;
@@ -857,17 +857,7 @@ class SignalledStream {
   };
 
   static const v1::Frame& PacedFrame() {
-    static const v1::Frame frame = [] {
-      SyntheticOptions o;
-      o.width = 640;
-      o.height = 480;
-      const SyntheticFrame f = *SyntheticScene::Default().Render(o);
-      v1::Frame out;
-      EXPECT_TRUE(
-          convert::ToProto(f.disparity_view(), "d", out.mutable_disparity()->mutable_raw()).ok());
-      EXPECT_TRUE(convert::ToProto(f.colour_view(), "c", out.mutable_colour()->mutable_raw()).ok());
-      return out;
-    }();
+    static const v1::Frame frame = SyntheticRawFrame(640, 480);
     return frame;
   }
 
