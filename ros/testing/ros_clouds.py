@@ -53,6 +53,36 @@ class Collector:
             self.all.clear()
 
 
+def replay_to_own_bridge(harness, bag, topics, prefix, params, out_topic, stamps, timeout=60):
+    """Plays `bag` (recorded on `topics`, all under `prefix`, e.g. "/stereo/") to a bridge of its
+    own under /replay, with `params`, and returns its clouds on `out_topic` for `stamps` (raises
+    TimeoutError naming what came).
+
+    That bridge is the only subscriber under /replay: `rosbag play --wait-for-subscribers` starts
+    once each topic has one subscriber, and on the live topics that could be a nodelet or another
+    bridge while the compared one was still connecting (it then missed the whole playback, under
+    load). --keep-alive: a player that exits right after its last publish can take messages still
+    in its outgoing queues with it (a megabyte of image per frame; rosbag2 has the same,
+    ros2/rosbag2#571): once 3 of 4 frames came back. The player stays up until the bridge has
+    answered every frame; a frame the bridge loses still fails."""
+    from sensor_msgs.msg import PointCloud2
+    replayed = Collector(out_topic, PointCloud2)
+    replay, replay_node = harness.start_bridge("cloudcast_replay", params, {"points2": out_topic},
+                                               namespace="/replay")
+    for t in topics:
+        harness.wait_for_subscriber("/replay/" + t[len(prefix):], replay_node)
+    ros_harness.wait_until(lambda: replayed.sub.get_num_connections() > 0, 20,
+                           "a connection to " + out_topic)
+    player = harness.start("rosbag_play", [
+        "rosbag", "play", "--wait-for-subscribers", "--keep-alive", "--rate", "2", bag,
+        "__name:=player"] + [f"{t}:=/replay/{t[len(prefix):]}" for t in topics])
+    try:
+        return replayed.wait_for(stamps, timeout)
+    finally:
+        player.stop()
+        replay.stop()
+
+
 def stamp_ns(base, k):
     """The stamp of frame k of a tsukuba_publisher.py run with --stamp-base `base`."""
     return (base + k) * 1_000_000_000

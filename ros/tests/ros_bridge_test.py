@@ -19,7 +19,8 @@ import unittest
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "testing"))
 import ros_harness  # noqa: E402
-from ros_clouds import Collector, cloud_arrays, diag_values, stamp_ns  # noqa: E402
+from ros_clouds import (Collector, cloud_arrays, diag_values, replay_to_own_bridge,  # noqa: E402
+                        stamp_ns)
 
 ARGS = None
 # 00001 and 01200 have no invalid pixel (01200 spans d = 6..146); 00600 and 01400 have 447 and 645
@@ -196,32 +197,15 @@ class RosBridgeTest(unittest.TestCase):
         live = self.bridge_clouds.wait_for(stamps, 30)
         recorder.stop()
         ros_harness.wait_until(lambda: os.path.exists(bag), 10, "rosbag record to close " + bag)
-        # Played back under /replay to a bridge of its own, with the same parameters, the only
-        # subscriber there: --wait-for-subscribers starts once each topic has one subscriber, and
-        # on /stereo's topics that could be the nodelet while the bridge was still connecting
-        # (ros_depth_test.py's bridge missed the whole playback so once under load).
-        replayed = Collector("/cloudcast/replayed_points2", PointCloud2)
-        replay, replay_node = self.h.start_bridge(
-            "cloudcast_replay", dict(BRIDGE_PARAMS, server=self.server),
-            {"points2": "/cloudcast/replayed_points2"}, namespace="/replay")
-        for t in topics:
-            self.h.wait_for_subscriber("/replay/" + t[len("/stereo/"):], replay_node)
-        ros_harness.wait_until(lambda: replayed.sub.get_num_connections() > 0, 20,
-                               "a connection to /cloudcast/replayed_points2")
-        # --keep-alive: a player that exits right after its last publish can take messages still
-        # in its outgoing queues with it (a megabyte of image per frame; rosbag2 has the same,
-        # ros2/rosbag2#571). Once 3 of 4 frames came back, the last one missing. The player stays
-        # up until the bridge has answered every frame; a frame the bridge loses still fails.
-        player = self.h.start("rosbag_play", [
-            "rosbag", "play", "--wait-for-subscribers", "--keep-alive", "--rate", "2", bag,
-            "__name:=player"] + [f"{t}:=/replay/{t[len('/stereo/'):]}" for t in topics])
+        # Played back under /replay to a bridge of its own with the same parameters
+        # (ros_clouds.replay_to_own_bridge says why).
         try:
-            played = replayed.wait_for(stamps, 60)
+            played = replay_to_own_bridge(
+                self.h, bag, topics, "/stereo/", dict(BRIDGE_PARAMS, server=self.server),
+                "/cloudcast/replayed_points2", stamps)
         except TimeoutError as e:
             self.fail(f"the bridge did not answer every frame played back: {e}\n"
                       + self.h.logs())
-        player.stop()
-        replay.stop()
         for frame, a, b in zip(FRAMES, live, played):
             with self.subTest(frame=frame):
                 self.assertEqual(a.header.stamp, b.header.stamp)
