@@ -110,10 +110,10 @@ class Child {
 // reset) with a message half read. The server ends those streams, frees them, and carries on.
 TEST(FaultsTest, ClientsVanishingMidFrameLeaveNoStreamAndOthersCarryOn) {
   const std::string dir = ::testing::TempDir();
-  const int port = testing::FreeLoopbackPort(), metrics = testing::FreeLoopbackPort();
-  ServerProcess server("127.0.0.1:" + std::to_string(port), "faults", {},
-                       dir + "/vanish_server.log", "warn", "127.0.0.1:" + std::to_string(metrics));
+  ServerProcess server("127.0.0.1:0", "faults", {}, dir + "/vanish_server.log", "warn",
+                       "127.0.0.1:0");
   ASSERT_TRUE(server.WaitUntilServing());
+  const int metrics = server.metrics_port();
   auto metric = [&](const std::string& name) {
     return server::MetricValue(server::ScrapeMetrics(metrics), name);
   };
@@ -242,11 +242,12 @@ class ServerStopTest : public ::testing::TestWithParam<int> {};
 TEST_P(ServerStopTest, ResilientStreamLosesNothingAcrossAServerRestart) {
   const int signal_number = GetParam();
   const std::string dir = ::testing::TempDir();
-  const int port = testing::FreeLoopbackPort();
-  const std::string address = "127.0.0.1:" + std::to_string(port);
-  auto server = std::make_unique<ServerProcess>(address, "first", std::vector<std::string>{},
+  auto server = std::make_unique<ServerProcess>("127.0.0.1:0", "first",
+                                                std::vector<std::string>{},
                                                 dir + "/restart_first.log");
   ASSERT_TRUE(server->WaitUntilServing());
+  // The second server comes back on the address the first one bound.
+  const std::string address = server->address();
   auto client = Connect(address);
   ASSERT_NE(client, nullptr);
   auto robot = OpenRobot(*client, true);

@@ -504,8 +504,7 @@ TEST(HardeningMemoryTest, StreamsThatStopReadingHoldBoundedMemoryAndGiveItBack) 
     GTEST_SKIP() << "RSS bounds are not meaningful under ASan (redzones and quarantine)";
   }
   const std::string log = ::testing::TempDir() + "/memory_server.log";
-  const int port = testing::FreeLoopbackPort();
-  testing::ServerProcess server("127.0.0.1:" + std::to_string(port), "memory", {}, log);
+  testing::ServerProcess server("127.0.0.1:0", "memory", {}, log);
   ASSERT_TRUE(server.WaitUntilServing());
   SyntheticOptions o;
   o.width = 640;

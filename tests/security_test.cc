@@ -244,9 +244,10 @@ TEST_F(SecurityTest, SighupReloadsTheCertificate) {
   const std::string cert = Path("live.pem"), key = Path("live.key");
   std::filesystem::copy_file(pki_->Cert("server"), cert);
   std::filesystem::copy_file(pki_->Key("server"), key);
-  const std::string address = "127.0.0.1:" + std::to_string(testing::FreeLoopbackPort());
-  testing::ServerProcess process(address, "reload", {"--tls-cert", cert, "--tls-key", key},
+  testing::ServerProcess process("127.0.0.1:0", "reload", {"--tls-cert", cert, "--tls-key", key},
                                  Path("server.log"));
+  ASSERT_TRUE(process.WaitUntilBound()) << process.log();
+  const std::string address = process.address();
   // Connect waits for the server (a TLS handshake that succeeds), up to its timeout.
   cc::ClientOptions old_ca = Options("ca");
   old_ca.connect_timeout = seconds(30);
@@ -451,13 +452,13 @@ TEST_F(TokensTest, HealthCheckNeedsNoToken) {
 
 // The tokens in use, a wrong one, and the log (at debug level) and /metrics of a real process.
 TEST_F(TokensTest, TokensNeverAppearInTheLogOrTheMetrics) {
-  const std::string address = "127.0.0.1:" + std::to_string(testing::FreeLoopbackPort());
-  const int metrics_port = testing::FreeLoopbackPort();
-  testing::ServerProcess process(address, "tokens",
+  testing::ServerProcess process("127.0.0.1:0", "tokens",
                                  {"--tls-cert", pki_->Cert("server"), "--tls-key",
                                   pki_->Key("server"), "--tokens-file", Path("tokens.json")},
-                                 Path("server.log"), "debug",
-                                 "127.0.0.1:" + std::to_string(metrics_port));
+                                 Path("server.log"), "debug", "127.0.0.1:0");
+  ASSERT_TRUE(process.WaitUntilBound()) << process.log();
+  const std::string address = process.address();
+  const int metrics_port = process.metrics_port();
   cc::ClientOptions fleet = Options("ca", "", kFleetToken);
   fleet.connect_timeout = seconds(30);  // waits for the process to listen
   auto client = cc::Client::Connect(address, fleet);
@@ -484,9 +485,10 @@ TEST_F(TokensTest, TokensNeverAppearInTheLogOrTheMetrics) {
 // file keeps the tokens in use.
 TEST_F(TokensTest, SighupReloadsTheTokensFile) {
   constexpr char kRotated[] = "rotated-token-a41c9e03d7b2f586";
-  const std::string address = "127.0.0.1:" + std::to_string(testing::FreeLoopbackPort());
-  testing::ServerProcess process(address, "tokens", {"--tokens-file", Path("tokens.json")},
+  testing::ServerProcess process("127.0.0.1:0", "tokens", {"--tokens-file", Path("tokens.json")},
                                  Path("server.log"));
+  ASSERT_TRUE(process.WaitUntilBound()) << process.log();
+  const std::string address = process.address();
   cc::ClientOptions fleet = Options("", "", kFleetToken);
   fleet.connect_timeout = seconds(30);  // waits for the process to listen
   auto client = cc::Client::Connect(address, fleet);

@@ -15,6 +15,7 @@
 #include "cloudcast/server/options.h"
 #include "cloudcast/testing/metrics_scrape.h"
 #include "support/program_support.h"
+#include "support/replica_support.h"
 #include "support/server_support.h"
 
 namespace cloudcast::server {
@@ -245,6 +246,34 @@ TEST(ServerOptionsTest, NoReflectionFlag) {
     ASSERT_TRUE(options.ok()) << options.status();
     EXPECT_EQ(options->reflection, !given);
   }
+}
+
+// Servers asked for port 0 say which ports they bound (--ready-file), so that tests and scripts
+// never pick a "free" port and then race other processes for it: two at once get two ports, each
+// serving gRPC and /metrics where its file says. A file that cannot be written stops the server.
+TEST(ServerOptionsTest, ReadyFileNamesTheAddressesItBound) {
+  const std::string dir = ::testing::TempDir();
+  testing::ServerProcess first("127.0.0.1:0", "first", {}, dir + "/ready_first.log", "warn",
+                               "127.0.0.1:0");
+  testing::ServerProcess second("127.0.0.1:0", "second", {}, dir + "/ready_second.log", "warn",
+                                "127.0.0.1:0");
+  for (testing::ServerProcess* server : {&first, &second}) {
+    ASSERT_TRUE(server->WaitUntilServing()) << server->log();
+    EXPECT_NE(server->address(), "127.0.0.1:0");
+    ASSERT_GT(server->metrics_port(), 0);
+    EXPECT_NE(ScrapeMetrics(server->metrics_port()).find("cloudcast_active_streams"),
+              std::string::npos);
+  }
+  EXPECT_NE(first.address(), second.address());
+  EXPECT_NE(first.metrics_port(), second.metrics_port());
+
+  const testing::RunResult r = testing::RunProgram(
+      testing::BinDir() + "/cloudcast-server",
+      {"--listen", "127.0.0.1:0", "--metrics-listen", "", "--ready-file",
+       dir + "/no-such-folder/ready"},
+      dir);
+  EXPECT_EQ(r.code, 1) << r;
+  EXPECT_NE((r.out + r.err).find("--ready-file"), std::string::npos) << r;
 }
 
 }  // namespace

@@ -48,6 +48,11 @@ ServerFlags::ServerFlags(CLI::App& app)
   app.add_option("--log-level", log_level_, "trace, debug, info, warn, error, critical or off")
       ->check(CLI::IsMember({"trace", "debug", "info", "warn", "error", "critical", "off"}))
       ->group("Service");
+  app.add_option("--ready-file", ready_file_,
+                 "Once serving, write the bound addresses to this file (lines `grpc=host:port` and "
+                 "`metrics=host:port`, empty when off), replacing it whole: how a script or test "
+                 "that asked for port 0 learns the port without racing for a free one")
+      ->group("Service");
   app.add_option("--shutdown-grace", shutdown_grace_seconds_,
                  "Seconds frames in flight get to finish on SIGINT / SIGTERM before their calls "
                  "are cancelled")

@@ -15,9 +15,11 @@
 #include <string.h>
 
 #include <CLI/CLI.hpp>
+#include <cerrno>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <fstream>
 #include <iostream>
 #include <string>
 #include <thread>
@@ -59,6 +61,20 @@ void BoundTcpReadBuffers() {
                                 ? std::string(current) + ",-tcp_read_chunks"
                                 : std::string("-tcp_read_chunks");
   setenv("GRPC_EXPERIMENTS", value.c_str(), 1);
+}
+
+// --ready-file: the addresses the server bound, written to a temporary file renamed over the
+// target, so that a reader polling for it never sees half of it. A script or test that starts the
+// server on port 0 reads the port here instead of picking a "free" port first and racing every
+// other process on the machine for it.
+bool WriteReadyFile(const std::string& path, const cloudcast::server::Server& server) {
+  const std::string temporary = path + ".tmp";
+  {
+    std::ofstream out(temporary, std::ios::trunc);
+    out << "grpc=" << server.address() << "\nmetrics=" << server.metrics_address() << "\n";
+    if (!out.flush()) return false;
+  }
+  return std::rename(temporary.c_str(), path.c_str()) == 0;
 }
 
 }  // namespace
@@ -107,6 +123,11 @@ int main(int argc, char** argv) {
       return 2;
     }
     spdlog::critical("{}", std::string(server.status().message()));
+    return 1;
+  }
+
+  if (!flags.ready_file().empty() && !WriteReadyFile(flags.ready_file(), **server)) {
+    spdlog::critical("cannot write --ready-file {}: {}", flags.ready_file(), strerror(errno));
     return 1;
   }
 

@@ -13,10 +13,13 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdio>
 #include <functional>
 #include <memory>
 #include <optional>
+#include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "support/program_support.h"
@@ -43,20 +46,31 @@ inline int FreeLoopbackPort() {
 
 // One cloudcast-server process. Its output goes to `log_path`. Metrics are off unless
 // `metrics_listen` names an address. `prefix` runs it through another program that execs it in
-// place (e.g. `ip netns exec NS`), so the pid is still the server's.
+// place (e.g. `ip netns exec NS`), so the pid is still the server's. Give port 0 in `address`
+// or `metrics_listen`: the server then writes what it bound to its --ready-file, and address() and
+// metrics_port() say it once WaitUntilBound() or WaitUntilServing() has returned true. (Fixed
+// ports pass no --ready-file, so that a build from before the flag can be run too.)
 class ServerProcess {
  public:
   ServerProcess(const std::string& address, const std::string& instance,
                 const std::vector<std::string>& extra_args, const std::string& log_path,
                 const std::string& log_level = "warn", const std::string& metrics_listen = "",
                 const std::vector<std::string>& prefix = {})
-      : address_(address), instance_(instance), log_path_(log_path) {
+      : address_(address), metrics_address_(metrics_listen), instance_(instance),
+        log_path_(log_path),
+        ready_path_(EndsWith(address, ":0") || EndsWith(metrics_listen, ":0")
+                        ? log_path + ".ready"
+                        : "") {
     std::vector<std::string> args = prefix;
     for (const std::string& a :
          {BinDir() + "/cloudcast-server", std::string("--listen"), address,
           std::string("--metrics-listen"), metrics_listen, std::string("--instance"), instance,
           std::string("--log-level"), log_level}) {
       args.push_back(a);
+    }
+    if (!ready_path_.empty()) {
+      std::remove(ready_path_.c_str());  // an earlier run's
+      args.insert(args.end(), {"--ready-file", ready_path_});
     }
     args.insert(args.end(), extra_args.begin(), extra_args.end());
     pid_ = fork();
@@ -78,8 +92,27 @@ class ServerProcess {
   ServerProcess(const ServerProcess&) = delete;
   ServerProcess& operator=(const ServerProcess&) = delete;
 
+  // Waits until the server has bound its ports (its --ready-file), and takes the addresses it
+  // bound from there; false when the process ended first or the deadline passed. A server with
+  // TLS is ready to be connected to then: WaitUntilServing's plaintext probe would not be.
+  bool WaitUntilBound(std::chrono::seconds timeout = std::chrono::seconds(20)) {
+    if (ready_path_.empty()) return !Ended();  // fixed ports: nothing to learn
+    const auto deadline = std::chrono::steady_clock::now() + timeout;
+    while (std::chrono::steady_clock::now() < deadline) {
+      const std::string ready = ReadText(ready_path_);
+      if (!ready.empty()) {
+        address_ = ReadyValue(ready, "grpc");
+        metrics_address_ = ReadyValue(ready, "metrics");
+        return !address_.empty();
+      }
+      if (Ended()) return false;
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    return false;
+  }
   // Waits until the server answers on its address (gRPC channel READY), or the deadline.
   bool WaitUntilServing(std::chrono::seconds timeout = std::chrono::seconds(20)) {
+    if (!WaitUntilBound(timeout)) return false;
     auto channel = grpc::CreateChannel(address_, grpc::InsecureChannelCredentials());
     return channel->WaitForConnected(std::chrono::system_clock::now() + timeout);
   }
@@ -100,14 +133,43 @@ class ServerProcess {
   bool running() const { return pid_ > 0; }
   pid_t pid() const { return pid_; }
 
+  // The address it was asked for, or once bound (WaitUntilBound), the one it bound.
   const std::string& address() const { return address_; }
+  // The port of its /metrics once bound; 0 when metrics are off.
+  int metrics_port() const {
+    const std::size_t colon = metrics_address_.rfind(':');
+    return colon == std::string::npos ? 0 : std::stoi(metrics_address_.substr(colon + 1));
+  }
   const std::string& instance() const { return instance_; }
   std::string log() const { return ReadText(log_path_); }
 
  private:
-  const std::string address_;
+  static bool EndsWith(const std::string& s, const std::string& tail) {
+    return s.size() >= tail.size() && s.compare(s.size() - tail.size(), tail.size(), tail) == 0;
+  }
+  // `key=value` from the lines of a --ready-file; "" when absent.
+  static std::string ReadyValue(const std::string& text, const std::string& key) {
+    std::istringstream lines(text);
+    for (std::string line; std::getline(lines, line);) {
+      if (line.rfind(key + "=", 0) == 0) return line.substr(key.size() + 1);
+    }
+    return "";
+  }
+  // Whether the process has ended (reaped here, its status kept for Wait).
+  bool Ended() {
+    if (pid_ <= 0) return true;
+    int status = 0;
+    if (waitpid(pid_, &status, WNOHANG) != pid_) return false;
+    exit_status_ = WIFEXITED(status) ? std::optional<int>(WEXITSTATUS(status)) : std::nullopt;
+    pid_ = -1;
+    return true;
+  }
+
+  std::string address_;
+  std::string metrics_address_;
   const std::string instance_;
   const std::string log_path_;
+  const std::string ready_path_;
   pid_t pid_ = -1;
   std::optional<int> exit_status_;
 };

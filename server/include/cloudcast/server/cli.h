@@ -20,6 +20,8 @@ class ServerFlags {
   // The options the parsed flags describe, validated. Call after app.parse().
   absl::StatusOr<ServerOptions> Options() const;
   const std::string& log_level() const { return log_level_; }
+  // --ready-file: where to write the bound addresses once serving; empty: nowhere.
+  const std::string& ready_file() const { return ready_file_; }
 
  private:
   ServerOptions options_;
@@ -37,6 +39,7 @@ class ServerFlags {
   bool no_reflection_ = false;
   std::unique_ptr<cli::StageFlags> stages_;  // after the service flags in --help
   std::string log_level_ = "info";
+  std::string ready_file_;
 };
 
 }  // namespace cloudcast::server
