@@ -1,5 +1,6 @@
 // Admission: the server-wide limits and each client's share of them.
 #include "admission.h"
+#include "read_budget.h"
 
 #include <gtest/gtest.h>
 
@@ -73,6 +74,61 @@ TEST(AdmissionTest, PeerHostDropsThePort) {
   EXPECT_EQ(PeerHost("ipv4:127.0.0.1:40123"), "ipv4:127.0.0.1");
   EXPECT_EQ(PeerHost("ipv6:[::1]:40123"), "ipv6:[::1]");
   EXPECT_EQ(PeerHost("unix:/run/cloudcast.sock"), "unix:/run/cloudcast.sock");
+}
+
+// The Process reads of one client: each reserves a whole message; past the client's share the
+// next waits, in the order they came, and starts when an earlier read gives its share back.
+TEST(ReadBudgetTest, AClientsReadsBeyondItsShareWaitInTurn) {
+  ReadBudget budget(/*per_client_bytes=*/200);
+  std::vector<int> started;
+  EXPECT_EQ(budget.Reserve(1, 100, [] {}), ReadBudget::kGranted);
+  EXPECT_EQ(budget.Reserve(1, 100, [] {}), ReadBudget::kGranted);
+  const std::uint64_t third = budget.Reserve(1, 100, [&] { started.push_back(3); });
+  const std::uint64_t fourth = budget.Reserve(1, 100, [&] { started.push_back(4); });
+  EXPECT_NE(third, ReadBudget::kGranted);
+  EXPECT_NE(fourth, ReadBudget::kGranted);
+  EXPECT_EQ(budget.waiting(1), 2u);
+  // Another client is not held back by the first one's.
+  EXPECT_EQ(budget.Reserve(2, 100, [] {}), ReadBudget::kGranted);
+  budget.Release(1, 100);
+  EXPECT_EQ(started, std::vector<int>{3});
+  budget.Release(1, 100);
+  EXPECT_EQ(started, (std::vector<int>{3, 4}));
+  EXPECT_EQ(budget.reserved(1), 200u);
+  budget.Release(1, 100);
+  budget.Release(1, 100);
+  EXPECT_EQ(budget.reserved(1), 0u);
+}
+
+// A call that leaves while it waits is withdrawn; one granted meanwhile is not (its read runs).
+// Withdrawing the head of the line lets the next one in when it fits.
+TEST(ReadBudgetTest, AWithdrawnWaiterLetsTheNextOneIn) {
+  ReadBudget budget(/*per_client_bytes=*/100);
+  std::vector<int> started;
+  ASSERT_EQ(budget.Reserve(7, 60, [] {}), ReadBudget::kGranted);
+  const std::uint64_t big = budget.Reserve(7, 100, [&] { started.push_back(1); });
+  const std::uint64_t small = budget.Reserve(7, 40, [&] { started.push_back(2); });
+  ASSERT_NE(big, ReadBudget::kGranted);
+  EXPECT_TRUE(started.empty());  // the small one waits behind the big one: first come, first read
+  EXPECT_TRUE(budget.Cancel(7, big));
+  EXPECT_EQ(started, std::vector<int>{2});
+  EXPECT_FALSE(budget.Cancel(7, small));  // granted already
+  EXPECT_FALSE(budget.Cancel(7, 12345));
+  budget.Release(7, 60);
+  budget.Release(7, 40);
+  EXPECT_EQ(budget.reserved(7), 0u);
+  EXPECT_EQ(budget.waiting(7), 0u);
+}
+
+// A message larger than the share is still read when the client has nothing else reserved:
+// every client can always send one message of --max-message-bytes.
+TEST(ReadBudgetTest, AReadLargerThanTheShareIsGrantedAlone) {
+  ReadBudget budget(/*per_client_bytes=*/50);
+  EXPECT_EQ(budget.Reserve(3, 80, [] {}), ReadBudget::kGranted);
+  bool second = false;
+  ASSERT_NE(budget.Reserve(3, 10, [&] { second = true; }), ReadBudget::kGranted);
+  budget.Release(3, 80);
+  EXPECT_TRUE(second);
 }
 
 }  // namespace

@@ -159,6 +159,11 @@ ServerFlags::ServerFlags(CLI::App& app)
   app.add_option("--max-process-per-client", o.max_process_per_client,
                  "One client's share of the Process calls in flight; 0 = half of --max-streams")
       ->group("Limits");
+  app.add_option("--max-reading-mb-per-client", reading_mb_per_client_,
+                 "MB of Process requests one client may have arriving at once: each read "
+                 "reserves --max-message-bytes (gRPC holds a message whole before it is checked), "
+                 "the client's other Process calls wait to read; 0 = twice --max-message-bytes")
+      ->group("Limits");
   app.add_option("--trusted-proxy", o.trusted_proxies,
                  "A proxy in front (its IP address; repeat for several) whose x-forwarded-for "
                  "header names the client: its calls count against that address. Others' "
@@ -205,6 +210,7 @@ absl::StatusOr<ServerOptions> ServerFlags::Options() const {
   o.shed_quiet_after = ToMillis(shed_quiet_after_seconds_);
   o.refusal_delay = ToMillis(refusal_delay_seconds_);
   o.transport_memory_bytes = transport_memory_mb_ << 20;
+  o.reading_bytes_per_client = reading_mb_per_client_ << 20;
   o.shutdown_grace = ToMillis(shutdown_grace_seconds_);
   o.reflection = !no_reflection_;
   o.max_connection_age = ToMillis(max_connection_age_seconds_);

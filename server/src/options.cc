@@ -117,6 +117,11 @@ std::uint32_t ServerOptions::ResolvedMaxProcessPerClient() const {
   return max_process_per_client > 0 ? max_process_per_client : std::max(1u, max_streams / 2);
 }
 
+std::uint64_t ServerOptions::ResolvedReadingBytesPerClient() const {
+  return std::max(reading_bytes_per_client > 0 ? reading_bytes_per_client : 2 * max_message_bytes,
+                  max_message_bytes);
+}
+
 std::string ServerOptions::ResolvedInstance() const {
   if (!instance.empty()) return instance;
   char host[256] = {};

@@ -144,6 +144,7 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& optio
     builder.SetResourceQuota(quota);
   }
   builder.RegisterService(server->service_.get());
+  builder.RegisterCallbackGenericService(server->service_->process_service());
   server->server_ = builder.BuildAndStart();
   if (server->server_ == nullptr || server->port_ == 0) {
     server->Abandon();

@@ -37,7 +37,14 @@ CloudCastService::CloudCastService(const ServerOptions& options, Metrics* metric
       pool_(options.ResolvedThreads(),
             WorkerPool::Limits{options.work_memory_bytes, options.large_frame_pixels}),
       stream_services_{&options_, metrics_,  &admitter_, &runner_,
-                       &pool_,    &streams_, &call_log_, &calls_changed_} {
+                       &pool_,    &streams_, &call_log_, &calls_changed_},
+      process_reads_(options.ResolvedReadingBytesPerClient()),
+      process_service_(ProcessCallServices{
+          &admitter_, &process_reads_, options.max_message_bytes,
+          [this](ProcessCall* call, AdmittedCall admitted, const grpc::ByteBuffer& request,
+                 Arrival arrival) {
+            ServeProcess(call, std::move(admitted), request, arrival);
+          }}) {
   housekeeping_ = std::thread([this] { Housekeeping(); });
 }
 
@@ -53,16 +60,8 @@ grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* CloudCastService::S
   return new StreamReactor(stream_services_, context, *std::move(call));
 }
 
-grpc::ServerUnaryReactor* CloudCastService::Process(grpc::CallbackServerContext* context,
-                                                    const grpc::ByteBuffer* request_bytes,
-                                                    grpc::ByteBuffer* reply_bytes) {
-  grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
-  const Arrival arrival{Clock::now(), UnixNanos()};
-  auto admitted = admitter_.AdmitCall(Admission::Kind::kProcess, context);
-  if (!admitted.ok()) {
-    reactor->Finish(ToGrpc(admitted.status()));
-    return reactor;
-  }
+void CloudCastService::ServeProcess(ProcessCall* process, AdmittedCall admitted,
+                                    const grpc::ByteBuffer& request_bytes, Arrival arrival) {
   // The request and its reply live until the worker is done with them.
   struct Call {
     RequestReader reader;  // holds the raw pixels in gRPC's slices until the worker is done
@@ -73,67 +72,62 @@ grpc::ServerUnaryReactor* CloudCastService::Process(grpc::CallbackServerContext*
     FrameCharge charge;
   };
   auto call = std::make_shared<Call>();
-  call->ticket = std::move(admitted->ticket);
+  call->ticket = std::move(admitted.ticket);
   // The place goes before the status: a client that has it may call again at once.
-  auto finish = [&](grpc::Status status) {
+  auto fail = [&](grpc::Status status) {
     call->ticket.Release();
-    reactor->Finish(std::move(status));
-    return reactor;
+    process->Fail(std::move(status));
   };
-  const std::size_t bytes = request_bytes->Length();
-  grpc::ByteBuffer copy(*request_bytes);  // shares the slices
+  const std::size_t bytes = request_bytes.Length();
+  grpc::ByteBuffer copy(request_bytes);  // shares the slices
   if (!call->reader.Parse(&copy, &call->request)) {
     metrics_->process_requests_unparsable.Increment();
-    return finish(Unparsable("ProcessRequest", bytes));
+    return fail(Unparsable("ProcessRequest", bytes));
   }
   metrics_->bytes_received.Increment(static_cast<double>(bytes));
   // Resolved before the frame is weighed, as a stream's config is: a stereo pair's matcher
   // memory depends on its settings.
-  auto settings = convert::Resolve(call->request.config(), *admitted->caller.defaults);
+  auto settings = convert::Resolve(call->request.config(), *admitted.caller.defaults);
   if (!settings.ok()) {
     metrics_->FrameErrors(settings.status().code()).Increment();
-    return finish(ToGrpc(settings.status()));
+    return fail(ToGrpc(settings.status()));
   }
   call->settings = std::make_shared<const StreamSettings>(*std::move(settings));
   bool for_memory = false;
-  auto charge = admitter_.AdmitFrame(admitted->caller, call->request.frame(), bytes,
+  auto charge = admitter_.AdmitFrame(admitted.caller, call->request.frame(), bytes,
                                      call->settings->frame.stereo, &for_memory);
   if (!charge.ok()) {
     metrics_->FrameErrors(charge.status().code()).Increment();
-    if (!for_memory) return finish(ToGrpc(charge.status()));
-    RefuseLater(reactor, std::make_shared<Admission::Ticket>(std::move(call->ticket)),
+    if (!for_memory) return fail(ToGrpc(charge.status()));
+    RefuseLater(process, std::make_shared<Admission::Ticket>(std::move(call->ticket)),
                 ToGrpc(charge.status()));
-    return reactor;
+    return;
   }
   call->charge = *std::move(charge);
   ProcessStarted();
   const bool submitted = pool_.Submit(
-      [this, reactor, reply_bytes, arrival, call](std::size_t worker) {
+      [this, process, arrival, call](std::size_t worker) {
         const absl::Status status =
             runner_.Run(worker, call->request.frame(), &call->reader.pixels(),
                         call->settings->frame, arrival, &call->reply);
         call->reader.Clear();
         call->charge.Release();
-        grpc::Status result;
+        call->ticket.Release();
         if (status.ok()) {
           call->reply.set_send_time_unix_ns(UnixNanos());
           metrics_->total_seconds.Observe(Seconds(Clock::now() - arrival.time));
-          Serialize(call->reply, reply_bytes);
-          metrics_->bytes_sent.Increment(static_cast<double>(reply_bytes->Length()));
+          metrics_->bytes_sent.Increment(static_cast<double>(process->Reply(call->reply)));
         } else {
-          result = ToGrpc(status);
+          process->Fail(ToGrpc(status));
         }
-        call->ticket.Release();
-        reactor->Finish(std::move(result));
         ProcessDone();
       },
-      admitted->caller.fair_key, admitted->call_key, call->charge.pixels(),
+      admitted.caller.fair_key, admitted.call_key, call->charge.pixels(),
       call->charge.work_bytes());
   if (!submitted) {
-    finish(grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
+    fail(grpc::Status(grpc::StatusCode::UNAVAILABLE, "the server is shutting down"));
     ProcessDone();
   }
-  return reactor;
 }
 
 grpc::ServerUnaryReactor* CloudCastService::GetInfo(grpc::CallbackServerContext* context,
@@ -187,18 +181,17 @@ void CloudCastService::SetTenants(std::shared_ptr<const TenantDirectory> tenants
   admitter_.SetTenants(std::move(tenants));
 }
 
-void CloudCastService::RefuseLater(grpc::ServerUnaryReactor* reactor,
-                                   std::shared_ptr<Admission::Ticket> ticket,
+void CloudCastService::RefuseLater(ProcessCall* call, std::shared_ptr<Admission::Ticket> ticket,
                                    grpc::Status status) {
   if (options_.refusal_delay.count() == 0 || admitter_.draining()) {
     ticket->Release();
-    reactor->Finish(std::move(status));
+    call->Fail(std::move(status));
     return;
   }
   ProcessStarted();
-  delayed_.RunAt(Clock::now() + options_.refusal_delay, [this, reactor, ticket, status] {
+  delayed_.RunAt(Clock::now() + options_.refusal_delay, [this, call, ticket, status] {
     ticket->Release();
-    reactor->Finish(status);
+    call->Fail(status);
     ProcessDone();
   });
 }

@@ -36,6 +36,8 @@
 #include "frame_processor.h"
 #include "metrics.h"
 #include "open_streams.h"
+#include "process_call.h"
+#include "read_budget.h"
 #include "stream_reactor.h"
 #include "tenants.h"
 #include "worker_pool.h"
@@ -44,8 +46,10 @@ namespace cloudcast::server {
 
 // Stream and Process take raw bytes and parse them here, so that bytes which are not a valid
 // message get a status that says so (gRPC's own parsing reports a half-close, or UNIMPLEMENTED).
+// Process is a generic method, served by process_service() (ProcessCall: its read waits for the
+// client's read budget).
 using CallbackBase =
-    v1::CloudCast::WithRawCallbackMethod_Stream<v1::CloudCast::WithRawCallbackMethod_Process<
+    v1::CloudCast::WithRawCallbackMethod_Stream<v1::CloudCast::WithGenericMethod_Process<
         v1::CloudCast::WithCallbackMethod_GetInfo<v1::CloudCast::Service>>>;
 
 class CloudCastService final : public CallbackBase {
@@ -58,12 +62,12 @@ class CloudCastService final : public CallbackBase {
 
   grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* Stream(
       grpc::CallbackServerContext* context) override;
-  grpc::ServerUnaryReactor* Process(grpc::CallbackServerContext* context,
-                                    const grpc::ByteBuffer* request,
-                                    grpc::ByteBuffer* reply) override;
   grpc::ServerUnaryReactor* GetInfo(grpc::CallbackServerContext* context,
                                     const v1::GetInfoRequest* request,
                                     v1::ServerInfo* info) override;
+
+  // Serves the Process method: register it with the server beside this service.
+  grpc::CallbackGenericService* process_service() { return &process_service_; }
 
   // The bearer tokens new calls must carry (null: none needed). Calls already open keep the
   // tenant they were admitted as. Thread-safe.
@@ -97,9 +101,12 @@ class CloudCastService final : public CallbackBase {
   void ResetQueuedFramesHighWater() { streams_.ResetQueuedHighWater(); }
 
  private:
+  // A Process call whose request has arrived: parsed, weighed and queued for a worker.
+  void ServeProcess(ProcessCall* call, AdmittedCall admitted, const grpc::ByteBuffer& request,
+                    Arrival arrival);
   // Finishes a Process call refused for memory after --refusal-delay, holding the call's place
   // meanwhile (at once while the server drains).
-  void RefuseLater(grpc::ServerUnaryReactor* reactor, std::shared_ptr<Admission::Ticket> ticket,
+  void RefuseLater(ProcessCall* call, std::shared_ptr<Admission::Ticket> ticket,
                    grpc::Status status);
   void Housekeeping();
   // A Process call (or a refusal held back) begins and ends: counted for WaitForCalls.
@@ -118,6 +125,8 @@ class CloudCastService final : public CallbackBase {
   std::atomic<int> process_calls_{0};  // Process calls open, and refusals held back
   CallsChanged calls_changed_;
   const StreamServices stream_services_;
+  ReadBudget process_reads_;
+  ProcessService process_service_;
   // After admitter_ and metrics_, which its actions use: it is destroyed (and runs what is left)
   // before them.
   DelayedActions delayed_;

