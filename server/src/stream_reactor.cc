@@ -215,8 +215,13 @@ void StreamReactor::Pump(std::unique_lock<std::mutex>& lock, bool cancel) {
     // went before, may run after the client already holds the status). A stream the client
     // cancelled keeps its place until gRPC is done with it (OnDone): nobody waits for its
     // status, and a client that resets streams as fast as it opens them (rapid reset) must not
-    // have more of them alive than its share.
-    if (ops.finish && !cancelled) ticket_.Release();
+    // have more of them alive than its share. gRPC may report a reset as a failed read before
+    // it calls OnCancel, so a stream that ends having read nothing keeps its place too (a rapid
+    // reset held 10,233 streams against --max-streams 64 so), and so does one gRPC already knows
+    // is cancelled; a client that sent nothing waits for no status worth a place.
+    if (ops.finish && !cancelled && messages_read_ > 0 && !context_->IsCancelled()) {
+      ticket_.Release();
+    }
   }
   // Read the next message when there is room for it.
   if (reading_ == nullptr && lifecycle_.reading() && queue_.CanRead(settings_->delivery)) {
