@@ -207,6 +207,7 @@ absl::StatusOr<std::unique_ptr<Topology>> Topology::Create(const TopologyOptions
   };
   for (const auto& [fd, argv] : steps) {
     if (absl::Status s = RunIn(fd, argv); !s.ok()) return s;
+    if (argv[1] == "link" && argv[2] == "add") topology->links_.push_back(argv[10]);
   }
   if (options.client_namespace) {
     if (absl::Status s = RunIn(client_fd, {"ip", "link", "set", "lo", "up"}); !s.ok()) return s;
@@ -215,7 +216,19 @@ absl::StatusOr<std::unique_ptr<Topology>> Topology::Create(const TopologyOptions
     const std::string setting = "net.ipv4.tcp_congestion_control=" + options.congestion_control;
     for (int fd : {server_fd, options.client_namespace ? client_fd : -2}) {
       if (fd == -2) continue;
-      if (absl::Status s = RunIn(fd, {"sysctl", "-q", "-w", setting}); !s.ok()) return s;
+      if (absl::Status s = RunIn(fd, {"sysctl", "-q", "-w", setting}); !s.ok()) {
+        bool ok = false;
+        absl::StatusOr<std::string> allowed =
+            Capture(-1, {"sysctl", "-n", "net.ipv4.tcp_allowed_congestion_control"}, &ok);
+        return absl::FailedPreconditionError(absl::StrCat(
+            "--cc ", options.congestion_control,
+            ": the kernel lets a network namespace make only the host's allowed algorithms its "
+            "default (net.ipv4.tcp_allowed_congestion_control = ",
+            allowed.ok() ? absl::StripAsciiWhitespace(*allowed) : "?",
+            "), and the host's setting is not changed here. Use one of those, or set it per "
+            "socket: LD_PRELOAD=<bin>/libcloudcast_tcp_cc.so CLOUDCAST_TCP_CC=",
+            options.congestion_control, " (docs/links.md)"));
+      }
     }
   }
   info.server_congestion_control = ReadCongestionControl(server_fd);
@@ -226,6 +239,9 @@ absl::StatusOr<std::unique_ptr<Topology>> Topology::Create(const TopologyOptions
 }
 
 Topology::~Topology() {
+  // Now rather than when the router namespace is torn down (the kernel does that later, in the
+  // background): deleting one end of a veth pair deletes the other.
+  for (const std::string& name : links_) (void)RunIn(-1, {"ip", "link", "del", name});
   for (const std::string& name : named_) (void)RunIn(-1, {"ip", "netns", "del", name});
   if (host_netns_fd_ >= 0) close(host_netns_fd_);
 }

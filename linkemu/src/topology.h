@@ -47,6 +47,7 @@ class Topology {
   Topology() = default;
   TopologyInfo info_;
   std::vector<std::string> named_;  // namespaces to delete
+  std::vector<std::string> links_;  // the router's ends of the veth pairs
   int host_netns_fd_ = -1;
 };
 

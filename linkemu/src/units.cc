@@ -8,6 +8,7 @@
 
 #include "absl/status/status.h"
 #include "absl/strings/ascii.h"
+#include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/strip.h"
 
@@ -33,8 +34,10 @@ absl::StatusOr<double> ParseRate(absl::string_view field, absl::string_view text
     return absl::InvalidArgumentError(
         absl::StrCat(field, ": '", text, "' is not a rate (e.g. 10mbit, 500kbit, 1gbit)"));
   }
-  absl::string_view u = unit;
-  if (!absl::ConsumeSuffix(&u, "/s")) absl::ConsumeSuffix(&u, "ps");
+  // "mbit", "mbit/s", "mbps" and "m" are one unit.
+  std::string u = unit;
+  if (absl::EndsWith(u, "/s")) u.resize(u.size() - 2);
+  if (absl::EndsWith(u, "bps")) u = u.substr(0, u.size() - 3) + "bit";
   static constexpr std::pair<absl::string_view, double> kUnits[] = {
       {"", 1}, {"bit", 1}, {"kbit", 1e3}, {"mbit", 1e6}, {"gbit", 1e9}, {"k", 1e3}, {"m", 1e6}};
   for (const auto& [name, scale] : kUnits) {
