@@ -79,7 +79,7 @@ absl::StatusOr<std::vector<RateStep>> ParseSchedule(absl::string_view field, abs
   return steps;
 }
 
-std::vector<RateStep> WithOutage(std::vector<RateStep> steps, Nanos at, Nanos length) {
+std::vector<RateStep> WithOutage(const std::vector<RateStep>& steps, Nanos at, Nanos length) {
   const Nanos end = at + length;
   double after = 0;
   for (const RateStep& step : steps) {

@@ -110,7 +110,7 @@ absl::StatusOr<BuiltDirection> BuildDirection(absl::string_view name, const Dire
       absl::StatusOr<Nanos> length = ParseDuration(field + " LENGTH", parts[1]);
       if (!length.ok()) return length.status();
       if (*length <= 0) return absl::InvalidArgumentError(field + ": LENGTH must be above 0");
-      steps = WithOutage(std::move(steps), *at, *length);
+      steps = WithOutage(steps, *at, *length);
     }
     first_rate = steps.front().bits_per_second;
     if (first_rate == 0) {

@@ -30,6 +30,14 @@ std::int64_t MonotonicNs() {
 // flight (40 Mbit/s x 200 ms is 700 full-size packets).
 constexpr std::uint32_t kKernelQueuePackets = 16384;
 constexpr int kSocketBufferBytes = 16 << 20;
+constexpr unsigned kHeaderBytes = 64;
+
+// The packet's whole length from its IP header (the copy is cut to kHeaderBytes).
+int PacketLength(const unsigned char* ip, int copied) {
+  if (copied >= 4 && (ip[0] >> 4) == 4) return (ip[2] << 8) | ip[3];
+  if (copied >= 6 && (ip[0] >> 4) == 6) return 40 + ((ip[4] << 8) | ip[5]);
+  return copied;
+}
 
 }  // namespace
 
@@ -54,8 +62,8 @@ absl::StatusOr<std::unique_ptr<NfqueueRelay>> NfqueueRelay::Open(LinkDirection* 
       return absl::UnavailableError(
           absl::StrCat("nfq_create_queue ", number, ": ", std::strerror(errno)));
     }
-    // The whole packet: its length is what the link serializes (an MTU of 1500 at most here).
-    if (nfq_set_mode(side->queue, NFQNL_COPY_PACKET, 0xffff) < 0 ||
+    // Only the IP header comes up: its length field is what the link serializes.
+    if (nfq_set_mode(side->queue, NFQNL_COPY_PACKET, kHeaderBytes) < 0 ||
         nfq_set_queue_maxlen(side->queue, kKernelQueuePackets) < 0) {
       return absl::UnavailableError(
           absl::StrCat("configuring NFQUEUE ", number, ": ", std::strerror(errno)));
@@ -83,9 +91,10 @@ int NfqueueRelay::OnPacket(nfq_q_handle* queue, ::nfgenmsg*, ::nfq_data* data, v
   if (header == nullptr) return 0;
   const std::uint32_t id = ntohl(header->packet_id);
   unsigned char* payload = nullptr;
-  const int length = nfq_get_payload(data, &payload);
+  const int copied = nfq_get_payload(data, &payload);
+  const int length = copied > 0 ? PacketLength(payload, copied) : 0;
   const Nanos now = side->relay->Now();
-  const LinkDirection::Decision decision = side->model->Offer(now, std::max(length, 0));
+  const LinkDirection::Decision decision = side->model->Offer(now, length);
   if (decision.fate == LinkDirection::Fate::kQueueDrop) {
     nfq_set_verdict(queue, id, NF_DROP, 0, nullptr);
     return 0;

@@ -48,7 +48,7 @@ class RateSchedule : public Capacity {
 absl::StatusOr<std::vector<RateStep>> ParseSchedule(absl::string_view field, absl::string_view text,
                                                     double base);
 // Puts an outage (rate 0) over [at, at + length) and the rate in force at its end back after it.
-std::vector<RateStep> WithOutage(std::vector<RateStep> steps, Nanos at, Nanos length);
+std::vector<RateStep> WithOutage(const std::vector<RateStep>& steps, Nanos at, Nanos length);
 
 // Mahimahi's trace format: one integer per line, a time in milliseconds at which the link may
 // deliver one 1504-byte "packet's worth" (a delivery opportunity); several lines with the same time
