@@ -229,6 +229,87 @@ TEST_F(LinkemuSelfTest, TcpBulkTransferRunsAtTheConfiguredRateEachWay) {
   EXPECT_LT(down, 1.01 * 8e6);
 }
 
+// Downloads from the server namespace for `seconds` (its end sends as fast as TCP lets it; CUBIC
+// on both sockets) and returns the goodput in each window, in seconds since `origin`.
+std::vector<double> DownloadRates(EmulatedLink& link, Clock::time_point origin, double seconds,
+                                  const std::vector<std::pair<double, double>>& windows) {
+  const std::string ip = link.server_ip();
+  NamespaceChild source(
+      link.server_netns(),
+      [&](int ready) {
+        const int s = socket(AF_INET, SOCK_STREAM, 0);
+        const int one = 1;
+        setsockopt(s, SOL_SOCKET, SO_REUSEADDR, &one, sizeof(one));
+        sockaddr_in a = Address(ip, kPort + 3);
+        if (!UseCubic(s) || bind(s, reinterpret_cast<sockaddr*>(&a), sizeof(a)) != 0 ||
+            listen(s, 1) != 0) {
+          return -1.0;
+        }
+        SignalReady(ready);
+        const int c = accept(s, nullptr, nullptr);
+        SendFor(c, seconds);
+        close(c);
+        return 0.0;
+      },
+      seconds + 10);
+  std::vector<double> bytes(windows.size(), 0.0);
+  if (!source.WaitReady()) return bytes;
+  const int c = socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in a = Address(ip, kPort + 3);
+  if (!UseCubic(c) || connect(c, reinterpret_cast<sockaddr*>(&a), sizeof(a)) != 0) return bytes;
+  std::vector<char> buffer(1 << 16);
+  for (;;) {
+    const ssize_t n = recv(c, buffer.data(), buffer.size(), 0);
+    if (n <= 0) break;
+    const double t = Seconds(origin);
+    for (std::size_t i = 0; i < windows.size(); ++i) {
+      if (t >= windows[i].first && t <= windows[i].second) bytes[i] += static_cast<double>(n);
+    }
+  }
+  close(c);
+  source.Result();
+  for (std::size_t i = 0; i < windows.size(); ++i) {
+    bytes[i] = bytes[i] * 8 / (windows[i].second - windows[i].first);
+  }
+  return bytes;
+}
+
+// A rate schedule: 8 Mbit/s, then 2 from 4 s after the ready line; TCP's goodput follows, and
+// never exceeds the rate in force.
+TEST_F(LinkemuSelfTest, TcpFollowsARateStep) {
+  auto link =
+      Start({"--down-schedule", "0s=8mbit,4s=2mbit", "--delay", "10ms", "--down-queue", "60kB"});
+  ASSERT_NE(link, nullptr);
+  const std::vector<double> rates =
+      DownloadRates(*link, Clock::now(), 7.5, {{1.5, 3.8}, {5.0, 7.3}});
+  std::printf("rate step 8 -> 2 Mbit/s at 4 s: goodput %.2f then %.2f Mbit/s\n", rates[0] / 1e6,
+              rates[1] / 1e6);
+  EXPECT_GT(rates[0], 0.75 * 8e6);
+  EXPECT_LT(rates[0], 1.01 * 8e6);
+  EXPECT_GT(rates[1], 0.5 * 2e6);  // CUBIC halves its window at the step's queue drops
+  EXPECT_LT(rates[1], 1.05 * 2e6);
+}
+
+// A Mahimahi trace: one 1504-byte delivery opportunity every 2 ms (6.0 Mbit/s), repeating.
+TEST_F(LinkemuSelfTest, TcpFollowsAMahimahiTrace) {
+  const std::string trace = ::testing::TempDir() + "/linkemu_trace_" + std::to_string(getpid());
+  {
+    FILE* f = std::fopen(trace.c_str(), "w");
+    ASSERT_NE(f, nullptr);
+    for (int ms = 2; ms <= 100; ms += 2) std::fprintf(f, "%d\n", ms);
+    std::fclose(f);
+  }
+  auto link = Start({"--down-trace", trace, "--delay", "10ms"});
+  std::remove(trace.c_str());
+  ASSERT_NE(link, nullptr);
+  const double mean = link->ready()["down"]["trace"]["mean_rate_bps"].get<double>();
+  EXPECT_NEAR(mean, 1504 * 8 / 0.002, 1);
+  const std::vector<double> rates = DownloadRates(*link, Clock::now(), 5, {{1.5, 4.5}});
+  std::printf("Mahimahi trace of %.2f Mbit/s: goodput %.2f Mbit/s\n", mean / 1e6, rates[0] / 1e6);
+  EXPECT_GT(rates[0], 0.75 * mean);
+  EXPECT_LT(rates[0], 1.01 * mean);
+}
+
 struct Probes {
   std::vector<double> rtt_ms;  // -1: no echo
   bool in_order = true;
