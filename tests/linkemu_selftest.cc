@@ -506,6 +506,18 @@ TEST_F(LinkemuSelfTest, AnOutageHoldsPacketsThenTheLinkRecovers) {
   EXPECT_LT(Percentile(tail, 0.5), 10.0 + 30.0);
 }
 
+// A bad flag: the emulator names it on stderr and exits before making anything; Start says it
+// gave no ready line instead of hanging.
+TEST_F(LinkemuSelfTest, ABadFlagEndsTheStartClearly) {
+  EmulatedLink::Options options;
+  options.binary = std::string(CLOUDCAST_BIN_DIR) + "/cloudcast-linkemu";
+  options.flags = {"--up-delay", "20"};
+  absl::StatusOr<std::unique_ptr<EmulatedLink>> link = EmulatedLink::Start(options);
+  ASSERT_FALSE(link.ok());
+  EXPECT_NE(std::string(link.status().message()).find("no ready line"), std::string::npos)
+      << link.status();
+}
+
 // Two emulators at once get their own namespaces and addresses and both carry traffic (the
 // second with its clients in a namespace too, both ends set to reno); when they stop, nothing of
 // theirs is left in the host's namespace or in /run/netns.
