@@ -21,7 +21,7 @@
 #                       if any frame is lost or any replica answered none
 #   -h, --help          this text
 #
-# Needs podman, podman-compose, runc and debootstrap (scripts/setup installs them).
+# Needs podman, podman-compose, runc and debootstrap (scripts/setup --long installs them).
 set -euo pipefail
 repo=$(cd "$(dirname "$0")/.." && pwd)
 here=$repo/docker
@@ -58,7 +58,7 @@ done
 [ "$duration" -le 600 ] || { echo "loadtest.sh: --duration is at most 600 s" >&2; exit 2; }
 for c in podman podman-compose python3 curl debootstrap; do
   if ! command -v "$c" >/dev/null; then
-    echo "loadtest.sh: $c is not installed (scripts/setup installs it)" >&2
+    echo "loadtest.sh: $c is not installed (scripts/setup --long installs it)" >&2
     [ "$ci" = 1 ] && { echo "loadtest.sh: SKIPPED: the containerised test cannot run here" >&2; exit 77; }
     exit 1
   fi

@@ -197,7 +197,7 @@ int CountColour(const cv::Mat& image, cv::Vec3b bgr) {
 TEST_F(LoadCliTest, HtmlReportRendersItsChartsInHeadlessChromium) {
   const std::string chromium = "/usr/bin/chromium";
   if (!std::filesystem::exists(chromium)) {
-    GTEST_SKIP() << "Debian's chromium is not installed (scripts/setup installs it): the HTML "
+    GTEST_SKIP() << "Debian's chromium is not installed (scripts/setup --long installs it, as ./scripts/test --all does): the HTML "
                     "page cannot be rendered here";
   }
   const RunResult r = Run({"--server", null_->address(), "--synthetic", "160x120", "--streams", "4",
