@@ -30,6 +30,8 @@
 #include "cloudcast/stereo/matcher.h"
 #include "cloudcast/video/decoder.h"
 #include "cloudcast/video/encoder.h"
+#include "cloudcast/video/rvl.h"
+#include "cloudcast/core/frame_codec.h"
 #include "line_plot.h"
 #include "stats.h"
 
@@ -72,6 +74,8 @@ struct Dataset {
   std::string name;
   std::vector<Pair> pairs;
   std::vector<OwnedColor> colour;  // the left colour images, in order
+  // Disparity maps a robot would send, for the lossless depth codecs: each with its kind.
+  std::vector<std::pair<std::string, OwnedDisparity>> disparity;
 };
 
 Dataset Synthetic(int frames) {
@@ -97,6 +101,17 @@ Dataset Synthetic(int frames) {
       const double v = src[i] * kSyntheticStereoBaseline;
       p.truth.pixels[i] = std::isfinite(v) && v > 0.5 && v < 255 ? std::lround(v) : 0;
     }
+    // The frame's own disparity (baseline 1) in 1/16 px, as a matcher or a depth camera's
+    // driver would send it: 0 where nothing is seen.
+    OwnedDisparity u16{std::vector<std::uint8_t>(left.width * left.height * 2), left.width,
+                       left.height, DisparityEncoding::kU16};
+    for (std::size_t i = 0; i < std::size_t{left.width} * left.height; ++i) {
+      const double v = src[i] * 16;
+      const std::uint16_t q =
+          std::isfinite(v) && v > 0 ? static_cast<std::uint16_t>(std::min(65535.0, std::round(v))) : 0;
+      std::memcpy(&u16.pixels[2 * i], &q, 2);
+    }
+    d.disparity.emplace_back("u16 exact (1/16 px)", std::move(u16));
     d.pairs.push_back(std::move(p));
     d.colour.push_back(std::move(lc));
   }
@@ -112,6 +127,7 @@ Dataset Tsukuba(const std::string& dir, int frames) {
     Pair p;
     p.left = Check(stereo::ToGrey(f.left.view()), "grey");
     p.right = Check(stereo::ToGrey(f.right.view()), "grey");
+    d.disparity.emplace_back("u8 truth", f.truth);
     p.truth = std::move(f.truth);
     d.pairs.push_back(std::move(p));
     d.colour.push_back(std::move(f.left));
@@ -429,6 +445,73 @@ ColourRow RunJpeg(const Dataset& d, int quality, int fps) {
   return row;
 }
 
+// --- lossless depth / disparity -------------------------------------------------------------------
+
+struct DepthRow {
+  std::string dataset, kind, codec;
+  double bytes_per_frame = 0, raw_bytes = 0, encode_ms = 0, decode_ms = 0;
+};
+
+// Today's uplink (row deltas + zstd level 1, core/frame_codec) against RVL on the same maps, each
+// decoded and compared with the original.
+std::vector<DepthRow> RunDepth(const std::string& dataset, const std::string& kind,
+                               const std::vector<const OwnedDisparity*>& maps, int rounds) {
+  PlaneCompressor zc;
+  PlaneDecompressor zd;
+  std::vector<DepthRow> rows(2);
+  std::vector<double> ms[2][2];
+  double bytes[2] = {0, 0};
+  std::string buf;
+  std::vector<std::uint16_t> rvl_out;
+  for (int r = 0; r < rounds; ++r) {
+    for (const OwnedDisparity* m : maps) {
+      const DisparityView v = m->view();
+      const std::size_t n = std::size_t{v.width} * v.height;
+      // zstd, as the uplink sends it.
+      double t0 = ThreadCpuMs();
+      Check(zc.Compress(v, Predictor::kUp, kDefaultCompressionLevel, "disparity", &buf), "zstd");
+      ms[0][0].push_back(ThreadCpuMs() - t0);
+      if (r == 0) bytes[0] += buf.size();
+      const std::uint8_t* pixels = nullptr;
+      t0 = ThreadCpuMs();
+      Check(zd.Decompress(buf, LayoutOf(v), Predictor::kUp, "disparity", "map", &pixels), "zstd");
+      ms[0][1].push_back(ThreadCpuMs() - t0);
+      if (std::memcmp(pixels, m->pixels.data(), m->pixels.size()) != 0) Die("zstd not lossless");
+      // RVL.
+      t0 = ThreadCpuMs();
+      if (v.encoding == DisparityEncoding::kU8) {
+        video::EncodeRvl(m->pixels.data(), v.width, v.height, &buf);
+      } else {
+        video::EncodeRvl(reinterpret_cast<const std::uint16_t*>(m->pixels.data()), v.width,
+                         v.height, &buf);
+      }
+      ms[1][0].push_back(ThreadCpuMs() - t0);
+      if (r == 0) bytes[1] += buf.size();
+      const std::uint32_t max = v.encoding == DisparityEncoding::kU8 ? 255 : 65535;
+      t0 = ThreadCpuMs();
+      Check(video::DecodeRvl(buf, v.width, v.height, max, Limits{}, "disparity", &rvl_out), "rvl");
+      ms[1][1].push_back(ThreadCpuMs() - t0);
+      for (std::size_t i = 0; i < n; ++i) {
+        const std::uint16_t want = v.encoding == DisparityEncoding::kU8
+                                       ? m->pixels[i]
+                                       : reinterpret_cast<const std::uint16_t*>(m->pixels.data())[i];
+        if (rvl_out[i] != want) Die("RVL not lossless");
+      }
+    }
+  }
+  const char* names[2] = {"row deltas + zstd 1 (today)", "RVL"};
+  for (int c = 0; c < 2; ++c) {
+    rows[c].dataset = dataset;
+    rows[c].kind = kind;
+    rows[c].codec = names[c];
+    rows[c].bytes_per_frame = bytes[c] / maps.size();
+    rows[c].raw_bytes = static_cast<double>(maps[0]->pixels.size());
+    rows[c].encode_ms = Median(ms[c][0]);
+    rows[c].decode_ms = Median(ms[c][1]);
+  }
+  return rows;
+}
+
 template <typename T>
 std::vector<T> ParseList(const std::string& s, const char* flag) {
   std::vector<T> out;
@@ -462,7 +545,8 @@ int Main(int argc, char** argv) {
   std::string colour_presets = "ultrafast,veryfast", colour_crfs = "14,18,22,26,30,34",
               jpeg_qualities = "50,70,80,90,95";
   int synthetic_frames = 30, tsukuba_frames = 0, fps = 30, keyint = 60, interleaved_refs = 2;
-  bool no_sgbm = false, no_colour = false, no_stereo = false;
+  bool no_sgbm = false, no_colour = false, no_stereo = false, no_depth = false;
+  int depth_rounds = 5;
   app.add_option("--data", data_dir, "New Tsukuba folder (default: $CLOUDCAST_DATA or the build's)");
   app.add_option("--datasets", datasets, "synthetic, tsukuba")->capture_default_str();
   app.add_option("--synthetic-frames", synthetic_frames, "consecutive synthetic pairs")
@@ -490,6 +574,10 @@ int Main(int argc, char** argv) {
   app.add_flag("--no-sgbm", no_sgbm, "score our matcher only (StereoSGBM takes ~4x its time)");
   app.add_flag("--no-colour", no_colour, "skip the colour table");
   app.add_flag("--no-stereo", no_stereo, "skip the stereo table");
+  app.add_flag("--no-depth", no_depth, "skip the lossless depth/disparity table (zstd against RVL)");
+  app.add_option("--depth-rounds", depth_rounds, "timed rounds of the depth table")
+      ->check(CLI::Range(1, 1000))
+      ->capture_default_str();
   app.add_option("--json", json_path, "write every row as JSON");
   app.add_option("--plots", plots_dir, "write PNG charts into this folder");
   CLI11_PARSE(app, argc, argv);
@@ -660,6 +748,45 @@ int Main(int argc, char** argv) {
       for (const ColourRow* r : rs) ok &= r->mbps <= 3.0 && r->psnr >= 38.0;
       if (ok) std::printf("  %s\n", setting.c_str());
     }
+  }
+
+  if (!no_depth) {
+    // Our matcher's output on New Tsukuba too: what a stereo robot that matches on board sends
+    // (1/16 px, holes where the checks refused a match).
+    std::vector<DepthRow> depth_rows;
+    for (const Dataset& d : sets) {
+      std::map<std::string, std::vector<const OwnedDisparity*>> kinds;
+      for (const auto& [kind, map] : d.disparity) kinds[kind].push_back(&map);
+      std::vector<OwnedDisparity> matched;
+      if (d.name == "tsukuba") {
+        for (const Pair& p : d.pairs) {
+          DisparityMap16 out;
+          Check(m.ours->Compute(p.left.view(), p.right.view(), &out), "ours");
+          OwnedDisparity o{std::vector<std::uint8_t>(out.values.size() * 2), out.width, out.height,
+                           DisparityEncoding::kU16};
+          std::memcpy(o.pixels.data(), out.values.data(), o.pixels.size());
+          matched.push_back(std::move(o));
+        }
+        for (const OwnedDisparity& o : matched) kinds["u16 our matcher (1/16 px)"].push_back(&o);
+      }
+      for (const auto& [kind, maps] : kinds) {
+        for (DepthRow& r : RunDepth(d.name, kind, maps, depth_rounds)) depth_rows.push_back(r);
+      }
+    }
+    std::printf("\nlossless disparity: today's row deltas + zstd level 1 against RVL (thread CPU ms, "
+                "median over %d rounds x frames)\n", depth_rounds);
+    std::printf("%-10s %-26s %-28s %9s %7s %8s %8s\n", "data", "maps", "codec", "KB/frame",
+                "% raw", "enc ms", "dec ms");
+    nlohmann::json rows = nlohmann::json::array();
+    for (const DepthRow& r : depth_rows) {
+      std::printf("%-10s %-26s %-28s %9.1f %6.1f%% %8.3f %8.3f\n", r.dataset.c_str(),
+                  r.kind.c_str(), r.codec.c_str(), r.bytes_per_frame / 1000,
+                  100 * r.bytes_per_frame / r.raw_bytes, r.encode_ms, r.decode_ms);
+      rows.push_back({{"dataset", r.dataset}, {"maps", r.kind}, {"codec", r.codec},
+                      {"bytes_per_frame", r.bytes_per_frame}, {"raw_bytes", r.raw_bytes},
+                      {"encode_ms", r.encode_ms}, {"decode_ms", r.decode_ms}});
+    }
+    out["depth"] = rows;
   }
 
   if (!plots_dir.empty()) {

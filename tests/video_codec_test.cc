@@ -15,6 +15,7 @@
 #include "cloudcast/video/decoder.h"
 #include "cloudcast/video/encoder.h"
 #include "cloudcast/video/h264_bitstream.h"
+#include "cloudcast/video/rvl.h"
 
 namespace cloudcast::video {
 namespace {
@@ -510,6 +511,65 @@ TEST_F(VideoBadInput, GapRequiresAKeyframe) {
   for (int i = 0; i < 3; ++i) ASSERT_TRUE(d.Decode(units_[i].bytes, "au", &out).ok());
   d.RequireKeyframe();  // frame 3 was lost
   ExpectRecoversAtIdr(d);
+}
+
+// --- RVL ------------------------------------------------------------------------------------------
+
+TEST(Rvl, RoundTripsDepthAndDisparity) {
+  // 16-bit: synthetic disparity in 1/16 px (zeros where nothing is seen), and extremes.
+  SyntheticOptions o;
+  o.width = 160;
+  o.height = 120;
+  o.disparity_encoding = DisparityEncoding::kU16;
+  auto f = SyntheticScene::Default().Render(o);
+  ASSERT_TRUE(f.ok());
+  std::vector<std::uint16_t> u16(160 * 120);
+  std::memcpy(u16.data(), f->disparity.data(), u16.size() * 2);
+  for (int i = 0; i < 40; ++i) u16[i * 7] = 0;  // holes
+  u16[1] = 65535;
+  u16[2] = 1;
+  std::string bytes;
+  EncodeRvl(u16.data(), 160, 120, &bytes);
+  std::vector<std::uint16_t> back;
+  ASSERT_TRUE(DecodeRvl(bytes, 160, 120, 65535, Limits{}, "d", &back).ok());
+  EXPECT_EQ(back, u16);
+  // 8-bit, all zeros, all one value.
+  std::vector<std::uint8_t> u8(64 * 8, 0);
+  EncodeRvl(u8.data(), 64, 8, &bytes);
+  ASSERT_TRUE(DecodeRvl(bytes, 64, 8, 255, Limits{}, "d", &back).ok());
+  EXPECT_EQ(back, std::vector<std::uint16_t>(64 * 8, 0));
+  u8.assign(64 * 8, 200);
+  EncodeRvl(u8.data(), 64, 8, &bytes);
+  ASSERT_TRUE(DecodeRvl(bytes, 64, 8, 255, Limits{}, "d", &back).ok());
+  EXPECT_EQ(back, std::vector<std::uint16_t>(64 * 8, 200));
+  // A zero delta is one 4-bit group: half a byte a pixel, plus the header and the two runs.
+  EXPECT_LE(bytes.size(), 12u + 64 * 8 / 2 + 8);
+}
+
+TEST(Rvl, MalformedBytesNameTheField) {
+  std::vector<std::uint16_t> img(32 * 4);
+  for (std::size_t i = 0; i < img.size(); ++i) img[i] = static_cast<std::uint16_t>(i % 5 ? 300 + i : 0);
+  std::string bytes;
+  EncodeRvl(img.data(), 32, 4, &bytes);
+  std::vector<std::uint16_t> back;
+  auto err = [&](std::string_view b, std::uint32_t w, std::uint32_t h, std::uint32_t max) {
+    return std::string(DecodeRvl(b, w, h, max, Limits{}, "frame.depth.rvl", &back).message());
+  };
+  EXPECT_THAT(err("PNG....", 32, 4, 65535), HasSubstr("frame.depth.rvl is not RVL"));
+  EXPECT_THAT(err(bytes, 16, 8, 65535), HasSubstr("holds a 32x4 image; the frame is 16x8"));
+  EXPECT_THAT(err(bytes.substr(0, bytes.size() - 4), 32, 4, 65535), HasSubstr("ends at pixel"));
+  EXPECT_THAT(err(bytes.substr(0, bytes.size() - 1), 32, 4, 65535), HasSubstr("whole 32-bit words"));
+  EXPECT_THAT(err(bytes, 32, 4, 255), HasSubstr("over the image's sample range"));
+  // A first run of zeros longer than the image.
+  std::vector<std::uint16_t> zeros(32 * 8, 0);
+  EncodeRvl(zeros.data(), 32, 8, &bytes);
+  bytes.replace(4, 8, std::string("\x20\0\0\0\x04\0\0\0", 8));  // the header now says 32x4
+  EXPECT_THAT(err(bytes, 32, 4, 65535), HasSubstr("a run of zeros past the image's end"));
+  // Over the limits before anything grows.
+  Limits small;
+  small.max_side = 16;
+  EXPECT_EQ(DecodeRvl(bytes, 32, 4, 65535, small, "d", &back).code(),
+            absl::StatusCode::kResourceExhausted);
 }
 
 }  // namespace
