@@ -20,6 +20,7 @@
 #include "cloudcast/io/cloud_io.h"
 #include "cloudcast/proto/convert.h"
 #include "cloudcast/video/encoder.h"
+#include "cloudcast/video/rvl.h"
 #include "cloudcast/v1/cloudcast.pb.h"
 
 using namespace cloudcast;
@@ -586,6 +587,13 @@ void VideoSeeds() {
   Write("video_decode", "colour444_bgr", stream(video::PictureKind::kColour444, 3, -1, 0, 1));
   Write("video_decode", "grey_starts_without_idr", stream(video::PictureKind::kGrey, 4, 2, 1, 0));
   Write("video_decode", "grey_gap_then_idr", stream(video::PictureKind::kGrey, 5, 3, 0, 2));
+  // RVL images (flag 4; 12: 8-bit): the 16 x 12 disparity maps the other seeds use.
+  std::string rvl;
+  const cv::Mat u8 = DisparityU8(), u16 = DisparityU16();
+  video::EncodeRvl(u8.ptr<std::uint8_t>(), kW, kH, &rvl);
+  Write("video_decode", "rvl_u8", std::string(1, '\x0c') + rvl);
+  video::EncodeRvl(u16.ptr<std::uint16_t>(), kW, kH, &rvl);
+  Write("video_decode", "rvl_u16", std::string(1, '\x04') + rvl);
 }
 
 int main(int argc, char** argv) {

@@ -1,7 +1,8 @@
 // The server's video frame path: access units of one stream through one video::Decoder (our
 // Annex B / SPS parser, the size check and charge, then libavcodec's H.264 decoder), as the server
-// keeps one per stream and role. The input is a stream:
-//   byte 0       bit 0: output BGR8 (else mono8); bit 1: a gap (RequireKeyframe) before unit 2
+// keeps one per stream and role; and the RVL depth decoder. The input is a stream:
+//   byte 0       bit 0: output BGR8 (else mono8); bit 1: a gap (RequireKeyframe) before unit 2;
+//                bit 2: the rest is one RVL image instead (bit 3: 8-bit, else 16-bit samples)
 //   then units   each a 2-byte big-endian length and that many bytes
 // The limits are small (256 a side) so that each run stays fast; what they bound is the check.
 #include <cstddef>
@@ -11,11 +12,34 @@
 #include <string_view>
 
 #include "cloudcast/video/decoder.h"
+#include "cloudcast/video/rvl.h"
+#include <vector>
 
 using namespace cloudcast;
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   if (size < 1) return 0;
+  if (data[0] & 4) {
+    // The size the frame would declare: taken from the header itself, so that decoding runs.
+    const std::string_view bytes(reinterpret_cast<const char*>(data + 1), size - 1);
+    std::uint32_t w = 0, h = 0;
+    if (bytes.size() >= 12) {
+      for (int i = 0; i < 4; ++i) w |= std::uint32_t{static_cast<std::uint8_t>(bytes[4 + i])} << 8 * i;
+      for (int i = 0; i < 4; ++i) h |= std::uint32_t{static_cast<std::uint8_t>(bytes[8 + i])} << 8 * i;
+    }
+    Limits limits;
+    limits.max_side = 256;
+    limits.max_pixels = 256 * 256;
+    const std::uint32_t max = (data[0] & 8) ? 255 : 65535;
+    std::vector<std::uint16_t> out;
+    if (video::DecodeRvl(bytes, w, h, max, limits, "rvl", &out).ok()) {
+      for (std::uint16_t v : out) {
+        if (v > max) std::abort();
+      }
+      if (out.size() != std::size_t{w} * h) std::abort();
+    }
+    return 0;
+  }
   video::Decoder::Options options;
   options.limits.max_side = 256;
   options.limits.max_pixels = 256 * 256;
