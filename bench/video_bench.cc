@@ -152,9 +152,10 @@ struct Rate {
   double mbps = 0;      // > 0: this total bitrate (split over the streams)
   bool lossless = false;
   std::string Label() const {
-    char b[32];
+    char b[96];
     if (lossless) return "qp 0 (lossless)";
-    if (crf > 0) std::snprintf(b, sizeof b, "crf %g", crf);
+    if (crf > 0 && mbps > 0) std::snprintf(b, sizeof b, "crf %g <= %g Mb/s", crf, mbps);
+    else if (crf > 0) std::snprintf(b, sizeof b, "crf %g", crf);
     else std::snprintf(b, sizeof b, "%g Mbit/s", mbps);
     return b;
   }
@@ -244,8 +245,8 @@ EncoderOptions StreamOptions(PictureKind kind, std::uint32_t w, std::uint32_t h,
     o.qp = 0;
     o.bitrate_bps = 0;
   } else if (rate.crf > 0) {
-    o.crf = rate.crf;
-    o.bitrate_bps = 0;
+    o.crf = rate.crf;  // capped by the bitrate's one-frame VBV when one is given
+    o.bitrate_bps = static_cast<std::int64_t>(rate.mbps * 1e6 / streams);
   } else {
     o.bitrate_bps = static_cast<std::int64_t>(rate.mbps * 1e6 / streams);
   }
@@ -254,8 +255,8 @@ EncoderOptions StreamOptions(PictureKind kind, std::uint32_t w, std::uint32_t h,
 
 // Encodes and decodes the dataset's pairs in `layout`, then scores the decoded pairs.
 StereoRow RunStereo(const Dataset& d, Layout layout, const std::string& preset, const Rate& rate,
-                    int fps, int keyint, int interleaved_refs, Matchers& m, bool with_sgbm,
-                    const Scores& lossless) {
+                    int fps, int keyint, int interleaved_refs, const std::string& x264_params, Matchers& m,
+                    bool with_sgbm, const Scores& lossless) {
   const std::uint32_t w = d.pairs[0].left.width, h = d.pairs[0].left.height;
   StereoRow row;
   row.dataset = d.name;
@@ -273,6 +274,7 @@ StereoRow RunStereo(const Dataset& d, Layout layout, const std::string& preset, 
             ? StreamOptions(PictureKind::kGrey, w, h, preset, rate, fps, 1, 2, keyint)
             : StreamOptions(PictureKind::kGrey, w, h, preset, rate, fps, 2, 1, keyint);
     if (layout == Layout::kInterleaved) o.refs = interleaved_refs;
+    o.x264_params = x264_params;
     enc.push_back(Check(Encoder::Make(o), "encoder"));
     dec.push_back(std::make_unique<Decoder>(Decoder::Options{}));
   }
@@ -368,17 +370,13 @@ struct ColourRow {
   double bytes_per_frame = 0, mbps = 0, psnr = 0, ssim = 0, encode_ms = 0, decode_ms = 0;
 };
 
-ColourRow RunColourVideo(const Dataset& d, PictureKind kind, const std::string& preset, double crf,
-                         int fps, int keyint) {
+ColourRow RunColourVideo(const Dataset& d, PictureKind kind, const std::string& preset,
+                         const Rate& rate, int fps, int keyint) {
   ColourRow row;
   row.dataset = d.name;
   row.codec = std::string("H.264 ") + (kind == PictureKind::kColour444 ? "4:4:4 " : "4:2:0 ") +
               preset;
-  char b[32];
-  std::snprintf(b, sizeof b, "crf %g", crf);
-  row.setting = b;
-  Rate rate;
-  rate.crf = crf;
+  row.setting = rate.Label();
   auto enc = Check(Encoder::Make(StreamOptions(kind, d.colour[0].width, d.colour[0].height, preset,
                                                rate, fps, 1, 1, keyint)),
                    "encoder");
@@ -542,10 +540,13 @@ int Main(int argc, char** argv) {
   std::string datasets = "synthetic,tsukuba", layouts = "independent,interleaved,side-by-side";
   std::string presets = "ultrafast,superfast,veryfast,faster", crfs = "10,14,18,22,26",
               bitrates = "8";
-  std::string colour_presets = "ultrafast,veryfast", colour_crfs = "14,18,22,26,30,34",
+  std::string colour_presets = "ultrafast,superfast,veryfast", colour_crfs = "14,18,22,26,30,34",
+              colour_bitrates = "3",
               jpeg_qualities = "50,70,80,90,95";
   int synthetic_frames = 30, tsukuba_frames = 0, fps = 30, keyint = 60, interleaved_refs = 2;
   bool no_sgbm = false, no_colour = false, no_stereo = false, no_depth = false;
+  std::string stereo_x264, capped, colour_capped;
+  bool lossless_every_preset = false;
   int depth_rounds = 5;
   app.add_option("--data", data_dir, "New Tsukuba folder (default: $CLOUDCAST_DATA or the build's)");
   app.add_option("--datasets", datasets, "synthetic, tsukuba")->capture_default_str();
@@ -560,8 +561,16 @@ int Main(int argc, char** argv) {
   app.add_option("--crfs", crfs, "CRF values for the stereo table")->capture_default_str();
   app.add_option("--bitrates", bitrates, "total Mbit/s values (bitrate mode, one-frame VBV)")
       ->capture_default_str();
+  app.add_option("--capped-crfs", capped,
+                 "CRF:MBIT_S pairs: constant quality capped by a total bitrate (one-frame VBV), "
+                 "e.g. 2:8,4:8");
+  app.add_flag("--lossless-every-preset", lossless_every_preset,
+               "a qp 0 row for every preset (default: the first preset only)");
   app.add_option("--colour-presets", colour_presets)->capture_default_str();
   app.add_option("--colour-crfs", colour_crfs)->capture_default_str();
+  app.add_option("--colour-capped-crfs", colour_capped, "CRF:MBIT_S pairs for the colour table");
+  app.add_option("--colour-bitrates", colour_bitrates, "Mbit/s values (bitrate mode, one-frame VBV)")
+      ->capture_default_str();
   app.add_option("--jpeg-qualities", jpeg_qualities)->capture_default_str();
   app.add_option("--fps", fps, "frames (pairs) per second the Mbit/s are given at")
       ->check(CLI::Range(1, 240))
@@ -571,6 +580,8 @@ int Main(int argc, char** argv) {
   app.add_option("--interleaved-refs", interleaved_refs, "reference frames of the L,R stream")
       ->check(CLI::Range(1, 16))
       ->capture_default_str();
+  app.add_option("--stereo-x264-params", stereo_x264,
+                 "more x264 options for the stereo streams, e.g. aq-mode=3:aq-strength=1.5");
   app.add_flag("--no-sgbm", no_sgbm, "score our matcher only (StereoSGBM takes ~4x its time)");
   app.add_flag("--no-colour", no_colour, "skip the colour table");
   app.add_flag("--no-stereo", no_stereo, "skip the stereo table");
@@ -592,6 +603,19 @@ int Main(int argc, char** argv) {
   std::vector<Rate> rates;
   for (double c : ParseList<double>(crfs, "--crfs")) rates.push_back(Rate{c, 0, false});
   for (double b : ParseList<double>(bitrates, "--bitrates")) rates.push_back(Rate{0, b, false});
+  auto parse_capped = [](const std::string& list, const char* flag) {
+    std::vector<Rate> out;
+    for (const std::string& c : Words(list)) {
+      Rate r;
+      if (std::sscanf(c.c_str(), "%lf:%lf", &r.crf, &r.mbps) != 2 || r.crf <= 0 || r.mbps <= 0) {
+        Die(std::string(flag) + ": '" + c + "' is not CRF:MBIT_S (e.g. 4:8)");
+      }
+      out.push_back(r);
+    }
+    return out;
+  };
+  for (const Rate& r : parse_capped(capped, "--capped-crfs")) rates.push_back(r);
+  const std::vector<Rate> colour_capped_rates = parse_capped(colour_capped, "--colour-capped-crfs");
   const std::vector<std::string> preset_list = Words(presets);
   for (const std::string& p : preset_list) {  // a wrong preset fails before any work
     EncoderOptions o;
@@ -614,13 +638,14 @@ int Main(int argc, char** argv) {
   m.sgbm = Check(stereo::MakeMatcher(sgbm_params), "matcher");
   std::string load;
   if (std::ifstream in("/proc/loadavg"); in) std::getline(in, load);
-  std::printf("cloudcast-video-bench: x264 via libavcodec, one thread, tune zerolatency, keyint %d, "
-              "%d fps; load average %s\n",
-              keyint, fps, load.c_str());
+  std::printf("cloudcast-video-bench: x264 via libavcodec, one thread, tune zerolatency (stereo "
+              "streams: '%s'), keyint %d, %d fps; load average %s\n",
+              stereo_x264.c_str(), keyint, fps, load.c_str());
   nlohmann::json out;
   out["load_average"] = load;
   out["fps"] = fps;
   out["keyint"] = keyint;
+  out["stereo_x264_params"] = stereo_x264;
 
   std::vector<StereoRow> stereo_rows;
   if (!no_stereo) {
@@ -644,9 +669,9 @@ int Main(int argc, char** argv) {
         with_lossless.insert(with_lossless.end(), rates.begin(), rates.end());
         for (const std::string& preset : preset_list) {
           for (const Rate& rate : with_lossless) {
-            if (rate.lossless && preset != preset_list.front()) continue;
-            StereoRow r = RunStereo(d, layout, preset, rate, fps, keyint, interleaved_refs, m,
-                                    !no_sgbm, lossless);
+            if (rate.lossless && preset != preset_list.front() && !lossless_every_preset) continue;
+            StereoRow r = RunStereo(d, layout, preset, rate, fps, keyint, interleaved_refs,
+                                    stereo_x264, m, !no_sgbm, lossless);
             std::printf("%-16s %-10s %-16s %9.1f %8.2f %7.2f%% %7.2f%% %+8.2f %+8.2f %7.2f%% "
                         "%7.2f%% %7.2f %7.2f\n",
                         Name(layout), preset.c_str(), rate.Label().c_str(),
@@ -681,23 +706,38 @@ int Main(int argc, char** argv) {
                       {"decode_ms_per_image", r.decode_ms}});
     }
     out["stereo"] = rows;
-    // The target: <= 8 Mbit/s with bad-2.0 within +1.0 point of lossless (ours, both truths), on
-    // every data set; the cheapest such setting per layout and preset.
-    std::printf("\nstereo settings meeting <= 8 Mbit/s and ours within +1.0 point of lossless "
-                "(GT and GT+1) on every data set:\n");
+    // The target: <= 8 Mbit/s with our matcher's bad-2.0 within +1.0 point of lossless, against
+    // each data set's own truth: the synthetic scene's exact one (GT), New Tsukuba's GT + 1 (its
+    // stored truth reads 1 px low: docs/stereo.md). Per data set, then the settings meeting it
+    // on every data set.
+    auto delta = [](const StereoRow& r) {
+      return r.dataset == "tsukuba" ? r.d_ours_gt1 : r.d_ours_gt;
+    };
     std::map<std::string, std::vector<const StereoRow*>> by_setting;
     for (const StereoRow& r : stereo_rows) {
-      if (r.rate.lossless) continue;
+      if (r.rate.lossless && r.mbps > 8.0) continue;
       by_setting[std::string(Key(r.layout)) + " " + r.preset + " " + r.rate.Label()].push_back(&r);
     }
     nlohmann::json meets = nlohmann::json::array();
+    for (const Dataset& d : sets) {
+      std::printf("\nstereo, %s: settings at <= 8 Mbit/s with ours within +1.0 point of lossless "
+                  "(%s):\n", d.name.c_str(), d.name == "tsukuba" ? "GT+1" : "GT");
+      for (const StereoRow& r : stereo_rows) {
+        if (r.dataset != d.name || r.mbps > 8.0 || delta(r) > 1.0) continue;
+        std::printf("  %-16s %-10s %-20s %6.2f Mbit/s  %+.2f points  encode %.2f ms  decode "
+                    "%.2f ms\n",
+                    Name(r.layout), r.preset.c_str(), r.rate.Label().c_str(), r.mbps, delta(r),
+                    r.encode_ms, r.decode_ms);
+      }
+    }
+    std::printf("\nstereo: settings meeting it on every data set:\n");
     for (const auto& [setting, rs] : by_setting) {
       bool ok = rs.size() == sets.size();
       double worst_mbps = 0, worst_delta = -1e9, worst_enc = 0;
       for (const StereoRow* r : rs) {
-        ok &= r->mbps <= 8.0 && r->d_ours_gt <= 1.0 && r->d_ours_gt1 <= 1.0;
+        ok &= r->mbps <= 8.0 && delta(*r) <= 1.0;
         worst_mbps = std::max(worst_mbps, r->mbps);
-        worst_delta = std::max({worst_delta, r->d_ours_gt, r->d_ours_gt1});
+        worst_delta = std::max(worst_delta, delta(*r));
         worst_enc = std::max(worst_enc, r->encode_ms);
       }
       if (!ok) continue;
@@ -715,10 +755,10 @@ int Main(int argc, char** argv) {
       std::printf("\ncolour, %s: %zu frames of %ux%u (BGR; PSNR over the three channels, SSIM the "
                   "channels' mean)\n",
                   d.name.c_str(), d.colour.size(), d.colour[0].width, d.colour[0].height);
-      std::printf("%-24s %-8s %9s %8s %7s %7s %7s %7s\n", "codec", "setting", "KB/frame",
+      std::printf("%-24s %-12s %9s %8s %7s %7s %7s %7s\n", "codec", "setting", "KB/frame",
                   "Mbit/s", "PSNR", "SSIM", "enc ms", "dec ms");
       auto print = [&](const ColourRow& r) {
-        std::printf("%-24s %-8s %9.1f %8.2f %7.2f %7.4f %7.2f %7.2f\n", r.codec.c_str(),
+        std::printf("%-24s %-12s %9.1f %8.2f %7.2f %7.4f %7.2f %7.2f\n", r.codec.c_str(),
                     r.setting.c_str(), r.bytes_per_frame / 1000, r.mbps, r.psnr, r.ssim,
                     r.encode_ms, r.decode_ms);
         std::fflush(stdout);
@@ -727,7 +767,13 @@ int Main(int argc, char** argv) {
       for (PictureKind kind : {PictureKind::kColour, PictureKind::kColour444}) {
         for (const std::string& preset : Words(colour_presets)) {
           for (double crf : ParseList<double>(colour_crfs, "--colour-crfs")) {
-            print(RunColourVideo(d, kind, preset, crf, fps, keyint));
+            print(RunColourVideo(d, kind, preset, Rate{crf, 0, false}, fps, keyint));
+          }
+          for (double mbps : ParseList<double>(colour_bitrates, "--colour-bitrates")) {
+            print(RunColourVideo(d, kind, preset, Rate{0, mbps, false}, fps, keyint));
+          }
+          for (const Rate& r : colour_capped_rates) {
+            print(RunColourVideo(d, kind, preset, r, fps, keyint));
           }
         }
       }

@@ -26,7 +26,7 @@ TEST_F(VideoBenchTest, CodesPairsInEveryLayoutAndWritesItsTablesAndCharts) {
   const testing::RunResult r = RunProgram(
       Bench(),
       {"--datasets", "synthetic", "--synthetic-frames", "2", "--presets", "ultrafast", "--crfs",
-       "20", "--bitrates", "", "--no-sgbm", "--colour-presets", "ultrafast", "--colour-crfs", "24",
+       "20", "--bitrates", "", "--no-sgbm", "--colour-presets", "ultrafast", "--colour-crfs", "24", "--colour-bitrates", "",
        "--jpeg-qualities", "80", "--json", Path("video.json"), "--plots", Path("plots")},
       dir_.string());
   ASSERT_EQ(r.code, 0) << r;

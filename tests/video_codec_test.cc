@@ -227,8 +227,11 @@ TEST(VideoCodec, EncoderOptionErrorsNameTheField) {
   o.preset = "warp-speed";
   EXPECT_THAT(std::string(Encoder::Make(o).status().message()), HasSubstr("warp-speed"));
   o.preset = "veryfast";
+  o.x264_params = "no-such-option=1";
+  EXPECT_THAT(std::string(Encoder::Make(o).status().message()), HasSubstr("no-such-option"));
+  o.x264_params = "aq-strength=1.5";
   auto enc = Encoder::Make(o);
-  ASSERT_TRUE(enc.ok());
+  ASSERT_TRUE(enc.ok()) << enc.status();
   const auto colour = Frames(160, 120, 1, /*grey=*/false);
   EncodedPicture p;
   const absl::Status s = (*enc)->Encode(colour[0].view(), {}, "frame.left", &p);

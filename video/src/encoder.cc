@@ -182,6 +182,7 @@ absl::StatusOr<std::unique_ptr<Encoder>> Encoder::Make(const EncoderOptions& opt
   } else {
     absl::StrAppend(&params, ":keyint=infinite");
   }
+  if (!options.x264_params.empty()) absl::StrAppend(&params, ":", options.x264_params);
   av_dict_set(&dict, "x264-params", params.c_str(), 0);
   internal::ClearLibavMessage();
   const int rc = avcodec_open2(ctx, codec, &dict);
@@ -199,6 +200,12 @@ absl::StatusOr<std::unique_ptr<Encoder>> Encoder::Make(const EncoderOptions& opt
   }
   if (!unused.empty()) {
     return absl::InternalError(absl::StrCat("libx264 did not take the option '", unused, "'"));
+  }
+  // libavcodec warns of an x264-params entry x264 cannot parse, and opens anyway: refuse it here.
+  const std::string why = internal::TakeLibavWarning();
+  if (!options.x264_params.empty() && why.find("Error parsing option") != std::string::npos) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "options.x264_params '", options.x264_params, "': libx264: ", why));
   }
   AVFrame* f = impl->frame;
   f->format = ctx->pix_fmt;

@@ -12,9 +12,10 @@ namespace cloudcast::video::internal {
 namespace {
 
 thread_local std::string t_message;
+thread_local std::string t_warning;
 
 void Callback(void* avcl, int level, const char* fmt, va_list vl) {
-  if (level > AV_LOG_ERROR) return;
+  if (level > AV_LOG_WARNING) return;
   char line[512];
   int print_prefix = 1;
   va_list copy;
@@ -25,7 +26,8 @@ void Callback(void* avcl, int level, const char* fmt, va_list vl) {
   while (!text.empty() && (text.back() == '\n' || text.back() == ' ')) text.pop_back();
   if (text.empty()) return;
   // The first message of a failure is the cause; later ones repeat its consequences.
-  if (t_message.empty()) t_message = std::move(text);
+  std::string& slot = level <= AV_LOG_ERROR ? t_message : t_warning;
+  if (slot.empty()) slot = std::move(text);
 }
 
 }  // namespace
@@ -41,7 +43,16 @@ std::string TakeLibavMessage() {
   return m;
 }
 
-void ClearLibavMessage() { t_message.clear(); }
+std::string TakeLibavWarning() {
+  std::string m = std::move(t_warning);
+  t_warning.clear();
+  return m;
+}
+
+void ClearLibavMessage() {
+  t_message.clear();
+  t_warning.clear();
+}
 
 std::string LibavError(int code) {
   char buf[AV_ERROR_MAX_STRING_SIZE] = {0};

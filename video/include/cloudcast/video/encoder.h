@@ -50,6 +50,10 @@ struct EncoderOptions {
   bool intra_refresh = false;
   // 1: one thread. More: x264's sliced threads (one slice per thread; no added latency).
   int threads = 1;
+  // More x264 options, "key=value:key=value", after ours (e.g. "aq-mode=3:aq-strength=1.5":
+  // adaptive quantisation gives flat regions, whose small gradients the matchers' census costs
+  // read, more bits; docs/video.md measures it).
+  std::string x264_params;
   // Reference frames (0: the preset's). Two lets an interleaved stereo stream (L, R, L, R, ...)
   // predict each view from the other and from itself one pair ago.
   int refs = 0;
