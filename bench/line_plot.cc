@@ -21,7 +21,7 @@ double NiceStep(double span, int count) {
   return 10 * p;
 }
 
-const cv::Scalar kColours[] = {{180, 119, 31},  {14, 127, 255}, {44, 160, 44},  {40, 39, 214},
+const cv::Scalar kColours[] = {{180, 119, 31},  {14, 127, 255}, {44, 160, 44},   {40, 39, 214},
                                {189, 103, 148}, {75, 86, 140},  {194, 119, 227}, {127, 127, 127},
                                {34, 189, 188},  {207, 190, 23}, {0, 0, 0},       {100, 200, 100}};
 
@@ -81,7 +81,8 @@ bool LinePlot::Write(const std::string& path) const {
     for (std::size_t k = 0; k < s.x.size() && k < s.y.size(); ++k) pts.push_back({s.x[k], s.y[k]});
     std::sort(pts.begin(), pts.end());
     for (std::size_t k = 0; k + 1 < pts.size(); ++k) {
-      const cv::Point a = px(pts[k].first, pts[k].second), b = px(pts[k + 1].first, pts[k + 1].second);
+      const cv::Point a = px(pts[k].first, pts[k].second),
+                      b = px(pts[k + 1].first, pts[k + 1].second);
       if (s.dashed) {
         Dashed(img, a, b, c, 2);
       } else {

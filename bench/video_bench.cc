@@ -23,6 +23,7 @@
 #include <vector>
 
 #include "absl/strings/str_split.h"
+#include "cloudcast/core/frame_codec.h"
 #include "cloudcast/datasets/synthetic.h"
 #include "cloudcast/datasets/tsukuba.h"
 #include "cloudcast/stereo/evaluation.h"
@@ -31,7 +32,6 @@
 #include "cloudcast/video/decoder.h"
 #include "cloudcast/video/encoder.h"
 #include "cloudcast/video/rvl.h"
-#include "cloudcast/core/frame_codec.h"
 #include "line_plot.h"
 #include "stats.h"
 
@@ -107,8 +107,9 @@ Dataset Synthetic(int frames) {
                        left.height, DisparityEncoding::kU16};
     for (std::size_t i = 0; i < std::size_t{left.width} * left.height; ++i) {
       const double v = src[i] * 16;
-      const std::uint16_t q =
-          std::isfinite(v) && v > 0 ? static_cast<std::uint16_t>(std::min(65535.0, std::round(v))) : 0;
+      const std::uint16_t q = std::isfinite(v) && v > 0
+                                  ? static_cast<std::uint16_t>(std::min(65535.0, std::round(v)))
+                                  : 0;
       std::memcpy(&u16.pixels[2 * i], &q, 2);
     }
     d.disparity.emplace_back("u16 exact (1/16 px)", std::move(u16));
@@ -135,28 +136,34 @@ Dataset Tsukuba(const std::string& dir, int frames) {
   return d;
 }
 
-// --- stereo -----------------------------------------------------------------------------------------
+// --- stereo
+// -----------------------------------------------------------------------------------------
 
 enum class Layout { kIndependent, kInterleaved, kSideBySide };
 const char* Name(Layout l) {
-  return l == Layout::kIndependent ? "independent" : l == Layout::kInterleaved ? "L,R interleaved"
-                                                                                : "side by side";
+  return l == Layout::kIndependent   ? "independent"
+         : l == Layout::kInterleaved ? "L,R interleaved"
+                                     : "side by side";
 }
 const char* Key(Layout l) {
-  return l == Layout::kIndependent ? "independent" : l == Layout::kInterleaved ? "interleaved"
-                                                                                : "side-by-side";
+  return l == Layout::kIndependent   ? "independent"
+         : l == Layout::kInterleaved ? "interleaved"
+                                     : "side-by-side";
 }
 
 struct Rate {
-  double crf = 0;       // > 0: constant quality
-  double mbps = 0;      // > 0: this total bitrate (split over the streams)
+  double crf = 0;   // > 0: constant quality
+  double mbps = 0;  // > 0: this total bitrate (split over the streams)
   bool lossless = false;
   std::string Label() const {
     char b[96];
     if (lossless) return "qp 0 (lossless)";
-    if (crf > 0 && mbps > 0) std::snprintf(b, sizeof b, "crf %g <= %g Mb/s", crf, mbps);
-    else if (crf > 0) std::snprintf(b, sizeof b, "crf %g", crf);
-    else std::snprintf(b, sizeof b, "%g Mbit/s", mbps);
+    if (crf > 0 && mbps > 0)
+      std::snprintf(b, sizeof b, "crf %g <= %g Mb/s", crf, mbps);
+    else if (crf > 0)
+      std::snprintf(b, sizeof b, "crf %g", crf);
+    else
+      std::snprintf(b, sizeof b, "%g Mbit/s", mbps);
     return b;
   }
 };
@@ -230,10 +237,17 @@ void Split(const GreyImage& sbs, GreyImage* l, GreyImage* r) {
   }
 }
 
+// Periodic intra refresh instead of periodic IDRs (--intra-refresh), for every stream.
+bool g_intra_refresh = false;
+
 EncoderOptions StreamOptions(PictureKind kind, std::uint32_t w, std::uint32_t h,
                              const std::string& preset, const Rate& rate, int fps, int streams,
                              int pictures_per_frame, int keyint_frames) {
   EncoderOptions o;
+  if (g_intra_refresh) {
+    o.intra_refresh = true;
+    keyint_frames = 0;
+  }
   o.kind = kind;
   o.width = w;
   o.height = h;
@@ -255,8 +269,8 @@ EncoderOptions StreamOptions(PictureKind kind, std::uint32_t w, std::uint32_t h,
 
 // Encodes and decodes the dataset's pairs in `layout`, then scores the decoded pairs.
 StereoRow RunStereo(const Dataset& d, Layout layout, const std::string& preset, const Rate& rate,
-                    int fps, int keyint, int interleaved_refs, const std::string& x264_params, Matchers& m,
-                    bool with_sgbm, const Scores& lossless) {
+                    int fps, int keyint, int interleaved_refs, const std::string& x264_params,
+                    Matchers& m, bool with_sgbm, const Scores& lossless) {
   const std::uint32_t w = d.pairs[0].left.width, h = d.pairs[0].left.height;
   StereoRow row;
   row.dataset = d.name;
@@ -324,7 +338,8 @@ StereoRow RunStereo(const Dataset& d, Layout layout, const std::string& preset, 
   return row;
 }
 
-// --- colour -----------------------------------------------------------------------------------------
+// --- colour
+// -----------------------------------------------------------------------------------------
 
 double Psnr(const cv::Mat& a, const cv::Mat& b) { return cv::PSNR(a, b); }
 
@@ -374,8 +389,8 @@ ColourRow RunColourVideo(const Dataset& d, PictureKind kind, const std::string& 
                          const Rate& rate, int fps, int keyint) {
   ColourRow row;
   row.dataset = d.name;
-  row.codec = std::string("H.264 ") + (kind == PictureKind::kColour444 ? "4:4:4 " : "4:2:0 ") +
-              preset;
+  row.codec =
+      std::string("H.264 ") + (kind == PictureKind::kColour444 ? "4:4:4 " : "4:2:0 ") + preset;
   row.setting = rate.Label();
   auto enc = Check(Encoder::Make(StreamOptions(kind, d.colour[0].width, d.colour[0].height, preset,
                                                rate, fps, 1, 1, keyint)),
@@ -443,7 +458,8 @@ ColourRow RunJpeg(const Dataset& d, int quality, int fps) {
   return row;
 }
 
-// --- lossless depth / disparity -------------------------------------------------------------------
+// --- lossless depth / disparity
+// -------------------------------------------------------------------
 
 struct DepthRow {
   std::string dataset, kind, codec;
@@ -490,9 +506,10 @@ std::vector<DepthRow> RunDepth(const std::string& dataset, const std::string& ki
       Check(video::DecodeRvl(buf, v.width, v.height, max, Limits{}, "disparity", &rvl_out), "rvl");
       ms[1][1].push_back(ThreadCpuMs() - t0);
       for (std::size_t i = 0; i < n; ++i) {
-        const std::uint16_t want = v.encoding == DisparityEncoding::kU8
-                                       ? m->pixels[i]
-                                       : reinterpret_cast<const std::uint16_t*>(m->pixels.data())[i];
+        const std::uint16_t want =
+            v.encoding == DisparityEncoding::kU8
+                ? m->pixels[i]
+                : reinterpret_cast<const std::uint16_t*>(m->pixels.data())[i];
         if (rvl_out[i] != want) Die("RVL not lossless");
       }
     }
@@ -541,14 +558,14 @@ int Main(int argc, char** argv) {
   std::string presets = "ultrafast,superfast,veryfast,faster", crfs = "10,14,18,22,26",
               bitrates = "8";
   std::string colour_presets = "ultrafast,superfast,veryfast", colour_crfs = "14,18,22,26,30,34",
-              colour_bitrates = "3",
-              jpeg_qualities = "50,70,80,90,95";
+              colour_bitrates = "3", jpeg_qualities = "50,70,80,90,95";
   int synthetic_frames = 30, tsukuba_frames = 0, fps = 30, keyint = 60, interleaved_refs = 2;
   bool no_sgbm = false, no_colour = false, no_stereo = false, no_depth = false;
   std::string stereo_x264, capped, colour_capped;
   bool lossless_every_preset = false;
   int depth_rounds = 5;
-  app.add_option("--data", data_dir, "New Tsukuba folder (default: $CLOUDCAST_DATA or the build's)");
+  app.add_option("--data", data_dir,
+                 "New Tsukuba folder (default: $CLOUDCAST_DATA or the build's)");
   app.add_option("--datasets", datasets, "synthetic, tsukuba")->capture_default_str();
   app.add_option("--synthetic-frames", synthetic_frames, "consecutive synthetic pairs")
       ->check(CLI::Range(1, 3000))
@@ -564,18 +581,22 @@ int Main(int argc, char** argv) {
   app.add_option("--capped-crfs", capped,
                  "CRF:MBIT_S pairs: constant quality capped by a total bitrate (one-frame VBV), "
                  "e.g. 2:8,4:8");
+  app.add_flag("--intra-refresh", g_intra_refresh,
+               "periodic intra refresh instead of an IDR every --keyint frames (one IDR first)");
   app.add_flag("--lossless-every-preset", lossless_every_preset,
                "a qp 0 row for every preset (default: the first preset only)");
   app.add_option("--colour-presets", colour_presets)->capture_default_str();
   app.add_option("--colour-crfs", colour_crfs)->capture_default_str();
   app.add_option("--colour-capped-crfs", colour_capped, "CRF:MBIT_S pairs for the colour table");
-  app.add_option("--colour-bitrates", colour_bitrates, "Mbit/s values (bitrate mode, one-frame VBV)")
+  app.add_option("--colour-bitrates", colour_bitrates,
+                 "Mbit/s values (bitrate mode, one-frame VBV)")
       ->capture_default_str();
   app.add_option("--jpeg-qualities", jpeg_qualities)->capture_default_str();
   app.add_option("--fps", fps, "frames (pairs) per second the Mbit/s are given at")
       ->check(CLI::Range(1, 240))
       ->capture_default_str();
-  app.add_option("--keyint", keyint, "frames between IDRs")->check(CLI::Range(0, 100000))
+  app.add_option("--keyint", keyint, "frames between IDRs")
+      ->check(CLI::Range(0, 100000))
       ->capture_default_str();
   app.add_option("--interleaved-refs", interleaved_refs, "reference frames of the L,R stream")
       ->check(CLI::Range(1, 16))
@@ -585,7 +606,8 @@ int Main(int argc, char** argv) {
   app.add_flag("--no-sgbm", no_sgbm, "score our matcher only (StereoSGBM takes ~4x its time)");
   app.add_flag("--no-colour", no_colour, "skip the colour table");
   app.add_flag("--no-stereo", no_stereo, "skip the stereo table");
-  app.add_flag("--no-depth", no_depth, "skip the lossless depth/disparity table (zstd against RVL)");
+  app.add_flag("--no-depth", no_depth,
+               "skip the lossless depth/disparity table (zstd against RVL)");
   app.add_option("--depth-rounds", depth_rounds, "timed rounds of the depth table")
       ->check(CLI::Range(1, 1000))
       ->capture_default_str();
@@ -595,10 +617,14 @@ int Main(int argc, char** argv) {
 
   std::vector<Layout> layout_list;
   for (const std::string& l : Words(layouts)) {
-    if (l == "independent") layout_list.push_back(Layout::kIndependent);
-    else if (l == "interleaved") layout_list.push_back(Layout::kInterleaved);
-    else if (l == "side-by-side") layout_list.push_back(Layout::kSideBySide);
-    else Die("--layouts: unknown layout '" + l + "' (independent, interleaved, side-by-side)");
+    if (l == "independent")
+      layout_list.push_back(Layout::kIndependent);
+    else if (l == "interleaved")
+      layout_list.push_back(Layout::kInterleaved);
+    else if (l == "side-by-side")
+      layout_list.push_back(Layout::kSideBySide);
+    else
+      Die("--layouts: unknown layout '" + l + "' (independent, interleaved, side-by-side)");
   }
   std::vector<Rate> rates;
   for (double c : ParseList<double>(crfs, "--crfs")) rates.push_back(Rate{c, 0, false});
@@ -626,9 +652,12 @@ int Main(int argc, char** argv) {
   }
   std::vector<Dataset> sets;
   for (const std::string& name : Words(datasets)) {
-    if (name == "synthetic") sets.push_back(Synthetic(synthetic_frames));
-    else if (name == "tsukuba") sets.push_back(Tsukuba(data_dir, tsukuba_frames));
-    else Die("--datasets: unknown data set '" + name + "' (synthetic, tsukuba)");
+    if (name == "synthetic")
+      sets.push_back(Synthetic(synthetic_frames));
+    else if (name == "tsukuba")
+      sets.push_back(Tsukuba(data_dir, tsukuba_frames));
+    else
+      Die("--datasets: unknown data set '" + name + "' (synthetic, tsukuba)");
   }
   stereo::SetOpenCvThreads(1);
   Matchers m;
@@ -638,13 +667,15 @@ int Main(int argc, char** argv) {
   m.sgbm = Check(stereo::MakeMatcher(sgbm_params), "matcher");
   std::string load;
   if (std::ifstream in("/proc/loadavg"); in) std::getline(in, load);
-  std::printf("cloudcast-video-bench: x264 via libavcodec, one thread, tune zerolatency (stereo "
-              "streams: '%s'), keyint %d, %d fps; load average %s\n",
-              stereo_x264.c_str(), keyint, fps, load.c_str());
+  std::printf(
+      "cloudcast-video-bench: x264 via libavcodec, one thread, tune zerolatency (stereo "
+      "streams: '%s'), keyint %d, %d fps; load average %s\n",
+      stereo_x264.c_str(), keyint, fps, load.c_str());
   nlohmann::json out;
   out["load_average"] = load;
   out["fps"] = fps;
   out["keyint"] = keyint;
+  out["intra_refresh"] = g_intra_refresh;
   out["stereo_x264_params"] = stereo_x264;
 
   std::vector<StereoRow> stereo_rows;
@@ -652,18 +683,20 @@ int Main(int argc, char** argv) {
     for (const Dataset& d : sets) {
       Scores lossless;
       for (const Pair& p : d.pairs) Score(m, p.left, p.right, p.truth, &lossless, !no_sgbm);
-      std::printf("\nstereo, %s: %zu pairs of %ux%u (grey); lossless bad-2.0: ours %.2f %% (GT) "
-                  "%.2f %% (GT+1), StereoSGBM %.2f %% / %.2f %%\n",
-                  d.name.c_str(), d.pairs.size(), d.pairs[0].left.width, d.pairs[0].left.height,
-                  lossless.ours.Bad(2, 0), lossless.ours.Bad(2, 1),
-                  no_sgbm ? NAN : lossless.sgbm.Bad(2, 0), no_sgbm ? NAN : lossless.sgbm.Bad(2, 1));
-      std::printf("%-16s %-10s %-16s %9s %8s %8s %8s %8s %8s %8s %8s %7s %7s\n", "layout",
-                  "preset", "rate", "KB/pair", "Mbit/s", "ours GT", "ours+1", "d ours", "d ours+1",
-                  "SGBM GT", "SGBM+1", "enc ms", "dec ms");
-      out["stereo_lossless"][d.name] = {{"ours_bad2_gt", lossless.ours.Bad(2, 0)},
-                                        {"ours_bad2_gt_plus_1", lossless.ours.Bad(2, 1)},
-                                        {"sgbm_bad2_gt", no_sgbm ? NAN : lossless.sgbm.Bad(2, 0)},
-                                        {"sgbm_bad2_gt_plus_1", no_sgbm ? NAN : lossless.sgbm.Bad(2, 1)}};
+      std::printf(
+          "\nstereo, %s: %zu pairs of %ux%u (grey); lossless bad-2.0: ours %.2f %% (GT) "
+          "%.2f %% (GT+1), StereoSGBM %.2f %% / %.2f %%\n",
+          d.name.c_str(), d.pairs.size(), d.pairs[0].left.width, d.pairs[0].left.height,
+          lossless.ours.Bad(2, 0), lossless.ours.Bad(2, 1), no_sgbm ? NAN : lossless.sgbm.Bad(2, 0),
+          no_sgbm ? NAN : lossless.sgbm.Bad(2, 1));
+      std::printf("%-16s %-10s %-16s %9s %8s %8s %8s %8s %8s %8s %8s %7s %7s\n", "layout", "preset",
+                  "rate", "KB/pair", "Mbit/s", "ours GT", "ours+1", "d ours", "d ours+1", "SGBM GT",
+                  "SGBM+1", "enc ms", "dec ms");
+      out["stereo_lossless"][d.name] = {
+          {"ours_bad2_gt", lossless.ours.Bad(2, 0)},
+          {"ours_bad2_gt_plus_1", lossless.ours.Bad(2, 1)},
+          {"sgbm_bad2_gt", no_sgbm ? NAN : lossless.sgbm.Bad(2, 0)},
+          {"sgbm_bad2_gt_plus_1", no_sgbm ? NAN : lossless.sgbm.Bad(2, 1)}};
       for (Layout layout : layout_list) {
         std::vector<Rate> with_lossless = {Rate{0, 0, true}};
         with_lossless.insert(with_lossless.end(), rates.begin(), rates.end());
@@ -672,11 +705,12 @@ int Main(int argc, char** argv) {
             if (rate.lossless && preset != preset_list.front() && !lossless_every_preset) continue;
             StereoRow r = RunStereo(d, layout, preset, rate, fps, keyint, interleaved_refs,
                                     stereo_x264, m, !no_sgbm, lossless);
-            std::printf("%-16s %-10s %-16s %9.1f %8.2f %7.2f%% %7.2f%% %+8.2f %+8.2f %7.2f%% "
-                        "%7.2f%% %7.2f %7.2f\n",
-                        Name(layout), preset.c_str(), rate.Label().c_str(),
-                        r.bytes_per_pair / 1000, r.mbps, r.ours_gt, r.ours_gt1, r.d_ours_gt,
-                        r.d_ours_gt1, r.sgbm_gt, r.sgbm_gt1, r.encode_ms, r.decode_ms);
+            std::printf(
+                "%-16s %-10s %-16s %9.1f %8.2f %7.2f%% %7.2f%% %+8.2f %+8.2f %7.2f%% "
+                "%7.2f%% %7.2f %7.2f\n",
+                Name(layout), preset.c_str(), rate.Label().c_str(), r.bytes_per_pair / 1000, r.mbps,
+                r.ours_gt, r.ours_gt1, r.d_ours_gt, r.d_ours_gt1, r.sgbm_gt, r.sgbm_gt1,
+                r.encode_ms, r.decode_ms);
             std::fflush(stdout);
             stereo_rows.push_back(r);
           }
@@ -720,14 +754,17 @@ int Main(int argc, char** argv) {
     }
     nlohmann::json meets = nlohmann::json::array();
     for (const Dataset& d : sets) {
-      std::printf("\nstereo, %s: settings at <= 8 Mbit/s with ours within +1.0 point of lossless "
-                  "(%s):\n", d.name.c_str(), d.name == "tsukuba" ? "GT+1" : "GT");
+      std::printf(
+          "\nstereo, %s: settings at <= 8 Mbit/s with ours within +1.0 point of lossless "
+          "(%s):\n",
+          d.name.c_str(), d.name == "tsukuba" ? "GT+1" : "GT");
       for (const StereoRow& r : stereo_rows) {
         if (r.dataset != d.name || r.mbps > 8.0 || delta(r) > 1.0) continue;
-        std::printf("  %-16s %-10s %-20s %6.2f Mbit/s  %+.2f points  encode %.2f ms  decode "
-                    "%.2f ms\n",
-                    Name(r.layout), r.preset.c_str(), r.rate.Label().c_str(), r.mbps, delta(r),
-                    r.encode_ms, r.decode_ms);
+        std::printf(
+            "  %-16s %-10s %-20s %6.2f Mbit/s  %+.2f points  encode %.2f ms  decode "
+            "%.2f ms\n",
+            Name(r.layout), r.preset.c_str(), r.rate.Label().c_str(), r.mbps, delta(r), r.encode_ms,
+            r.decode_ms);
       }
     }
     std::printf("\nstereo: settings meeting it on every data set:\n");
@@ -743,8 +780,10 @@ int Main(int argc, char** argv) {
       if (!ok) continue;
       std::printf("  %-44s max %.2f Mbit/s, worst change %+.2f points, encode %.2f ms/image\n",
                   setting.c_str(), worst_mbps, worst_delta, worst_enc);
-      meets.push_back({{"setting", setting}, {"max_mbps", worst_mbps},
-                       {"worst_delta", worst_delta}, {"encode_ms", worst_enc}});
+      meets.push_back({{"setting", setting},
+                       {"max_mbps", worst_mbps},
+                       {"worst_delta", worst_delta},
+                       {"encode_ms", worst_enc}});
     }
     out["stereo_meets_target"] = meets;
   }
@@ -752,11 +791,12 @@ int Main(int argc, char** argv) {
   std::vector<ColourRow> colour_rows;
   if (!no_colour) {
     for (const Dataset& d : sets) {
-      std::printf("\ncolour, %s: %zu frames of %ux%u (BGR; PSNR over the three channels, SSIM the "
-                  "channels' mean)\n",
-                  d.name.c_str(), d.colour.size(), d.colour[0].width, d.colour[0].height);
-      std::printf("%-24s %-12s %9s %8s %7s %7s %7s %7s\n", "codec", "setting", "KB/frame",
-                  "Mbit/s", "PSNR", "SSIM", "enc ms", "dec ms");
+      std::printf(
+          "\ncolour, %s: %zu frames of %ux%u (BGR; PSNR over the three channels, SSIM the "
+          "channels' mean)\n",
+          d.name.c_str(), d.colour.size(), d.colour[0].width, d.colour[0].height);
+      std::printf("%-24s %-12s %9s %8s %7s %7s %7s %7s\n", "codec", "setting", "KB/frame", "Mbit/s",
+                  "PSNR", "SSIM", "enc ms", "dec ms");
       auto print = [&](const ColourRow& r) {
         std::printf("%-24s %-12s %9.1f %8.2f %7.2f %7.4f %7.2f %7.2f\n", r.codec.c_str(),
                     r.setting.c_str(), r.bytes_per_frame / 1000, r.mbps, r.psnr, r.ssim,
@@ -781,9 +821,15 @@ int Main(int argc, char** argv) {
     }
     nlohmann::json rows = nlohmann::json::array();
     for (const ColourRow& r : colour_rows) {
-      rows.push_back({{"dataset", r.dataset}, {"codec", r.codec}, {"setting", r.setting},
-                      {"bytes_per_frame", r.bytes_per_frame}, {"mbps", r.mbps}, {"psnr_db", r.psnr},
-                      {"ssim", r.ssim}, {"encode_ms", r.encode_ms}, {"decode_ms", r.decode_ms}});
+      rows.push_back({{"dataset", r.dataset},
+                      {"codec", r.codec},
+                      {"setting", r.setting},
+                      {"bytes_per_frame", r.bytes_per_frame},
+                      {"mbps", r.mbps},
+                      {"psnr_db", r.psnr},
+                      {"ssim", r.ssim},
+                      {"encode_ms", r.encode_ms},
+                      {"decode_ms", r.decode_ms}});
     }
     out["colour"] = rows;
     std::printf("\ncolour settings meeting <= 3 Mbit/s at PSNR >= 38 dB on every data set:\n");
@@ -819,18 +865,24 @@ int Main(int argc, char** argv) {
         for (DepthRow& r : RunDepth(d.name, kind, maps, depth_rounds)) depth_rows.push_back(r);
       }
     }
-    std::printf("\nlossless disparity: today's row deltas + zstd level 1 against RVL (thread CPU ms, "
-                "median over %d rounds x frames)\n", depth_rounds);
-    std::printf("%-10s %-26s %-28s %9s %7s %8s %8s\n", "data", "maps", "codec", "KB/frame",
-                "% raw", "enc ms", "dec ms");
+    std::printf(
+        "\nlossless disparity: today's row deltas + zstd level 1 against RVL (thread CPU ms, "
+        "median over %d rounds x frames)\n",
+        depth_rounds);
+    std::printf("%-10s %-26s %-28s %9s %7s %8s %8s\n", "data", "maps", "codec", "KB/frame", "% raw",
+                "enc ms", "dec ms");
     nlohmann::json rows = nlohmann::json::array();
     for (const DepthRow& r : depth_rows) {
       std::printf("%-10s %-26s %-28s %9.1f %6.1f%% %8.3f %8.3f\n", r.dataset.c_str(),
                   r.kind.c_str(), r.codec.c_str(), r.bytes_per_frame / 1000,
                   100 * r.bytes_per_frame / r.raw_bytes, r.encode_ms, r.decode_ms);
-      rows.push_back({{"dataset", r.dataset}, {"maps", r.kind}, {"codec", r.codec},
-                      {"bytes_per_frame", r.bytes_per_frame}, {"raw_bytes", r.raw_bytes},
-                      {"encode_ms", r.encode_ms}, {"decode_ms", r.decode_ms}});
+      rows.push_back({{"dataset", r.dataset},
+                      {"maps", r.kind},
+                      {"codec", r.codec},
+                      {"bytes_per_frame", r.bytes_per_frame},
+                      {"raw_bytes", r.raw_bytes},
+                      {"encode_ms", r.encode_ms},
+                      {"decode_ms", r.decode_ms}});
     }
     out["depth"] = rows;
   }
@@ -867,8 +919,8 @@ int Main(int argc, char** argv) {
       }
       if (!no_colour) {
         LinePlot p;
-        p.title = "colour " + d.name + ": PSNR against Mbit/s at " + std::to_string(fps) +
-                  " frames/s";
+        p.title =
+            "colour " + d.name + ": PSNR against Mbit/s at " + std::to_string(fps) + " frames/s";
         p.x_label = "Mbit/s";
         p.y_label = "PSNR (dB)";
         p.x_marks = {3.0};

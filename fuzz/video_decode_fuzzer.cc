@@ -10,10 +10,10 @@
 #include <cstdio>
 #include <cstdlib>
 #include <string_view>
+#include <vector>
 
 #include "cloudcast/video/decoder.h"
 #include "cloudcast/video/rvl.h"
-#include <vector>
 
 using namespace cloudcast;
 
@@ -24,8 +24,10 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     const std::string_view bytes(reinterpret_cast<const char*>(data + 1), size - 1);
     std::uint32_t w = 0, h = 0;
     if (bytes.size() >= 12) {
-      for (int i = 0; i < 4; ++i) w |= std::uint32_t{static_cast<std::uint8_t>(bytes[4 + i])} << 8 * i;
-      for (int i = 0; i < 4; ++i) h |= std::uint32_t{static_cast<std::uint8_t>(bytes[8 + i])} << 8 * i;
+      for (int i = 0; i < 4; ++i)
+        w |= std::uint32_t{static_cast<std::uint8_t>(bytes[4 + i])} << 8 * i;
+      for (int i = 0; i < 4; ++i)
+        h |= std::uint32_t{static_cast<std::uint8_t>(bytes[8 + i])} << 8 * i;
     }
     Limits limits;
     limits.max_side = 256;

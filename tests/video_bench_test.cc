@@ -23,12 +23,31 @@ class VideoBenchTest : public testing::ScratchDirTest {
 };
 
 TEST_F(VideoBenchTest, CodesPairsInEveryLayoutAndWritesItsTablesAndCharts) {
-  const testing::RunResult r = RunProgram(
-      Bench(),
-      {"--datasets", "synthetic", "--synthetic-frames", "2", "--presets", "ultrafast", "--crfs",
-       "20", "--bitrates", "", "--no-sgbm", "--colour-presets", "ultrafast", "--colour-crfs", "24", "--colour-bitrates", "",
-       "--jpeg-qualities", "80", "--json", Path("video.json"), "--plots", Path("plots")},
-      dir_.string());
+  const testing::RunResult r = RunProgram(Bench(),
+                                          {"--datasets",
+                                           "synthetic",
+                                           "--synthetic-frames",
+                                           "2",
+                                           "--presets",
+                                           "ultrafast",
+                                           "--crfs",
+                                           "20",
+                                           "--bitrates",
+                                           "",
+                                           "--no-sgbm",
+                                           "--colour-presets",
+                                           "ultrafast",
+                                           "--colour-crfs",
+                                           "24",
+                                           "--colour-bitrates",
+                                           "",
+                                           "--jpeg-qualities",
+                                           "80",
+                                           "--json",
+                                           Path("video.json"),
+                                           "--plots",
+                                           Path("plots")},
+                                          dir_.string());
   ASSERT_EQ(r.code, 0) << r;
   EXPECT_NE(r.out.find("L,R interleaved"), std::string::npos) << r;
   const auto j = nlohmann::json::parse(ReadText(Path("video.json")));

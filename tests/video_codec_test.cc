@@ -92,7 +92,8 @@ Decoder::Options DecoderOptions(ColorEncoding output = ColorEncoding::kMono8) {
   return o;
 }
 
-// --- the codec on real frames ---------------------------------------------------------------------
+// --- the codec on real frames
+// ---------------------------------------------------------------------
 
 TEST(VideoCodec, GreyRoundTripIsOnePictureInOneOut) {
   const auto frames = Frames(320, 240, 8, /*grey=*/true);
@@ -242,7 +243,8 @@ TEST(VideoCodec, EncoderOptionErrorsNameTheField) {
               HasSubstr("80x60 but the stream is 160x120"));
 }
 
-// --- bad input --------------------------------------------------------------------------------------
+// --- bad input
+// --------------------------------------------------------------------------------------
 
 class VideoBadInput : public ::testing::Test {
  protected:
@@ -278,7 +280,8 @@ TEST_F(VideoBadInput, StreamStartingWithoutKeyframeIsRefusedUndecoded) {
   ColorView out;
   const absl::Status s = d.Decode(units_[2].bytes, "frame.video.left.access_unit", &out);
   EXPECT_EQ(s.code(), absl::StatusCode::kFailedPrecondition);
-  EXPECT_THAT(std::string(s.message()), HasSubstr("frame.video.left.access_unit is not a keyframe"));
+  EXPECT_THAT(std::string(s.message()),
+              HasSubstr("frame.video.left.access_unit is not a keyframe"));
   EXPECT_TRUE(d.needs_keyframe());
   EXPECT_FALSE(d.opened()) << "nothing is decoded before the stream's IDR";
   EXPECT_EQ(charges, 0);
@@ -433,10 +436,9 @@ TEST_F(VideoBadInput, SequenceHeaderClaiming16kIsRefusedBeforeAllocation) {
   EXPECT_FALSE(d.opened()) << "no decoder exists for a refused header";
   // Over the side limit too: 32768 wide.
   Limits limits;
-  EXPECT_THAT(std::string(ParseSequenceHeader(Sps(2048, 8).substr(4), "f", limits)
-                              .status()
-                              .message()),
-              HasSubstr("f.sps.pic_width_in_mbs_minus1: the sequence header claims 32768x128"));
+  EXPECT_THAT(
+      std::string(ParseSequenceHeader(Sps(2048, 8).substr(4), "f", limits).status().message()),
+      HasSubstr("f.sps.pic_width_in_mbs_minus1: the sequence header claims 32768x128"));
   ExpectRecoversAtIdr(d);
 }
 
@@ -454,13 +456,19 @@ TEST_F(VideoBadInput, ChargeComesFromTheHeaderAndARefusalLeavesNoDecoder) {
   EXPECT_EQ(refused.charged_bytes(), 0u);
 
   std::vector<std::uint64_t> charges;
+  std::uint64_t released = 0;
   o.charge = [&](std::uint64_t bytes) {
     charges.push_back(bytes);
     return absl::OkStatus();
   };
-  Decoder d(o);
-  for (int i = 0; i < 10; ++i) ASSERT_TRUE(d.Decode(units_[i].bytes, "au", &out).ok());
+  o.release = [&](std::uint64_t bytes) { released += bytes; };
+  {
+    Decoder d(o);
+    for (int i = 0; i < 10; ++i) ASSERT_TRUE(d.Decode(units_[i].bytes, "au", &out).ok());
+    EXPECT_EQ(released, 0u);
+  }
   ASSERT_EQ(charges.size(), 1u) << "the same header again is not charged again";
+  EXPECT_EQ(released, charges[0]) << "the stream's memory goes back when its decoder goes";
   auto info = InspectAccessUnit(units_[0].bytes, "au", Limits{});
   EXPECT_EQ(charges[0], DecoderMemoryBytes(*info->sps, ColorEncoding::kMono8));
   EXPECT_GE(charges[0], 160u * 120 * 3 / 2 * (info->sps->max_num_ref_frames + 1));
@@ -493,9 +501,12 @@ TEST(H264Bitstream, MalformedAccessUnitsNameTheField) {
   };
   EXPECT_THAT(err(""), HasSubstr("au is empty"));
   EXPECT_THAT(err("\x89PNG\r\n"), HasSubstr("start code"));
-  EXPECT_THAT(err(std::string("\x00\x00\x01\xE5\x10", 5)), HasSubstr("au.nal[0].forbidden_zero_bit"));
-  EXPECT_THAT(err(std::string("\x00\x00\x01\x74\x10", 5)), HasSubstr("au.nal[0].nal_unit_type is 20"));
-  EXPECT_THAT(err(std::string("\x00\x00\x01\x65\x10\x00\x00\x01", 8)), HasSubstr("au.nal[1] is empty"));
+  EXPECT_THAT(err(std::string("\x00\x00\x01\xE5\x10", 5)),
+              HasSubstr("au.nal[0].forbidden_zero_bit"));
+  EXPECT_THAT(err(std::string("\x00\x00\x01\x74\x10", 5)),
+              HasSubstr("au.nal[0].nal_unit_type is 20"));
+  EXPECT_THAT(err(std::string("\x00\x00\x01\x65\x10\x00\x00\x01", 8)),
+              HasSubstr("au.nal[1] is empty"));
   // An SPS cut short names the field it stopped at.
   const std::string sps = Sps(10, 8);
   const std::string cut = err(sps.substr(0, 9));
@@ -516,7 +527,8 @@ TEST_F(VideoBadInput, GapRequiresAKeyframe) {
   ExpectRecoversAtIdr(d);
 }
 
-// --- RVL ------------------------------------------------------------------------------------------
+// --- RVL
+// ------------------------------------------------------------------------------------------
 
 TEST(Rvl, RoundTripsDepthAndDisparity) {
   // 16-bit: synthetic disparity in 1/16 px (zeros where nothing is seen), and extremes.
@@ -551,7 +563,8 @@ TEST(Rvl, RoundTripsDepthAndDisparity) {
 
 TEST(Rvl, MalformedBytesNameTheField) {
   std::vector<std::uint16_t> img(32 * 4);
-  for (std::size_t i = 0; i < img.size(); ++i) img[i] = static_cast<std::uint16_t>(i % 5 ? 300 + i : 0);
+  for (std::size_t i = 0; i < img.size(); ++i)
+    img[i] = static_cast<std::uint16_t>(i % 5 ? 300 + i : 0);
   std::string bytes;
   EncodeRvl(img.data(), 32, 4, &bytes);
   std::vector<std::uint16_t> back;
@@ -561,7 +574,8 @@ TEST(Rvl, MalformedBytesNameTheField) {
   EXPECT_THAT(err("PNG....", 32, 4, 65535), HasSubstr("frame.depth.rvl is not RVL"));
   EXPECT_THAT(err(bytes, 16, 8, 65535), HasSubstr("holds a 32x4 image; the frame is 16x8"));
   EXPECT_THAT(err(bytes.substr(0, bytes.size() - 4), 32, 4, 65535), HasSubstr("ends at pixel"));
-  EXPECT_THAT(err(bytes.substr(0, bytes.size() - 1), 32, 4, 65535), HasSubstr("whole 32-bit words"));
+  EXPECT_THAT(err(bytes.substr(0, bytes.size() - 1), 32, 4, 65535),
+              HasSubstr("whole 32-bit words"));
   EXPECT_THAT(err(bytes, 32, 4, 255), HasSubstr("over the image's sample range"));
   // A first run of zeros longer than the image.
   std::vector<std::uint16_t> zeros(32 * 8, 0);

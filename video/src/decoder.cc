@@ -57,6 +57,7 @@ struct Decoder::Impl {
     av_frame_free(&frame);
     av_packet_free(&packet);
     avcodec_free_context(&ctx);
+    if (charged > 0 && options.release) options.release(charged);
   }
 
   absl::Status Open() {
@@ -76,8 +77,8 @@ struct Decoder::Impl {
     // Stop at the first damaged slice and say so, instead of concealing it.
     ctx->err_recognition = AV_EF_EXPLODE | AV_EF_BITSTREAM | AV_EF_BUFFER | AV_EF_CRCCHECK;
     if (const int rc = avcodec_open2(ctx, codec, nullptr); rc < 0) {
-      return absl::InternalError(absl::StrCat("cannot open libavcodec's H.264 decoder: ",
-                                              LibavError(rc)));
+      return absl::InternalError(
+          absl::StrCat("cannot open libavcodec's H.264 decoder: ", LibavError(rc)));
     }
     return absl::OkStatus();
   }
@@ -101,8 +102,7 @@ bool Decoder::opened() const { return impl_->ctx != nullptr; }
 std::uint32_t Decoder::width() const { return impl_->width; }
 std::uint32_t Decoder::height() const { return impl_->height; }
 
-absl::Status Decoder::Decode(std::string_view access_unit, std::string_view field,
-                             ColorView* out) {
+absl::Status Decoder::Decode(std::string_view access_unit, std::string_view field, ColorView* out) {
   Impl& m = *impl_;
   const Options& o = m.options;
   auto info = InspectAccessUnit(access_unit, field, o.limits);
@@ -121,14 +121,14 @@ absl::Status Decoder::Decode(std::string_view access_unit, std::string_view fiel
     const SequenceHeader& sps = *info->sps;
     const std::string sps_field = absl::StrCat(S(field), ".sps");
     if ((o.width != 0 && sps.width != o.width) || (o.height != 0 && sps.height != o.height)) {
-      return m.Fail(absl::InvalidArgumentError(absl::StrCat(
-          sps_field, ": the sequence header says ", sps.width, "x", sps.height,
-          " but the stream's images are ", o.width, "x", o.height)));
+      return m.Fail(absl::InvalidArgumentError(
+          absl::StrCat(sps_field, ": the sequence header says ", sps.width, "x", sps.height,
+                       " but the stream's images are ", o.width, "x", o.height)));
     }
     if (m.width != 0 && (sps.width != m.width || sps.height != m.height)) {
       return m.Fail(absl::InvalidArgumentError(absl::StrCat(
-          sps_field, ": the picture size changes mid-stream, from ", m.width, "x", m.height,
-          " to ", sps.width, "x", sps.height, "; a new size needs a new stream")));
+          sps_field, ": the picture size changes mid-stream, from ", m.width, "x", m.height, " to ",
+          sps.width, "x", sps.height, "; a new size needs a new stream")));
     }
     // Charged before any decoder is opened or fed for this size.
     const std::uint64_t need = DecoderMemoryBytes(sps, o.output);
@@ -141,9 +141,10 @@ absl::Status Decoder::Decode(std::string_view access_unit, std::string_view fiel
     m.width = sps.width;
     m.height = sps.height;
   } else if (m.width == 0) {
-    return m.Fail(absl::FailedPreconditionError(absl::StrCat(
-        S(field), ": an IDR without a sequence header (SPS), and none came before it: the first "
-        "access unit of a stream must carry its SPS and PPS")));
+    return m.Fail(absl::FailedPreconditionError(
+        absl::StrCat(S(field),
+                     ": an IDR without a sequence header (SPS), and none came before it: the first "
+                     "access unit of a stream must carry its SPS and PPS")));
   }
   if (m.ctx == nullptr) {
     if (absl::Status s = m.Open(); !s.ok()) return m.Fail(s);
@@ -156,10 +157,10 @@ absl::Status Decoder::Decode(std::string_view access_unit, std::string_view fiel
   internal::ClearLibavMessage();
   const auto libav_failure = [&](const char* what, int rc) {
     const std::string why = internal::TakeLibavMessage();
-    return m.Fail(absl::InvalidArgumentError(absl::StrCat(
-        S(field), ": ", what, rc < 0 ? absl::StrCat(" (", LibavError(rc), ")") : "",
-        why.empty() ? "" : absl::StrCat(": libavcodec: ", why),
-        "; the stream needs an IDR to go on")));
+    return m.Fail(absl::InvalidArgumentError(
+        absl::StrCat(S(field), ": ", what, rc < 0 ? absl::StrCat(" (", LibavError(rc), ")") : "",
+                     why.empty() ? "" : absl::StrCat(": libavcodec: ", why),
+                     "; the stream needs an IDR to go on")));
   };
   int rc = avcodec_send_packet(m.ctx, m.packet);
   av_packet_unref(m.packet);  // not ref-counted: drops the pointers only
@@ -191,9 +192,8 @@ absl::Status Decoder::Decode(std::string_view access_unit, std::string_view fiel
                          0);
   }
   const AVPixelFormat format = static_cast<AVPixelFormat>(f->format);
-  if (format != AV_PIX_FMT_GRAY8 && format != AV_PIX_FMT_YUV420P &&
-      format != AV_PIX_FMT_YUVJ420P && format != AV_PIX_FMT_YUV444P &&
-      format != AV_PIX_FMT_YUVJ444P) {
+  if (format != AV_PIX_FMT_GRAY8 && format != AV_PIX_FMT_YUV420P && format != AV_PIX_FMT_YUVJ420P &&
+      format != AV_PIX_FMT_YUV444P && format != AV_PIX_FMT_YUVJ444P) {
     return libav_failure("the picture is not 8-bit 4:0:0, 4:2:0 or 4:4:4", 0);
   }
   const std::size_t bpp = BytesPerPixel(o.output);
@@ -201,8 +201,7 @@ absl::Status Decoder::Decode(std::string_view access_unit, std::string_view fiel
   m.output.resize(row * m.height);
   if (o.output == ColorEncoding::kMono8) {
     for (std::uint32_t v = 0; v < m.height; ++v) {
-      std::memcpy(m.output.data() + v * row, f->data[0] + std::size_t{v} * f->linesize[0],
-                  m.width);
+      std::memcpy(m.output.data() + v * row, f->data[0] + std::size_t{v} * f->linesize[0], m.width);
     }
   } else {
     const AVPixelFormat to = o.output == ColorEncoding::kRGB8    ? AV_PIX_FMT_RGB24

@@ -27,9 +27,12 @@ using internal::LibavError;
 
 std::string_view Name(PictureKind kind) {
   switch (kind) {
-    case PictureKind::kGrey: return "grey";
-    case PictureKind::kColour: return "colour";
-    case PictureKind::kColour444: return "colour444";
+    case PictureKind::kGrey:
+      return "grey";
+    case PictureKind::kColour:
+      return "colour";
+    case PictureKind::kColour444:
+      return "colour444";
   }
   return "?";
 }
@@ -39,7 +42,7 @@ struct Encoder::Impl {
   AVCodecContext* ctx = nullptr;
   AVFrame* frame = nullptr;
   AVPacket* packet = nullptr;
-  SwsContext* sws = nullptr;          // colour: packed RGB/BGR/grey to YUV 4:2:0
+  SwsContext* sws = nullptr;  // colour: packed RGB/BGR/grey to YUV 4:2:0
   AVPixelFormat sws_from = AV_PIX_FMT_NONE;
   std::vector<std::uint8_t> staging;  // a view given as separate rows, made contiguous
   std::int64_t next_index = 0;
@@ -88,9 +91,9 @@ absl::Status CheckOptions(const EncoderOptions& o) {
         "options.bitrate_bps is 0, and neither qp nor crf is set: the encoder needs one of them");
   }
   if (o.bitrate_bps > 0 && o.bitrate_bps / o.fps < 1000) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "options.bitrate_bps is ", o.bitrate_bps, ": under 1000 bits a frame at ", o.fps,
-        " frames/s"));
+    return absl::InvalidArgumentError(absl::StrCat("options.bitrate_bps is ", o.bitrate_bps,
+                                                   ": under 1000 bits a frame at ", o.fps,
+                                                   " frames/s"));
   }
   if (absl::Status s = check::InRange("options.keyframe_interval", o.keyframe_interval, 0, 100000);
       !s.ok()) {
@@ -104,10 +107,14 @@ absl::Status CheckOptions(const EncoderOptions& o) {
 
 AVPixelFormat PackedFormat(ColorEncoding e) {
   switch (e) {
-    case ColorEncoding::kBGR8: return AV_PIX_FMT_BGR24;
-    case ColorEncoding::kRGB8: return AV_PIX_FMT_RGB24;
-    case ColorEncoding::kRGBA8: return AV_PIX_FMT_RGBA;
-    case ColorEncoding::kMono8: return AV_PIX_FMT_GRAY8;
+    case ColorEncoding::kBGR8:
+      return AV_PIX_FMT_BGR24;
+    case ColorEncoding::kRGB8:
+      return AV_PIX_FMT_RGB24;
+    case ColorEncoding::kRGBA8:
+      return AV_PIX_FMT_RGBA;
+    case ColorEncoding::kMono8:
+      return AV_PIX_FMT_GRAY8;
   }
   return AV_PIX_FMT_NONE;
 }
@@ -194,9 +201,9 @@ absl::StatusOr<std::unique_ptr<Encoder>> Encoder::Make(const EncoderOptions& opt
   av_dict_free(&dict);
   if (rc < 0) {
     const std::string why = internal::TakeLibavMessage();
-    return absl::InvalidArgumentError(absl::StrCat(
-        "libx264 refused the options (preset '", options.preset, "'): ", LibavError(rc),
-        why.empty() ? "" : absl::StrCat(" (", why, ")")));
+    return absl::InvalidArgumentError(
+        absl::StrCat("libx264 refused the options (preset '", options.preset,
+                     "'): ", LibavError(rc), why.empty() ? "" : absl::StrCat(" (", why, ")")));
   }
   if (!unused.empty()) {
     return absl::InternalError(absl::StrCat("libx264 did not take the option '", unused, "'"));
@@ -204,8 +211,8 @@ absl::StatusOr<std::unique_ptr<Encoder>> Encoder::Make(const EncoderOptions& opt
   // libavcodec warns of an x264-params entry x264 cannot parse, and opens anyway: refuse it here.
   const std::string why = internal::TakeLibavWarning();
   if (!options.x264_params.empty() && why.find("Error parsing option") != std::string::npos) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "options.x264_params '", options.x264_params, "': libx264: ", why));
+    return absl::InvalidArgumentError(
+        absl::StrCat("options.x264_params '", options.x264_params, "': libx264: ", why));
   }
   AVFrame* f = impl->frame;
   f->format = ctx->pix_fmt;
@@ -227,24 +234,25 @@ absl::Status Encoder::Encode(const ColorView& image, const FrameControl& control
   const EncoderOptions& o = m.options;
   if (absl::Status s = ValidateView(image, o.limits, field); !s.ok()) return s;
   if (image.width != o.width || image.height != o.height) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        S(field), " is ", image.width, "x", image.height, " but the stream is ", o.width, "x",
-        o.height, "; a new size needs a new encoder (and stream)"));
+    return absl::InvalidArgumentError(
+        absl::StrCat(S(field), " is ", image.width, "x", image.height, " but the stream is ",
+                     o.width, "x", o.height, "; a new size needs a new encoder (and stream)"));
   }
   if (o.kind == PictureKind::kGrey && image.encoding != ColorEncoding::kMono8) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        S(field), ".encoding is ", S(cloudcast::Name(image.encoding)),
-        "; a grey stream takes mono8 (stereo::ToGrey converts)"));
+    return absl::InvalidArgumentError(
+        absl::StrCat(S(field), ".encoding is ", S(cloudcast::Name(image.encoding)),
+                     "; a grey stream takes mono8 (stereo::ToGrey converts)"));
   }
   if (control.bitrate_bps < 0 || (control.bitrate_bps > 0 && control.bitrate_bps / o.fps < 1000)) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        S(field), ": control.bitrate_bps is ", control.bitrate_bps, "; 0 (unchanged) or at least ",
-        1000 * o.fps));
+    return absl::InvalidArgumentError(absl::StrCat(S(field), ": control.bitrate_bps is ",
+                                                   control.bitrate_bps,
+                                                   "; 0 (unchanged) or at least ", 1000 * o.fps));
   }
   if (control.bitrate_bps > 0 && control.bitrate_bps != m.bitrate) {
     if (o.qp < 0 && o.bitrate_bps <= 0 && o.crf > 0) {
       return absl::InvalidArgumentError(absl::StrCat(
-          S(field), ": control.bitrate_bps needs a stream opened with a bitrate (options.bitrate_bps: "
+          S(field),
+          ": control.bitrate_bps needs a stream opened with a bitrate (options.bitrate_bps: "
           "the VBV is set up when the encoder opens)"));
     }
     m.SetBitrate(control.bitrate_bps);
@@ -290,7 +298,8 @@ absl::Status Encoder::Encode(const ColorView& image, const FrameControl& control
   if (rc == AVERROR(EAGAIN)) {
     // Latency is the point: an encoder that holds a picture is set up wrongly.
     return absl::InternalError(absl::StrCat(
-        S(field), ": libx264 held the picture instead of coding it at once (a lookahead or frame "
+        S(field),
+        ": libx264 held the picture instead of coding it at once (a lookahead or frame "
         "threads are on)"));
   }
   if (rc < 0) {

@@ -102,7 +102,8 @@ class SpsReader {
  private:
   absl::Status Truncated(const char* name) const {
     return absl::InvalidArgumentError(
-        absl::StrCat(field_, ".", name, ": the sequence parameter set ends (or holds a malformed "
+        absl::StrCat(field_, ".", name,
+                     ": the sequence parameter set ends (or holds a malformed "
                      "Exp-Golomb code) before this field"));
   }
   absl::Status OutOfRange(const char* name, std::int64_t v, std::int64_t lo,
@@ -131,18 +132,16 @@ absl::Status SkipScalingList(SpsReader& r, int size) {
   return absl::OkStatus();
 }
 
+// The profiles whose SPS carries chroma_format_idc, bit depths and scaling lists (7.3.2.1.1).
 bool HasChromaFields(std::uint32_t profile) {
-  switch (profile) {
-    case 100: case 110: case 122: case 244: case 44: case 83: case 86: case 118: case 128:
-    case 138: case 139: case 134: case 135:
-      return true;
-    default:
-      return false;
+  for (std::uint32_t p : {100, 110, 122, 244, 44, 83, 86, 118, 128, 138, 139, 134, 135}) {
+    if (p == profile) return true;
   }
+  return false;
 }
 
-#define CC_RETURN_IF_ERROR(expr)          \
-  do {                                    \
+#define CC_RETURN_IF_ERROR(expr)                       \
+  do {                                                 \
     if (absl::Status _s = (expr); !_s.ok()) return _s; \
   } while (0)
 
@@ -160,7 +159,8 @@ absl::StatusOr<SequenceHeader> ParseSequenceHeader(std::string_view nal, std::st
   if (HasChromaFields(h.profile_idc)) {
     CC_RETURN_IF_ERROR(r.Ue("chroma_format_idc", &h.chroma_format_idc, 3));
     if (h.chroma_format_idc == 2) {
-      return r.Invalid("chroma_format_idc", "2 (4:2:2) is not taken; 0 (grey), 1 (4:2:0), 3 (4:4:4)");
+      return r.Invalid("chroma_format_idc",
+                       "2 (4:2:2) is not taken; 0 (grey), 1 (4:2:0), 3 (4:4:4)");
     }
     if (h.chroma_format_idc == 3) {
       std::uint32_t separate = 0;
@@ -229,10 +229,10 @@ absl::StatusOr<SequenceHeader> ParseSequenceHeader(std::string_view nal, std::st
         " pixels; this server takes at most ", limits.max_side, " pixels a side (max_side)"));
   }
   if (coded_w * coded_h > limits.max_pixels) {
-    return absl::ResourceExhaustedError(absl::StrCat(
-        r.field(), ".pic_width_in_mbs_minus1: the sequence header claims ", coded_w, "x", coded_h,
-        " = ", coded_w * coded_h, " pixels; this server takes at most ", limits.max_pixels,
-        " (max_pixels)"));
+    return absl::ResourceExhaustedError(
+        absl::StrCat(r.field(), ".pic_width_in_mbs_minus1: the sequence header claims ", coded_w,
+                     "x", coded_h, " = ", coded_w * coded_h, " pixels; this server takes at most ",
+                     limits.max_pixels, " (max_pixels)"));
   }
   CC_RETURN_IF_ERROR(r.U(1, "direct_8x8_inference_flag", &v));
   std::uint32_t cropping = 0;
@@ -249,10 +249,10 @@ absl::StatusOr<SequenceHeader> ParseSequenceHeader(std::string_view nal, std::st
     crop_x = unit * (std::uint64_t{left} + right);
     crop_y = unit * (std::uint64_t{top} + bottom);
     if (crop_x >= coded_w || crop_y >= coded_h) {
-      return r.Invalid(crop_x >= coded_w ? "frame_crop_left_offset" : "frame_crop_top_offset",
-                       absl::StrCat("the cropping window (", crop_x, " columns, ", crop_y,
-                                    " rows) leaves nothing of the ", coded_w, "x", coded_h,
-                                    " picture"));
+      return r.Invalid(
+          crop_x >= coded_w ? "frame_crop_left_offset" : "frame_crop_top_offset",
+          absl::StrCat("the cropping window (", crop_x, " columns, ", crop_y,
+                       " rows) leaves nothing of the ", coded_w, "x", coded_h, " picture"));
     }
   }
   h.coded_width = static_cast<std::uint32_t>(coded_w);
@@ -278,7 +278,8 @@ absl::StatusOr<AccessUnitInfo> InspectAccessUnit(std::string_view bytes, std::st
   while (first < bytes.size() && at(first) == 0) ++first;
   if (starts.empty() || first != starts[0] - 1 || first < 2) {
     return absl::InvalidArgumentError(absl::StrCat(
-        S(field), " is not an H.264 Annex B access unit: it must start with the start code 00 00 01 "
+        S(field),
+        " is not an H.264 Annex B access unit: it must start with the start code 00 00 01 "
         "(or 00 00 00 01)"));
   }
   AccessUnitInfo info;
@@ -300,9 +301,9 @@ absl::StatusOr<AccessUnitInfo> InspectAccessUnit(std::string_view bytes, std::st
     nal.ref_idc = (header >> 5) & 3;
     nal.type = header & 31;
     if (nal.type == 0 || nal.type > 12) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          nal_field, ".nal_unit_type is ", nal.type,
-          "; this decoder takes 1..12 (no SVC, MVC or 3D extension NAL units)"));
+      return absl::InvalidArgumentError(
+          absl::StrCat(nal_field, ".nal_unit_type is ", nal.type,
+                       "; this decoder takes 1..12 (no SVC, MVC or 3D extension NAL units)"));
     }
     if (nal.type >= 2 && nal.type <= 4) {
       return absl::InvalidArgumentError(absl::StrCat(
@@ -324,7 +325,8 @@ absl::StatusOr<AccessUnitInfo> InspectAccessUnit(std::string_view bytes, std::st
   }
   if (info.idr && non_idr) {
     return absl::InvalidArgumentError(absl::StrCat(
-        S(field), " mixes IDR (nal_unit_type 5) and non-IDR (1) slices; one picture is one or the "
+        S(field),
+        " mixes IDR (nal_unit_type 5) and non-IDR (1) slices; one picture is one or the "
         "other"));
   }
   info.has_slices = info.idr || non_idr;

@@ -107,9 +107,9 @@ absl::Status DecodeRvl(std::string_view bytes, std::uint32_t width, std::uint32_
                                                    " image; the frame is ", width, "x", height));
   }
   if ((bytes.size() - kHeader) % 4 != 0) {
-    return absl::InvalidArgumentError(
-        absl::StrCat(S(field), ": ", bytes.size() - kHeader, " bytes after the header are not "
-                     "whole 32-bit words"));
+    return absl::InvalidArgumentError(absl::StrCat(S(field), ": ", bytes.size() - kHeader,
+                                                   " bytes after the header are not "
+                                                   "whole 32-bit words"));
   }
   const std::size_t pixels = std::size_t{width} * height;
   out->resize(pixels);

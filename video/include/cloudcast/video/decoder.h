@@ -11,7 +11,8 @@
 //   a new picture size mid-stream                             INVALID_ARGUMENT (new size: new
 //                                                             stream);
 //   a corrupt or truncated picture (libavcodec's error, or a picture it concealed)
-//                                                             INVALID_ARGUMENT, then needs_keyframe.
+//                                                             INVALID_ARGUMENT, then
+//                                                             needs_keyframe.
 #pragma once
 
 #include <cstdint>
@@ -45,6 +46,9 @@ class Decoder {
     // opened or grown for it; a refusal (its status is returned, e.g. RESOURCE_EXHAUSTED naming a
     // budget) leaves the stream as it was. Unset: nothing is charged.
     std::function<absl::Status(std::uint64_t bytes)> charge;
+    // Called once, when the decoder is destroyed, with everything `charge` accepted (if any):
+    // the stream's memory goes back to the budget.
+    std::function<void(std::uint64_t bytes)> release;
   };
 
   explicit Decoder(Options options);

@@ -62,7 +62,7 @@ struct EncoderOptions {
 
 // Per frame: what the caller changes.
 struct FrameControl {
-  bool keyframe = false;        // this frame is an IDR (with SPS and PPS before it)
+  bool keyframe = false;         // this frame is an IDR (with SPS and PPS before it)
   std::int64_t bitrate_bps = 0;  // > 0: the new bitrate (and VBV) from this frame on
 };
 
@@ -84,8 +84,8 @@ class Encoder {
 
   // Encodes `image` (grey: kMono8; colour: kBGR8, kRGB8, kRGBA8 or kMono8; the stream's size)
   // into `out` (its buffer is reused). Errors name `field`.
-  absl::Status Encode(const ColorView& image, const FrameControl& control,
-                      std::string_view field, EncodedPicture* out);
+  absl::Status Encode(const ColorView& image, const FrameControl& control, std::string_view field,
+                      EncodedPicture* out);
 
   const EncoderOptions& options() const;
 

@@ -41,9 +41,9 @@ struct SequenceHeader {
   std::uint32_t level_idc = 0;
   std::uint32_t chroma_format_idc = 1;  // 0: grey (4:0:0), 1: 4:2:0, 3: 4:4:4
   std::uint32_t max_num_ref_frames = 0;
-  std::uint32_t coded_width = 0;   // in whole macroblocks
+  std::uint32_t coded_width = 0;  // in whole macroblocks
   std::uint32_t coded_height = 0;
-  std::uint32_t width = 0;         // after the cropping window: the picture's size
+  std::uint32_t width = 0;  // after the cropping window: the picture's size
   std::uint32_t height = 0;
 };
 
@@ -58,10 +58,10 @@ struct AccessUnitInfo {
 // Splits an Annex B byte stream (each NAL unit after a 00 00 01 or 00 00 00 01 start code) and
 // parses every SPS in it. Checks, each error naming `field` (e.g. "frame.video.left.access_unit"):
 // not empty and starting with a start code; every NAL unit non-empty, forbidden_zero_bit 0, a
-// type this decoder takes (1..12; not the SVC/MVC/3D extensions); an SPS of 8-bit 4:0:0, 4:2:0 or 4:4:4,
-// progressive (frame_mbs_only_flag 1), with a cropping window inside the picture; its picture
-// size within `limits` (RESOURCE_EXHAUSTED naming the SPS field, before anything is allocated);
-// at most one SPS and one IDR-or-not kind of slice. INVALID_ARGUMENT otherwise.
+// type this decoder takes (1..12; not the SVC/MVC/3D extensions); an SPS of 8-bit 4:0:0, 4:2:0 or
+// 4:4:4, progressive (frame_mbs_only_flag 1), with a cropping window inside the picture; its
+// picture size within `limits` (RESOURCE_EXHAUSTED naming the SPS field, before anything is
+// allocated); at most one SPS and one IDR-or-not kind of slice. INVALID_ARGUMENT otherwise.
 absl::StatusOr<AccessUnitInfo> InspectAccessUnit(std::string_view bytes, std::string_view field,
                                                  const Limits& limits);
 
