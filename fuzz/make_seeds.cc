@@ -19,6 +19,8 @@
 #include "cloudcast/core/frame_codec.h"
 #include "cloudcast/io/cloud_io.h"
 #include "cloudcast/proto/convert.h"
+#include "cloudcast/video/encoder.h"
+#include "cloudcast/video/rvl.h"
 #include "cloudcast/v1/cloudcast.pb.h"
 
 using namespace cloudcast;
@@ -539,6 +541,61 @@ void CloudFileSeeds() {
 
 }  // namespace
 
+// fuzz-video-decode: short real H.264 streams (x264, 64x48) in the harness's framing: a flag byte,
+// then each access unit after its 2-byte big-endian length. Grey, colour 4:2:0 and 4:4:4, an IDR
+// asked for mid-stream, one starting without its IDR, and one with a gap.
+void VideoSeeds() {
+  auto stream = [](video::PictureKind kind, int frames, int idr_at, int skip_first,
+                   std::uint8_t flags) {
+    video::EncoderOptions o;
+    o.kind = kind;
+    o.width = 64;
+    o.height = 48;
+    o.crf = 30;
+    o.bitrate_bps = 0;
+    auto enc = video::Encoder::Make(o);
+    Check(enc.status());
+    std::string out(1, static_cast<char>(flags));
+    for (int f = 0; f < frames; ++f) {
+      cv::Mat img = kind == video::PictureKind::kGrey ? cv::Mat(48, 64, CV_8UC1)
+                                                      : cv::Mat(48, 64, CV_8UC3);
+      for (int v = 0; v < 48; ++v) {
+        for (int u = 0; u < 64 * img.channels(); ++u) {
+          img.ptr<std::uint8_t>(v)[u] = static_cast<std::uint8_t>((u * 7 + v * 5 + f * 3) ^ (u * v));
+        }
+      }
+      ColorView view;
+      view.data = img.data;
+      view.size_bytes = img.total() * img.elemSize();
+      view.width = 64;
+      view.height = 48;
+      view.stride_bytes = img.step;
+      view.encoding = img.channels() == 1 ? ColorEncoding::kMono8 : ColorEncoding::kBGR8;
+      video::FrameControl control;
+      control.keyframe = f == idr_at;
+      video::EncodedPicture pic;
+      Check((*enc)->Encode(view, control, "seed", &pic));
+      if (f < skip_first) continue;
+      out.push_back(static_cast<char>(pic.bytes.size() >> 8));
+      out.push_back(static_cast<char>(pic.bytes.size() & 0xFF));
+      out += pic.bytes;
+    }
+    return out;
+  };
+  Write("video_decode", "grey_4_frames", stream(video::PictureKind::kGrey, 4, -1, 0, 0));
+  Write("video_decode", "colour420_bgr_idr_at_2", stream(video::PictureKind::kColour, 4, 2, 0, 1));
+  Write("video_decode", "colour444_bgr", stream(video::PictureKind::kColour444, 3, -1, 0, 1));
+  Write("video_decode", "grey_starts_without_idr", stream(video::PictureKind::kGrey, 4, 2, 1, 0));
+  Write("video_decode", "grey_gap_then_idr", stream(video::PictureKind::kGrey, 5, 3, 0, 2));
+  // RVL images (flag 4; 12: 8-bit): the 16 x 12 disparity maps the other seeds use.
+  std::string rvl;
+  const cv::Mat u8 = DisparityU8(), u16 = DisparityU16();
+  video::EncodeRvl(u8.ptr<std::uint8_t>(), kW, kH, &rvl);
+  Write("video_decode", "rvl_u8", std::string(1, '\x0c') + rvl);
+  video::EncodeRvl(u16.ptr<std::uint16_t>(), kW, kH, &rvl);
+  Write("video_decode", "rvl_u16", std::string(1, '\x04') + rvl);
+}
+
 int main(int argc, char** argv) {
   if (argc != 2) {
     std::cerr << "usage: make_seeds <corpus folder, e.g. fuzz/corpus>\n";
@@ -550,6 +607,7 @@ int main(int argc, char** argv) {
   ImageSeeds();
   DracoSeeds();
   CloudFileSeeds();
+  VideoSeeds();
   std::cout << "make_seeds: wrote the seed corpora under " << g_root << "\n";
   return 0;
 }

@@ -20,22 +20,23 @@ class EndedCall final : public grpc::ServerGenericBidiReactor {
 
 ProcessCall::ProcessCall(const ProcessCallServices& services, grpc::CallbackServerContext* context)
     : services_(services) {
+  // Every member is written and read under mu_ (the destructor runs after OnDone takes it): gRPC
+  // orders the reactions through its own uninstrumented locks, which TSan cannot see.
+  std::unique_lock<std::mutex> lock(mu_);
   auto admitted = services_.admitter->AdmitCall(Admission::Kind::kProcess, context);
   if (!admitted.ok()) {
+    lock.unlock();
     Finish(ToGrpc(admitted.status()));
     return;
   }
   admitted_ = *std::move(admitted);
   client_ = admitted_.caller.fair_key;
-  bool granted = false;
-  {
-    // Held while reserving: a grant arriving from another thread waits until the state is set.
-    std::lock_guard<std::mutex> lock(mu_);
-    waiter_ = services_.reads->Reserve(client_, services_.read_reservation,
-                                       [this] { StartReading(); });
-    granted = waiter_ == ReadBudget::kGranted;
-    state_ = granted ? State::kReading : State::kWaitingForBudget;
-  }
+  // Held while reserving: a grant arriving from another thread waits until the state is set.
+  waiter_ = services_.reads->Reserve(client_, services_.read_reservation,
+                                     [this] { StartReading(); });
+  const bool granted = waiter_ == ReadBudget::kGranted;
+  state_ = granted ? State::kReading : State::kWaitingForBudget;
+  lock.unlock();
   if (granted) StartRead(&request_);
 }
 
@@ -49,22 +50,26 @@ void ProcessCall::StartReading() {
 }
 
 void ProcessCall::OnReadDone(bool ok) {
+  AdmittedCall admitted;
+  std::uint64_t client = 0;
   {
     std::lock_guard<std::mutex> lock(mu_);
     state_ = State::kRead;
+    admitted = std::move(admitted_);
+    client = client_;
   }
   // The message is whole (or will never be): its bytes are now the frame's, charged by the
   // frame admission like any frame's.
-  services_.reads->Release(client_, services_.read_reservation);
+  services_.reads->Release(client, services_.read_reservation);
   if (!ok) {
     // Cancelled, or the client half-closed without a request.
-    admitted_.ticket.Release();
+    admitted.ticket.Release();
     Finish(grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
                         "the Process call ended before its ProcessRequest arrived"));
     return;
   }
   const Arrival arrival{Clock::now(), UnixNanos()};
-  services_.serve(this, std::move(admitted_), request_, arrival);
+  services_.serve(this, std::move(admitted), request_, arrival);
 }
 
 void ProcessCall::OnCancel() {
@@ -74,13 +79,18 @@ void ProcessCall::OnCancel() {
     if (state_ == State::kWaitingForBudget) {
       // Not granted yet: it never will be. Granted meanwhile: its read starts and fails.
       withdrawn = services_.reads->Cancel(client_, waiter_);
-      if (withdrawn) state_ = State::kEnded;
+      if (withdrawn) {
+        state_ = State::kEnded;
+        admitted_.ticket.Release();
+      }
     }
   }
-  if (withdrawn) {
-    admitted_.ticket.Release();
-    Finish(grpc::Status(grpc::StatusCode::CANCELLED, "cancelled"));
-  }
+  if (withdrawn) Finish(grpc::Status(grpc::StatusCode::CANCELLED, "cancelled"));
+}
+
+void ProcessCall::OnDone() {
+  { std::lock_guard<std::mutex> lock(mu_); }  // after every reaction's writes (see the constructor)
+  delete this;
 }
 
 std::size_t ProcessCall::Reply(const google::protobuf::Message& reply) {

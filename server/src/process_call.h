@@ -47,7 +47,7 @@ class ProcessCall final : public grpc::ServerGenericBidiReactor {
 
   void OnReadDone(bool ok) override;
   void OnCancel() override;
-  void OnDone() override { delete this; }
+  void OnDone() override;
 
  private:
   enum class State { kWaitingForBudget, kReading, kRead, kEnded };

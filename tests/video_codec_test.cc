@@ -1,0 +1,602 @@
+// The video codec layer (video/): real libx264 output decoded by libavcodec's own H.264 decoder,
+// and every bad input the server must survive, each a per-frame error naming the field after
+// which the stream goes on at the next IDR.
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+#include <malloc.h>
+
+#include <cmath>
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include "cloudcast/datasets/synthetic.h"
+#include "cloudcast/stereo/grey.h"
+#include "cloudcast/video/decoder.h"
+#include "cloudcast/video/encoder.h"
+#include "cloudcast/video/h264_bitstream.h"
+#include "cloudcast/video/rvl.h"
+
+namespace cloudcast::video {
+namespace {
+
+using ::testing::HasSubstr;
+
+// Consecutive frames of the synthetic scene (its camera moves frame to frame), grey or BGR.
+std::vector<OwnedColor> Frames(std::uint32_t w, std::uint32_t h, int count, bool grey,
+                               int first = 0) {
+  const SyntheticScene scene = SyntheticScene::Default();
+  std::vector<OwnedColor> out;
+  for (int i = 0; i < count; ++i) {
+    SyntheticOptions o;
+    o.width = w;
+    o.height = h;
+    o.frame = static_cast<std::uint64_t>(first + i);
+    auto f = scene.Render(o);
+    EXPECT_TRUE(f.ok()) << f.status();
+    OwnedColor c;
+    c.pixels = f->colour;
+    c.width = w;
+    c.height = h;
+    c.encoding = ColorEncoding::kBGR8;
+    out.push_back(grey ? *stereo::ToGrey(c.view()) : c);
+  }
+  return out;
+}
+
+double Psnr(const ColorView& a, const ColorView& b) {
+  EXPECT_EQ(a.width, b.width);
+  EXPECT_EQ(a.height, b.height);
+  const std::size_t row = a.width * BytesPerPixel(a.encoding);
+  double se = 0;
+  for (std::uint32_t v = 0; v < a.height; ++v) {
+    for (std::size_t i = 0; i < row; ++i) {
+      const double d = static_cast<double>(a.row(v)[i]) - static_cast<double>(b.row(v)[i]);
+      se += d * d;
+    }
+  }
+  const double mse = se / (double(row) * a.height);
+  return mse == 0 ? 99.0 : 10 * std::log10(255.0 * 255.0 / mse);
+}
+
+EncoderOptions Options(PictureKind kind, std::uint32_t w, std::uint32_t h) {
+  EncoderOptions o;
+  o.kind = kind;
+  o.width = w;
+  o.height = h;
+  o.crf = 18;
+  o.bitrate_bps = 0;
+  return o;
+}
+
+std::vector<EncodedPicture> Encode(const EncoderOptions& options,
+                                   const std::vector<OwnedColor>& frames,
+                                   const std::vector<int>& keyframes = {}) {
+  auto enc = Encoder::Make(options);
+  EXPECT_TRUE(enc.ok()) << enc.status();
+  std::vector<EncodedPicture> out;
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    FrameControl control;
+    for (int k : keyframes) control.keyframe |= static_cast<std::size_t>(k) == i;
+    EncodedPicture p;
+    const absl::Status s = (*enc)->Encode(frames[i].view(), control, "frame", &p);
+    EXPECT_TRUE(s.ok()) << s;
+    out.push_back(std::move(p));
+  }
+  return out;
+}
+
+Decoder::Options DecoderOptions(ColorEncoding output = ColorEncoding::kMono8) {
+  Decoder::Options o;
+  o.output = output;
+  return o;
+}
+
+// --- the codec on real frames
+// ---------------------------------------------------------------------
+
+TEST(VideoCodec, GreyRoundTripIsOnePictureInOneOut) {
+  const auto frames = Frames(320, 240, 8, /*grey=*/true);
+  const auto units = Encode(Options(PictureKind::kGrey, 320, 240), frames);
+  Decoder decoder(DecoderOptions());
+  for (std::size_t i = 0; i < units.size(); ++i) {
+    EXPECT_EQ(units[i].index, static_cast<std::int64_t>(i));
+    EXPECT_EQ(units[i].keyframe, i == 0) << i;
+    ColorView out;
+    ASSERT_TRUE(decoder.Decode(units[i].bytes, "au", &out).ok()) << i;
+    EXPECT_EQ(out.encoding, ColorEncoding::kMono8);
+    EXPECT_GT(Psnr(out, frames[i].view()), 38.0) << i;  // crf 18
+  }
+  // Luma only: the grey stream's SPS says 4:0:0.
+  auto info = InspectAccessUnit(units[0].bytes, "au", Limits{});
+  ASSERT_TRUE(info.ok());
+  ASSERT_TRUE(info->sps.has_value());
+  EXPECT_EQ(info->sps->chroma_format_idc, 0u);
+  EXPECT_EQ(info->sps->width, 320u);
+  EXPECT_EQ(info->sps->height, 240u);
+  EXPECT_TRUE(info->idr);
+  // Consecutive frames cost less than the IDR: prediction works.
+  EXPECT_LT(units[3].bytes.size(), units[0].bytes.size());
+}
+
+TEST(VideoCodec, ColourRoundTripBgr) {
+  const auto frames = Frames(320, 240, 5, /*grey=*/false);
+  const auto units = Encode(Options(PictureKind::kColour, 320, 240), frames);
+  Decoder decoder(DecoderOptions(ColorEncoding::kBGR8));
+  for (std::size_t i = 0; i < units.size(); ++i) {
+    ColorView out;
+    ASSERT_TRUE(decoder.Decode(units[i].bytes, "au", &out).ok()) << i;
+    EXPECT_EQ(out.encoding, ColorEncoding::kBGR8);
+    EXPECT_GT(Psnr(out, frames[i].view()), 26.0) << i;  // 4:2:0's own ceiling here: 27.9 dB
+  }
+  auto info = InspectAccessUnit(units[0].bytes, "au", Limits{});
+  ASSERT_TRUE(info.ok());
+  EXPECT_EQ(info->sps->chroma_format_idc, 1u);
+}
+
+// 4:2:0 alone caps the synthetic scene's colour near 28 dB (its textures change colour pixel to
+// pixel); 4:4:4 keeps it.
+TEST(VideoCodec, Colour444KeepsColourDetail) {
+  const auto frames = Frames(320, 240, 3, /*grey=*/false);
+  const auto units = Encode(Options(PictureKind::kColour444, 320, 240), frames);
+  Decoder decoder(DecoderOptions(ColorEncoding::kBGR8));
+  for (std::size_t i = 0; i < units.size(); ++i) {
+    ColorView out;
+    ASSERT_TRUE(decoder.Decode(units[i].bytes, "au", &out).ok()) << i;
+    EXPECT_GT(Psnr(out, frames[i].view()), 33.0) << i;  // 4:2:0 at the same CRF: 27.6 dB
+  }
+  EXPECT_EQ(InspectAccessUnit(units[0].bytes, "au", Limits{})->sps->chroma_format_idc, 3u);
+}
+
+TEST(VideoCodec, QpZeroIsLossless) {
+  const auto frames = Frames(160, 120, 3, /*grey=*/true);
+  EncoderOptions o = Options(PictureKind::kGrey, 160, 120);
+  o.qp = 0;
+  const auto units = Encode(o, frames);
+  Decoder decoder(DecoderOptions());
+  for (std::size_t i = 0; i < units.size(); ++i) {
+    ColorView out;
+    ASSERT_TRUE(decoder.Decode(units[i].bytes, "au", &out).ok());
+    EXPECT_EQ(Psnr(out, frames[i].view()), 99.0) << "picture " << i << " differs";
+  }
+}
+
+TEST(VideoCodec, IdrOnRequestStartsALateDecoder) {
+  const auto frames = Frames(160, 120, 8, /*grey=*/true);
+  const auto units = Encode(Options(PictureKind::kGrey, 160, 120), frames, {5});
+  EXPECT_TRUE(units[5].keyframe);
+  EXPECT_FALSE(units[4].keyframe);
+  auto info = InspectAccessUnit(units[5].bytes, "au", Limits{});
+  ASSERT_TRUE(info.ok());
+  EXPECT_TRUE(info->sps.has_value()) << "an IDR repeats the headers for late joiners";
+  Decoder late(DecoderOptions());
+  ColorView out;
+  for (int i = 5; i < 8; ++i) ASSERT_TRUE(late.Decode(units[i].bytes, "au", &out).ok()) << i;
+}
+
+TEST(VideoCodec, PeriodicIdrAndIntraRefresh) {
+  const auto frames = Frames(160, 120, 9, /*grey=*/true);
+  EncoderOptions o = Options(PictureKind::kGrey, 160, 120);
+  o.keyframe_interval = 4;
+  auto units = Encode(o, frames);
+  for (std::size_t i = 0; i < units.size(); ++i) EXPECT_EQ(units[i].keyframe, i % 4 == 0) << i;
+  // Intra refresh: one IDR, then no picture much larger than the rest; an IDR still on request.
+  o.keyframe_interval = 0;
+  o.intra_refresh = true;
+  units = Encode(o, frames, {6});
+  Decoder decoder(DecoderOptions());
+  for (std::size_t i = 0; i < units.size(); ++i) {
+    EXPECT_EQ(units[i].keyframe, i == 0 || i == 6) << i;
+    ColorView out;
+    ASSERT_TRUE(decoder.Decode(units[i].bytes, "au", &out).ok()) << i;
+  }
+}
+
+TEST(VideoCodec, BitrateChangesPerFrame) {
+  const auto frames = Frames(320, 240, 30, /*grey=*/false);
+  EncoderOptions o = Options(PictureKind::kColour, 320, 240);
+  o.crf = 0;
+  o.bitrate_bps = 4'000'000;
+  auto enc = Encoder::Make(o);
+  ASSERT_TRUE(enc.ok()) << enc.status();
+  std::vector<std::size_t> sizes;
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    FrameControl c;
+    if (i == 15) c.bitrate_bps = 300'000;  // the link dropped
+    EncodedPicture p;
+    ASSERT_TRUE((*enc)->Encode(frames[i].view(), c, "frame", &p).ok());
+    sizes.push_back(p.bytes.size());
+  }
+  std::size_t before = 0, after = 0;
+  for (int i = 8; i < 15; ++i) before += sizes[i];
+  for (int i = 22; i < 29; ++i) after += sizes[i];
+  EXPECT_LT(after * 3, before) << "7 frames at 4 Mbit/s: " << before << " B, at 0.3: " << after;
+  // One frame of VBV at 0.3 Mbit/s and 30 fps is 1,250 bytes: no frame far above it.
+  for (int i = 22; i < 29; ++i) EXPECT_LT(sizes[i], 2 * 1250u) << i;
+}
+
+TEST(VideoCodec, EncoderOptionErrorsNameTheField) {
+  EncoderOptions o = Options(PictureKind::kGrey, 161, 120);
+  EXPECT_THAT(std::string(Encoder::Make(o).status().message()), HasSubstr("options.width"));
+  o.width = 160;
+  o.crf = 0;
+  o.bitrate_bps = 0;
+  EXPECT_THAT(std::string(Encoder::Make(o).status().message()), HasSubstr("options.bitrate_bps"));
+  o.crf = 60;
+  EXPECT_THAT(std::string(Encoder::Make(o).status().message()), HasSubstr("options.crf"));
+  o.crf = 18;
+  o.preset = "warp-speed";
+  EXPECT_THAT(std::string(Encoder::Make(o).status().message()), HasSubstr("warp-speed"));
+  o.preset = "veryfast";
+  o.x264_params = "no-such-option=1";
+  EXPECT_THAT(std::string(Encoder::Make(o).status().message()), HasSubstr("no-such-option"));
+  o.x264_params = "aq-strength=1.5";
+  auto enc = Encoder::Make(o);
+  ASSERT_TRUE(enc.ok()) << enc.status();
+  const auto colour = Frames(160, 120, 1, /*grey=*/false);
+  EncodedPicture p;
+  const absl::Status s = (*enc)->Encode(colour[0].view(), {}, "frame.left", &p);
+  EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(std::string(s.message()), HasSubstr("frame.left.encoding"));
+  const auto small = Frames(80, 60, 1, /*grey=*/true);
+  EXPECT_THAT(std::string((*enc)->Encode(small[0].view(), {}, "frame.left", &p).message()),
+              HasSubstr("80x60 but the stream is 160x120"));
+}
+
+// --- bad input
+// --------------------------------------------------------------------------------------
+
+class VideoBadInput : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    frames_ = Frames(160, 120, 10, /*grey=*/true);
+    units_ = Encode(Options(PictureKind::kGrey, 160, 120), frames_, {6});
+  }
+  // The stream goes on: the next IDR decodes, and the pictures after it.
+  void ExpectRecoversAtIdr(Decoder& d) {
+    ColorView out;
+    EXPECT_TRUE(d.needs_keyframe());
+    const absl::Status refused = d.Decode(units_[4].bytes, "au", &out);
+    EXPECT_EQ(refused.code(), absl::StatusCode::kFailedPrecondition) << refused;
+    for (int i = 6; i < 10; ++i) {
+      const absl::Status s = d.Decode(units_[i].bytes, "au", &out);
+      ASSERT_TRUE(s.ok()) << i << ": " << s;
+      EXPECT_GT(Psnr(out, frames_[i].view()), 35.0);
+    }
+    EXPECT_FALSE(d.needs_keyframe());
+  }
+  std::vector<OwnedColor> frames_;
+  std::vector<EncodedPicture> units_;
+};
+
+TEST_F(VideoBadInput, StreamStartingWithoutKeyframeIsRefusedUndecoded) {
+  int charges = 0;
+  Decoder::Options o = DecoderOptions();
+  o.charge = [&](std::uint64_t) {
+    ++charges;
+    return absl::OkStatus();
+  };
+  Decoder d(o);
+  ColorView out;
+  const absl::Status s = d.Decode(units_[2].bytes, "frame.video.left.access_unit", &out);
+  EXPECT_EQ(s.code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_THAT(std::string(s.message()),
+              HasSubstr("frame.video.left.access_unit is not a keyframe"));
+  EXPECT_TRUE(d.needs_keyframe());
+  EXPECT_FALSE(d.opened()) << "nothing is decoded before the stream's IDR";
+  EXPECT_EQ(charges, 0);
+  ExpectRecoversAtIdr(d);
+  EXPECT_EQ(charges, 1);
+}
+
+TEST_F(VideoBadInput, CorruptSliceIsAnErrorThenTheStreamGoesOn) {
+  Decoder d(DecoderOptions());
+  ColorView out;
+  for (int i = 0; i < 3; ++i) ASSERT_TRUE(d.Decode(units_[i].bytes, "au", &out).ok());
+  // Damage the slice data of picture 3 (its header bytes kept, so the NAL units still parse).
+  std::string bad = units_[3].bytes;
+  for (std::size_t k = 8; k < bad.size(); k += 3) bad[k] = static_cast<char>(bad[k] ^ 0x5A);
+  for (std::size_t k = 3; k + 2 < bad.size(); ++k) {  // no start code may appear by chance
+    if (bad[k] == 0 && bad[k + 1] == 0) bad[k + 1] = 1;
+  }
+  const absl::Status s = d.Decode(bad, "frame.video.left.access_unit", &out);
+  EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument) << s;
+  EXPECT_THAT(std::string(s.message()), HasSubstr("frame.video.left.access_unit"));
+  EXPECT_THAT(std::string(s.message()), HasSubstr("needs an IDR"));
+  ExpectRecoversAtIdr(d);
+}
+
+TEST_F(VideoBadInput, TruncatedAccessUnitIsAnError) {
+  Decoder d(DecoderOptions());
+  ColorView out;
+  for (int i = 0; i < 3; ++i) ASSERT_TRUE(d.Decode(units_[i].bytes, "au", &out).ok());
+  const std::string cut = units_[3].bytes.substr(0, units_[3].bytes.size() / 2);
+  const absl::Status s = d.Decode(cut, "frame.video.left.access_unit", &out);
+  EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument) << s;
+  EXPECT_THAT(std::string(s.message()), HasSubstr("frame.video.left.access_unit"));
+  ExpectRecoversAtIdr(d);
+}
+
+TEST_F(VideoBadInput, TruncatedIdrIsAnError) {
+  Decoder d(DecoderOptions());
+  ColorView out;
+  const std::string cut = units_[0].bytes.substr(0, units_[0].bytes.size() * 2 / 3);
+  const absl::Status s = d.Decode(cut, "au", &out);
+  EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument) << s;
+  ExpectRecoversAtIdr(d);
+}
+
+TEST_F(VideoBadInput, ResolutionChangeMidStreamIsRefused) {
+  Decoder d(DecoderOptions());
+  ColorView out;
+  for (int i = 0; i < 3; ++i) ASSERT_TRUE(d.Decode(units_[i].bytes, "au", &out).ok());
+  const auto bigger = Encode(Options(PictureKind::kGrey, 320, 240), Frames(320, 240, 1, true));
+  const absl::Status s = d.Decode(bigger[0].bytes, "frame.video.left.access_unit", &out);
+  EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(std::string(s.message()),
+              HasSubstr("frame.video.left.access_unit.sps: the picture size changes mid-stream, "
+                        "from 160x120 to 320x240"));
+  EXPECT_EQ(d.width(), 160u);
+  ExpectRecoversAtIdr(d);
+}
+
+TEST_F(VideoBadInput, SizeOtherThanTheFramesIsRefused) {
+  Decoder::Options o = DecoderOptions();
+  o.width = 640;
+  o.height = 480;
+  Decoder d(o);
+  ColorView out;
+  const absl::Status s = d.Decode(units_[0].bytes, "au", &out);
+  EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(std::string(s.message()), HasSubstr("au.sps: the sequence header says 160x120"));
+  EXPECT_FALSE(d.opened());
+}
+
+// Writes an SPS bit by bit (Baseline, no VUI), with emulation prevention.
+class SpsWriter {
+ public:
+  void U(int n, std::uint32_t v) {
+    for (int i = n - 1; i >= 0; --i) bits_.push_back((v >> i) & 1);
+  }
+  void Ue(std::uint32_t v) {
+    const std::uint64_t x = std::uint64_t{v} + 1;
+    int n = 0;
+    while ((x >> (n + 1)) != 0) ++n;
+    U(n, 0);
+    for (int i = n; i >= 0; --i) bits_.push_back((x >> i) & 1);
+  }
+  std::string Nal() {
+    bits_.push_back(1);  // rbsp_stop_one_bit
+    while (bits_.size() % 8) bits_.push_back(0);
+    std::string rbsp;
+    for (std::size_t i = 0; i < bits_.size(); i += 8) {
+      std::uint8_t b = 0;
+      for (int k = 0; k < 8; ++k) b = static_cast<std::uint8_t>(b << 1 | bits_[i + k]);
+      rbsp.push_back(static_cast<char>(b));
+    }
+    std::string nal("\x00\x00\x00\x01\x67", 5);
+    int zeros = 0;
+    for (char c : rbsp) {
+      if (zeros >= 2 && static_cast<std::uint8_t>(c) <= 3) {
+        nal.push_back(3);
+        zeros = 0;
+      }
+      nal.push_back(c);
+      zeros = c == 0 ? zeros + 1 : 0;
+    }
+    return nal;
+  }
+
+ private:
+  std::vector<int> bits_;
+};
+
+std::string Sps(std::uint32_t width_mbs, std::uint32_t height_mbs) {
+  SpsWriter w;
+  w.U(8, 66);  // Baseline
+  w.U(8, 0);
+  w.U(8, 51);
+  w.Ue(0);  // seq_parameter_set_id
+  w.Ue(0);  // log2_max_frame_num_minus4
+  w.Ue(2);  // pic_order_cnt_type
+  w.Ue(1);  // max_num_ref_frames
+  w.U(1, 0);
+  w.Ue(width_mbs - 1);
+  w.Ue(height_mbs - 1);
+  w.U(1, 1);  // frame_mbs_only_flag
+  w.U(1, 1);
+  w.U(1, 0);  // no cropping
+  w.U(1, 0);  // no VUI
+  return w.Nal();
+}
+
+TEST_F(VideoBadInput, SequenceHeaderClaiming16kIsRefusedBeforeAllocation) {
+  // A real IDR whose SPS is replaced by one claiming 16384 x 16384.
+  auto info = InspectAccessUnit(units_[0].bytes, "au", Limits{});
+  ASSERT_TRUE(info.ok());
+  std::string forged = Sps(1024, 1024);
+  for (const NalUnit& n : info->nals) {
+    if (n.type != kNalSps) forged += std::string("\x00\x00\x00\x01", 4) + std::string(n.bytes);
+  }
+  std::uint64_t charged = 0;
+  Decoder::Options o = DecoderOptions();
+  o.charge = [&](std::uint64_t bytes) {
+    charged += bytes;
+    return absl::OkStatus();
+  };
+  Decoder d(o);
+  ColorView out;
+  const absl::Status s = d.Decode(forged, "frame.video.left.access_unit", &out);
+  EXPECT_EQ(s.code(), absl::StatusCode::kResourceExhausted);
+  EXPECT_THAT(std::string(s.message()),
+              HasSubstr("frame.video.left.access_unit.sps.pic_width_in_mbs_minus1: the sequence "
+                        "header claims 16384x16384"));
+  EXPECT_THAT(std::string(s.message()), HasSubstr("max_pixels"));
+  EXPECT_EQ(charged, 0u);
+  EXPECT_FALSE(d.opened()) << "no decoder exists for a refused header";
+  // Over the side limit too: 32768 wide.
+  Limits limits;
+  EXPECT_THAT(
+      std::string(ParseSequenceHeader(Sps(2048, 8).substr(4), "f", limits).status().message()),
+      HasSubstr("f.sps.pic_width_in_mbs_minus1: the sequence header claims 32768x128"));
+  ExpectRecoversAtIdr(d);
+}
+
+TEST_F(VideoBadInput, ChargeComesFromTheHeaderAndARefusalLeavesNoDecoder) {
+  Decoder::Options o = DecoderOptions();
+  o.charge = [](std::uint64_t bytes) {
+    return absl::ResourceExhaustedError("over --max-memory-mb (test)");
+  };
+  Decoder refused(o);
+  ColorView out;
+  const absl::Status s = refused.Decode(units_[0].bytes, "au", &out);
+  EXPECT_EQ(s.code(), absl::StatusCode::kResourceExhausted);
+  EXPECT_THAT(std::string(s.message()), HasSubstr("--max-memory-mb"));
+  EXPECT_FALSE(refused.opened());
+  EXPECT_EQ(refused.charged_bytes(), 0u);
+
+  std::vector<std::uint64_t> charges;
+  std::uint64_t released = 0;
+  o.charge = [&](std::uint64_t bytes) {
+    charges.push_back(bytes);
+    return absl::OkStatus();
+  };
+  o.release = [&](std::uint64_t bytes) { released += bytes; };
+  {
+    Decoder d(o);
+    for (int i = 0; i < 10; ++i) ASSERT_TRUE(d.Decode(units_[i].bytes, "au", &out).ok());
+    EXPECT_EQ(released, 0u);
+  }
+  ASSERT_EQ(charges.size(), 1u) << "the same header again is not charged again";
+  EXPECT_EQ(released, charges[0]) << "the stream's memory goes back when its decoder goes";
+  auto info = InspectAccessUnit(units_[0].bytes, "au", Limits{});
+  EXPECT_EQ(charges[0], DecoderMemoryBytes(*info->sps, ColorEncoding::kMono8));
+  EXPECT_GE(charges[0], 160u * 120 * 3 / 2 * (info->sps->max_num_ref_frames + 1));
+}
+
+// glibc's accounting sees the allocations only without a sanitizer's allocator (gcc defines
+// __SANITIZE_*__, clang answers __has_feature).
+#if defined(__has_feature)
+#if __has_feature(address_sanitizer) || __has_feature(thread_sanitizer) || \
+    __has_feature(memory_sanitizer)
+#define CLOUDCAST_SANITIZED_ALLOCATOR 1
+#endif
+#endif
+#if !defined(__SANITIZE_ADDRESS__) && !defined(__SANITIZE_THREAD__) && \
+    !defined(CLOUDCAST_SANITIZED_ALLOCATOR)
+// What is charged covers what the decoder allocates, at 640x480 (glibc's own accounting).
+TEST(VideoCodec, ChargeCoversWhatTheDecoderAllocates) {
+  const auto frames = Frames(640, 480, 6, /*grey=*/false);
+  const auto units = Encode(Options(PictureKind::kColour, 640, 480), frames);
+  Decoder::Options o = DecoderOptions(ColorEncoding::kBGR8);
+  Decoder d(o);
+  const struct mallinfo2 before = mallinfo2();
+  std::size_t peak = 0;
+  for (const EncodedPicture& u : units) {
+    ColorView out;
+    ASSERT_TRUE(d.Decode(u.bytes, "au", &out).ok());
+    const struct mallinfo2 now = mallinfo2();
+    peak = std::max(peak, (now.uordblks + now.hblkhd) - (before.uordblks + before.hblkhd));
+  }
+  EXPECT_GT(peak, 0u);
+  EXPECT_LE(peak, d.charged_bytes()) << "charged " << d.charged_bytes() << ", allocated " << peak;
+}
+#endif
+
+TEST(H264Bitstream, MalformedAccessUnitsNameTheField) {
+  const Limits limits;
+  auto err = [&](std::string bytes) {
+    return std::string(InspectAccessUnit(bytes, "au", limits).status().message());
+  };
+  EXPECT_THAT(err(""), HasSubstr("au is empty"));
+  EXPECT_THAT(err("\x89PNG\r\n"), HasSubstr("start code"));
+  EXPECT_THAT(err(std::string("\x00\x00\x01\xE5\x10", 5)),
+              HasSubstr("au.nal[0].forbidden_zero_bit"));
+  EXPECT_THAT(err(std::string("\x00\x00\x01\x74\x10", 5)),
+              HasSubstr("au.nal[0].nal_unit_type is 20"));
+  EXPECT_THAT(err(std::string("\x00\x00\x01\x65\x10\x00\x00\x01", 8)),
+              HasSubstr("au.nal[1] is empty"));
+  // An SPS cut short names the field it stopped at.
+  const std::string sps = Sps(10, 8);
+  const std::string cut = err(sps.substr(0, 9));
+  EXPECT_THAT(cut, HasSubstr("au.sps."));
+  EXPECT_THAT(cut, HasSubstr("ends"));
+  auto ok = InspectAccessUnit(sps, "au", limits);
+  ASSERT_TRUE(ok.ok()) << ok.status();
+  EXPECT_EQ(ok->sps->width, 160u);
+  EXPECT_EQ(ok->sps->height, 128u);
+  EXPECT_FALSE(ok->has_slices);
+}
+
+TEST_F(VideoBadInput, GapRequiresAKeyframe) {
+  Decoder d(DecoderOptions());
+  ColorView out;
+  for (int i = 0; i < 3; ++i) ASSERT_TRUE(d.Decode(units_[i].bytes, "au", &out).ok());
+  d.RequireKeyframe();  // frame 3 was lost
+  ExpectRecoversAtIdr(d);
+}
+
+// --- RVL
+// ------------------------------------------------------------------------------------------
+
+TEST(Rvl, RoundTripsDepthAndDisparity) {
+  // 16-bit: synthetic disparity in 1/16 px (zeros where nothing is seen), and extremes.
+  SyntheticOptions o;
+  o.width = 160;
+  o.height = 120;
+  o.disparity_encoding = DisparityEncoding::kU16;
+  auto f = SyntheticScene::Default().Render(o);
+  ASSERT_TRUE(f.ok());
+  std::vector<std::uint16_t> u16(160 * 120);
+  std::memcpy(u16.data(), f->disparity.data(), u16.size() * 2);
+  for (int i = 0; i < 40; ++i) u16[i * 7] = 0;  // holes
+  u16[1] = 65535;
+  u16[2] = 1;
+  std::string bytes;
+  EncodeRvl(u16.data(), 160, 120, &bytes);
+  std::vector<std::uint16_t> back;
+  ASSERT_TRUE(DecodeRvl(bytes, 160, 120, 65535, Limits{}, "d", &back).ok());
+  EXPECT_EQ(back, u16);
+  // 8-bit, all zeros, all one value.
+  std::vector<std::uint8_t> u8(64 * 8, 0);
+  EncodeRvl(u8.data(), 64, 8, &bytes);
+  ASSERT_TRUE(DecodeRvl(bytes, 64, 8, 255, Limits{}, "d", &back).ok());
+  EXPECT_EQ(back, std::vector<std::uint16_t>(64 * 8, 0));
+  u8.assign(64 * 8, 200);
+  EncodeRvl(u8.data(), 64, 8, &bytes);
+  ASSERT_TRUE(DecodeRvl(bytes, 64, 8, 255, Limits{}, "d", &back).ok());
+  EXPECT_EQ(back, std::vector<std::uint16_t>(64 * 8, 200));
+  // A zero delta is one 4-bit group: half a byte a pixel, plus the header and the two runs.
+  EXPECT_LE(bytes.size(), 12u + 64 * 8 / 2 + 8);
+}
+
+TEST(Rvl, MalformedBytesNameTheField) {
+  std::vector<std::uint16_t> img(32 * 4);
+  for (std::size_t i = 0; i < img.size(); ++i)
+    img[i] = static_cast<std::uint16_t>(i % 5 ? 300 + i : 0);
+  std::string bytes;
+  EncodeRvl(img.data(), 32, 4, &bytes);
+  std::vector<std::uint16_t> back;
+  auto err = [&](std::string_view b, std::uint32_t w, std::uint32_t h, std::uint32_t max) {
+    return std::string(DecodeRvl(b, w, h, max, Limits{}, "frame.depth.rvl", &back).message());
+  };
+  EXPECT_THAT(err("PNG....", 32, 4, 65535), HasSubstr("frame.depth.rvl is not RVL"));
+  EXPECT_THAT(err(bytes, 16, 8, 65535), HasSubstr("holds a 32x4 image; the frame is 16x8"));
+  EXPECT_THAT(err(bytes.substr(0, bytes.size() - 4), 32, 4, 65535), HasSubstr("ends at pixel"));
+  EXPECT_THAT(err(bytes.substr(0, bytes.size() - 1), 32, 4, 65535),
+              HasSubstr("whole 32-bit words"));
+  EXPECT_THAT(err(bytes, 32, 4, 255), HasSubstr("over the image's sample range"));
+  // A first run of zeros longer than the image.
+  std::vector<std::uint16_t> zeros(32 * 8, 0);
+  EncodeRvl(zeros.data(), 32, 8, &bytes);
+  bytes.replace(4, 8, std::string("\x20\0\0\0\x04\0\0\0", 8));  // the header now says 32x4
+  EXPECT_THAT(err(bytes, 32, 4, 65535), HasSubstr("a run of zeros past the image's end"));
+  // Over the limits before anything grows.
+  Limits small;
+  small.max_side = 16;
+  EXPECT_EQ(DecodeRvl(bytes, 32, 4, 65535, small, "d", &back).code(),
+            absl::StatusCode::kResourceExhausted);
+}
+
+}  // namespace
+}  // namespace cloudcast::video
