@@ -1,0 +1,415 @@
+// cloudcast-ros2-bridge end to end inside a network namespace of its own (unshare -n, loopback
+// with multicast: DDS discovery stays in it): a camera publishing New Tsukuba frames on DDS with
+// ROS 2's conventions, the bridge (its own process) with a cloudcast server, and a subscriber of
+// its PointCloud2 and /diagnostics. The clouds must equal, byte for byte, what the ROS 1 bridge
+// publishes for the same frames (its link to the server and its PointCloud2 conversion, run here
+// in-process). The camera publishes continuously and the test asserts on later samples: a
+// reader still in discovery may miss the first ones (cyclonedds#1110).
+//
+// Negative cases: an XCDR2 writer and a best-effort camera against input_qos default match no
+// reader (the bridge says so on /diagnostics); bad messages give a /diagnostics error naming the
+// message and field, and the bridge goes on.
+#include <gtest/gtest.h>
+#include <fcntl.h>
+#include <sched.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdlib>
+#include <filesystem>
+#include <functional>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "bridge_options.h"
+#include "cloud_link.h"
+#include "cloudcast/datasets/tsukuba.h"
+#include "dds_node.h"
+#include "frame_conversions.h"
+#include "point_cloud2.h"
+#include "ros2_inputs.h"
+#include "ros_args.h"
+#include "sample_views.h"
+#include "support/program_support.h"
+#include "support/server_fixture.h"
+#include "tsukuba_samples.h"
+
+extern char** environ;
+
+namespace cloudcast::ros2_bridge {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+using testing::TsukubaSamples;
+
+// ---- The network namespace: entered by the process before any test (and any thread) starts.
+
+std::string g_netns_problem = "not set up";
+
+class NetnsEnvironment : public ::testing::Environment {
+ public:
+  void SetUp() override {
+    if (geteuid() != 0) {
+      g_netns_problem = "not root: cannot create a network namespace";
+      return;
+    }
+    if (unshare(CLONE_NEWNET) != 0) {
+      g_netns_problem = std::string("unshare(CLONE_NEWNET): ") + std::strerror(errno);
+      return;
+    }
+    if (std::system("ip link set lo up multicast on") != 0) {
+      g_netns_problem = "'ip link set lo up multicast on' failed (iproute2: scripts/setup)";
+      return;
+    }
+    g_netns_problem.clear();
+  }
+};
+const auto* const g_netns = ::testing::AddGlobalTestEnvironment(new NetnsEnvironment);
+
+// ---- The bridge process.
+
+class BridgeProcess {
+ public:
+  BridgeProcess(const std::vector<std::string>& args, const std::string& log) : log_(log) {
+    std::vector<std::string> argv = {cloudcast::testing::BinDir() + "/cloudcast-ros2-bridge"};
+    argv.insert(argv.end(), args.begin(), args.end());
+    std::vector<char*> cargv;
+    for (auto& a : argv) cargv.push_back(a.data());
+    cargv.push_back(nullptr);
+    posix_spawn_file_actions_t actions;
+    posix_spawn_file_actions_init(&actions);
+    posix_spawn_file_actions_addopen(&actions, 1, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    posix_spawn_file_actions_adddup2(&actions, 1, 2);
+    if (posix_spawn(&pid_, cargv[0], &actions, nullptr, cargv.data(), environ) != 0) pid_ = -1;
+    posix_spawn_file_actions_destroy(&actions);
+  }
+  ~BridgeProcess() {
+    if (pid_ <= 0) return;
+    kill(pid_, SIGTERM);
+    for (int i = 0; i < 100; ++i) {
+      if (waitpid(pid_, nullptr, WNOHANG) == pid_) return;
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+    kill(pid_, SIGKILL);
+    waitpid(pid_, nullptr, 0);
+  }
+  bool started() const { return pid_ > 0; }
+  bool running() const { return pid_ > 0 && waitpid(pid_, nullptr, WNOHANG) == 0; }
+  std::string Log() const { return cloudcast::testing::ReadText(log_); }
+
+ private:
+  std::string log_;
+  pid_t pid_ = -1;
+};
+
+// ---- The camera and the subscriber, on a DDS participant of the test's own.
+
+struct CameraWriters {
+  dds_entity_t disparity = 0, colour = 0, info = 0;
+};
+
+// A writer as rmw makes it, optionally best effort or XCDR2 (the negative cases).
+dds_entity_t Writer(DdsNode* node, const MessageType& type, const std::string& topic,
+                    bool reliable, bool xcdr2) {
+  const dds_entity_t t = dds_create_topic(node->participant(), type.descriptor,
+                                          DdsTopicName(topic).c_str(), nullptr, nullptr);
+  QosProfile profile = reliable ? DefaultQos() : SensorDataQos();
+  DdsQos qos = EndpointQos(profile, type.type_hash());
+  if (xcdr2) {
+    dds_data_representation_id_t x2 = DDS_DATA_REPRESENTATION_XCDR2;
+    dds_qset_data_representation(qos.get(), 1, &x2);
+  }
+  return dds_create_writer(node->participant(), t, qos.get(), nullptr);
+}
+
+struct Received {
+  std::vector<std::shared_ptr<TakenSample>> clouds;
+  std::vector<std::string> diagnostics;  // each status's message and last_error
+};
+
+class Ros2BridgeTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    const std::string dir = tsukuba::DefaultDir();
+    if (!tsukuba::Present(dir)) return;
+    for (const char* id : {"00001", "00200", "00400"}) {
+      auto f = tsukuba::Load(dir, id);
+      if (f.ok()) frames_->push_back(*std::move(f));
+    }
+  }
+
+  void SetUp() override {
+    if (!g_netns_problem.empty()) GTEST_SKIP() << g_netns_problem;
+    if (frames_->empty()) GTEST_SKIP() << "the New Tsukuba sample is not in " << tsukuba::DefaultDir();
+    scratch_ = std::filesystem::path(::testing::TempDir()) /
+               ("ros2_bridge_" + std::to_string(getpid()));
+    std::filesystem::create_directories(scratch_);
+    server_ = cloudcast::testing::StartTestServer();
+    ASSERT_NE(server_, nullptr);
+    for (const auto& f : *frames_) samples_.push_back(std::make_unique<TsukubaSamples>(f));
+    auto node = DdsNode::Create(0);
+    ASSERT_TRUE(node.ok()) << node.status();
+    camera_ = *std::move(node);
+    auto points = camera_->CreateReader(kPointCloud2Type, "/stereo/points2", DefaultQos());
+    ASSERT_TRUE(points.ok()) << points.status();
+    points_ = *points;
+    auto diag = camera_->CreateReader(kDiagnosticArrayType, "/diagnostics", DefaultQos());
+    ASSERT_TRUE(diag.ok()) << diag.status();
+    diagnostics_ = *diag;
+  }
+
+  void TearDown() override {
+    bridge_.reset();
+    camera_.reset();
+    server_.reset();
+    if (!scratch_.empty()) std::filesystem::remove_all(scratch_);
+  }
+
+  void StartBridge(std::vector<std::string> params) {
+    std::vector<std::string> args = {"--ros-args", "-r", "__ns:=/stereo", "-p",
+                                     "server:=" + server_->address(), "-p",
+                                     "diagnostics_period:=0.3"};
+    for (const auto& p : params) {
+      args.push_back("-p");
+      args.push_back(p);
+    }
+    bridge_ = std::make_unique<BridgeProcess>(args, (scratch_ / "bridge.log").string());
+    ASSERT_TRUE(bridge_->started());
+  }
+
+  CameraWriters Camera(bool reliable = true, bool xcdr2 = false) {
+    CameraWriters w;
+    w.disparity = Writer(camera_.get(), kDisparityImageType, "/stereo/disparity", reliable, xcdr2);
+    w.colour = Writer(camera_.get(), kImageType, "/stereo/left/image_rect_color", reliable, xcdr2);
+    w.info = Writer(camera_.get(), kCameraInfoType, "/stereo/left/camera_info", reliable, xcdr2);
+    EXPECT_GT(w.disparity, 0);
+    EXPECT_GT(w.colour, 0);
+    EXPECT_GT(w.info, 0);
+    return w;
+  }
+
+  // Frame k of the run: frames_[k % n], stamped 1000 + k s.
+  void Publish(const CameraWriters& w, int k,
+               const std::function<void(TsukubaSamples&)>& spoil = nullptr) {
+    TsukubaSamples& s = *samples_[static_cast<std::size_t>(k) % samples_.size()];
+    s.Stamp(1000 + k, 0);
+    if (spoil) spoil(s);
+    dds_write(w.disparity, &s.disparity);
+    dds_write(w.colour, &s.colour);
+    dds_write(w.info, &s.info);
+    if (spoil) samples_[static_cast<std::size_t>(k) % samples_.size()] =
+        std::make_unique<TsukubaSamples>((*frames_)[static_cast<std::size_t>(k) % frames_->size()]);
+  }
+
+  void Take(Received* r) {
+    for (;;) {
+      auto s = std::make_shared<TakenSample>(kPointCloud2Type);
+      void* buf[1] = {s->get()};
+      dds_sample_info_t info;
+      if (dds_take(points_, buf, &info, 1, 1) <= 0) break;
+      if (info.valid_data) r->clouds.push_back(s);
+    }
+    for (;;) {
+      TakenSample s(kDiagnosticArrayType);
+      void* buf[1] = {s.get()};
+      dds_sample_info_t info;
+      if (dds_take(diagnostics_, buf, &info, 1, 1) <= 0) break;
+      if (!info.valid_data) continue;
+      const auto& a = s.as<diagnostic_msgs_msg_dds__DiagnosticArray_>();
+      for (std::uint32_t i = 0; i < a.status._length; ++i) {
+        const auto& st = a.status._buffer[i];
+        std::string text = std::string(st.name) + " | " + st.message;
+        for (std::uint32_t j = 0; j < st.values._length; ++j) {
+          if (std::string(st.values._buffer[j].key) == "last_error") {
+            text += " | last_error: " + std::string(st.values._buffer[j].value);
+          }
+        }
+        r->diagnostics.push_back(text);
+      }
+    }
+  }
+
+  // Publishes a frame every 50 ms (spoiled by `spoil` when given) until `done` holds or
+  // `seconds` pass; returns whether `done` held.
+  bool PublishUntil(const CameraWriters& w, Received* r, const std::function<bool()>& done,
+                    double seconds, const std::function<void(TsukubaSamples&)>& spoil = nullptr) {
+    const auto end = Clock::now() + std::chrono::duration<double>(seconds);
+    while (Clock::now() < end) {
+      Publish(w, next_frame_++, spoil);
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+      Take(r);
+      if (done()) return true;
+      if (!bridge_->running()) {
+        ADD_FAILURE() << "the bridge exited:\n" << bridge_->Log();
+        return false;
+      }
+    }
+    return false;
+  }
+
+  static bool DiagnosticsMention(const Received& r, const std::string& text) {
+    for (const auto& d : r.diagnostics) {
+      if (d.find(text) != std::string::npos) return true;
+    }
+    return false;
+  }
+
+  // What the ROS 1 bridge publishes for frame i: its link to the server (CloudLink, the same
+  // options) and its PointCloud2 conversion.
+  std::vector<sensor_msgs::PointCloud2> Ros1Clouds() {
+    std::map<std::string, ParamValue> none;
+    none["server"].s = server_->address();
+    auto options = ros_bridge::ReadBridgeOptions(Ros2ParamReader(none, {}), "test");
+    EXPECT_TRUE(options.ok()) << options.status();
+    options->config.set_delivery(v1::DELIVERY_ALL);
+    ros_bridge::BridgeStats stats;
+    std::mutex mu;
+    std::map<std::uint32_t, sensor_msgs::PointCloud2> clouds;
+    {
+      ros_bridge::CloudLink link(*options, &stats,
+                                 [&](client::Result&& r, const ros_bridge::SentFrame& f) {
+                                   sensor_msgs::PointCloud2 msg;
+                                   ros_bridge::ToPointCloud2(r.cloud, f.header, &msg);
+                                   std::lock_guard<std::mutex> lock(mu);
+                                   clouds[f.header.stamp.sec] = std::move(msg);
+                                 });
+      EXPECT_TRUE(link.Probe().ok());
+      std::vector<float> masked;
+      for (std::size_t i = 0; i < samples_.size(); ++i) {
+        samples_[i]->Stamp(static_cast<std::int32_t>(i), 0);
+        ros_bridge::OutgoingFrame frame;
+        EXPECT_TRUE(ros_bridge::ToFrame(View(samples_[i]->disparity), View(samples_[i]->colour),
+                                        View(samples_[i]->info), &masked, &frame)
+                        .ok());
+        link.Send(frame);
+      }
+    }  // the link's destructor waits for the replies
+    std::vector<sensor_msgs::PointCloud2> out;
+    for (std::size_t i = 0; i < samples_.size(); ++i) out.push_back(clouds[i]);
+    return out;
+  }
+
+  static inline std::vector<tsukuba::Frame>* frames_ = new std::vector<tsukuba::Frame>();
+  std::filesystem::path scratch_;
+  std::unique_ptr<server::Server> server_;
+  std::vector<std::unique_ptr<TsukubaSamples>> samples_;
+  std::unique_ptr<DdsNode> camera_;
+  dds_entity_t points_ = 0, diagnostics_ = 0;
+  std::unique_ptr<BridgeProcess> bridge_;
+  int next_frame_ = 0;
+};
+
+TEST_F(Ros2BridgeTest, CycloneCameraCloudsEqualTheRos1BridgesPointForPoint) {
+  const std::vector<sensor_msgs::PointCloud2> expected = Ros1Clouds();
+  ASSERT_EQ(expected.size(), samples_.size());
+  for (const auto& e : expected) ASSERT_GT(e.width, 1000u);
+  StartBridge({});
+  const CameraWriters w = Camera();
+  Received r;
+  // Later samples: clouds of at least 2 x the frames after the first one that came.
+  ASSERT_TRUE(PublishUntil(w, &r, [&] { return r.clouds.size() >= 2 * samples_.size() + 1; }, 40))
+      << r.clouds.size() << " clouds\n" << bridge_->Log();
+  for (std::size_t c = 1; c < r.clouds.size(); ++c) {
+    const auto& got = r.clouds[c]->as<sensor_msgs_msg_dds__PointCloud2_>();
+    const int k = got.header.stamp.sec - 1000;
+    ASSERT_GE(k, 0);
+    const sensor_msgs::PointCloud2& want = expected[static_cast<std::size_t>(k) % expected.size()];
+    EXPECT_STREQ(got.header.frame_id, testing::kFrameId);
+    EXPECT_EQ(got.header.stamp.nanosec, 0u);
+    EXPECT_EQ(got.height, want.height);
+    EXPECT_EQ(got.width, want.width);
+    EXPECT_EQ(got.point_step, want.point_step);
+    EXPECT_EQ(got.row_step, want.row_step);
+    EXPECT_EQ(got.is_dense, static_cast<bool>(want.is_dense));
+    EXPECT_EQ(got.is_bigendian, static_cast<bool>(want.is_bigendian));
+    ASSERT_EQ(got.fields._length, want.fields.size());
+    for (std::size_t f = 0; f < want.fields.size(); ++f) {
+      EXPECT_EQ(got.fields._buffer[f].name, want.fields[f].name);
+      EXPECT_EQ(got.fields._buffer[f].offset, want.fields[f].offset);
+      EXPECT_EQ(got.fields._buffer[f].datatype, want.fields[f].datatype);
+      EXPECT_EQ(got.fields._buffer[f].count, want.fields[f].count);
+    }
+    ASSERT_EQ(got.data._length, want.data.size());
+    EXPECT_EQ(std::memcmp(got.data._buffer, want.data.data(), want.data.size()), 0)
+        << "cloud of stamp " << got.header.stamp.sec;
+  }
+  EXPECT_TRUE(DiagnosticsMention(r, "/stereo/cloudcast_bridge: cloudcast stream | streaming"))
+      << (r.diagnostics.empty() ? "no diagnostics" : r.diagnostics.back());
+}
+
+TEST_F(Ros2BridgeTest, AnXcdr2CameraMatchesNoReaderAndTheBridgeSaysSo) {
+  StartBridge({});
+  const CameraWriters w = Camera(/*reliable=*/true, /*xcdr2=*/true);
+  Received r;
+  const bool said = PublishUntil(
+      w, &r, [&] { return DiagnosticsMention(r, "data representation is not XCDR1"); }, 20);
+  EXPECT_TRUE(said) << bridge_->Log();
+  EXPECT_TRUE(r.clouds.empty());
+}
+
+TEST_F(Ros2BridgeTest, ABestEffortCameraAgainstReliableInputsIsReported) {
+  StartBridge({"input_qos:=default"});
+  const CameraWriters w = Camera(/*reliable=*/false);
+  Received r;
+  EXPECT_TRUE(PublishUntil(w, &r, [&] { return DiagnosticsMention(r, "it is best effort"); }, 20))
+      << bridge_->Log();
+  EXPECT_TRUE(r.clouds.empty());
+}
+
+TEST_F(Ros2BridgeTest, ABestEffortCameraIsTakenWithTheSensorDataDefault) {
+  StartBridge({});
+  const CameraWriters w = Camera(/*reliable=*/false);
+  Received r;
+  EXPECT_TRUE(PublishUntil(w, &r, [&] { return r.clouds.size() >= 3; }, 40)) << bridge_->Log();
+}
+
+// Each bad input gets its error on /diagnostics, naming the message and field; good frames
+// afterwards still become clouds.
+TEST_F(Ros2BridgeTest, BadInputIsReportedAndTheBridgeGoesOn) {
+  StartBridge({"queue_size:=3"});
+  const CameraWriters w = Camera();
+  Received r;
+  ASSERT_TRUE(PublishUntil(w, &r, [&] { return !r.clouds.empty(); }, 40)) << bridge_->Log();
+  struct Case {
+    const char* name;
+    std::function<void(TsukubaSamples&)> spoil;
+    std::string expected;
+  };
+  const std::vector<Case> cases = {
+      {"step", [](TsukubaSamples& s) { s.colour.step = s.colour.width * 3 + 8; },
+       "left/image_rect_color.data holds"},
+      {"step too small", [](TsukubaSamples& s) { s.colour.step = 100; },
+       "left/image_rect_color.step is 100"},
+      {"encoding", [](TsukubaSamples& s) { s.colour.encoding = const_cast<char*>("yuv422"); },
+       "left/image_rect_color.encoding is 'yuv422'"},
+      {"disparity encoding",
+       [](TsukubaSamples& s) { s.disparity.image.encoding = const_cast<char*>("16UC1"); },
+       "disparity.image.encoding is '16UC1'"},
+      {"camera_info size", [](TsukubaSamples& s) { s.info.width = 320; },
+       "left/camera_info is 320x480 but disparity.image is 640x480"},
+      {"stamps", [](TsukubaSamples& s) { s.info.header.stamp.nanosec = 1; },
+       "/stereo/left/camera_info with the same stamp"},
+  };
+  for (const Case& c : cases) {
+    r.diagnostics.clear();
+    EXPECT_TRUE(PublishUntil(w, &r, [&] { return DiagnosticsMention(r, c.expected); }, 15,
+                             c.spoil))
+        << c.name << ": " << (r.diagnostics.empty() ? "no diagnostics" : r.diagnostics.back())
+        << "\n"
+        << bridge_->Log();
+  }
+  const std::size_t before = r.clouds.size();
+  EXPECT_TRUE(PublishUntil(w, &r, [&] { return r.clouds.size() >= before + 3; }, 30))
+      << bridge_->Log();
+  EXPECT_TRUE(bridge_->running());
+}
+
+}  // namespace
+}  // namespace cloudcast::ros2_bridge
