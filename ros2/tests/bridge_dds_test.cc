@@ -356,6 +356,41 @@ TEST_F(Ros2BridgeTest, CycloneCameraCloudsEqualTheRos1BridgesPointForPoint) {
       << bridge_->Log();
 }
 
+#ifdef CLOUDCAST_ROS2_FASTDDS_PEER
+// The other vendor, both ways: a Fast DDS camera (ros2-fastdds-peer, Fast DDS's own CDR of
+// fastddsgen's types) into the bridge, the bridge's clouds into a Fast DDS reader; the clouds as
+// the Fast DDS reader decoded them equal the ROS 1 bridge's.
+TEST_F(Ros2BridgeTest, FastDdsCameraAndSubscriberGetTheRos1BridgesClouds) {
+  const std::vector<sensor_msgs::PointCloud2> expected = Ros1Clouds();
+  StartBridge({"passthrough.enabled:=false", "voxel.enabled:=false", "input_qos:=default"});
+  const std::string out = (scratch_ / "fastdds").string();
+  std::filesystem::create_directories(out);
+  const auto r = cloudcast::testing::RunProgram(
+      cloudcast::testing::BinDir() + "/ros2-fastdds-peer",
+      {"--data", tsukuba::DefaultDir(), "--namespace", "/stereo", "--clouds", "6", "--out", out,
+       "--seconds", "40"},
+      scratch_.string());
+  ASSERT_TRUE(r.exited && r.code == 0) << r << "\n" << bridge_->Log();
+  int compared = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(out)) {
+    if (entry.path().extension() != ".bin") continue;
+    const int k = std::stoi(entry.path().stem().string()) - 1000;
+    ASSERT_GE(k, 0);
+    const sensor_msgs::PointCloud2& want = expected[static_cast<std::size_t>(k) % expected.size()];
+    const std::string data = cloudcast::testing::ReadText(entry.path().string());
+    ASSERT_EQ(data.size(), want.data.size()) << entry.path();
+    EXPECT_EQ(std::memcmp(data.data(), want.data.data(), data.size()), 0) << entry.path();
+    std::string txt = cloudcast::testing::ReadText(
+        (entry.path().parent_path() / (entry.path().stem().string() + ".txt")).string());
+    const std::string fields = " x:0:7:1 y:4:7:1 z:8:7:1 rgb:12:7:1\n";
+    EXPECT_EQ(txt, std::string(testing::kFrameId) + " 0 1 " + std::to_string(want.width) +
+                       " 16 " + std::to_string(want.row_step) + " 1 0" + fields);
+    ++compared;
+  }
+  EXPECT_EQ(compared, 6);
+}
+#endif
+
 TEST_F(Ros2BridgeTest, AnXcdr2CameraMatchesNoReaderAndTheBridgeSaysSo) {
   StartBridge({});
   const CameraWriters w = Camera(/*reliable=*/true, /*xcdr2=*/true);
