@@ -10,11 +10,6 @@
 // reader (the bridge says so on /diagnostics); bad messages give a /diagnostics error naming the
 // message and field, and the bridge goes on.
 #include <gtest/gtest.h>
-#include <fcntl.h>
-#include <sched.h>
-#include <signal.h>
-#include <spawn.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
 #include <chrono>
@@ -39,9 +34,8 @@
 #include "sample_views.h"
 #include "support/program_support.h"
 #include "support/server_fixture.h"
+#include "ros2_harness.h"
 #include "tsukuba_samples.h"
-
-extern char** environ;
 
 namespace cloudcast::ros2_bridge {
 namespace {
@@ -55,59 +49,9 @@ std::string g_netns_problem = "not set up";
 
 class NetnsEnvironment : public ::testing::Environment {
  public:
-  void SetUp() override {
-    if (geteuid() != 0) {
-      g_netns_problem = "not root: cannot create a network namespace";
-      return;
-    }
-    if (unshare(CLONE_NEWNET) != 0) {
-      g_netns_problem = std::string("unshare(CLONE_NEWNET): ") + std::strerror(errno);
-      return;
-    }
-    if (std::system("ip link set lo up multicast on") != 0) {
-      g_netns_problem = "'ip link set lo up multicast on' failed (iproute2: scripts/setup)";
-      return;
-    }
-    g_netns_problem.clear();
-  }
+  void SetUp() override { g_netns_problem = testing::EnterNetworkNamespace(); }
 };
 const auto* const g_netns = ::testing::AddGlobalTestEnvironment(new NetnsEnvironment);
-
-// ---- The bridge process.
-
-class BridgeProcess {
- public:
-  BridgeProcess(const std::vector<std::string>& args, const std::string& log) : log_(log) {
-    std::vector<std::string> argv = {cloudcast::testing::BinDir() + "/cloudcast-ros2-bridge"};
-    argv.insert(argv.end(), args.begin(), args.end());
-    std::vector<char*> cargv;
-    for (auto& a : argv) cargv.push_back(a.data());
-    cargv.push_back(nullptr);
-    posix_spawn_file_actions_t actions;
-    posix_spawn_file_actions_init(&actions);
-    posix_spawn_file_actions_addopen(&actions, 1, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    posix_spawn_file_actions_adddup2(&actions, 1, 2);
-    if (posix_spawn(&pid_, cargv[0], &actions, nullptr, cargv.data(), environ) != 0) pid_ = -1;
-    posix_spawn_file_actions_destroy(&actions);
-  }
-  ~BridgeProcess() {
-    if (pid_ <= 0) return;
-    kill(pid_, SIGTERM);
-    for (int i = 0; i < 100; ++i) {
-      if (waitpid(pid_, nullptr, WNOHANG) == pid_) return;
-      std::this_thread::sleep_for(std::chrono::milliseconds(50));
-    }
-    kill(pid_, SIGKILL);
-    waitpid(pid_, nullptr, 0);
-  }
-  bool started() const { return pid_ > 0; }
-  bool running() const { return pid_ > 0 && waitpid(pid_, nullptr, WNOHANG) == 0; }
-  std::string Log() const { return cloudcast::testing::ReadText(log_); }
-
- private:
-  std::string log_;
-  pid_t pid_ = -1;
-};
 
 // ---- The camera and the subscriber, on a DDS participant of the test's own.
 
@@ -180,7 +124,8 @@ class Ros2BridgeTest : public ::testing::Test {
       args.push_back("-p");
       args.push_back(p);
     }
-    bridge_ = std::make_unique<BridgeProcess>(args, (scratch_ / "bridge.log").string());
+    args.insert(args.begin(), cloudcast::testing::BinDir() + "/cloudcast-ros2-bridge");
+    bridge_ = std::make_unique<testing::ChildProcess>(args, (scratch_ / "bridge.log").string());
     ASSERT_TRUE(bridge_->started());
   }
 
@@ -312,7 +257,7 @@ class Ros2BridgeTest : public ::testing::Test {
   std::vector<std::unique_ptr<TsukubaSamples>> samples_;
   std::unique_ptr<DdsNode> camera_;
   dds_entity_t points_ = 0, diagnostics_ = 0;
-  std::unique_ptr<BridgeProcess> bridge_;
+  std::unique_ptr<testing::ChildProcess> bridge_;
   int next_frame_ = 0;
 };
 
