@@ -64,6 +64,9 @@ struct Row {
   std::string consumer;
   int rate = 0, published = 0, clouds = 0;
   double clouds_per_s = 0, latency_ms = 0, cpu_ms = 0, bridge_cpu_ms = 0, points = 0, bytes = 0;
+  // From the bridge's last /diagnostics: frames the server skipped (delivery latest), sets the
+  // inputs refused or could not pair, and the last error.
+  std::string dropped = "-", input_errors = "-", last_error;
 };
 
 double WallSeconds() {
@@ -100,7 +103,8 @@ Row Run(const std::string& bin, const std::string& scratch, const std::string& c
   auto wc = (*node)->CreateWriter(kImageType, "/stereo/left/image_rect_color", DefaultQos());
   auto wi = (*node)->CreateWriter(kCameraInfoType, "/stereo/left/camera_info", DefaultQos());
   auto rp = (*node)->CreateReader(kPointCloud2Type, "/stereo/points2", DefaultQos());
-  if (!wd.ok() || !wc.ok() || !wi.ok() || !rp.ok()) return row;
+  auto rd = (*node)->CreateReader(kDiagnosticArrayType, "/diagnostics", DefaultQos());
+  if (!wd.ok() || !wc.ok() || !wi.ok() || !rp.ok() || !rd.ok()) return row;
 
   struct Arrival {
     double latency_ms;
@@ -164,6 +168,24 @@ Row Run(const std::string& bin, const std::string& scratch, const std::string& c
     std::this_thread::sleep_for(std::chrono::milliseconds(5));
   }
   const long long cpu1 = CpuTicks(bridge.pid()) + CpuTicks(server.pid());
+  std::this_thread::sleep_for(std::chrono::milliseconds(1200));  // one more diagnostics period
+  for (;;) {
+    TakenSample s(kDiagnosticArrayType);
+    void* buf[1] = {s.get()};
+    dds_sample_info_t info;
+    if (dds_take(*rd, buf, &info, 1, 1) <= 0) break;
+    if (!info.valid_data) continue;
+    const auto& a = s.as<diagnostic_msgs_msg_dds__DiagnosticArray_>();
+    for (std::uint32_t i = 0; i < a.status._length; ++i) {
+      const auto& values = a.status._buffer[i].values;
+      for (std::uint32_t j = 0; j < values._length; ++j) {
+        const std::string key = values._buffer[j].key, value = values._buffer[j].value;
+        if (key == "frames_dropped") row.dropped = value;
+        if (key == "input_errors") row.input_errors = value;
+        if (key == "last_error") row.last_error = value;
+      }
+    }
+  }
   const long long bridge1 = CpuTicks(bridge.pid());
   row.clouds = static_cast<int>(arrivals.size());
   if (row.clouds == 0) return row;
@@ -252,18 +274,23 @@ int main(int argc, char** argv) {
   for (int rate : rates) {
     for (const auto& [name, params] : consumers) {
       rows.push_back(Run(bin, scratch, name, params, rate, frames, samples));
-      std::fprintf(stderr, "bench: %s at %d Hz: %d clouds\n", name.c_str(), rate,
-                   rows.back().clouds);
+      std::fprintf(stderr, "bench: %s at %d Hz: %d clouds; the bridge: %s dropped by the server, "
+                   "%s input errors%s%s\n", name.c_str(), rate, rows.back().clouds,
+                   rows.back().dropped.c_str(), rows.back().input_errors.c_str(),
+                   rows.back().last_error.empty() ? "" : "; last: ",
+                   rows.back().last_error.c_str());
     }
   }
   std::printf(
       "| consumer | publisher rate | published | clouds | clouds/s | latency ms (median) | CPU ms "
       "/ cloud (bridge + server) | CPU ms / cloud (bridge) | points (median) | cloud bytes "
-      "(median) |\n| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n");
+      "(median) | server-skipped | input errors |\n"
+      "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n");
   for (const Row& r : rows) {
-    std::printf("| %s | %d Hz | %d | %d | %.1f | %.1f | %.1f | %.1f | %.0f | %.0f |\n",
+    std::printf("| %s | %d Hz | %d | %d | %.1f | %.1f | %.1f | %.1f | %.0f | %.0f | %s | %s |\n",
                 r.consumer.c_str(), r.rate, r.published, r.clouds, r.clouds_per_s, r.latency_ms,
-                r.cpu_ms, r.bridge_cpu_ms, r.points, r.bytes);
+                r.cpu_ms, r.bridge_cpu_ms, r.points, r.bytes, r.dropped.c_str(),
+                r.input_errors.c_str());
   }
   if (json) {
     std::printf("[");
