@@ -14,6 +14,12 @@
 
 namespace cloudcast::ros2_bridge {
 
+// The Cyclone configuration the bridge runs with unless CYCLONEDDS_URI says otherwise: a socket
+// receive buffer of up to 10 MB for its megabyte input images (dds_node.cc says why).
+inline constexpr const char* kLargeMessageConfig =
+    "<CycloneDDS><Domain><Internal><SocketReceiveBufferSize min=\"default\" max=\"10MB\"/>"
+    "</Internal></Domain></CycloneDDS>";
+
 // ROS_DOMAIN_ID (unset or empty: 0); DDS domains 0..232 (RTPS's port mapping), errors name it.
 absl::StatusOr<dds_domainid_t> DomainIdFromEnv();
 
@@ -32,9 +38,11 @@ class DdsNode {
   dds_entity_t participant() const { return participant_; }
 
  private:
-  explicit DdsNode(dds_entity_t participant) : participant_(participant) {}
+  DdsNode(dds_entity_t participant, dds_entity_t own_domain)
+      : participant_(participant), own_domain_(own_domain) {}
   absl::StatusOr<dds_entity_t> Topic(const MessageType& type, const std::string& topic);
   dds_entity_t participant_;
+  dds_entity_t own_domain_;  // 0 when the domain is CYCLONEDDS_URI's (or made elsewhere)
 };
 
 }  // namespace cloudcast::ros2_bridge

@@ -266,6 +266,10 @@ std::vector<std::string> Ros2ParamReader::Names() const {
 }
 
 std::string Ros2ParamReader::Display(const std::string& name) const {
+  // "stereo/..." (a group, in the core's errors) is "stereo.*".
+  if (name.size() > 4 && name.compare(name.size() - 4, 4, "/...") == 0) {
+    return absl::StrReplaceAll(name.substr(0, name.size() - 4), {{"/", "."}}) + ".*";
+  }
   return absl::StrReplaceAll(name, {{"/", "."}});
 }
 

@@ -71,6 +71,11 @@ TEST(Ros2Args, ErrorsNameTheParameterInRos2Spelling) {
             std::string::npos)
       << o.status();
 
+  a = Parse({"--ros-args", "-p", "input:=stereo", "-p", "stereo.num_disparities:=17"});
+  o = ros_bridge::ReadBridgeOptions(Ros2ParamReader(a->params, {}), "cloudcast-ros2-bridge");
+  ASSERT_FALSE(o.ok());
+  EXPECT_EQ(o.status().message().rfind("stereo.*: ", 0), 0u) << o.status();
+
   // ROS 2's extras are not the core's unknown parameters.
   a = Parse({"--ros-args", "-p", "input_qos:=default"});
   EXPECT_TRUE(ros_bridge::ReadBridgeOptions(Ros2ParamReader(a->params, {"input_qos"}), "x").ok());
