@@ -4,6 +4,7 @@
 // the left colour as bgr8, the left CameraInfo (P = [f 0 cx 0; 0 f cy 0; 0 0 1 0]).
 #pragma once
 
+#include <cmath>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -40,6 +41,13 @@ class TsukubaSamples {
     disparity.delta_d = 1.0f;
     colour = Image(frame.colour.width, frame.colour.height, "bgr8", 3, colour_.data(),
                    colour_.size());
+    depth_.resize(n);
+    for (std::size_t i = 0; i < n; ++i) {
+      const std::uint8_t d = frame.disparity.pixels[i];
+      depth_[i] = d == 0 ? 0 : static_cast<std::uint16_t>(std::lround(kF * kBaseline / d * 1000.0));
+    }
+    depth = Image(frame.disparity.width, frame.disparity.height, "16UC1", 2,
+                  reinterpret_cast<std::uint8_t*>(depth_.data()), n * 2);
     info.height = frame.colour.height;
     info.width = frame.colour.width;
     info.distortion_model = const_cast<char*>("plumb_bob");
@@ -60,7 +68,8 @@ class TsukubaSamples {
   // Every message of the frame gets the same stamp (exact-time sync pairs them).
   void Stamp(std::int32_t sec, std::uint32_t nanosec) {
     for (std_msgs_msg_dds__Header_* h :
-         {&disparity.header, &disparity.image.header, &colour.header, &info.header}) {
+         {&disparity.header, &disparity.image.header, &colour.header, &info.header,
+          &depth.header}) {
       h->stamp.sec = sec;
       h->stamp.nanosec = nanosec;
       h->frame_id = const_cast<char*>(kFrameId);
@@ -70,6 +79,9 @@ class TsukubaSamples {
   stereo_msgs_msg_dds__DisparityImage_ disparity{};
   sensor_msgs_msg_dds__Image_ colour{};
   sensor_msgs_msg_dds__CameraInfo_ info{};
+  // The ground truth as a depth camera's 16UC1 image registered to the colour camera (the ROS 1
+  // publisher's depth16): z = f B / d in millimetres, rounded; d = 0 gives 0 (no measurement).
+  sensor_msgs_msg_dds__Image_ depth{};
 
  private:
   static sensor_msgs_msg_dds__Image_ Image(std::uint32_t w, std::uint32_t h, const char* encoding,
@@ -86,6 +98,7 @@ class TsukubaSamples {
     return image;
   }
   std::vector<float> disparity_;
+  std::vector<std::uint16_t> depth_;
   std::vector<std::uint8_t> colour_;
   std::vector<double> d_;
 };

@@ -116,8 +116,8 @@ class Ros2BridgeTest : public ::testing::Test {
     if (!scratch_.empty()) std::filesystem::remove_all(scratch_);
   }
 
-  void StartBridge(std::vector<std::string> params) {
-    std::vector<std::string> args = {"--ros-args", "-r", "__ns:=/stereo", "-p",
+  void StartBridge(std::vector<std::string> params, const std::string& ns = "/stereo") {
+    std::vector<std::string> args = {"--ros-args", "-r", "__ns:=" + ns, "-p",
                                      "server:=" + server_->address(), "-p",
                                      "diagnostics_period:=0.3"};
     for (const auto& p : params) {
@@ -146,7 +146,11 @@ class Ros2BridgeTest : public ::testing::Test {
     TsukubaSamples& s = *samples_[static_cast<std::size_t>(k) % samples_.size()];
     s.Stamp(1000 + k, 0);
     if (spoil) spoil(s);
-    dds_write(w.disparity, &s.disparity);
+    if (depth_input_) {
+      dds_write(w.disparity, &s.depth);
+    } else {
+      dds_write(w.disparity, &s.disparity);
+    }
     dds_write(w.colour, &s.colour);
     dds_write(w.info, &s.info);
     if (spoil) samples_[static_cast<std::size_t>(k) % samples_.size()] =
@@ -181,6 +185,15 @@ class Ros2BridgeTest : public ::testing::Test {
     }
   }
 
+  CameraWriters DepthCamera() {
+    CameraWriters w;
+    w.disparity = Writer(camera_.get(), kImageType, "/camera/depth_registered/image_rect", true,
+                         false);
+    w.colour = Writer(camera_.get(), kImageType, "/camera/rgb/image_rect_color", true, false);
+    w.info = Writer(camera_.get(), kCameraInfoType, "/camera/rgb/camera_info", true, false);
+    return w;
+  }
+
   // Publishes a frame every 50 ms (spoiled by `spoil` when given) until `done` holds or
   // `seconds` pass; returns whether `done` held.
   bool PublishUntil(const CameraWriters& w, Received* r, const std::function<bool()>& done,
@@ -208,7 +221,7 @@ class Ros2BridgeTest : public ::testing::Test {
 
   // What the ROS 1 bridge publishes for frame i: its link to the server (CloudLink, the same
   // options) and its PointCloud2 conversion.
-  std::vector<sensor_msgs::PointCloud2> Ros1Clouds() {
+  std::vector<sensor_msgs::PointCloud2> Ros1Clouds(bool depth = false) {
     // The bridge's parameters (kUnfiltered): the whole cloud, not what the server's default
     // passthrough and voxel grid leave.
     std::map<std::string, ParamValue> params;
@@ -236,9 +249,12 @@ class Ros2BridgeTest : public ::testing::Test {
       for (std::size_t i = 0; i < samples_.size(); ++i) {
         samples_[i]->Stamp(static_cast<std::int32_t>(i), 0);
         ros_bridge::OutgoingFrame frame;
-        EXPECT_TRUE(ros_bridge::ToFrame(View(samples_[i]->disparity), View(samples_[i]->colour),
-                                        View(samples_[i]->info), &masked, &frame)
-                        .ok());
+        const absl::Status s =
+            depth ? ros_bridge::ToDepthFrame(View(samples_[i]->depth), View(samples_[i]->colour),
+                                             View(samples_[i]->info), std::nullopt, &frame)
+                  : ros_bridge::ToFrame(View(samples_[i]->disparity), View(samples_[i]->colour),
+                                        View(samples_[i]->info), &masked, &frame);
+        EXPECT_TRUE(s.ok()) << s;
         link.Send(frame);
       }
     }  // the link's destructor waits for the replies
@@ -259,6 +275,7 @@ class Ros2BridgeTest : public ::testing::Test {
   dds_entity_t points_ = 0, diagnostics_ = 0;
   std::unique_ptr<testing::ChildProcess> bridge_;
   int next_frame_ = 0;
+  bool depth_input_ = false;  // Publish writes the depth image in place of the disparity
 };
 
 TEST_F(Ros2BridgeTest, CycloneCameraCloudsEqualTheRos1BridgesPointForPoint) {
@@ -299,6 +316,35 @@ TEST_F(Ros2BridgeTest, CycloneCameraCloudsEqualTheRos1BridgesPointForPoint) {
   EXPECT_TRUE(DiagnosticsMention(r, "/stereo/cloudcast_bridge: cloudcast stream | streaming"))
       << (r.diagnostics.empty() ? "no diagnostics" : r.diagnostics.back()) << "\n"
       << bridge_->Log();
+}
+
+// input depth: a depth camera's 16UC1 image, colour and CameraInfo (depth_image_proc's names
+// under /camera), the same equality with the ROS 1 bridge's clouds.
+TEST_F(Ros2BridgeTest, DepthCameraCloudsEqualTheRos1BridgesPointForPoint) {
+  const std::vector<sensor_msgs::PointCloud2> expected = Ros1Clouds(/*depth=*/true);
+  for (const auto& e : expected) ASSERT_GT(e.width, 100000u);
+  // The reader of the clouds, under /camera.
+  auto points = camera_->CreateReader(kPointCloud2Type, "/camera/points2", DefaultQos());
+  ASSERT_TRUE(points.ok());
+  points_ = *points;
+  StartBridge({"input:=depth", "passthrough.enabled:=false", "voxel.enabled:=false",
+               "input_qos:=default"},
+              "/camera");
+  depth_input_ = true;
+  const CameraWriters w = DepthCamera();
+  Received r;
+  ASSERT_TRUE(PublishUntil(w, &r, [&] { return r.clouds.size() >= samples_.size() + 1; }, 40))
+      << r.clouds.size() << " clouds\n" << bridge_->Log();
+  for (std::size_t c = 1; c < r.clouds.size(); ++c) {
+    const auto& got = r.clouds[c]->as<sensor_msgs_msg_dds__PointCloud2_>();
+    const int k = got.header.stamp.sec - 1000;
+    ASSERT_GE(k, 0);
+    const sensor_msgs::PointCloud2& want = expected[static_cast<std::size_t>(k) % expected.size()];
+    EXPECT_STREQ(got.header.frame_id, testing::kFrameId);
+    ASSERT_EQ(got.data._length, want.data.size());
+    EXPECT_EQ(std::memcmp(got.data._buffer, want.data.data(), want.data.size()), 0)
+        << "cloud of stamp " << got.header.stamp.sec;
+  }
 }
 
 #ifdef CLOUDCAST_ROS2_FASTDDS_PEER
