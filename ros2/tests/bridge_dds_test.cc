@@ -380,6 +380,54 @@ TEST_F(Ros2BridgeTest, FastDdsCameraAndSubscriberGetTheRos1BridgesClouds) {
   }
   EXPECT_EQ(compared, 6);
 }
+
+// Samples that are no valid CDR (a Fast DDS writer of random bytes under the DisparityImage type
+// name) never reach the bridge: Cyclone's reader checks every sample against the type and drops
+// them. The bridge keeps running and turns the good camera's frames into clouds meanwhile.
+TEST_F(Ros2BridgeTest, NonCdrBytesAreDroppedAndTheBridgeGoesOn) {
+  StartBridge({});
+  const CameraWriters w = Camera();
+  Received r;
+  ASSERT_TRUE(PublishUntil(w, &r, [&] { return !r.clouds.empty(); }, 40)) << bridge_->Log();
+  std::thread garbage([&] {
+    const auto g = cloudcast::testing::RunProgram(
+        cloudcast::testing::BinDir() + "/ros2-fastdds-peer",
+        {"--namespace", "/stereo", "--garbage", "4"}, scratch_.string());
+    EXPECT_TRUE(g.exited && g.code == 0) << g;
+  });
+  // A reader of the same topic here: it must match the garbage writer (else the test proves
+  // nothing) and receive only the camera's valid samples.
+  auto witness = camera_->CreateReader(kDisparityImageType, "/stereo/disparity", SensorDataQos());
+  ASSERT_TRUE(witness.ok());
+  const std::size_t before = r.clouds.size();
+  std::uint32_t most_writers = 0;
+  int valid = 0;
+  const auto end = Clock::now() + std::chrono::seconds(4);
+  while (Clock::now() < end) {
+    Publish(w, next_frame_++);
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    Take(&r);
+    dds_subscription_matched_status_t matched;
+    if (dds_get_subscription_matched_status(*witness, &matched) == DDS_RETCODE_OK) {
+      most_writers = std::max(most_writers, matched.current_count);
+    }
+    for (;;) {
+      TakenSample sample(kDisparityImageType);
+      void* buf[1] = {sample.get()};
+      dds_sample_info_t info;
+      if (dds_take(*witness, buf, &info, 1, 1) <= 0) break;
+      if (!info.valid_data) continue;
+      EXPECT_GE(sample.header().stamp.sec, 1000);
+      EXPECT_STREQ(sample.header().frame_id, testing::kFrameId);
+      ++valid;
+    }
+  }
+  garbage.join();
+  EXPECT_EQ(most_writers, 2u) << "the garbage writer never matched";
+  EXPECT_GT(valid, 0);
+  EXPECT_TRUE(bridge_->running()) << bridge_->Log();
+  EXPECT_GT(r.clouds.size(), before + 10) << bridge_->Log();
+}
 #endif
 
 TEST_F(Ros2BridgeTest, AnXcdr2CameraMatchesNoReaderAndTheBridgeSaysSo) {

@@ -6,6 +6,10 @@
 // fields); it exits 0 after --clouds of them, 1 when --seconds pass first, 2 on a bad argument.
 //
 //   ros2-fastdds-peer --data DIR --namespace /stereo --clouds 7 --out DIR [--seconds 40]
+//
+// --garbage SECONDS instead writes, for that long, samples that are no valid CDR (random bytes
+// behind a CDR_LE header, every 20 ms) on the disparity topic under the DisparityImage type name:
+// what a broken or hostile writer sends. Exits 0.
 #include <fastdds/dds/domain/DomainParticipant.hpp>
 #include <fastdds/dds/domain/DomainParticipantFactory.hpp>
 #include <fastdds/dds/publisher/DataWriter.hpp>
@@ -42,6 +46,35 @@ struct Args {
   std::string data, ns = "/stereo", out;
   int clouds = 7;
   double seconds = 40;
+  double garbage = 0;
+};
+
+// A type under DisparityImage's DDS name whose samples are whatever bytes they hold.
+struct RawBytes {
+  std::vector<std::uint8_t> bytes;
+};
+class RawDisparityType : public fdds::TopicDataType {
+ public:
+  RawDisparityType() {
+    setName("stereo_msgs::msg::dds_::DisparityImage_");
+    m_typeSize = 1 << 16;
+    m_isGetKeyDefined = false;
+  }
+  bool serialize(void* data, eprosima::fastrtps::rtps::SerializedPayload_t* payload) override {
+    const auto& raw = *static_cast<RawBytes*>(data);
+    if (raw.bytes.size() > payload->max_size) return false;
+    std::memcpy(payload->data, raw.bytes.data(), raw.bytes.size());
+    payload->length = static_cast<std::uint32_t>(raw.bytes.size());
+    payload->encapsulation = CDR_LE;
+    return true;
+  }
+  bool deserialize(eprosima::fastrtps::rtps::SerializedPayload_t*, void*) override { return false; }
+  std::function<uint32_t()> getSerializedSizeProvider(void* data) override {
+    return [data] { return static_cast<uint32_t>(static_cast<RawBytes*>(data)->bytes.size()); };
+  }
+  void* createData() override { return new RawBytes(); }
+  void deleteData(void* data) override { delete static_cast<RawBytes*>(data); }
+  bool getKey(void*, eprosima::fastrtps::rtps::InstanceHandle_t*, bool) override { return false; }
 };
 
 // As rmw_fastrtps makes them: reliable, keep last 10, volatile, XCDR1, the type hash in
@@ -93,9 +126,40 @@ int main(int argc, char** argv) {
       a.clouds = std::atoi(v.c_str());
     } else if (f == "--seconds") {
       a.seconds = std::atof(v.c_str());
+    } else if (f == "--garbage") {
+      a.garbage = std::atof(v.c_str());
     } else {
       return Usage(("unknown flag " + f).c_str());
     }
+  }
+  if (a.garbage > 0) {
+    fdds::DomainParticipant* p =
+        fdds::DomainParticipantFactory::get_instance()->create_participant(
+            0, fdds::PARTICIPANT_QOS_DEFAULT);
+    if (p == nullptr) return Usage("cannot create the Fast DDS participant");
+    fdds::TypeSupport raw(new RawDisparityType());
+    raw.register_type(p);
+    fdds::Topic* t = p->create_topic("rt" + a.ns + "/disparity", raw.get_type_name(),
+                                     fdds::TOPIC_QOS_DEFAULT);
+    fdds::Publisher* pub = p->create_publisher(fdds::PUBLISHER_QOS_DEFAULT);
+    fdds::DataWriter* w = pub->create_datawriter(
+        t, RosQos(fdds::DATAWRITER_QOS_DEFAULT, "stereo_msgs/msg/DisparityImage"));
+    if (w == nullptr) return Usage("cannot create the Fast DDS writer");
+    std::srand(1);
+    const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(a.garbage);
+    while (std::chrono::steady_clock::now() < end) {
+      RawBytes sample;
+      sample.bytes.resize(1 + static_cast<std::size_t>(std::rand() % 2000));
+      for (auto& b : sample.bytes) b = static_cast<std::uint8_t>(std::rand());
+      // Lengths that claim more than there is: the first field, the header's stamp, then a
+      // string length of ~2 GB.
+      if (sample.bytes.size() > 12) std::memset(sample.bytes.data() + 8, 0x7f, 4);
+      w->write(&sample);
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    p->delete_contained_entities();
+    fdds::DomainParticipantFactory::get_instance()->delete_participant(p);
+    return 0;
   }
   if (a.data.empty() || a.out.empty()) return Usage("--data and --out are required");
 
