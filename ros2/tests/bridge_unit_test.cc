@@ -3,10 +3,12 @@
 // exact-time synchronizer, and the samples it writes.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <string>
 #include <vector>
 
 #include "bridge_options.h"
+#include "help.h"
 #include "ros2_inputs.h"
 #include "ros_args.h"
 #include "sample_views.h"
@@ -200,6 +202,22 @@ TEST(Ros2Samples, PointCloud2CarriesTheInputsHeaderAndTheSharedLayout) {
   ASSERT_TRUE(DeserializeCdr(kPointCloud2Type, bytes, &back).ok());
   EXPECT_EQ(back.row_step, 16u);
   FreeSample(kPointCloud2Type, &back);
+}
+
+TEST(Ros2Help, ListsEveryParameterInRos2SpellingAndTheTopics) {
+  const std::string help = HelpText();
+  for (const ros_bridge::ParamDoc& d : ros_bridge::ParamDocs()) {
+    if (d.name == "stereo/publish_disparity") continue;  // refused by the ROS 2 bridge
+    std::string name = d.name;
+    std::replace(name.begin(), name.end(), '/', '.');
+    EXPECT_NE(help.find("  " + name + " ("), std::string::npos) << name;
+  }
+  for (const char* text : {"input_qos (", "use_sim_time (", "--ros-args", "--params-file",
+                           "ROS_DOMAIN_ID", "CYCLONEDDS_URI", "points2", "/diagnostics",
+                           "depth_registered/image_rect", "right/camera_info"}) {
+    EXPECT_NE(help.find(text), std::string::npos) << text;
+  }
+  EXPECT_EQ(help.find("~"), std::string::npos);  // no ROS 1 private names
 }
 
 }  // namespace
