@@ -7,8 +7,10 @@
 #include "absl/strings/str_cat.h"
 #include "cloudcast/proto/convert.h"
 #include "depth_input.h"
+#include "diagnostics_msg.h"
 #include "disparity_input.h"
 #include "point_cloud2.h"
+#include "ros_params.h"
 #include "stereo_input.h"
 
 namespace cloudcast::ros_bridge {
@@ -147,7 +149,9 @@ void Bridge::PublishDisparity(const client::Result& result, const SentFrame& fra
 }
 
 void Bridge::OnTimer(const ros::TimerEvent&) {
-  diagnostics_.publish(stats_.Report(ros::Time::now(), status_name_, options_.server));
+  const ros::Time now = ros::Time::now();
+  diagnostics_.publish(
+      ToDiagnosticArray(stats_.Report(now.toSec(), status_name_, options_.server), now));
 }
 
 }  // namespace cloudcast::ros_bridge

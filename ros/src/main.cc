@@ -7,7 +7,7 @@
 #include <cstring>
 
 #include "bridge.h"
-#include "bridge_options.h"
+#include "ros_params.h"
 
 int main(int argc, char** argv) {
   for (int i = 1; i < argc; ++i) {

@@ -1,8 +1,6 @@
 #include "point_cloud2.h"
 
-#include <sensor_msgs/PointField.h>
-
-#include <cstring>
+#include "point_cloud_layout.h"
 
 namespace cloudcast::ros_bridge {
 
@@ -13,25 +11,17 @@ void ToPointCloud2(const PointCloud& cloud, const std_msgs::Header& header,
   out->width = static_cast<std::uint32_t>(cloud.size());
   out->is_bigendian = false;
   out->is_dense = true;  // the server's clouds hold finite points only
-  out->fields.resize(4);
-  const char* names[] = {"x", "y", "z", "rgb"};
-  for (int i = 0; i < 4; ++i) {
-    out->fields[i].name = names[i];
-    out->fields[i].offset = static_cast<std::uint32_t>(4 * i);
-    out->fields[i].datatype = sensor_msgs::PointField::FLOAT32;
-    out->fields[i].count = 1;
+  out->fields.resize(kPointFields.size());
+  for (std::size_t i = 0; i < kPointFields.size(); ++i) {
+    out->fields[i].name = kPointFields[i].name;
+    out->fields[i].offset = kPointFields[i].offset;
+    out->fields[i].datatype = kPointFields[i].datatype;
+    out->fields[i].count = kPointFields[i].count;
   }
-  static_assert(sizeof(Point) == 16, "the PointCloud2 layout is cloudcast's point");
-  out->point_step = sizeof(Point);
+  out->point_step = kPointStep;
   out->row_step = out->point_step * out->width;
-  out->data.resize(cloud.size() * sizeof(Point));
-  std::uint8_t* dst = out->data.data();
-  for (const Point& p : cloud.points) {
-    Point q = p;
-    q.rgba &= 0x00FFFFFFu;
-    std::memcpy(dst, &q, sizeof q);
-    dst += sizeof q;
-  }
+  out->data.resize(cloud.size() * kPointStep);
+  WritePointData(cloud, out->data.data());
 }
 
 }  // namespace cloudcast::ros_bridge

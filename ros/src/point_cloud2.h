@@ -9,10 +9,8 @@
 namespace cloudcast::ros_bridge {
 
 // `cloud` (unorganized, finite points) as a PointCloud2 with `header`: height 1, dense, little
-// endian, fields x y z rgb (FLOAT32 at offsets 0 4 8 12, point_step 16: cloudcast's own point,
-// and the layout of stereo_image_proc's point_cloud2). rgb is PCL's packed colour, 0x00RRGGBB as
-// the float's bits (the alpha byte zero, as stereo_image_proc and depth_image_proc write it, so
-// the field never holds a NaN pattern).
+// endian, the fields of bridge/point_cloud_layout.h (x y z rgb, FLOAT32 at 0 4 8 12, PCL's
+// packed rgb).
 void ToPointCloud2(const PointCloud& cloud, const std_msgs::Header& header,
                    sensor_msgs::PointCloud2* out);
 

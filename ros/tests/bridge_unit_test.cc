@@ -19,10 +19,11 @@
 #include "cloud_link.h"
 #include "cloudcast/proto/convert.h"
 #include "depth_input.h"
-#include "diagnostics.h"
+#include "diagnostics_msg.h"
 #include "disparity_input.h"
 #include "disparity_output.h"
 #include "point_cloud2.h"
+#include "ros_params.h"
 #include "stereo_input.h"
 
 namespace cloudcast::ros_bridge {
@@ -512,7 +513,7 @@ TEST(BridgeStats, ReportsTheReplysStageTimesAndCounters) {
   stats.Reconnected();
   stats.StreamClosed();
   stats.StreamDropped(2);
-  auto array = stats.Report(ros::Time(10, 0), "bridge", "127.0.0.1:50051");
+  auto array = ToDiagnosticArray(stats.Report(10.0, "bridge", "127.0.0.1:50051"), ros::Time(10, 0));
   ASSERT_EQ(array.status.size(), 1u);
   const auto& s = array.status[0];
   EXPECT_EQ(s.level, diagnostic_msgs::DiagnosticStatus::OK);
@@ -532,7 +533,7 @@ TEST(BridgeStats, ReportsTheReplysStageTimesAndCounters) {
   EXPECT_EQ(v["clouds"], "1");
   // The next period starts anew; the failed send makes it an ERROR.
   stats.NotSent(absl::UnavailableError("no stream"));
-  auto next = stats.Report(ros::Time(11, 0), "bridge", "x");
+  auto next = ToDiagnosticArray(stats.Report(11.0, "bridge", "x"), ros::Time(11, 0));
   EXPECT_EQ(next.status[0].level, diagnostic_msgs::DiagnosticStatus::ERROR);
   EXPECT_NE(next.status[0].message.find("no stream"), std::string::npos);
 }
@@ -541,7 +542,7 @@ TEST(BridgeStats, ReportsTheReplysStageTimesAndCounters) {
 TEST(BridgeStats, ALinkDownFromTheStartIsAnErrorNamingWhy) {
   BridgeStats stats;
   stats.LinkDown(absl::UnauthenticatedError("the bearer token is not valid for this server"));
-  auto array = stats.Report(ros::Time(1, 0), "bridge", "x");
+  auto array = ToDiagnosticArray(stats.Report(1.0, "bridge", "x"), ros::Time(1, 0));
   ASSERT_EQ(array.status.size(), 1u);
   EXPECT_EQ(array.status[0].level, diagnostic_msgs::DiagnosticStatus::ERROR);
   std::map<std::string, std::string> v;

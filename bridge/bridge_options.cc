@@ -1,7 +1,5 @@
 #include "bridge_options.h"
 
-#include <ros/ros.h>
-
 #include <algorithm>
 #include <cmath>
 #include <optional>
@@ -99,68 +97,23 @@ const std::vector<ParamDoc>& Docs() {
   return docs;
 }
 
-// Reads one parameter by its type, with errors that name it. Unset parameters are nullopt.
-class Params {
- public:
-  explicit Params(const ros::NodeHandle& nh) : nh_(nh) {}
-
-  absl::StatusOr<std::optional<std::string>> String(const std::string& name) const {
-    XmlRpc::XmlRpcValue v;
-    if (!nh_.getParam(name, v)) return std::optional<std::string>();
-    if (v.getType() != XmlRpc::XmlRpcValue::TypeString) return WrongType(name, v, "a string");
-    return std::optional<std::string>(static_cast<std::string&>(v));
-  }
-  absl::StatusOr<std::optional<bool>> Bool(const std::string& name) const {
-    XmlRpc::XmlRpcValue v;
-    if (!nh_.getParam(name, v)) return std::optional<bool>();
-    if (v.getType() != XmlRpc::XmlRpcValue::TypeBoolean) return WrongType(name, v, "true or false");
-    return std::optional<bool>(static_cast<bool&>(v));
-  }
-  absl::StatusOr<std::optional<int>> Int(const std::string& name) const {
-    XmlRpc::XmlRpcValue v;
-    if (!nh_.getParam(name, v)) return std::optional<int>();
-    if (v.getType() != XmlRpc::XmlRpcValue::TypeInt) return WrongType(name, v, "an integer");
-    return std::optional<int>(static_cast<int&>(v));
-  }
-  // Integers are numbers too ("leaf: 1" in YAML).
-  absl::StatusOr<std::optional<double>> Double(const std::string& name) const {
-    XmlRpc::XmlRpcValue v;
-    if (!nh_.getParam(name, v)) return std::optional<double>();
-    if (v.getType() == XmlRpc::XmlRpcValue::TypeInt) {
-      return std::optional<double>(static_cast<int&>(v));
-    }
-    if (v.getType() != XmlRpc::XmlRpcValue::TypeDouble) return WrongType(name, v, "a number");
-    return std::optional<double>(static_cast<double&>(v));
-  }
-
- private:
-  static absl::Status WrongType(const std::string& name, XmlRpc::XmlRpcValue& v,
-                                const char* wanted) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("~", name, " is ", v.toXml(), "; must be ", wanted));
-  }
-  const ros::NodeHandle& nh_;
-};
-
-absl::Status OutOfRange(const std::string& name, double value, const std::string& rule) {
+// Errors name the parameter as the transport spells it ("~voxel/leaf" on ROS 1, "voxel.leaf" on
+// ROS 2): ParamReader::Display.
+absl::Status OutOfRange(const ParamReader& p, const std::string& name, double value,
+                        const std::string& rule) {
   std::ostringstream os;
-  os << "~" << name << " is " << value << "; must be " << rule;
+  os << p.Display(name) << " is " << value << "; must be " << rule;
   return absl::InvalidArgumentError(os.str());
 }
 
-// Every parameter under the node's private namespace must be one of ParamDocs.
-absl::Status CheckNoUnknownParams(const ros::NodeHandle& nh) {
-  std::vector<std::string> names;
-  if (!nh.getParamNames(names)) return absl::OkStatus();  // the master will fail louder
-  const std::string prefix = nh.getNamespace() + "/";
-  for (const std::string& full : names) {
-    if (full.rfind(prefix, 0) != 0) continue;
-    const std::string name = full.substr(prefix.size());
+// Every parameter the node was given must be one of ParamDocs.
+absl::Status CheckNoUnknownParams(const ParamReader& p, const std::string& program) {
+  for (const std::string& name : p.Names()) {
     const bool known = std::any_of(Docs().begin(), Docs().end(),
                                    [&](const ParamDoc& d) { return d.name == name; });
     if (!known) {
       return absl::InvalidArgumentError(absl::StrCat(
-          "~", name, " is not a parameter of cloudcast-ros-bridge (see --help for the list)"));
+          p.Display(name), " is not a parameter of ", program, " (see --help for the list)"));
     }
   }
   return absl::OkStatus();
@@ -171,16 +124,16 @@ absl::Status CheckNoUnknownParams(const ros::NodeHandle& nh) {
   if (!lhs##_or.ok()) return lhs##_or.status(); \
   auto lhs = *std::move(lhs##_or)
 
-absl::Status ReadConnection(const Params& p, BridgeOptions* o) {
+absl::Status ReadConnection(const ParamReader& p, BridgeOptions* o) {
   CLOUDCAST_ASSIGN_OR_RETURN(server, p.String("server"));
   if (server) {
-    if (server->empty()) return absl::InvalidArgumentError("~server is empty; give host:port");
+    if (server->empty()) return absl::InvalidArgumentError(p.Display("server") + " is empty; give host:port");
     o->server = *server;
   }
   CLOUDCAST_ASSIGN_OR_RETURN(connect, p.Double("connect_timeout"));
   if (connect) {
     if (!(std::isfinite(*connect) && *connect >= 0)) {
-      return OutOfRange("connect_timeout", *connect, "finite and >= 0 (seconds)");
+      return OutOfRange(p, "connect_timeout", *connect, "finite and >= 0 (seconds)");
     }
     o->client.connect_timeout = std::chrono::milliseconds(std::llround(*connect * 1000));
   }
@@ -189,7 +142,7 @@ absl::Status ReadConnection(const Params& p, BridgeOptions* o) {
   CLOUDCAST_ASSIGN_OR_RETURN(reconnect, p.Double("reconnect_timeout"));
   if (reconnect) {
     if (!(std::isfinite(*reconnect) && *reconnect > 0)) {
-      return OutOfRange("reconnect_timeout", *reconnect, "finite and > 0 (seconds)");
+      return OutOfRange(p, "reconnect_timeout", *reconnect, "finite and > 0 (seconds)");
     }
     o->reconnect_timeout = std::chrono::milliseconds(std::llround(*reconnect * 1000));
   }
@@ -215,12 +168,14 @@ absl::Status ReadConnection(const Params& p, BridgeOptions* o) {
   if (any_tls) {
     if (files.cert_file.empty() != files.key_file.empty()) {
       return absl::InvalidArgumentError(
-          files.cert_file.empty() ? "~tls/key needs ~tls/cert (the certificate it belongs to)"
-                                  : "~tls/cert needs ~tls/key (its private key)");
+          files.cert_file.empty()
+              ? absl::StrCat(p.Display("tls/key"), " needs ", p.Display("tls/cert"),
+                             " (the certificate it belongs to)")
+              : absl::StrCat(p.Display("tls/cert"), " needs ", p.Display("tls/key"), " (its private key)"));
     }
     auto loaded = client::LoadTlsFiles(files);
     if (!loaded.ok()) {
-      return absl::InvalidArgumentError(absl::StrCat("~tls/...: ", loaded.status().message()));
+      return absl::InvalidArgumentError(absl::StrCat(p.Display("tls/..."), ": ", loaded.status().message()));
     }
     o->client.security.tls = *std::move(loaded);
   }
@@ -228,14 +183,14 @@ absl::Status ReadConnection(const Params& p, BridgeOptions* o) {
   if (token_file && !token_file->empty()) {
     auto token = client::ReadTokenFile(*token_file);
     if (!token.ok()) {
-      return absl::InvalidArgumentError(absl::StrCat("~token_file: ", token.status().message()));
+      return absl::InvalidArgumentError(absl::StrCat(p.Display("token_file"), ": ", token.status().message()));
     }
     o->client.security.bearer_token = *std::move(token);
   }
   return absl::OkStatus();
 }
 
-absl::Status ReadInput(const Params& p, BridgeOptions* o) {
+absl::Status ReadInput(const ParamReader& p, BridgeOptions* o) {
   CLOUDCAST_ASSIGN_OR_RETURN(input, p.String("input"));
   if (input) {
     if (*input == "disparity") {
@@ -246,12 +201,12 @@ absl::Status ReadInput(const Params& p, BridgeOptions* o) {
       o->input = InputKind::kStereo;
     } else {
       return absl::InvalidArgumentError(
-          absl::StrCat("~input is '", *input, "'; must be disparity, depth or stereo"));
+          absl::StrCat(p.Display("input"), " is '", *input, "'; must be disparity, depth or stereo"));
     }
   }
   CLOUDCAST_ASSIGN_OR_RETURN(queue, p.Int("queue_size"));
   if (queue) {
-    if (*queue < 1 || *queue > 1000) return OutOfRange("queue_size", *queue, "in 1..1000");
+    if (*queue < 1 || *queue > 1000) return OutOfRange(p, "queue_size", *queue, "in 1..1000");
     o->sync.queue_size = *queue;
   }
   CLOUDCAST_ASSIGN_OR_RETURN(approx, p.Bool("approximate_sync"));
@@ -259,7 +214,7 @@ absl::Status ReadInput(const Params& p, BridgeOptions* o) {
   CLOUDCAST_ASSIGN_OR_RETURN(period, p.Double("diagnostics_period"));
   if (period) {
     if (!(std::isfinite(*period) && *period > 0)) {
-      return OutOfRange("diagnostics_period", *period, "finite and > 0 (seconds)");
+      return OutOfRange(p, "diagnostics_period", *period, "finite and > 0 (seconds)");
     }
     o->diagnostics_period_s = *period;
   }
@@ -268,33 +223,30 @@ absl::Status ReadInput(const Params& p, BridgeOptions* o) {
 
 // Parameters that belong to one input kind only are refused with the others, so that a setting is
 // never silently ignored.
-absl::Status OnlyFor(const ros::NodeHandle& nh, const BridgeOptions& o, InputKind kind,
+absl::Status OnlyFor(const ParamReader& p, const BridgeOptions& o, InputKind kind,
                      const std::string& prefix) {
   if (o.input == kind) return absl::OkStatus();
-  std::vector<std::string> names;
-  if (!nh.getParamNames(names)) return absl::OkStatus();
-  const std::string full_prefix = nh.getNamespace() + "/" + prefix;
-  for (const std::string& full : names) {
-    if (full.rfind(full_prefix, 0) != 0) continue;
+  for (const std::string& name : p.Names()) {
+    if (name.rfind(prefix, 0) != 0) continue;
     return absl::InvalidArgumentError(absl::StrCat(
-        "~", full.substr(nh.getNamespace().size() + 1), " is set but ~input is '",
-        std::string(Name(o.input)), "'; it applies to ~input ", std::string(Name(kind)), " only"));
+        p.Display(name), " is set but ", p.Display("input"), " is '", std::string(Name(o.input)),
+        "'; it applies to ", p.Display("input"), " ", std::string(Name(kind)), " only"));
   }
   return absl::OkStatus();
 }
 
-absl::Status ReadDepth(const Params& p, BridgeOptions* o) {
+absl::Status ReadDepth(const ParamReader& p, BridgeOptions* o) {
   CLOUDCAST_ASSIGN_OR_RETURN(scale, p.Double("depth_scale"));
   if (scale) {
     if (!(std::isfinite(*scale) && *scale > 0)) {
-      return OutOfRange("depth_scale", *scale, "finite and > 0 (units of z per raw depth value)");
+      return OutOfRange(p, "depth_scale", *scale, "finite and > 0 (units of z per raw depth value)");
     }
     o->depth_scale = *scale;
   }
   return absl::OkStatus();
 }
 
-absl::Status ReadStereo(const Params& p, BridgeOptions* o) {
+absl::Status ReadStereo(const ParamReader& p, BridgeOptions* o) {
   // Unset members keep the core's defaults for the check only: the config carries the set ones,
   // and the server's defaults fill the rest.
   StereoParams checked;
@@ -305,7 +257,7 @@ absl::Status ReadStereo(const Params& p, BridgeOptions* o) {
       std::vector<std::string> names;
       for (StereoMatcher m : AllStereoMatchers()) names.emplace_back(Name(m));
       return absl::InvalidArgumentError(absl::StrCat(
-          "~stereo/matcher is '", *matcher, "'; must be one of ", absl::StrJoin(names, ", ")));
+          p.Display("stereo/matcher"), " is '", *matcher, "'; must be one of ", absl::StrJoin(names, ", ")));
     }
     c->set_matcher(convert::ToProto(checked.matcher));
   }
@@ -334,7 +286,7 @@ absl::Status ReadStereo(const Params& p, BridgeOptions* o) {
   }
   // The core's rules, as the server applies them (StereoParams::Validate names the member).
   if (absl::Status s = checked.Validate("stereo"); !s.ok()) {
-    return absl::InvalidArgumentError(absl::StrCat("~stereo/...: ", s.message()));
+    return absl::InvalidArgumentError(absl::StrCat(p.Display("stereo/..."), ": ", s.message()));
   }
   CLOUDCAST_ASSIGN_OR_RETURN(publish, p.Bool("stereo/publish_disparity"));
   if (publish) {
@@ -344,14 +296,14 @@ absl::Status ReadStereo(const Params& p, BridgeOptions* o) {
   return absl::OkStatus();
 }
 
-absl::Status ReadStages(const Params& p, BridgeOptions* o) {
+absl::Status ReadStages(const ParamReader& p, BridgeOptions* o) {
   v1::StreamConfig& c = o->config;
   CLOUDCAST_ASSIGN_OR_RETURN(delivery, p.String("delivery"));
   if (delivery && !delivery->empty()) {
     convert::Delivery d;
     if (!convert::ParseDelivery(*delivery, &d)) {
       return absl::InvalidArgumentError(
-          absl::StrCat("~delivery is '", *delivery, "'; must be latest or all"));
+          absl::StrCat(p.Display("delivery"), " is '", *delivery, "'; must be latest or all"));
     }
     c.set_delivery(convert::ToProto(d));
   }
@@ -361,16 +313,16 @@ absl::Status ReadStages(const Params& p, BridgeOptions* o) {
   CLOUDCAST_ASSIGN_OR_RETURN(pt_min, p.Double("passthrough/min"));
   CLOUDCAST_ASSIGN_OR_RETURN(pt_max, p.Double("passthrough/max"));
   if (pt_min) {
-    if (!std::isfinite(*pt_min)) return OutOfRange("passthrough/min", *pt_min, "finite");
+    if (!std::isfinite(*pt_min)) return OutOfRange(p, "passthrough/min", *pt_min, "finite");
     c.mutable_passthrough()->set_min(static_cast<float>(*pt_min));
   }
   if (pt_max) {
-    if (!std::isfinite(*pt_max)) return OutOfRange("passthrough/max", *pt_max, "finite");
+    if (!std::isfinite(*pt_max)) return OutOfRange(p, "passthrough/max", *pt_max, "finite");
     c.mutable_passthrough()->set_max(static_cast<float>(*pt_max));
   }
   if (pt_min && pt_max && *pt_min > *pt_max) {
-    return OutOfRange("passthrough/min", *pt_min,
-                      absl::StrCat("<= ~passthrough/max (", *pt_max, ")"));
+    return OutOfRange(p, "passthrough/min", *pt_min,
+                      absl::StrCat("<= ", p.Display("passthrough/max"), " (", *pt_max, ")"));
   }
 
   CLOUDCAST_ASSIGN_OR_RETURN(voxel_on, p.Bool("voxel/enabled"));
@@ -378,31 +330,31 @@ absl::Status ReadStages(const Params& p, BridgeOptions* o) {
   CLOUDCAST_ASSIGN_OR_RETURN(leaf, p.Double("voxel/leaf"));
   if (leaf) {
     if (!(std::isfinite(*leaf) && *leaf > 0))
-      return OutOfRange("voxel/leaf", *leaf, "finite and > 0");
+      return OutOfRange(p, "voxel/leaf", *leaf, "finite and > 0");
     c.mutable_voxel_grid()->set_leaf(static_cast<float>(*leaf));
   }
   CLOUDCAST_ASSIGN_OR_RETURN(min_points, p.Int("voxel/min_points"));
   if (min_points) {
-    if (*min_points < 0) return OutOfRange("voxel/min_points", *min_points, ">= 0");
+    if (*min_points < 0) return OutOfRange(p, "voxel/min_points", *min_points, ">= 0");
     c.mutable_voxel_grid()->set_min_points_per_voxel(static_cast<std::uint32_t>(*min_points));
   }
 
   CLOUDCAST_ASSIGN_OR_RETURN(bits, p.Int("draco/position_bits"));
   if (bits) {
-    if (*bits < 1 || *bits > 30) return OutOfRange("draco/position_bits", *bits, "in 1..30");
+    if (*bits < 1 || *bits > 30) return OutOfRange(p, "draco/position_bits", *bits, "in 1..30");
     c.mutable_draco()->set_position_bits(*bits);
   }
   CLOUDCAST_ASSIGN_OR_RETURN(max_error, p.Double("draco/max_position_error"));
   if (max_error) {
     if (!(std::isfinite(*max_error) && *max_error >= 0)) {
-      return OutOfRange("draco/max_position_error", *max_error, "finite and >= 0");
+      return OutOfRange(p, "draco/max_position_error", *max_error, "finite and >= 0");
     }
     c.mutable_draco()->set_max_position_error(static_cast<float>(*max_error));
   }
   for (const char* name : {"draco/encode_speed", "draco/decode_speed"}) {
     CLOUDCAST_ASSIGN_OR_RETURN(speed, p.Int(name));
     if (!speed) continue;
-    if (*speed < 0 || *speed > 10) return OutOfRange(name, *speed, "in 0..10");
+    if (*speed < 0 || *speed > 10) return OutOfRange(p, name, *speed, "in 0..10");
     if (std::string(name) == "draco/encode_speed") {
       c.mutable_draco()->set_encode_speed(*speed);
     } else {
@@ -417,22 +369,6 @@ absl::Status ReadStages(const Params& p, BridgeOptions* o) {
                                                    resolved.status().message()));
   }
   return absl::OkStatus();
-}
-
-// `text` in lines of at most `width` characters, each after `indent`.
-std::string Wrapped(const std::string& text, std::size_t width, const std::string& indent) {
-  std::string out, line;
-  std::istringstream words(text);
-  std::string word;
-  while (words >> word) {
-    if (!line.empty() && line.size() + 1 + word.size() > width) {
-      out += indent + line + "\n";
-      line.clear();
-    }
-    line += (line.empty() ? "" : " ") + word;
-  }
-  if (!line.empty()) out += indent + line + "\n";
-  return out;
 }
 
 }  // namespace
@@ -451,68 +387,31 @@ std::string_view Name(InputKind kind) {
 
 const std::vector<ParamDoc>& ParamDocs() { return Docs(); }
 
-std::string HelpText() {
-  std::ostringstream os;
-  os << "cloudcast-ros-bridge: turns a ROS camera's disparity, depth image or stereo pair into\n"
-        "point clouds on a cloudcast server and publishes them as sensor_msgs/PointCloud2.\n\n"
-        "Usage: cloudcast-ros-bridge [ROS remappings, e.g. disparity:=/stereo/disparity]\n"
-        "                            [_param:=value ...]\n\n"
-        "Subscribes, ~input disparity (the names of stereo_image_proc's point_cloud2 nodelet):\n"
-        "  disparity               stereo_msgs/DisparityImage (32FC1; z = f T / d; d below\n"
-        "                          min_disparity, NaN or inf: no point)\n"
-        "  left/image_rect_color   sensor_msgs/Image, rgb8 bgr8 rgba8 bgra8 or mono8, same size\n"
-        "  left/camera_info        sensor_msgs/CameraInfo (P gives fx, fy, cx, cy)\n"
-        "~input depth (the names of depth_image_proc's point_cloud_xyzrgb nodelet):\n"
-        "  depth_registered/image_rect\n"
-        "                          sensor_msgs/Image, 16UC1 (mm) or 32FC1 (m), REP 118; 0, NaN,\n"
-        "                          inf: no point; registered to the colour camera\n"
-        "  rgb/image_rect_color    sensor_msgs/Image, the colour encodings above, same size\n"
-        "  rgb/camera_info         sensor_msgs/CameraInfo of the depth's pixels (P, or K)\n"
-        "~input stereo (rectified pairs; the server matches them, ~stereo/...):\n"
-        "  left/image_rect_color   sensor_msgs/Image, the colour encodings above (the points'\n"
-        "                          colour; the matcher uses its grey)\n"
-        "  right/image_rect        sensor_msgs/Image, same size (mono8 is enough)\n"
-        "  left/camera_info        sensor_msgs/CameraInfo: P gives fx, fy, cx, cy\n"
-        "  right/camera_info       sensor_msgs/CameraInfo: P[3] = -fx * baseline\n"
-        "Publishes:\n"
-        "  points2                 sensor_msgs/PointCloud2: x y z rgb (FLOAT32 at 0 4 8 12, PCL's\n"
-        "                          packed rgb), unorganized, dense, the input's header\n"
-        "  disparity               (~input stereo, ~stereo/publish_disparity) stereo_msgs/\n"
-        "                          DisparityImage: the server's disparities, 1/16 pixel steps\n"
-        "  /diagnostics            diagnostic_msgs/DiagnosticArray: per-stage times (decode,\n"
-        "                          rectify, match, pipeline, encode, queue, round trip),\n"
-        "                          frames, drops, reconnects\n\n"
-        "Parameters (private, e.g. _server:=10.0.0.2:50051 or <param name=\"server\"> in a "
-        "launch file):\n";
-  for (const ParamDoc& d : Docs()) {
-    std::string head = "  ~" + d.name + " (" + d.type + ", default " +
-                       (d.default_value.empty() ? "none" : d.default_value) + ")";
-    os << head << "\n" << Wrapped(d.help, 84, "      ");
+// `text` in lines of at most `width` characters, each after `indent`.
+std::string WrapText(const std::string& text, std::size_t width, const std::string& indent) {
+  std::string out, line;
+  std::istringstream words(text);
+  std::string word;
+  while (words >> word) {
+    if (!line.empty() && line.size() + 1 + word.size() > width) {
+      out += indent + line + "\n";
+      line.clear();
+    }
+    line += (line.empty() ? "" : " ") + word;
   }
-  os << "\nExamples:\n"
-        "  cloudcast-ros-bridge _server:=127.0.0.1:50051 disparity:=/stereo/disparity \\\n"
-        "      left/image_rect_color:=/stereo/left/image_rect_color \\\n"
-        "      left/camera_info:=/stereo/left/camera_info\n"
-        "  cloudcast-ros-bridge _input:=depth __ns:=/camera points2:=/camera/cloudcast/points\n"
-        "  cloudcast-ros-bridge _input:=stereo _stereo/matcher:=sgm _stereo/num_disparities:=160 "
-        "\\\n"
-        "      __ns:=/stereo\n"
-        "  roslaunch cloudcast_ros cloudcast_bridge.launch camera:=/stereo server:=robot-pc:50051\n"
-        "  roslaunch cloudcast_ros cloudcast_depth.launch camera:=/camera\n"
-        "  roslaunch cloudcast_ros cloudcast_stereo.launch camera:=/stereo\n"
-        "Documentation: docs/ros.md\n";
-  return os.str();
+  if (!line.empty()) out += indent + line + "\n";
+  return out;
 }
 
-absl::StatusOr<BridgeOptions> ReadBridgeOptions(const ros::NodeHandle& private_nh) {
-  if (absl::Status s = CheckNoUnknownParams(private_nh); !s.ok()) return s;
-  const Params p(private_nh);
+
+absl::StatusOr<BridgeOptions> ReadBridgeOptions(const ParamReader& p, const std::string& program) {
+  if (absl::Status s = CheckNoUnknownParams(p, program); !s.ok()) return s;
   BridgeOptions o;
   o.client.connect_timeout = std::chrono::milliseconds(5000);
   if (absl::Status s = ReadConnection(p, &o); !s.ok()) return s;
   if (absl::Status s = ReadInput(p, &o); !s.ok()) return s;
-  if (absl::Status s = OnlyFor(private_nh, o, InputKind::kDepth, "depth_scale"); !s.ok()) return s;
-  if (absl::Status s = OnlyFor(private_nh, o, InputKind::kStereo, "stereo/"); !s.ok()) return s;
+  if (absl::Status s = OnlyFor(p, o, InputKind::kDepth, "depth_scale"); !s.ok()) return s;
+  if (absl::Status s = OnlyFor(p, o, InputKind::kStereo, "stereo/"); !s.ok()) return s;
   if (o.input == InputKind::kDepth) {
     if (absl::Status s = ReadDepth(p, &o); !s.ok()) return s;
   }

@@ -3,17 +3,25 @@
 // round trip, the bridge's own Draco decode), as means and maxima over each diagnostics period.
 #pragma once
 
-#include <diagnostic_msgs/DiagnosticArray.h>
-#include <ros/time.h>
-
 #include <cstdint>
 #include <mutex>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "absl/status/status.h"
 #include "cloudcast/client/result.h"
 
 namespace cloudcast::ros_bridge {
+
+// One diagnostic_msgs/DiagnosticStatus, as either transport publishes it (in a DiagnosticArray
+// stamped with the report's time).
+struct DiagnosticReport {
+  enum Level : std::uint8_t { kOk = 0, kWarn = 1, kError = 2, kStale = 3 };
+  Level level = kOk;
+  std::string name, message, hardware_id;
+  std::vector<std::pair<std::string, std::string>> values;
+};
 
 // Thread-safe: the ROS thread counts inputs and sends, the stream's receiver thread the replies.
 class BridgeStats {
@@ -33,10 +41,10 @@ class BridgeStats {
   void Published();     // a PointCloud2 went out
   void PublishError(const absl::Status& s);  // a reply's extra (the disparity map) was unusable
 
-  // The report for the period since the previous one (which it starts anew). `name` is the
-  // status's name, `hardware_id` the server target.
-  diagnostic_msgs::DiagnosticArray Report(const ros::Time& stamp, const std::string& name,
-                                          const std::string& hardware_id);
+  // The report for the period since the previous one (which it starts anew), made at `now_s`
+  // (seconds on the transport's clock). `name` is the status's name, `hardware_id` the server
+  // target.
+  DiagnosticReport Report(double now_s, const std::string& name, const std::string& hardware_id);
 
  private:
   struct Stage {
@@ -59,7 +67,7 @@ class BridgeStats {
   Stage decode_, rectify_, match_, pipeline_, encode_, queue_, round_trip_, bridge_decode_, points_,
       draco_bytes_;
   float position_error_bound_ = 0;
-  ros::Time period_start_;
+  double period_start_s_ = -1;  // none yet
 };
 
 }  // namespace cloudcast::ros_bridge

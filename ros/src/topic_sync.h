@@ -1,7 +1,5 @@
-// One kind of camera input: its subscribers, their time synchronization, and the conversion of
-// each synchronized set of messages into a frame for the client library. Three classes like it:
-// disparity_input.h (stereo_msgs/DisparityImage), depth_input.h (a depth image) and
-// stereo_input.h (a rectified stereo pair, matched on the server).
+// Subscribers to N ROS 1 topics, synchronized by message_filters (the ROS 1 inputs' half of
+// input_source.h).
 #pragma once
 
 #include <message_filters/subscriber.h>
@@ -9,7 +7,6 @@
 #include <message_filters/sync_policies/exact_time.h>
 #include <message_filters/synchronizer.h>
 #include <ros/ros.h>
-#include <std_msgs/Header.h>
 
 #include <array>
 #include <functional>
@@ -18,33 +15,9 @@
 #include <tuple>
 #include <utility>
 
-#include "absl/status/status.h"
 #include "bridge_options.h"
-#include "cloudcast/client/frame.h"
-#include "cloudcast/core/camera.h"
 
 namespace cloudcast::ros_bridge {
-
-// A frame ready for Stream::Send. The views point into the ROS messages (or a buffer of the
-// input), valid during the sink call only.
-struct OutgoingFrame {
-  client::FrameInput images;  // a DisparityFrame, DepthFrame or StereoFrame
-  CameraModel camera;         // this frame's camera, in cloudcast's model
-  std_msgs::Header header;    // the stamp and frame_id the cloud gets
-};
-
-class InputSource {
- public:
-  // Called for each synchronized frame, on the ROS callback thread.
-  using Sink = std::function<void(const OutgoingFrame&)>;
-  // Called for each set of messages that cannot become a frame; the status names the topic and
-  // the field (e.g. "disparity.image.encoding is '16UC1'; must be 32FC1").
-  using ErrorSink = std::function<void(const absl::Status&)>;
-
-  virtual ~InputSource() = default;
-  // The resolved topics it subscribes to, for the log.
-  virtual std::string Describe() const = 0;
-};
 
 // Subscribers to N topics and a message_filters synchronizer over them (ExactTime or
 // ApproximateTime, by SyncOptions), calling `callback` with each matched set.

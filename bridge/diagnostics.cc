@@ -1,19 +1,13 @@
 #include "diagnostics.h"
 
-#include <diagnostic_msgs/DiagnosticStatus.h>
-#include <diagnostic_msgs/KeyValue.h>
-
 #include <cstdio>
 #include <string>
 
 namespace cloudcast::ros_bridge {
 namespace {
 
-void Add(diagnostic_msgs::DiagnosticStatus* s, const std::string& key, const std::string& value) {
-  diagnostic_msgs::KeyValue kv;
-  kv.key = key;
-  kv.value = value;
-  s->values.push_back(std::move(kv));
+void Add(DiagnosticReport* s, const std::string& key, const std::string& value) {
+  s->values.emplace_back(key, value);
 }
 
 std::string Fixed(double v, int digits = 3) {
@@ -109,29 +103,26 @@ void BridgeStats::PublishError(const absl::Status& s) {
   last_error_ = s.ToString();
 }
 
-diagnostic_msgs::DiagnosticArray BridgeStats::Report(const ros::Time& stamp,
-                                                     const std::string& name,
-                                                     const std::string& hardware_id) {
+DiagnosticReport BridgeStats::Report(double now_s, const std::string& name,
+                                     const std::string& hardware_id) {
   std::lock_guard<std::mutex> lock(mu_);
-  diagnostic_msgs::DiagnosticArray array;
-  array.header.stamp = stamp;
-  diagnostic_msgs::DiagnosticStatus s;
+  DiagnosticReport s;
   s.name = name;
   s.hardware_id = hardware_id;
   if (link_down_) {
-    s.level = diagnostic_msgs::DiagnosticStatus::ERROR;
+    s.level = DiagnosticReport::kError;
     s.message = "no stream to the server: " + last_error_;
   } else if (period_errors_ > 0) {
-    s.level = diagnostic_msgs::DiagnosticStatus::WARN;
+    s.level = DiagnosticReport::kWarn;
     s.message = "errors in this period; last: " + last_error_;
   } else if (period_sent_ > 0 && period_clouds_ == 0) {
-    s.level = diagnostic_msgs::DiagnosticStatus::WARN;
+    s.level = DiagnosticReport::kWarn;
     s.message = "frames sent, no cloud back in this period";
   } else {
-    s.level = diagnostic_msgs::DiagnosticStatus::OK;
+    s.level = DiagnosticReport::kOk;
     s.message = period_clouds_ > 0 ? "streaming" : "waiting for frames";
   }
-  const double seconds = period_start_.isZero() ? 0.0 : (stamp - period_start_).toSec();
+  const double seconds = period_start_s_ < 0 ? 0.0 : now_s - period_start_s_;
   Add(&s, "clouds_per_s", Fixed(seconds > 0 ? period_clouds_ / seconds : 0.0, 2));
   Add(&s, "frames_in", std::to_string(frames_in_));
   Add(&s, "input_errors", std::to_string(input_errors_));
@@ -157,13 +148,12 @@ diagnostic_msgs::DiagnosticArray BridgeStats::Report(const ros::Time& stamp,
   Add(&s, "draco_bytes_mean", Fixed(n > 0 ? draco_bytes_.sum / n : 0.0, 0));
   Add(&s, "position_error_bound", Fixed(position_error_bound_, 6));
   if (!last_error_.empty()) Add(&s, "last_error", last_error_);
-  array.status.push_back(std::move(s));
 
   period_clouds_ = period_errors_ = period_sent_ = 0;
   decode_ = rectify_ = match_ = pipeline_ = encode_ = queue_ = round_trip_ = bridge_decode_ =
       points_ = draco_bytes_ = Stage{};
-  period_start_ = stamp;
-  return array;
+  period_start_s_ = now_s;
+  return s;
 }
 
 }  // namespace cloudcast::ros_bridge

@@ -1,6 +1,4 @@
-#include "image_messages.h"
-
-#include <sensor_msgs/image_encodings.h>
+#include "image_checks.h"
 
 #include <cmath>
 
@@ -9,7 +7,7 @@
 namespace cloudcast::ros_bridge {
 namespace {
 
-namespace enc = sensor_msgs::image_encodings;
+namespace enc = encodings;
 
 absl::Status Invalid(const std::string& message) { return absl::InvalidArgumentError(message); }
 
@@ -17,7 +15,7 @@ bool FinitePositive(double v) { return std::isfinite(v) && v > 0; }
 
 }  // namespace
 
-absl::Status CheckLayout(const sensor_msgs::Image& image, std::size_t bytes_per_pixel,
+absl::Status CheckLayout(const ImageMsg& image, std::size_t bytes_per_pixel,
                          const std::string& field) {
   if (image.width == 0 || image.height == 0) {
     return Invalid(
@@ -36,23 +34,23 @@ absl::Status CheckLayout(const sensor_msgs::Image& image, std::size_t bytes_per_
   return absl::OkStatus();
 }
 
-absl::StatusOr<client::ColorInput> ColourFromImage(const sensor_msgs::Image& image,
+absl::StatusOr<client::ColorInput> ColourFromImage(const ImageMsg& image,
                                                    const std::string& topic) {
   ColorEncoding encoding;
   bool bgra = false;
-  if (image.encoding == enc::RGB8) {
+  if (image.encoding == enc::kRgb8) {
     encoding = ColorEncoding::kRGB8;
-  } else if (image.encoding == enc::BGR8) {
+  } else if (image.encoding == enc::kBgr8) {
     encoding = ColorEncoding::kBGR8;
-  } else if (image.encoding == enc::RGBA8) {
+  } else if (image.encoding == enc::kRgba8) {
     encoding = ColorEncoding::kRGBA8;
-  } else if (image.encoding == enc::MONO8) {
+  } else if (image.encoding == enc::kMono8) {
     encoding = ColorEncoding::kMono8;
-  } else if (image.encoding == enc::BGRA8) {
+  } else if (image.encoding == enc::kBgra8) {
     encoding = ColorEncoding::kRGBA8;  // four bytes a pixel, for the layout check only
     bgra = true;
   } else {
-    return Invalid(absl::StrCat(topic, ".encoding is '", image.encoding,
+    return Invalid(absl::StrCat(topic, ".encoding is '", std::string(image.encoding),
                                 "'; the bridge takes rgb8, bgr8, rgba8, bgra8 or mono8"));
   }
   if (absl::Status s = CheckLayout(image, BytesPerPixel(encoding), topic); !s.ok()) return s;
@@ -70,15 +68,15 @@ absl::StatusOr<client::ColorInput> ColourFromImage(const sensor_msgs::Image& ima
   return client::ColorInput(view);
 }
 
-absl::Status CheckSameSize(const sensor_msgs::Image& first, const std::string& first_topic,
-                           const sensor_msgs::Image& second, const std::string& second_topic) {
+absl::Status CheckSameSize(const ImageMsg& first, const std::string& first_topic,
+                           const ImageMsg& second, const std::string& second_topic) {
   if (first.width == second.width && first.height == second.height) return absl::OkStatus();
   return Invalid(absl::StrCat(second_topic, " is ", second.width, "x", second.height, " but ",
                               first_topic, " is ", first.width, "x", first.height,
                               "; they must be the same size"));
 }
 
-absl::StatusOr<Pinhole> PinholeFromInfo(const sensor_msgs::CameraInfo& info,
+absl::StatusOr<Pinhole> PinholeFromInfo(const CameraInfoMsg& info,
                                         const std::string& topic, std::uint32_t width,
                                         std::uint32_t height, const std::string& image_topic,
                                         IntrinsicsFrom from) {

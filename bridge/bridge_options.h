@@ -1,5 +1,6 @@
-// The bridge's settings, read from its private ROS parameters (~server, ~input, ...), and the one
-// table of those parameters that --help and docs/ros.md print.
+// The bridges' settings, read from the node's parameters (ROS 1: ~server, ~input, ...; ROS 2:
+// server, input, voxel.leaf, ...) through a ParamReader of either transport, and the one table of
+// those parameters that --help, docs/ros.md and docs/ros2.md print.
 #pragma once
 
 #include <chrono>
@@ -11,10 +12,6 @@
 #include "absl/status/statusor.h"
 #include "cloudcast/client/config.h"
 #include "cloudcast/client/options.h"
-
-namespace ros {
-class NodeHandle;
-}
 
 namespace cloudcast::ros_bridge {
 
@@ -58,13 +55,30 @@ struct ParamDoc {
 };
 const std::vector<ParamDoc>& ParamDocs();
 
-// The text `cloudcast-ros-bridge --help` prints: usage, topics, parameters, examples.
-std::string HelpText();
+// `text` in lines of at most `width` characters, each after `indent` (for --help).
+std::string WrapText(const std::string& text, std::size_t width, const std::string& indent);
 
-// Reads the private parameters of `private_nh` (a "~" handle). Parameters of the wrong type, out
-// of range or naming files that cannot be read give INVALID_ARGUMENT naming the parameter, e.g.
-// "~voxel/leaf is -0.5; must be finite and > 0". Parameters this bridge does not know (a typo,
-// "~voxel/leafsize") are errors too, so that a setting is never silently ignored.
-absl::StatusOr<BridgeOptions> ReadBridgeOptions(const ros::NodeHandle& private_nh);
+// The node's parameters on one transport, by the names of ParamDocs ("voxel/leaf").
+class ParamReader {
+ public:
+  virtual ~ParamReader() = default;
+  // Unset: nullopt. Set with another type: INVALID_ARGUMENT naming the parameter. Double takes an
+  // integer too ("leaf: 1" in YAML).
+  virtual absl::StatusOr<std::optional<std::string>> String(const std::string& name) const = 0;
+  virtual absl::StatusOr<std::optional<bool>> Bool(const std::string& name) const = 0;
+  virtual absl::StatusOr<std::optional<int>> Int(const std::string& name) const = 0;
+  virtual absl::StatusOr<std::optional<double>> Double(const std::string& name) const = 0;
+  // Every parameter the node was given, by the names of ParamDocs (known or not).
+  virtual std::vector<std::string> Names() const = 0;
+  // The name as the user wrote it, for errors: "~voxel/leaf" (ROS 1), "voxel.leaf" (ROS 2).
+  virtual std::string Display(const std::string& name) const = 0;
+};
+
+// Reads the parameters. Parameters of the wrong type, out of range or naming files that cannot
+// be read give INVALID_ARGUMENT naming the parameter, e.g. "~voxel/leaf is -0.5; must be finite
+// and > 0". Parameters the bridge does not know (a typo, "~voxel/leafsize") are errors too, so
+// that a setting is never silently ignored; `program` names the bridge in that error.
+absl::StatusOr<BridgeOptions> ReadBridgeOptions(const ParamReader& params,
+                                                const std::string& program);
 
 }  // namespace cloudcast::ros_bridge

@@ -1,0 +1,501 @@
+// cloudcast-ros2-bridge end to end inside a network namespace of its own (unshare -n, loopback
+// with multicast: DDS discovery stays in it): a camera publishing New Tsukuba frames on DDS with
+// ROS 2's conventions, the bridge (its own process) with a cloudcast server, and a subscriber of
+// its PointCloud2 and /diagnostics. The clouds must equal, byte for byte, what the ROS 1 bridge
+// publishes for the same frames (its link to the server and its PointCloud2 conversion, run here
+// in-process). The camera publishes continuously and the test asserts on later samples: a
+// reader still in discovery may miss the first ones (cyclonedds#1110).
+//
+// Negative cases: an XCDR2 writer and a best-effort camera against input_qos default match no
+// reader (the bridge says so on /diagnostics); bad messages give a /diagnostics error naming the
+// message and field, and the bridge goes on.
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdlib>
+#include <filesystem>
+#include <functional>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "bridge_options.h"
+#include "cloud_link.h"
+#include "cloudcast/datasets/tsukuba.h"
+#include "dds_node.h"
+#include "frame_conversions.h"
+#include "point_cloud2.h"
+#include "ros2_inputs.h"
+#include "ros_args.h"
+#include "sample_views.h"
+#include "support/program_support.h"
+#include "support/server_fixture.h"
+#include "ros2_harness.h"
+#include "tsukuba_samples.h"
+
+namespace cloudcast::ros2_bridge {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+using testing::TsukubaSamples;
+
+// ---- The network namespace: entered by the process before any test (and any thread) starts.
+
+std::string g_netns_problem = "not set up";
+
+class NetnsEnvironment : public ::testing::Environment {
+ public:
+  void SetUp() override { g_netns_problem = testing::EnterNetworkNamespace(); }
+};
+const auto* const g_netns = ::testing::AddGlobalTestEnvironment(new NetnsEnvironment);
+
+// ---- The camera and the subscriber, on a DDS participant of the test's own.
+
+struct CameraWriters {
+  dds_entity_t disparity = 0, colour = 0, info = 0;
+};
+
+// A writer as rmw makes it, optionally best effort or XCDR2 (the negative cases).
+dds_entity_t Writer(DdsNode* node, const MessageType& type, const std::string& topic,
+                    bool reliable, bool xcdr2) {
+  const dds_entity_t t = dds_create_topic(node->participant(), type.descriptor,
+                                          DdsTopicName(topic).c_str(), nullptr, nullptr);
+  QosProfile profile = reliable ? DefaultQos() : SensorDataQos();
+  DdsQos qos = EndpointQos(profile, type.type_hash());
+  if (xcdr2) {
+    dds_data_representation_id_t x2 = DDS_DATA_REPRESENTATION_XCDR2;
+    dds_qset_data_representation(qos.get(), 1, &x2);
+  }
+  return dds_create_writer(node->participant(), t, qos.get(), nullptr);
+}
+
+struct Received {
+  std::vector<std::shared_ptr<TakenSample>> clouds;
+  std::vector<std::string> diagnostics;  // each status's message and last_error
+};
+
+class Ros2BridgeTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    const std::string dir = tsukuba::DefaultDir();
+    if (!tsukuba::Present(dir)) return;
+    for (const char* id : {"00001", "00200", "00400"}) {
+      auto f = tsukuba::Load(dir, id);
+      if (f.ok()) frames_->push_back(*std::move(f));
+    }
+  }
+
+  void SetUp() override {
+    if (!g_netns_problem.empty()) GTEST_SKIP() << g_netns_problem;
+    if (frames_->empty()) GTEST_SKIP() << "the New Tsukuba sample is not in " << tsukuba::DefaultDir();
+    scratch_ = std::filesystem::path(::testing::TempDir()) /
+               ("ros2_bridge_" + std::to_string(getpid()));
+    std::filesystem::create_directories(scratch_);
+    server_ = cloudcast::testing::StartTestServer();
+    ASSERT_NE(server_, nullptr);
+    for (const auto& f : *frames_) samples_.push_back(std::make_unique<TsukubaSamples>(f));
+    auto node = DdsNode::Create(0);
+    ASSERT_TRUE(node.ok()) << node.status();
+    camera_ = *std::move(node);
+    auto points = camera_->CreateReader(kPointCloud2Type, "/stereo/points2", DefaultQos());
+    ASSERT_TRUE(points.ok()) << points.status();
+    points_ = *points;
+    auto diag = camera_->CreateReader(kDiagnosticArrayType, "/diagnostics", DefaultQos());
+    ASSERT_TRUE(diag.ok()) << diag.status();
+    diagnostics_ = *diag;
+  }
+
+  void TearDown() override {
+    bridge_.reset();
+    camera_.reset();
+    server_.reset();
+    if (!scratch_.empty()) std::filesystem::remove_all(scratch_);
+  }
+
+  void StartBridge(std::vector<std::string> params, const std::string& ns = "/stereo") {
+    std::vector<std::string> args = {"--ros-args", "-r", "__ns:=" + ns, "-p",
+                                     "server:=" + server_->address(), "-p",
+                                     "diagnostics_period:=0.3"};
+    for (const auto& p : params) {
+      args.push_back("-p");
+      args.push_back(p);
+    }
+    args.insert(args.begin(), cloudcast::testing::BinDir() + "/cloudcast-ros2-bridge");
+    bridge_ = std::make_unique<testing::ChildProcess>(args, (scratch_ / "bridge.log").string());
+    ASSERT_TRUE(bridge_->started());
+  }
+
+  CameraWriters Camera(bool reliable = true, bool xcdr2 = false) {
+    CameraWriters w;
+    w.disparity = Writer(camera_.get(), kDisparityImageType, "/stereo/disparity", reliable, xcdr2);
+    w.colour = Writer(camera_.get(), kImageType, "/stereo/left/image_rect_color", reliable, xcdr2);
+    w.info = Writer(camera_.get(), kCameraInfoType, "/stereo/left/camera_info", reliable, xcdr2);
+    EXPECT_GT(w.disparity, 0);
+    EXPECT_GT(w.colour, 0);
+    EXPECT_GT(w.info, 0);
+    return w;
+  }
+
+  // Frame k of the run: frames_[k % n], stamped 1000 + k s.
+  void Publish(const CameraWriters& w, int k,
+               const std::function<void(TsukubaSamples&)>& spoil = nullptr) {
+    TsukubaSamples& s = *samples_[static_cast<std::size_t>(k) % samples_.size()];
+    s.Stamp(1000 + k, 0);
+    if (spoil) spoil(s);
+    if (depth_input_) {
+      dds_write(w.disparity, &s.depth);
+    } else {
+      dds_write(w.disparity, &s.disparity);
+    }
+    dds_write(w.colour, &s.colour);
+    dds_write(w.info, &s.info);
+    if (spoil) samples_[static_cast<std::size_t>(k) % samples_.size()] =
+        std::make_unique<TsukubaSamples>((*frames_)[static_cast<std::size_t>(k) % frames_->size()]);
+  }
+
+  void Take(Received* r) {
+    for (;;) {
+      auto s = std::make_shared<TakenSample>(kPointCloud2Type);
+      void* buf[1] = {s->get()};
+      dds_sample_info_t info;
+      if (dds_take(points_, buf, &info, 1, 1) <= 0) break;
+      if (info.valid_data) r->clouds.push_back(s);
+    }
+    for (;;) {
+      TakenSample s(kDiagnosticArrayType);
+      void* buf[1] = {s.get()};
+      dds_sample_info_t info;
+      if (dds_take(diagnostics_, buf, &info, 1, 1) <= 0) break;
+      if (!info.valid_data) continue;
+      const auto& a = s.as<diagnostic_msgs_msg_dds__DiagnosticArray_>();
+      for (std::uint32_t i = 0; i < a.status._length; ++i) {
+        const auto& st = a.status._buffer[i];
+        std::string text = std::string(st.name) + " | " + st.message;
+        for (std::uint32_t j = 0; j < st.values._length; ++j) {
+          if (std::string(st.values._buffer[j].key) == "last_error") {
+            text += " | last_error: " + std::string(st.values._buffer[j].value);
+          }
+        }
+        r->diagnostics.push_back(text);
+      }
+    }
+  }
+
+  CameraWriters DepthCamera() {
+    CameraWriters w;
+    w.disparity = Writer(camera_.get(), kImageType, "/camera/depth_registered/image_rect", true,
+                         false);
+    w.colour = Writer(camera_.get(), kImageType, "/camera/rgb/image_rect_color", true, false);
+    w.info = Writer(camera_.get(), kCameraInfoType, "/camera/rgb/camera_info", true, false);
+    return w;
+  }
+
+  // Publishes a frame every 50 ms (spoiled by `spoil` when given) until `done` holds or
+  // `seconds` pass; returns whether `done` held.
+  bool PublishUntil(const CameraWriters& w, Received* r, const std::function<bool()>& done,
+                    double seconds, const std::function<void(TsukubaSamples&)>& spoil = nullptr) {
+    const auto end = Clock::now() + std::chrono::duration<double>(seconds);
+    while (Clock::now() < end) {
+      Publish(w, next_frame_++, spoil);
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+      Take(r);
+      if (done()) return true;
+      if (!bridge_->running()) {
+        ADD_FAILURE() << "the bridge exited:\n" << bridge_->Log();
+        return false;
+      }
+    }
+    return false;
+  }
+
+  static bool DiagnosticsMention(const Received& r, const std::string& text) {
+    for (const auto& d : r.diagnostics) {
+      if (d.find(text) != std::string::npos) return true;
+    }
+    return false;
+  }
+
+  // What the ROS 1 bridge publishes for frame i: its link to the server (CloudLink, the same
+  // options) and its PointCloud2 conversion.
+  std::vector<sensor_msgs::PointCloud2> Ros1Clouds(bool depth = false) {
+    // The bridge's parameters (kUnfiltered): the whole cloud, not what the server's default
+    // passthrough and voxel grid leave.
+    std::map<std::string, ParamValue> params;
+    params["server"].s = server_->address();
+    for (const char* name : {"passthrough.enabled", "voxel.enabled"}) {
+      params[name].type = ParamValue::kBool;
+      params[name].b = false;
+    }
+    auto options = ros_bridge::ReadBridgeOptions(Ros2ParamReader(params, {}), "test");
+    EXPECT_TRUE(options.ok()) << options.status();
+    options->config.set_delivery(v1::DELIVERY_ALL);
+    ros_bridge::BridgeStats stats;
+    std::mutex mu;
+    std::map<std::uint32_t, sensor_msgs::PointCloud2> clouds;
+    {
+      ros_bridge::CloudLink link(*options, &stats,
+                                 [&](client::Result&& r, const ros_bridge::SentFrame& f) {
+                                   sensor_msgs::PointCloud2 msg;
+                                   ros_bridge::ToPointCloud2(r.cloud, f.header, &msg);
+                                   std::lock_guard<std::mutex> lock(mu);
+                                   clouds[f.header.stamp.sec] = std::move(msg);
+                                 });
+      EXPECT_TRUE(link.Probe().ok());
+      std::vector<float> masked;
+      for (std::size_t i = 0; i < samples_.size(); ++i) {
+        samples_[i]->Stamp(static_cast<std::int32_t>(i), 0);
+        ros_bridge::OutgoingFrame frame;
+        const absl::Status s =
+            depth ? ros_bridge::ToDepthFrame(View(samples_[i]->depth), View(samples_[i]->colour),
+                                             View(samples_[i]->info), std::nullopt, &frame)
+                  : ros_bridge::ToFrame(View(samples_[i]->disparity), View(samples_[i]->colour),
+                                        View(samples_[i]->info), &masked, &frame);
+        EXPECT_TRUE(s.ok()) << s;
+        link.Send(frame);
+      }
+    }  // the link's destructor waits for the replies
+    const auto report = stats.Report(0, "reference", "");
+    for (const auto& [key, value] : report.values) {
+      if (key == "last_error") ADD_FAILURE() << "the reference link: " << value;
+    }
+    std::vector<sensor_msgs::PointCloud2> out;
+    for (std::size_t i = 0; i < samples_.size(); ++i) out.push_back(clouds[i]);
+    return out;
+  }
+
+  static inline std::vector<tsukuba::Frame>* frames_ = new std::vector<tsukuba::Frame>();
+  std::filesystem::path scratch_;
+  std::unique_ptr<server::Server> server_;
+  std::vector<std::unique_ptr<TsukubaSamples>> samples_;
+  std::unique_ptr<DdsNode> camera_;
+  dds_entity_t points_ = 0, diagnostics_ = 0;
+  std::unique_ptr<testing::ChildProcess> bridge_;
+  int next_frame_ = 0;
+  bool depth_input_ = false;  // Publish writes the depth image in place of the disparity
+};
+
+TEST_F(Ros2BridgeTest, CycloneCameraCloudsEqualTheRos1BridgesPointForPoint) {
+  const std::vector<sensor_msgs::PointCloud2> expected = Ros1Clouds();
+  ASSERT_EQ(expected.size(), samples_.size());
+  for (const auto& e : expected) ASSERT_GT(e.width, 100000u);
+  // Reliable at both ends (input_qos default): no sample is lost, so every later set matches.
+  StartBridge({"passthrough.enabled:=false", "voxel.enabled:=false", "input_qos:=default"});
+  const CameraWriters w = Camera();
+  Received r;
+  // Later samples: clouds of at least 2 x the frames after the first one that came.
+  ASSERT_TRUE(PublishUntil(w, &r, [&] { return r.clouds.size() >= 2 * samples_.size() + 1; }, 40))
+      << r.clouds.size() << " clouds\n" << bridge_->Log();
+  for (std::size_t c = 1; c < r.clouds.size(); ++c) {
+    const auto& got = r.clouds[c]->as<sensor_msgs_msg_dds__PointCloud2_>();
+    const int k = got.header.stamp.sec - 1000;
+    ASSERT_GE(k, 0);
+    const sensor_msgs::PointCloud2& want = expected[static_cast<std::size_t>(k) % expected.size()];
+    EXPECT_STREQ(got.header.frame_id, testing::kFrameId);
+    EXPECT_EQ(got.header.stamp.nanosec, 0u);
+    EXPECT_EQ(got.height, want.height);
+    EXPECT_EQ(got.width, want.width);
+    EXPECT_EQ(got.point_step, want.point_step);
+    EXPECT_EQ(got.row_step, want.row_step);
+    EXPECT_EQ(got.is_dense, static_cast<bool>(want.is_dense));
+    EXPECT_EQ(got.is_bigendian, static_cast<bool>(want.is_bigendian));
+    ASSERT_EQ(got.fields._length, want.fields.size());
+    for (std::size_t f = 0; f < want.fields.size(); ++f) {
+      EXPECT_EQ(got.fields._buffer[f].name, want.fields[f].name);
+      EXPECT_EQ(got.fields._buffer[f].offset, want.fields[f].offset);
+      EXPECT_EQ(got.fields._buffer[f].datatype, want.fields[f].datatype);
+      EXPECT_EQ(got.fields._buffer[f].count, want.fields[f].count);
+    }
+    ASSERT_EQ(got.data._length, want.data.size());
+    EXPECT_EQ(std::memcmp(got.data._buffer, want.data.data(), want.data.size()), 0)
+        << "cloud of stamp " << got.header.stamp.sec;
+  }
+  EXPECT_TRUE(DiagnosticsMention(r, "/stereo/cloudcast_bridge: cloudcast stream | streaming"))
+      << (r.diagnostics.empty() ? "no diagnostics" : r.diagnostics.back()) << "\n"
+      << bridge_->Log();
+}
+
+// input depth: a depth camera's 16UC1 image, colour and CameraInfo (depth_image_proc's names
+// under /camera), the same equality with the ROS 1 bridge's clouds.
+TEST_F(Ros2BridgeTest, DepthCameraCloudsEqualTheRos1BridgesPointForPoint) {
+  const std::vector<sensor_msgs::PointCloud2> expected = Ros1Clouds(/*depth=*/true);
+  for (const auto& e : expected) ASSERT_GT(e.width, 100000u);
+  // The reader of the clouds, under /camera.
+  auto points = camera_->CreateReader(kPointCloud2Type, "/camera/points2", DefaultQos());
+  ASSERT_TRUE(points.ok());
+  points_ = *points;
+  StartBridge({"input:=depth", "passthrough.enabled:=false", "voxel.enabled:=false",
+               "input_qos:=default"},
+              "/camera");
+  depth_input_ = true;
+  const CameraWriters w = DepthCamera();
+  Received r;
+  ASSERT_TRUE(PublishUntil(w, &r, [&] { return r.clouds.size() >= samples_.size() + 1; }, 40))
+      << r.clouds.size() << " clouds\n" << bridge_->Log();
+  for (std::size_t c = 1; c < r.clouds.size(); ++c) {
+    const auto& got = r.clouds[c]->as<sensor_msgs_msg_dds__PointCloud2_>();
+    const int k = got.header.stamp.sec - 1000;
+    ASSERT_GE(k, 0);
+    const sensor_msgs::PointCloud2& want = expected[static_cast<std::size_t>(k) % expected.size()];
+    EXPECT_STREQ(got.header.frame_id, testing::kFrameId);
+    ASSERT_EQ(got.data._length, want.data.size());
+    EXPECT_EQ(std::memcmp(got.data._buffer, want.data.data(), want.data.size()), 0)
+        << "cloud of stamp " << got.header.stamp.sec;
+  }
+}
+
+#ifdef CLOUDCAST_ROS2_FASTDDS_PEER
+// The other vendor, both ways: a Fast DDS camera (ros2-fastdds-peer, Fast DDS's own CDR of
+// fastddsgen's types) into the bridge, the bridge's clouds into a Fast DDS reader; the clouds as
+// the Fast DDS reader decoded them equal the ROS 1 bridge's.
+TEST_F(Ros2BridgeTest, FastDdsCameraAndSubscriberGetTheRos1BridgesClouds) {
+  const std::vector<sensor_msgs::PointCloud2> expected = Ros1Clouds();
+  StartBridge({"passthrough.enabled:=false", "voxel.enabled:=false", "input_qos:=default"});
+  const std::string out = (scratch_ / "fastdds").string();
+  std::filesystem::create_directories(out);
+  const auto r = cloudcast::testing::RunProgram(
+      cloudcast::testing::BinDir() + "/ros2-fastdds-peer",
+      {"--data", tsukuba::DefaultDir(), "--namespace", "/stereo", "--clouds", "6", "--out", out,
+       "--seconds", "40"},
+      scratch_.string());
+  ASSERT_TRUE(r.exited && r.code == 0) << r << "\n" << bridge_->Log();
+  int compared = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(out)) {
+    if (entry.path().extension() != ".bin") continue;
+    const int k = std::stoi(entry.path().stem().string()) - 1000;
+    ASSERT_GE(k, 0);
+    const sensor_msgs::PointCloud2& want = expected[static_cast<std::size_t>(k) % expected.size()];
+    const std::string data = cloudcast::testing::ReadText(entry.path().string());
+    ASSERT_EQ(data.size(), want.data.size()) << entry.path();
+    EXPECT_EQ(std::memcmp(data.data(), want.data.data(), data.size()), 0) << entry.path();
+    std::string txt = cloudcast::testing::ReadText(
+        (entry.path().parent_path() / (entry.path().stem().string() + ".txt")).string());
+    const std::string fields = " x:0:7:1 y:4:7:1 z:8:7:1 rgb:12:7:1\n";
+    EXPECT_EQ(txt, std::string(testing::kFrameId) + " 0 1 " + std::to_string(want.width) +
+                       " 16 " + std::to_string(want.row_step) + " 1 0" + fields);
+    ++compared;
+  }
+  EXPECT_EQ(compared, 6);
+}
+
+// Samples that are no valid CDR (a Fast DDS writer of random bytes under the DisparityImage type
+// name) never reach the bridge: Cyclone's reader checks every sample against the type and drops
+// them. The bridge keeps running and turns the good camera's frames into clouds meanwhile.
+TEST_F(Ros2BridgeTest, NonCdrBytesAreDroppedAndTheBridgeGoesOn) {
+  StartBridge({});
+  const CameraWriters w = Camera();
+  Received r;
+  ASSERT_TRUE(PublishUntil(w, &r, [&] { return !r.clouds.empty(); }, 40)) << bridge_->Log();
+  std::thread garbage([&] {
+    const auto g = cloudcast::testing::RunProgram(
+        cloudcast::testing::BinDir() + "/ros2-fastdds-peer",
+        {"--namespace", "/stereo", "--garbage", "4"}, scratch_.string());
+    EXPECT_TRUE(g.exited && g.code == 0) << g;
+  });
+  // A reader of the same topic here: it must match the garbage writer (else the test proves
+  // nothing) and receive only the camera's valid samples.
+  auto witness = camera_->CreateReader(kDisparityImageType, "/stereo/disparity", SensorDataQos());
+  ASSERT_TRUE(witness.ok());
+  const std::size_t before = r.clouds.size();
+  std::uint32_t most_writers = 0;
+  int valid = 0;
+  const auto end = Clock::now() + std::chrono::seconds(4);
+  while (Clock::now() < end) {
+    Publish(w, next_frame_++);
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    Take(&r);
+    dds_subscription_matched_status_t matched;
+    if (dds_get_subscription_matched_status(*witness, &matched) == DDS_RETCODE_OK) {
+      most_writers = std::max(most_writers, matched.current_count);
+    }
+    for (;;) {
+      TakenSample sample(kDisparityImageType);
+      void* buf[1] = {sample.get()};
+      dds_sample_info_t info;
+      if (dds_take(*witness, buf, &info, 1, 1) <= 0) break;
+      if (!info.valid_data) continue;
+      EXPECT_GE(sample.header().stamp.sec, 1000);
+      EXPECT_STREQ(sample.header().frame_id, testing::kFrameId);
+      ++valid;
+    }
+  }
+  garbage.join();
+  EXPECT_EQ(most_writers, 2u) << "the garbage writer never matched";
+  EXPECT_GT(valid, 0);
+  EXPECT_TRUE(bridge_->running()) << bridge_->Log();
+  EXPECT_GT(r.clouds.size(), before + 10) << bridge_->Log();
+}
+#endif
+
+TEST_F(Ros2BridgeTest, AnXcdr2CameraMatchesNoReaderAndTheBridgeSaysSo) {
+  StartBridge({});
+  const CameraWriters w = Camera(/*reliable=*/true, /*xcdr2=*/true);
+  Received r;
+  const bool said = PublishUntil(
+      w, &r, [&] { return DiagnosticsMention(r, "data representation is not XCDR1"); }, 20);
+  EXPECT_TRUE(said) << bridge_->Log();
+  EXPECT_TRUE(r.clouds.empty());
+}
+
+TEST_F(Ros2BridgeTest, ABestEffortCameraAgainstReliableInputsIsReported) {
+  StartBridge({"input_qos:=default"});
+  const CameraWriters w = Camera(/*reliable=*/false);
+  Received r;
+  EXPECT_TRUE(PublishUntil(w, &r, [&] { return DiagnosticsMention(r, "it is best effort"); }, 20))
+      << bridge_->Log();
+  EXPECT_TRUE(r.clouds.empty());
+}
+
+TEST_F(Ros2BridgeTest, ABestEffortCameraIsTakenWithTheSensorDataDefault) {
+  StartBridge({});
+  const CameraWriters w = Camera(/*reliable=*/false);
+  Received r;
+  EXPECT_TRUE(PublishUntil(w, &r, [&] { return r.clouds.size() >= 3; }, 40)) << bridge_->Log();
+}
+
+// Each bad input gets its error on /diagnostics, naming the message and field; good frames
+// afterwards still become clouds.
+TEST_F(Ros2BridgeTest, BadInputIsReportedAndTheBridgeGoesOn) {
+  StartBridge({"queue_size:=3"});
+  const CameraWriters w = Camera();
+  Received r;
+  ASSERT_TRUE(PublishUntil(w, &r, [&] { return !r.clouds.empty(); }, 40)) << bridge_->Log();
+  struct Case {
+    const char* name;
+    std::function<void(TsukubaSamples&)> spoil;
+    std::string expected;
+  };
+  const std::vector<Case> cases = {
+      {"step", [](TsukubaSamples& s) { s.colour.step = s.colour.width * 3 + 8; },
+       "left/image_rect_color.data holds"},
+      {"step too small", [](TsukubaSamples& s) { s.colour.step = 100; },
+       "left/image_rect_color.step is 100"},
+      {"encoding", [](TsukubaSamples& s) { s.colour.encoding = const_cast<char*>("yuv422"); },
+       "left/image_rect_color.encoding is 'yuv422'"},
+      {"disparity encoding",
+       [](TsukubaSamples& s) { s.disparity.image.encoding = const_cast<char*>("16UC1"); },
+       "disparity.image.encoding is '16UC1'"},
+      {"camera_info size", [](TsukubaSamples& s) { s.info.width = 320; },
+       "left/camera_info is 320x480 but disparity.image is 640x480"},
+      {"stamps", [](TsukubaSamples& s) { s.info.header.stamp.nanosec = 1; },
+       "/stereo/left/camera_info with the same stamp"},
+  };
+  for (const Case& c : cases) {
+    r.diagnostics.clear();
+    EXPECT_TRUE(PublishUntil(w, &r, [&] { return DiagnosticsMention(r, c.expected); }, 15,
+                             c.spoil))
+        << c.name << ": " << (r.diagnostics.empty() ? "no diagnostics" : r.diagnostics.back())
+        << "\n"
+        << bridge_->Log();
+  }
+  const std::size_t before = r.clouds.size();
+  EXPECT_TRUE(PublishUntil(w, &r, [&] { return r.clouds.size() >= before + 3; }, 30))
+      << bridge_->Log();
+  EXPECT_TRUE(bridge_->running());
+}
+
+}  // namespace
+}  // namespace cloudcast::ros2_bridge
