@@ -242,11 +242,14 @@ class ServerStopTest : public ::testing::TestWithParam<int> {};
 TEST_P(ServerStopTest, ResilientStreamLosesNothingAcrossAServerRestart) {
   const int signal_number = GetParam();
   const std::string dir = ::testing::TempDir();
-  auto server = std::make_unique<ServerProcess>("127.0.0.1:0", "first",
-                                                std::vector<std::string>{},
+  // The second server comes back on the address the first one bound. A loopback address of this
+  // test's own: on 127.0.0.1 the port, free again once the first server is gone, was taken
+  // meanwhile by another test's server asking for port 0, and the robot reconnected to it.
+  const std::string own_ip = "127.88." + std::to_string(getpid() / 250 % 250 + 1) + "." +
+                             std::to_string(getpid() % 250 + 1);
+  auto server = std::make_unique<ServerProcess>(own_ip + ":0", "first", std::vector<std::string>{},
                                                 dir + "/restart_first.log");
   ASSERT_TRUE(server->WaitUntilServing());
-  // The second server comes back on the address the first one bound.
   const std::string address = server->address();
   auto client = Connect(address);
   ASSERT_NE(client, nullptr);
