@@ -228,7 +228,7 @@ TEST(ConvertTest, ErrorsCarryTheirKind) {
   EXPECT_TRUE(AnswersNoFrame(error));
   EXPECT_EQ(ToStatus(error).code(), absl::StatusCode::kInvalidArgument);
 
-  FillError(absl::ResourceExhaustedError("frame.colour.raw is 5000x5000"), v1::ERROR_KIND_FRAME,
+  FillError(absl::ResourceExhaustedError("frame.color.raw is 5000x5000"), v1::ERROR_KIND_FRAME,
             7, "cam", &error);
   EXPECT_FALSE(AnswersNoFrame(error));
   EXPECT_EQ(error.sequence(), 7u);

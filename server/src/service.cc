@@ -92,7 +92,7 @@ grpc::ServerUnaryReactor* CloudCastService::Process(grpc::CallbackServerContext*
   auto settings = convert::Resolve(call->request.config(), *admitted->caller.defaults);
   if (!settings.ok()) {
     metrics_->FrameErrors(settings.status().code()).Increment();
-    return finish(ToGrpc(settings.status()));
+    return finish(RequestError(settings.status(), "config"));
   }
   call->settings = std::make_shared<const StreamSettings>(*std::move(settings));
   bool for_memory = false;
@@ -100,9 +100,9 @@ grpc::ServerUnaryReactor* CloudCastService::Process(grpc::CallbackServerContext*
                                      call->settings->frame.stereo, &for_memory);
   if (!charge.ok()) {
     metrics_->FrameErrors(charge.status().code()).Increment();
-    if (!for_memory) return finish(ToGrpc(charge.status()));
+    if (!for_memory) return finish(RequestError(charge.status(), "frame"));
     RefuseLater(reactor, std::make_shared<Admission::Ticket>(std::move(call->ticket)),
-                ToGrpc(charge.status()));
+                RequestError(charge.status(), "frame"));
     return reactor;
   }
   call->charge = *std::move(charge);
@@ -121,7 +121,7 @@ grpc::ServerUnaryReactor* CloudCastService::Process(grpc::CallbackServerContext*
           Serialize(call->reply, reply_bytes);
           metrics_->bytes_sent.Increment(static_cast<double>(reply_bytes->Length()));
         } else {
-          result = ToGrpc(status);
+          result = RequestError(status, "frame");
         }
         call->ticket.Release();
         reactor->Finish(std::move(result));
@@ -145,6 +145,7 @@ grpc::ServerUnaryReactor* CloudCastService::GetInfo(grpc::CallbackServerContext*
     return reactor;
   }
   info->set_version(CLOUDCAST_VERSION);
+  info->set_contract_revision(convert::kContractRevision);
   v1::ServerLimits* limits = info->mutable_limits();
   limits->set_max_message_bytes(options_.max_message_bytes);
   limits->set_max_side(options_.limits.max_side);
