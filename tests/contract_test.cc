@@ -13,6 +13,8 @@
 #include <string>
 #include <vector>
 
+#include "cloudcast/client/client.h"
+#include "cloudcast/client/opencv.h"
 #include "cloudcast/core/draco_codec.h"
 #include "cloudcast/io/cloud_io.h"
 #include "cloudcast/proto/convert.h"
@@ -292,6 +294,27 @@ TEST_F(ContractTest, AFramesCameraOverridesTheStreamsForThatFrame) {
   ASSERT_TRUE(replies[3].has_error());
   EXPECT_EQ(replies[3].error().sequence(), 4u);
   EXPECT_TRUE(Violation(replies[3].error(), "frame.camera.fy", "INVALID"));
+}
+
+// The client library sends a frame's camera (FrameMeta::camera), and reports a refusal's field.
+TEST_F(ContractTest, TheClientLibrarySendsAFramesCamera) {
+  auto client = client::Client::Connect(server_->address());
+  ASSERT_TRUE(client.ok()) << client.status();
+  const cv::Mat depth = DepthMm(), colour = Colour();  // the input views their pixels
+  auto input = client::DepthFrameFromMats(depth, colour);
+  ASSERT_TRUE(input.ok()) << input.status();
+  // No camera anywhere: refused, naming the field.
+  auto refused = (*client)->Process(*input);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(refused.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(refused.status().message().find("config.camera.fx"), std::string::npos);
+  // The frame's own camera is enough.
+  client::FrameMeta meta;
+  meta.camera.emplace();
+  meta.camera->set_fx(615);
+  auto result = (*client)->Process(*input, {}, meta);
+  ASSERT_TRUE(result.ok()) << result.status();
+  EXPECT_EQ(Depths(result->cloud), (std::vector<int>{80, 120}));
 }
 
 TEST_F(ContractTest, GetInfoNamesTheRevisionAndAssumesNoCamera) {

@@ -178,11 +178,11 @@ TEST_F(HardeningTest, UnparsableProcessRequestGetsInvalidArgument) {
   EXPECT_NE(status.error_message().find("could not be parsed"), std::string::npos)
       << status.error_message();
   // The whole request is at fault: the empty field path, structured all the same.
-  v1::BadRequest bad;
-  ASSERT_TRUE(convert::ParseStatusDetails(status.error_details(), &bad));
-  ASSERT_EQ(bad.field_violations_size(), 1);
-  EXPECT_EQ(bad.field_violations(0).field(), "");
-  EXPECT_EQ(bad.field_violations(0).reason(), "INVALID");
+  v1::BadRequest violations;
+  ASSERT_TRUE(convert::ParseStatusDetails(status.error_details(), &violations));
+  ASSERT_EQ(violations.field_violations_size(), 1);
+  EXPECT_EQ(violations.field_violations(0).field(), "");
+  EXPECT_EQ(violations.field_violations(0).reason(), "INVALID");
   const std::string metrics = server::ScrapeMetrics(server_->metrics_port());
   EXPECT_NE(metrics.find("cloudcast_requests_unparsable_total{method=\"Process\"} 1"),
             std::string::npos)

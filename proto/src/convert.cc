@@ -1,5 +1,6 @@
 #include "cloudcast/proto/convert.h"
 
+#include <algorithm>
 #include <cctype>
 #include <cstring>
 #include <limits>
@@ -975,9 +976,13 @@ v1::FieldViolation FieldViolationOf(const absl::Status& status, std::string_view
     // Every message names its field first (core/checks.h words them so; the server's tests
     // hold every error path to it), e.g. "frame.color.raw.height is 0".
     const std::string message(status.message());
-    const std::string_view token =
-        std::string_view(message).substr(0, message.find_first_of(" :,;("));
-    v.set_field(IsFieldPath(token) ? std::string(token) : S(fallback_field));
+    const std::size_t end = std::min(message.find_first_of(" :,;("), message.size());
+    const std::string_view token = std::string_view(message).substr(0, end);
+    // A dotted path ("frame.color.raw.height is 0"), or one word before a colon ("frame: ...");
+    // a plain first word ("the ...") is no field.
+    const bool path = IsFieldPath(token) && (token.find('.') != std::string_view::npos ||
+                                             (end < message.size() && message[end] == ':'));
+    v.set_field(path ? std::string(token) : S(fallback_field));
   }
   if (auto reason = status.GetPayload(kReasonPayload); reason.has_value()) {
     v.set_reason(std::string(*reason));
@@ -1000,6 +1005,8 @@ void FillError(const absl::Status& status, v1::ErrorKind kind, std::uint64_t seq
   v1::BadRequest* bad = error->mutable_bad_request();
   bad->clear_field_violations();
   *bad->add_field_violations() = FieldViolationOf(status, fallback);
+  // A request with neither a config nor a frame: the oneof `kind` is what it got wrong.
+  if (kind == v1::ERROR_KIND_REQUEST) bad->mutable_field_violations(0)->set_field("kind");
 }
 
 std::string StatusDetails(const absl::Status& status, std::string_view fallback_field) {

@@ -212,9 +212,9 @@ absl::Status DecodeCompressed(const v1::CompressedColor& compressed, std::string
 void FillError(const absl::Status& status, v1::ErrorKind kind, std::uint64_t sequence,
                const std::string& frame_id, v1::FrameError* error);
 // The structured form of an error, FieldViolation: its field path and its rule (reason).
-// Messages name their field first (core/checks.h), so the path is the message's first word
-// unless the status carries one (RequiredError); a message that starts otherwise gets
-// `fallback_field`. The reason: REQUIRED (RequiredError), OVER_LIMIT (RESOURCE_EXHAUSTED) or
+// Messages name their field first (core/checks.h), so the path is the message's first word when
+// it is a dotted path or one word before a colon ("frame: ..."), unless the status carries one
+// (RequiredError); a message that starts otherwise gets `fallback_field`. The reason: REQUIRED (RequiredError), OVER_LIMIT (RESOURCE_EXHAUSTED) or
 // INVALID.
 v1::FieldViolation FieldViolationOf(const absl::Status& status, std::string_view fallback_field);
 // INVALID_ARGUMENT for a field that is needed and not set: its FieldViolation names `field` with
