@@ -174,6 +174,8 @@ class FleetTest : public ::testing::Test {
  protected:
   static std::unique_ptr<server::Server> StartServer(int threads, std::uint32_t queued = 4) {
     server::ServerOptions options;
+    // The fleet's configs carry no camera: the paper's, as the server's defaults, stated.
+    EXPECT_TRUE(ApplyPreset("new_tsukuba", &options.defaults.frame).ok());
     options.listen = "127.0.0.1:0";
     options.metrics_listen = "";
     options.threads = threads;
