@@ -55,7 +55,12 @@ StageFlags::StageFlags(CLI::App& app, Groups groups, const FrameSettings& defaul
                                                  "unless the source has its own camera"))
           ->check(Positive())
           ->group(cam);
-  if (defaults.focal_given) focal->capture_default_str();
+  // A program that captures every default (cloudcast-server) must not show one it does not have.
+  if (defaults.focal_given) {
+    focal->capture_default_str();
+  } else {
+    focal->default_str("");
+  }
   app.add_option("--fy", fy_, "Vertical focal length in pixels [default: --focal]")
       ->check(Positive())
       ->group(cam);
@@ -73,7 +78,11 @@ StageFlags::StageFlags(CLI::App& app, Groups groups, const FrameSettings& defaul
                      "New Tsukuba: 0.1 for metres); disparity and stereo input need it")
           ->check(Positive())
           ->group(cam);
-  if (defaults.baseline_given) baseline->capture_default_str();
+  if (defaults.baseline_given) {
+    baseline->capture_default_str();
+  } else {
+    baseline->default_str("");
+  }
   app.add_option("--disparity-scale", disparity_scale_,
                  "Multiplies raw disparity values (0.0625 for 1/16 fixed point)")
       ->check(NumberCheck("a finite number other than 0",
@@ -102,6 +111,9 @@ StageFlags::StageFlags(CLI::App& app, Groups groups, const FrameSettings& defaul
   if (pt_on) {
     min->capture_default_str();
     max->capture_default_str();
+  } else {
+    min->default_str("");
+    max->default_str("");
   }
   app.add_flag("--negative", negative_, "Passthrough keeps the points outside [min, max]")
       ->group(st);
