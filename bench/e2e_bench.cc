@@ -215,7 +215,9 @@ CaseResult RunCase(const ServerProcess& server, const std::vector<Frame>& frames
   for (int s = 0; s < streams; ++s) {
     auto state = std::make_unique<StreamState>();
     StreamState* st = state.get();
-    cc::StreamConfig config;
+    // The paper's setting, stated: the server assumes no camera (docs/migration.md). The
+    // synthetic fallback's camera at 640 px is the same.
+    cc::StreamConfig config = cc::PresetConfig("new_tsukuba").value();
     config.set_delivery(paced_fps > 0 ? v1::DELIVERY_LATEST : v1::DELIVERY_ALL);
     cc::StreamOptions so;
     so.on_result = [&, st](cc::Result&& res) {

@@ -346,15 +346,15 @@ std::vector<Candidate> UplinkRows() {
       [frame](const Frame& f, Encoded* e) {
         (void)convert::ToProto(f.disparity.view(), "disparity",
                                frame->mutable_disparity()->mutable_raw());
-        (void)convert::ToProto(f.colour.view(), "colour", frame->mutable_colour()->mutable_raw());
+        (void)convert::ToProto(f.colour.view(), "colour", frame->mutable_color()->mutable_raw());
         e->disparity = frame->disparity().raw().pixels();
-        e->colour = frame->colour().raw().pixels();
+        e->colour = frame->color().raw().pixels();
       },
       [frame, limits](const Frame&, const Encoded&, bool) {
         DisparityView d;
         ColorView c;
         return convert::ViewRaw(frame->disparity().raw(), "d", limits, &d).ok() &&
-               convert::ViewRaw(frame->colour().raw(), "c", limits, &c).ok();
+               convert::ViewRaw(frame->color().raw(), "c", limits, &c).ok();
       }));
   c.push_back(Row(
       "png", "OpenCV, compression 1 (the client's EncodePng default)",
@@ -382,8 +382,8 @@ std::vector<Candidate> UplinkRows() {
       e->colour = Jpeg(MatOf(f.colour), 90);
     } else {
       (void)convert::ToProto(f.colour.view(), z, "colour",
-                             frame->mutable_colour()->mutable_compressed());
-      e->colour = frame->colour().compressed().payload();
+                             frame->mutable_color()->mutable_compressed());
+      e->colour = frame->color().compressed().payload();
     }
   };
   c.push_back(Row(
@@ -395,7 +395,7 @@ std::vector<Candidate> UplinkRows() {
         bool ok =
             convert::DecodeCompressed(frame->disparity().compressed(), "d", limits, dd.get(), &d)
                 .ok() &&
-            convert::DecodeCompressed(frame->colour().compressed(), "c", limits, dc.get(), &col)
+            convert::DecodeCompressed(frame->color().compressed(), "c", limits, dc.get(), &col)
                 .ok();
         if (ok && check) {
           ok = Same(static_cast<const std::uint8_t*>(d.data), f.disparity.pixels) &&

@@ -6,8 +6,8 @@
 // Input layout (fuzz/make_seeds.cc writes the seeds in it):
 //   byte 0 = mode % 4:
 //     0  frame.disparity.encoded = the rest; colour a raw 1x1 grey pixel
-//     1  frame.colour.encoded = the rest; disparity a raw 1x1 U8 pixel
-//     2  frame.disparity.compressed; 3  frame.colour.compressed; the other image raw 1x1:
+//     1  frame.color.encoded = the rest; disparity a raw 1x1 U8 pixel
+//     2  frame.disparity.compressed; 3  frame.color.compressed; the other image raw 1x1:
 //        byte 1 encoding, byte 2 compression, bytes 3-4 width, 5-6 height (little endian),
 //        the rest the payload
 // A decoded image larger than 1x1 then fails the same-size check, after it was decoded.
@@ -66,10 +66,10 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     const std::string bytes(reinterpret_cast<const char*>(data + 1), size - 1);
     if (mode == 0) {
       frame.mutable_disparity()->set_encoded(bytes);
-      SetRawColour(frame.mutable_colour());
+      SetRawColour(frame.mutable_color());
     } else {
       SetRawDisparity(frame.mutable_disparity());
-      frame.mutable_colour()->set_encoded(bytes);
+      frame.mutable_color()->set_encoded(bytes);
     }
   } else {
     if (size < 7) return 0;
@@ -82,10 +82,10 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       c->set_width(Le16(data + 3));
       c->set_height(Le16(data + 5));
       c->set_payload(payload);
-      SetRawColour(frame.mutable_colour());
+      SetRawColour(frame.mutable_color());
     } else {
       SetRawDisparity(frame.mutable_disparity());
-      v1::CompressedColor* c = frame.mutable_colour()->mutable_compressed();
+      v1::CompressedColor* c = frame.mutable_color()->mutable_compressed();
       c->set_encoding(static_cast<v1::ColorEncoding>(data[1] % 6));
       c->set_compression(compression);
       c->set_width(Le16(data + 3));

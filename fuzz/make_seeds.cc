@@ -166,14 +166,14 @@ v1::Frame MakeFrame(As disparity_as, const cv::Mat& disparity, DisparityEncoding
   }
   switch (colour_as) {
     case As::kRaw:
-      Check(convert::ToProto(View(colour, ce), "c", f.mutable_colour()->mutable_raw()));
+      Check(convert::ToProto(View(colour, ce), "c", f.mutable_color()->mutable_raw()));
       break;
     case As::kEncoded:
-      f.mutable_colour()->set_encoded(Encode(".png", colour));
+      f.mutable_color()->set_encoded(Encode(".png", colour));
       break;
     case As::kCompressed:
       Check(convert::ToProto(View(colour, ce), compression, "c",
-                             f.mutable_colour()->mutable_compressed()));
+                             f.mutable_color()->mutable_compressed()));
       break;
   }
   return f;
@@ -192,7 +192,7 @@ v1::Frame DepthFrame(As depth_as, const cv::Mat& depth, DepthEncoding encoding,
                            f.mutable_depth()->mutable_compressed()));
   }
   Check(convert::ToProto(View(ColourBgr(), ColorEncoding::kBGR8), "c",
-                         f.mutable_colour()->mutable_raw()));
+                         f.mutable_color()->mutable_raw()));
   return f;
 }
 v1::Frame StereoFrame(As as, int type, std::uint64_t sequence) {
@@ -201,10 +201,10 @@ v1::Frame StereoFrame(As as, int type, std::uint64_t sequence) {
   const cv::Mat left = StereoView(0, type), right = StereoView(4, type);
   const convert::Compression zstd{v1::COMPRESSION_ZSTD_DELTA_ROWS, 1};
   if (as == As::kRaw) {
-    Check(convert::ToProto(View(left, e), "c", f.mutable_colour()->mutable_raw()));
+    Check(convert::ToProto(View(left, e), "c", f.mutable_color()->mutable_raw()));
     Check(convert::ToProto(View(right, e), "r", f.mutable_right()->mutable_raw()));
   } else {
-    Check(convert::ToProto(View(left, e), zstd, "c", f.mutable_colour()->mutable_compressed()));
+    Check(convert::ToProto(View(left, e), zstd, "c", f.mutable_color()->mutable_compressed()));
     Check(convert::ToProto(View(right, e), zstd, "r", f.mutable_right()->mutable_compressed()));
   }
   return f;

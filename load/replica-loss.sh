@@ -51,8 +51,9 @@ for i in 1 2 3; do
   "$bin_dir/cloudcast-load" --probe --server "127.0.0.$i:$port" --connect-timeout 20 >/dev/null
 done
 data=${CLOUDCAST_DATA:-$repo/../shared/data/new_tsukuba}
-source_args=(--synthetic 640x480)
-[ -d "$data/groundtruth" ] && source_args=(--tsukuba "$data")
+# The paper's setting, stated (the server assumes no passthrough): both sources are 640x480.
+source_args=(--synthetic 640x480 --camera-preset new_tsukuba)
+[ -d "$data/groundtruth" ] && source_args=(--tsukuba "$data" --camera-preset new_tsukuba)
 "$bin_dir/cloudcast-load" --server "$target" --connections 1 --streams "$streams" --fps "$fps" \
   --duration "$duration" --lossless --resilient "${source_args[@]}" --json "$out/report.json" \
   --html "$out/report.html" "${extra[@]}" >"$out/load.txt" 2>"$out/progress.txt" &

@@ -47,8 +47,10 @@ trap cleanup EXIT
 server=$!
 "$bin_dir/cloudcast-load" --probe --server "127.0.0.1:$port" --connect-timeout 20 >/dev/null
 data=${CLOUDCAST_DATA:-$repo/../shared/data/new_tsukuba}
-source_args=(--synthetic 640x480)
-[ -d "$data/groundtruth" ] && source_args=(--tsukuba "$data")
+# The paper's setting, stated (the server assumes no passthrough): both sources are 640x480 with
+# its camera.
+source_args=(--synthetic 640x480 --camera-preset new_tsukuba)
+[ -d "$data/groundtruth" ] && source_args=(--tsukuba "$data" --camera-preset new_tsukuba)
 status=0
 "$bin_dir/cloudcast-load" --server "127.0.0.1:$port" --streams "$streams" --fps "$fps" \
   --duration "$duration" --lossless "${source_args[@]}" \

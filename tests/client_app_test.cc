@@ -369,9 +369,9 @@ TEST_F(ClientProgramTest, SnapshotAtAnEmptyEndShowsTheLastCloudWithPoints) {
     ASSERT_TRUE(cv::imwrite(Path("c/f" + std::to_string(i) + ".png"), TestColour(160, 120, i)));
   }
   const std::string png = Path("end.png");
-  const RunResult r =
-      Run({"--disparity-glob", Path("d/*.png"), "--colour-glob", Path("c/*.png"), "--server",
-           shared_target(), "--lossless", "--hidden", "--snapshot", png, "--window", "640x480"});
+  const RunResult r = Run({"--disparity-glob", Path("d/*.png"), "--colour-glob", Path("c/*.png"),
+                           "--camera-preset", "new_tsukuba", "--server", shared_target(),
+                           "--lossless", "--hidden", "--snapshot", png, "--window", "640x480"});
   ASSERT_TRUE(r.exited && r.code == 0) << r;
   const PictureStats p = Analyse(png);
   EXPECT_GT(p.foreground, 640 * 440 / 20) << "the snapshot is empty: " << png;
@@ -719,6 +719,8 @@ TEST_F(ClientProgramTest, StreamsStereoGlobsWithMatcherFlags) {
                            "--block-size",
                            "5",
                            "--return-disparity",
+                           "--focal",
+                           "307.5",  // the synthetic camera's at 320 px
                            "--baseline",
                            std::to_string(kSyntheticStereoBaseline),
                            "--server",
@@ -777,10 +779,11 @@ TEST_F(ClientProgramTest, StreamsLosslessVideos) {
       !WriteVideo(Path("c.mkv"), "FFV1", colours)) {
     GTEST_SKIP() << "this OpenCV build cannot write FFV1";
   }
-  const RunResult r = Run({"--disparity-video", Path("d.mkv"), "--colour-video", Path("c.mkv"),
-                           "--server", shared_target(), "--no-window", "--lossless", "--loop",
-                           "--frames", "15", "--json", Path("v.json")},
-                          "env -u DISPLAY");
+  const RunResult r =
+      Run({"--disparity-video", Path("d.mkv"), "--colour-video", Path("c.mkv"), "--camera-preset",
+           "new_tsukuba", "--server", shared_target(), "--no-window", "--lossless", "--loop",
+           "--frames", "15", "--json", Path("v.json")},
+          "env -u DISPLAY");
   ASSERT_TRUE(r.exited && r.code == 0) << r;
   EXPECT_EQ(r.err.find("not known to be lossless"), std::string::npos) << r;
   const Json j = Json::parse(ReadText(Path("v.json")));

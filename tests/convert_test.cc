@@ -228,7 +228,7 @@ TEST(ConvertTest, ErrorsCarryTheirKind) {
   EXPECT_TRUE(AnswersNoFrame(error));
   EXPECT_EQ(ToStatus(error).code(), absl::StatusCode::kInvalidArgument);
 
-  FillError(absl::ResourceExhaustedError("frame.colour.raw is 5000x5000"), v1::ERROR_KIND_FRAME,
+  FillError(absl::ResourceExhaustedError("frame.color.raw is 5000x5000"), v1::ERROR_KIND_FRAME,
             7, "cam", &error);
   EXPECT_FALSE(AnswersNoFrame(error));
   EXPECT_EQ(error.sequence(), 7u);
@@ -239,6 +239,95 @@ TEST(ConvertTest, ErrorsCarryTheirKind) {
   EXPECT_FALSE(AnswersNoFrame(error));
   error.set_code(99);
   EXPECT_EQ(ToStatus(error).code(), absl::StatusCode::kUnknown);
+}
+
+TEST(ConvertTest, ErrorsCarryTheirFieldAndRule) {
+  v1::FrameError error;
+  FillError(absl::ResourceExhaustedError("frame.color.raw is 5000x5000"), v1::ERROR_KIND_FRAME, 7,
+            "cam", &error);
+  ASSERT_EQ(error.bad_request().field_violations_size(), 1);
+  EXPECT_EQ(error.bad_request().field_violations(0).field(), "frame.color.raw");
+  EXPECT_EQ(error.bad_request().field_violations(0).reason(), "OVER_LIMIT");
+  EXPECT_EQ(error.bad_request().field_violations(0).description(), error.message());
+  // The field and rule survive the client's status, for FieldViolationOf.
+  const v1::FieldViolation back = FieldViolationOf(ToStatus(error), "");
+  EXPECT_EQ(back.field(), "frame.color.raw");
+  EXPECT_EQ(back.reason(), "OVER_LIMIT");
+
+  // A message that does not start with a field names the fallback; a required field its own.
+  FillError(absl::InvalidArgumentError("the request held neither"), v1::ERROR_KIND_REQUEST, 0, "",
+            &error);
+  EXPECT_EQ(error.bad_request().field_violations(0).field(), "kind");
+  EXPECT_EQ(error.bad_request().field_violations(0).reason(), "INVALID");
+  FillError(RequiredError("config.camera.fx", "a depth frame needs the focal length"),
+            v1::ERROR_KIND_FRAME, 1, "", &error);
+  EXPECT_EQ(error.bad_request().field_violations(0).field(), "config.camera.fx");
+  EXPECT_EQ(error.bad_request().field_violations(0).reason(), "REQUIRED");
+
+  // The call status details: a google.rpc.Status holding a google.rpc.BadRequest.
+  const std::string details =
+      StatusDetails(absl::InvalidArgumentError("frame.depth.raw.row_stride is 3"), "frame");
+  v1::BadRequest bad;
+  ASSERT_TRUE(ParseStatusDetails(details, &bad));
+  ASSERT_EQ(bad.field_violations_size(), 1);
+  EXPECT_EQ(bad.field_violations(0).field(), "frame.depth.raw.row_stride");
+  EXPECT_NE(details.find("type.googleapis.com/google.rpc.BadRequest"), std::string::npos);
+  EXPECT_FALSE(ParseStatusDetails("", &bad));
+}
+
+TEST(ConvertTest, TheContractAssumesNoCameraAndNoPassthrough) {
+  const StreamSettings defaults = ContractDefaults();
+  EXPECT_FALSE(defaults.frame.focal_given);
+  EXPECT_FALSE(defaults.frame.pipeline.passthrough.enabled);
+  // No camera: fx required for every frame, a baseline for disparities only.
+  absl::Status s = RequireCamera(defaults.frame, v1::Frame::kDepth);
+  EXPECT_EQ(FieldViolationOf(s, "").field(), "config.camera.fx");
+  EXPECT_EQ(FieldViolationOf(s, "").reason(), "REQUIRED");
+  v1::StreamConfig config;
+  config.mutable_camera()->set_fx(600);
+  auto resolved = Resolve(config, defaults);
+  ASSERT_TRUE(resolved.ok()) << resolved.status();
+  EXPECT_TRUE(RequireCamera(resolved->frame, v1::Frame::kDepth).ok());
+  s = RequireCamera(resolved->frame, v1::Frame::kDisparity);
+  EXPECT_EQ(FieldViolationOf(s, "").field(), "config.camera.baseline");
+  config.mutable_camera()->set_baseline(0.1);
+  resolved = Resolve(config, defaults);
+  ASSERT_TRUE(resolved.ok());
+  EXPECT_TRUE(RequireCamera(resolved->frame, v1::Frame::kDisparity).ok());
+  // GetInfo's defaults show no camera.
+  const v1::StreamConfig shown = ToProto(defaults);
+  EXPECT_FALSE(shown.camera().has_fx());
+  EXPECT_FALSE(shown.camera().has_baseline());
+  // A limit switches the passthrough on; enabled false keeps it off.
+  config.mutable_passthrough()->set_max(4);
+  resolved = Resolve(config, defaults);
+  ASSERT_TRUE(resolved.ok());
+  EXPECT_TRUE(resolved->frame.pipeline.passthrough.enabled);
+  EXPECT_EQ(resolved->frame.pipeline.passthrough.max, 4.0f);
+  config.mutable_passthrough()->set_enabled(false);
+  resolved = Resolve(config, defaults);
+  ASSERT_TRUE(resolved.ok());
+  EXPECT_FALSE(resolved->frame.pipeline.passthrough.enabled);
+  // A frame's camera, field by field over the stream's.
+  FrameSettings frame = resolved->frame;
+  v1::CameraModel zoom;
+  zoom.set_fx(1200);
+  ASSERT_TRUE(ApplyCamera(zoom, "frame.camera", &frame).ok());
+  EXPECT_EQ(frame.pipeline.camera.fx, 1200);
+  EXPECT_EQ(frame.pipeline.camera.baseline, 0.1);
+  zoom.set_fx(-1);
+  EXPECT_EQ(FieldViolationOf(ApplyCamera(zoom, "frame.camera", &frame), "").field(),
+            "frame.camera.fx");
+  // The paper's setting, by name.
+  auto paper = PresetConfig("new_tsukuba");
+  ASSERT_TRUE(paper.ok());
+  EXPECT_EQ(paper->camera().fx(), 615);
+  EXPECT_EQ(paper->camera().baseline(), 1);
+  EXPECT_FALSE(paper->camera().has_cx());
+  EXPECT_EQ(paper->passthrough().min(), 3);
+  EXPECT_EQ(paper->passthrough().max(), 12);
+  EXPECT_THAT(std::string(PresetConfig("kitti").status().message()),
+              HasSubstr("preset is \"kitti\"; it must be one of new_tsukuba"));
 }
 
 }  // namespace

@@ -191,9 +191,9 @@ TEST_F(FrameKindsTest, BadDepthFramesGetErrorsNamingTheField) {
     EXPECT_TRUE(
         convert::ToProto(f.depth_view, "depth", r.mutable_frame()->mutable_depth()->mutable_raw())
             .ok());
-    EXPECT_TRUE(convert::ToProto(f.colour_view, "colour",
-                                 r.mutable_frame()->mutable_colour()->mutable_raw())
-                    .ok());
+    EXPECT_TRUE(
+        convert::ToProto(f.colour_view, "colour", r.mutable_frame()->mutable_color()->mutable_raw())
+            .ok());
     return r;
   };
   {
@@ -210,7 +210,7 @@ TEST_F(FrameKindsTest, BadDepthFramesGetErrorsNamingTheField) {
   }
   {
     Case c{"sizes differ", base(), absl::StatusCode::kInvalidArgument,
-           "frame.colour is 32x24 but frame.depth is 16x24"};
+           "frame.color is 32x24 but frame.depth is 16x24"};
     EXPECT_TRUE(convert::ToProto(small.depth_view, "depth",
                                  c.request.mutable_frame()->mutable_depth()->mutable_raw())
                     .ok());
@@ -405,7 +405,7 @@ TEST_F(FrameKindsTest, BadStereoFramesAndConfigsGetErrorsNamingTheField) {
   const StereoFrame good{pair.left.view(), pair.right.view()};
   const std::vector<Case> cases = {
       {"right of another size", process(StereoFrame{pair.left.view(), small.right.view()}, ok),
-       absl::StatusCode::kInvalidArgument, "frame.right is 32x48 but frame.colour is 64x48"},
+       absl::StatusCode::kInvalidArgument, "frame.right is 32x48 but frame.color is 64x48"},
       {"num_disparities", process(good, too_many), absl::StatusCode::kInvalidArgument,
        "config.stereo.num_disparities is 100; it must be a positive multiple of 16"},
       {"block_size", process(good, bad_block), absl::StatusCode::kInvalidArgument,

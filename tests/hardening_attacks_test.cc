@@ -81,7 +81,7 @@ v1::Frame SyntheticRawFrame(std::uint32_t width, std::uint32_t height,
   v1::Frame frame;
   EXPECT_TRUE(
       convert::ToProto(f.disparity_view(), "d", frame.mutable_disparity()->mutable_raw()).ok());
-  EXPECT_TRUE(convert::ToProto(f.colour_view(), "c", frame.mutable_colour()->mutable_raw()).ok());
+  EXPECT_TRUE(convert::ToProto(f.colour_view(), "c", frame.mutable_color()->mutable_raw()).ok());
   return frame;
 }
 

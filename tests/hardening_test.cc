@@ -56,7 +56,7 @@ v1::StreamRequest FrameRequest(std::uint64_t sequence) {
       convert::ToProto(Frame().disparity_view(), "d", frame->mutable_disparity()->mutable_raw())
           .ok());
   EXPECT_TRUE(
-      convert::ToProto(Frame().colour_view(), "c", frame->mutable_colour()->mutable_raw()).ok());
+      convert::ToProto(Frame().colour_view(), "c", frame->mutable_color()->mutable_raw()).ok());
   return request;
 }
 
@@ -75,6 +75,9 @@ class HardeningTest : public ::testing::Test {
 
   void Start(server::ServerOptions options) {
     server_.reset();
+    // The paper's camera and range as the server's defaults, stated: these tests send its frames
+    // without a camera (the contract has no default one).
+    EXPECT_TRUE(ApplyPreset("new_tsukuba", &options.defaults.frame).ok());
     options.listen = "127.0.0.1:0";
     options.metrics_listen = "127.0.0.1:0";
     auto s = server::Server::Start(options);
@@ -174,6 +177,12 @@ TEST_F(HardeningTest, UnparsableProcessRequestGetsInvalidArgument) {
   EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
   EXPECT_NE(status.error_message().find("could not be parsed"), std::string::npos)
       << status.error_message();
+  // The whole request is at fault: the empty field path, structured all the same.
+  v1::BadRequest violations;
+  ASSERT_TRUE(convert::ParseStatusDetails(status.error_details(), &violations));
+  ASSERT_EQ(violations.field_violations_size(), 1);
+  EXPECT_EQ(violations.field_violations(0).field(), "");
+  EXPECT_EQ(violations.field_violations(0).reason(), "INVALID");
   const std::string metrics = server::ScrapeMetrics(server_->metrics_port());
   EXPECT_NE(metrics.find("cloudcast_requests_unparsable_total{method=\"Process\"} 1"),
             std::string::npos)
@@ -205,7 +214,7 @@ TEST_F(HardeningTest, LatestStreamThatNeverReadsStopsBeingRead) {
                                request.mutable_frame()->mutable_disparity()->mutable_raw())
                   .ok());
   ASSERT_TRUE(convert::ToProto(small.colour_view(), "c",
-                               request.mutable_frame()->mutable_colour()->mutable_raw())
+                               request.mutable_frame()->mutable_color()->mutable_raw())
                   .ok());
   constexpr int kFrames = 4000;
   std::mutex mu;
@@ -515,7 +524,7 @@ TEST(HardeningMemoryTest, StreamsThatStopReadingHoldBoundedMemoryAndGiveItBack) 
                                request.mutable_frame()->mutable_disparity()->mutable_raw())
                   .ok());
   ASSERT_TRUE(convert::ToProto(big.colour_view(), "c",
-                               request.mutable_frame()->mutable_colour()->mutable_raw())
+                               request.mutable_frame()->mutable_color()->mutable_raw())
                   .ok());
   const std::size_t frame_bytes = request.ByteSizeLong();
   // A client that never reads: a small receive window, so that the server's writes stall soon.
@@ -794,7 +803,7 @@ TEST_F(HardeningTest, StereoPairsNarrowerThanTheirDisparitiesAreRefusedNotFatal)
       stereo->set_matcher(matcher);
       stereo->set_num_disparities(k.disparities);
       stereo->set_block_size(5);
-      image(k.width, k.height, 0, request.mutable_frame()->mutable_colour());
+      image(k.width, k.height, 0, request.mutable_frame()->mutable_color());
       image(k.width, k.height, 3, request.mutable_frame()->mutable_right());
       grpc::ClientContext ctx;
       ctx.set_deadline(std::chrono::system_clock::now() + seconds(30));
@@ -818,6 +827,10 @@ TEST_F(HardeningTest, StereoPairsNarrowerThanTheirDisparitiesAreRefusedNotFatal)
             too_narrow ? "config.stereo.num_disparities" : "config.stereo.block_size";
         EXPECT_NE(status.error_message().find(field), std::string::npos)
             << what << ": " << status.error_message();
+        v1::BadRequest bad;
+        ASSERT_TRUE(convert::ParseStatusDetails(status.error_details(), &bad)) << what;
+        ASSERT_EQ(bad.field_violations_size(), 1) << what;
+        EXPECT_EQ(bad.field_violations(0).field(), field) << what;
       } else {
         // Matched, or refused for its work (the volume limit), never a crash.
         EXPECT_TRUE(status.ok() || status.error_code() == grpc::StatusCode::RESOURCE_EXHAUSTED)
@@ -855,7 +868,7 @@ TEST_F(HardeningTest, DepthsBehindTheCameraMakeNoPoints) {
   raw->set_width(w);
   raw->set_height(h);
   raw->set_pixels(std::string(reinterpret_cast<const char*>(depth.data()), depth.size() * 4));
-  v1::RawColor* colour = request.mutable_frame()->mutable_colour()->mutable_raw();
+  v1::RawColor* colour = request.mutable_frame()->mutable_color()->mutable_raw();
   colour->set_encoding(v1::COLOR_MONO8);
   colour->set_width(w);
   colour->set_height(h);
@@ -883,7 +896,7 @@ TEST_F(HardeningTest, StereoPairsAreChargedWhatTheirMatcherTakes) {
     stereo->set_matcher(matcher);
     stereo->set_num_disparities(disparities);
     stereo->set_block_size(block);
-    for (v1::ColorImage* image : {request.mutable_frame()->mutable_colour(),
+    for (v1::ColorImage* image : {request.mutable_frame()->mutable_color(),
                                   request.mutable_frame()->mutable_right()}) {
       v1::RawColor* raw = image->mutable_raw();
       raw->set_encoding(v1::COLOR_MONO8);
@@ -923,6 +936,11 @@ TEST_F(HardeningTest, StereoPairsAreChargedWhatTheirMatcherTakes) {
     EXPECT_EQ(status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << status.error_message();
     EXPECT_NE(status.error_message().find("ServerLimits.max_stereo_volume"), std::string::npos)
         << status.error_message();
+    v1::BadRequest bad;
+    ASSERT_TRUE(convert::ParseStatusDetails(status.error_details(), &bad));
+    ASSERT_EQ(bad.field_violations_size(), 1);
+    EXPECT_EQ(bad.field_violations(0).reason(), "OVER_LIMIT");
+    EXPECT_FALSE(bad.field_violations(0).field().empty()) << status.error_message();
   }
   // A camera's pair at the defaults is taken as before.
   grpc::ClientContext ctx;

@@ -137,7 +137,7 @@ TEST(FrameStoreTest, RequestsParseAsStreamRequestsWithPatchedFields) {
     EXPECT_EQ(request.frame().capture_time_unix_ns(), 1'700'000'000'000'000'000 + seq);
     EXPECT_EQ(request.frame().frame_id(), "synthetic_" + std::to_string(seq % 3));
     EXPECT_EQ(request.frame().disparity().raw().width(), 64u);
-    EXPECT_EQ(request.frame().colour().raw().pixels().size(), 64u * 48 * 3);
+    EXPECT_EQ(request.frame().color().raw().pixels().size(), 64u * 48 * 3);
   }
 }
 
@@ -155,7 +155,7 @@ TEST(FrameStoreTest, PngAndJpegUplinksEncodeTheImages) {
   for (auto& s : slices) bytes.append(reinterpret_cast<const char*>(s.begin()), s.size());
   v1::StreamRequest request;
   ASSERT_TRUE(request.ParseFromString(bytes));
-  EXPECT_FALSE(request.frame().colour().encoded().empty());
+  EXPECT_FALSE(request.frame().color().encoded().empty());
   EXPECT_FALSE(request.frame().disparity().encoded().empty());  // 16-bit disparity as PNG
 }
 
@@ -174,6 +174,8 @@ class FleetTest : public ::testing::Test {
  protected:
   static std::unique_ptr<server::Server> StartServer(int threads, std::uint32_t queued = 4) {
     server::ServerOptions options;
+    // The fleet's configs carry no camera: the paper's, as the server's defaults, stated.
+    EXPECT_TRUE(ApplyPreset("new_tsukuba", &options.defaults.frame).ok());
     options.listen = "127.0.0.1:0";
     options.metrics_listen = "";
     options.threads = threads;

@@ -65,7 +65,7 @@ std::string Disparity(const std::string& image_fields) {
   return Len(v1::Frame::kDisparityFieldNumber, image_fields);
 }
 std::string Colour(const std::string& image_fields) {
-  return Len(v1::Frame::kColourFieldNumber, image_fields);
+  return Len(v1::Frame::kColorFieldNumber, image_fields);
 }
 std::string Raw(const std::string& raw_fields) {
   return Len(v1::DisparityImage::kRawFieldNumber, raw_fields);
@@ -109,7 +109,7 @@ TEST(RequestReaderTest, RawPixelsStayInTheSlicesAndTheRestParsesAsProtobufParses
   frame->set_frame_id("left-0007");
   frame->set_capture_time_unix_ns(123456789);
   ASSERT_TRUE(convert::ToProto(f.disparity, "d", frame->mutable_disparity()->mutable_raw()).ok());
-  ASSERT_TRUE(convert::ToProto(f.colour, "c", frame->mutable_colour()->mutable_raw()).ok());
+  ASSERT_TRUE(convert::ToProto(f.colour, "c", frame->mutable_color()->mutable_raw()).ok());
   const std::string bytes = request.SerializeAsString();
   for (const std::vector<std::size_t>& sizes :
        std::vector<std::vector<std::size_t>>{{bytes.size()}, {1}, {5, 3, 64}, {100}, {16384}}) {
@@ -120,9 +120,9 @@ TEST(RequestReaderTest, RawPixelsStayInTheSlicesAndTheRestParsesAsProtobufParses
     EXPECT_TRUE(walked);
     // The pixels were not copied into the message.
     EXPECT_TRUE(parsed.frame().disparity().raw().pixels().empty());
-    EXPECT_TRUE(parsed.frame().colour().raw().pixels().empty());
+    EXPECT_TRUE(parsed.frame().color().raw().pixels().empty());
     EXPECT_EQ(reader.pixels().disparity.size, frame->disparity().raw().pixels().size());
-    EXPECT_EQ(reader.pixels().colour.size, frame->colour().raw().pixels().size());
+    EXPECT_EQ(reader.pixels().colour.size, frame->color().raw().pixels().size());
     EXPECT_EQ(parsed.frame().disparity().raw().width(), 37u);
     EXPECT_EQ(parsed.frame().frame_id(), "left-0007");
   }
@@ -317,7 +317,7 @@ TEST(RequestReaderTest, RowTablesGiveTheWorkerTheSameImagesAndTheSameCloud) {
         convert::ToProto(scene.disparity_view(), "d", frame->mutable_disparity()->mutable_raw())
             .ok());
     ASSERT_TRUE(
-        convert::ToProto(scene.colour_view(), "c", frame->mutable_colour()->mutable_raw()).ok());
+        convert::ToProto(scene.colour_view(), "c", frame->mutable_color()->mutable_raw()).ok());
     const std::string bytes = request.SerializeAsString();
     PipelineOptions options;
     options.camera = scene.camera;
@@ -366,7 +366,7 @@ TEST(RequestReaderTest, ImagesInSlicesAreCheckedAsImagesInTheMessage) {
   raw->set_width(100);
   raw->set_height(100);
   raw->set_pixels(Bytes(9000, 1));
-  v1::RawColor* colour = request.mutable_frame()->mutable_colour()->mutable_raw();
+  v1::RawColor* colour = request.mutable_frame()->mutable_color()->mutable_raw();
   colour->set_encoding(v1::COLOR_BGR8);
   colour->set_width(100);
   colour->set_height(100);

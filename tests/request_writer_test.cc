@@ -113,7 +113,7 @@ TEST(RequestWriterTest, BytesParseToTheMessageProtobufWouldSend) {
     ASSERT_TRUE(reader.Parse(&bytes, &read));
     EXPECT_TRUE(reader.walked());
     EXPECT_EQ(reader.pixels().disparity.size, expected.frame().disparity().raw().pixels().size());
-    EXPECT_EQ(reader.pixels().colour.size, expected.frame().colour().raw().pixels().size());
+    EXPECT_EQ(reader.pixels().colour.size, expected.frame().color().raw().pixels().size());
     EXPECT_EQ(reader.pixels().depth.size, expected.frame().depth().raw().pixels().size());
     EXPECT_EQ(reader.pixels().right.size, expected.frame().right().raw().pixels().size());
     reader.PutPixelsBack(read.mutable_frame());

@@ -80,6 +80,7 @@ class SecurityTest : public testing::ScratchDirTest {
 
   server::ServerOptions TlsOptions(bool mutual) const {
     server::ServerOptions o;
+    EXPECT_TRUE(ApplyPreset("new_tsukuba", &o.defaults.frame).ok());  // frames sent camera-less
     o.listen = "127.0.0.1:0";
     o.metrics_listen = "127.0.0.1:0";
     o.tls_cert_file = pki_->Cert("server");

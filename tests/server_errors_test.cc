@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdint>
 #include <functional>
+#include <map>
 #include <string>
 #include <thread>
 #include <vector>
@@ -90,9 +91,9 @@ std::vector<BadFrameCase> BadFrameCases() {
        kInvalid,
        {"frame.disparity is missing"}},
       {"missing colour",
-       [](v1::Frame* fr) { fr->clear_colour(); },
+       [](v1::Frame* fr) { fr->clear_color(); },
        kInvalid,
-       {"frame.colour is missing"}},
+       {"frame.color is missing"}},
       {"unspecified disparity encoding",
        [](v1::Frame* fr) {
          fr->mutable_disparity()->mutable_raw()->set_encoding(v1::DISPARITY_ENCODING_UNSPECIFIED);
@@ -101,26 +102,26 @@ std::vector<BadFrameCase> BadFrameCases() {
        {"frame.disparity.raw.encoding", "DISPARITY_ENCODING_UNSPECIFIED"}},
       {"unknown colour encoding",
        [](v1::Frame* fr) {
-         fr->mutable_colour()->mutable_raw()->set_encoding(static_cast<v1::ColorEncoding>(42));
+         fr->mutable_color()->mutable_raw()->set_encoding(static_cast<v1::ColorEncoding>(42));
        },
        kInvalid,
-       {"frame.colour.raw.encoding is 42"}},
+       {"frame.color.raw.encoding is 42"}},
       {"zero width",
        [](v1::Frame* fr) { fr->mutable_disparity()->mutable_raw()->set_width(0); },
        kInvalid,
        {"frame.disparity.raw.width is 0"}},
       {"zero height",
-       [](v1::Frame* fr) { fr->mutable_colour()->mutable_raw()->set_height(0); },
+       [](v1::Frame* fr) { fr->mutable_color()->mutable_raw()->set_height(0); },
        kInvalid,
-       {"frame.colour.raw.height is 0"}},
+       {"frame.color.raw.height is 0"}},
       {"disparity row_stride too small",
        [](v1::Frame* fr) { fr->mutable_disparity()->mutable_raw()->set_row_stride(100); },
        kInvalid,
        {"frame.disparity.raw.row_stride is 100, less than width x 1 = 640"}},
       {"colour row_stride too small",
-       [](v1::Frame* fr) { fr->mutable_colour()->mutable_raw()->set_row_stride(1000); },
+       [](v1::Frame* fr) { fr->mutable_color()->mutable_raw()->set_row_stride(1000); },
        kInvalid,
-       {"frame.colour.raw.row_stride is 1000, less than width x 3 = 1920"}},
+       {"frame.color.raw.row_stride is 1000, less than width x 3 = 1920"}},
       {"disparity pixels too short",
        [](v1::Frame* fr) {
          fr->mutable_disparity()->mutable_raw()->mutable_pixels()->resize(1000);
@@ -128,9 +129,9 @@ std::vector<BadFrameCase> BadFrameCases() {
        kInvalid,
        {"frame.disparity.raw.pixels holds 1000 bytes", "needs 307200"}},
       {"colour pixels too short for its stride",
-       [](v1::Frame* fr) { fr->mutable_colour()->mutable_raw()->set_row_stride(1921); },
+       [](v1::Frame* fr) { fr->mutable_color()->mutable_raw()->set_row_stride(1921); },
        kInvalid,
-       {"frame.colour.raw.pixels holds 921600 bytes", "row_stride 1921"}},
+       {"frame.color.raw.pixels holds 921600 bytes", "row_stride 1921"}},
       {"u16 pixels too short",
        [](v1::Frame* fr) {
          fr->mutable_disparity()->mutable_raw()->set_encoding(v1::DISPARITY_U16);
@@ -139,12 +140,12 @@ std::vector<BadFrameCase> BadFrameCases() {
        {"frame.disparity.raw.pixels holds 307200 bytes", "DISPARITY_U16"}},
       {"sizes differ",
        [](v1::Frame* fr) {
-         v1::RawColor* c = fr->mutable_colour()->mutable_raw();
+         v1::RawColor* c = fr->mutable_color()->mutable_raw();
          c->set_width(320);
          c->set_height(240);
        },
        kInvalid,
-       {"frame.colour is 320x240 but frame.disparity is 640x480"}},
+       {"frame.color is 320x240 but frame.disparity is 640x480"}},
       {"unknown image format",
        [](v1::Frame* fr) { fr->mutable_disparity()->set_encoded("this is not a PNG"); },
        kInvalid,
@@ -158,9 +159,9 @@ std::vector<BadFrameCase> BadFrameCases() {
        kInvalid,
        {"frame.disparity.encoded: cannot be decoded"}},
       {"truncated colour PNG",
-       [&f](v1::Frame* fr) { fr->mutable_colour()->set_encoded(f.colour_png.substr(0, 200)); },
+       [&f](v1::Frame* fr) { fr->mutable_color()->set_encoded(f.colour_png.substr(0, 200)); },
        kInvalid,
-       {"frame.colour.encoded"}},
+       {"frame.color.encoded"}},
       {"empty encoded disparity",
        [](v1::Frame* fr) { fr->mutable_disparity()->set_encoded(""); },
        kInvalid,
@@ -181,11 +182,11 @@ std::vector<BadFrameCase> BadFrameCases() {
        {"frame.disparity.raw is 20000x1", "the limit is 16384 pixels per side"}},
       {"pixels over the limit",
        [](v1::Frame* fr) {
-         fr->mutable_colour()->mutable_raw()->set_width(5000);
-         fr->mutable_colour()->mutable_raw()->set_height(5000);
+         fr->mutable_color()->mutable_raw()->set_width(5000);
+         fr->mutable_color()->mutable_raw()->set_height(5000);
        },
        kExhausted,
-       {"frame.colour.raw is 5000x5000 = 25000000 pixels", "the limit is 16777216"}},
+       {"frame.color.raw is 5000x5000 = 25000000 pixels", "the limit is 16777216"}},
       {"PNG header over the limit",
        [](v1::Frame* fr) { fr->mutable_disparity()->set_encoded(PngWithSize(16000, 16000)); },
        kExhausted,
@@ -195,15 +196,13 @@ std::vector<BadFrameCase> BadFrameCases() {
        kExhausted,
        {"frame.disparity.encoded (TIFF) is 30000x30000", "16384 pixels per side"}},
       {"PNM header over the limit",
-       [](v1::Frame* fr) {
-         fr->mutable_colour()->set_encoded("P6\n# a comment\n5000 4000\n255\n");
-       },
+       [](v1::Frame* fr) { fr->mutable_color()->set_encoded("P6\n# a comment\n5000 4000\n255\n"); },
        kExhausted,
-       {"frame.colour.encoded (PNM) is 5000x4000 = 20000000 pixels"}},
+       {"frame.color.encoded (PNM) is 5000x4000 = 20000000 pixels"}},
       {"JPEG header over the limit",
-       [](v1::Frame* fr) { fr->mutable_colour()->set_encoded(JpegWithSize(30000, 2)); },
+       [](v1::Frame* fr) { fr->mutable_color()->set_encoded(JpegWithSize(30000, 2)); },
        kExhausted,
-       {"frame.colour.encoded (JPEG) is 30000x2", "16384 pixels per side"}},
+       {"frame.color.encoded (JPEG) is 30000x2", "16384 pixels per side"}},
   };
 }
 
@@ -270,10 +269,69 @@ std::vector<BadConfigCase> BadConfigCases() {
   };
 }
 
+// The field path each case's FieldViolation names (FrameError.bad_request): written out here,
+// not derived from the message, so that a change of either shows.
+const std::map<std::string, std::string>& ExpectedFields() {
+  static const std::map<std::string, std::string> fields = {
+      {"missing disparity", "frame.disparity"},
+      {"missing colour", "frame.color"},
+      {"unspecified disparity encoding", "frame.disparity.raw.encoding"},
+      {"unknown colour encoding", "frame.color.raw.encoding"},
+      {"zero width", "frame.disparity.raw.width"},
+      {"zero height", "frame.color.raw.height"},
+      {"disparity row_stride too small", "frame.disparity.raw.row_stride"},
+      {"colour row_stride too small", "frame.color.raw.row_stride"},
+      {"disparity pixels too short", "frame.disparity.raw.pixels"},
+      {"colour pixels too short for its stride", "frame.color.raw.pixels"},
+      {"u16 pixels too short", "frame.disparity.raw.pixels"},
+      {"sizes differ", "frame.color"},
+      {"unknown image format", "frame.disparity.encoded"},
+      {"undecodable PNG body", "frame.disparity.encoded"},
+      {"truncated colour PNG", "frame.color.encoded"},
+      {"empty encoded disparity", "frame.disparity.encoded"},
+      {"multi-channel disparity file", "frame.disparity.encoded"},
+      {"side over the limit", "frame.disparity.raw"},
+      {"pixels over the limit", "frame.color.raw"},
+      {"PNG header over the limit", "frame.disparity.encoded"},
+      {"TIFF header over the limit", "frame.disparity.encoded"},
+      {"PNM header over the limit", "frame.color.encoded"},
+      {"JPEG header over the limit", "frame.color.encoded"},
+      {"fx zero", "config.camera.fx"},
+      {"fx NaN", "config.camera.fx"},
+      {"baseline negative", "config.camera.baseline"},
+      {"disparity_scale zero", "config.camera.disparity_scale"},
+      {"too many invalid disparities", "config.camera.invalid_disparities.values"},
+      {"leaf zero", "config.voxel_grid.leaf"},
+      {"leaf negative", "config.voxel_grid.leaf_y"},
+      {"min above max", "config.passthrough.min"},
+      {"min NaN", "config.passthrough.min"},
+      {"unknown axis", "config.passthrough.axis"},
+      {"draco bits out of range", "config.draco.position_bits"},
+      {"draco colour bits zero", "config.draco.color_bits"},
+      {"draco speed out of range", "config.draco.encode_speed"},
+      {"draco negative error", "config.draco.max_position_error"},
+      {"unknown delivery", "config.delivery"},
+      {"neither", "kind"},
+  };
+  return fields;
+}
+
 ::testing::AssertionResult IsError(const v1::StreamReply& reply, grpc::StatusCode code,
-                                   std::uint64_t sequence, const std::vector<std::string>& has) {
+                                   std::uint64_t sequence, const std::vector<std::string>& has,
+                                   const std::string& field) {
   if (!reply.has_error()) return ::testing::AssertionFailure() << "not an error reply";
   const v1::FrameError& e = reply.error();
+  if (e.bad_request().field_violations_size() != 1) {
+    return ::testing::AssertionFailure() << "no field violation: " << e.message();
+  }
+  const v1::FieldViolation& v = e.bad_request().field_violations(0);
+  const std::string reason =
+      code == grpc::StatusCode::RESOURCE_EXHAUSTED ? "OVER_LIMIT" : "INVALID";
+  if (v.field() != field || v.reason() != reason || v.description() != e.message()) {
+    return ::testing::AssertionFailure()
+           << "field violation " << v.field() << " (" << v.reason() << "), want " << field << " ("
+           << reason << "): " << e.message();
+  }
   if (e.code() != static_cast<int>(code)) {
     return ::testing::AssertionFailure()
            << "code " << e.code() << ", want " << code << ": " << e.message();
@@ -343,20 +401,23 @@ TEST_F(ServerTest, BadFramesAndConfigsGetNamedErrorsAndEveryStreamGoesOn) {
   std::uint64_t s = 1;
   for (const BadFrameCase& c : frame_cases) {
     SCOPED_TRACE(c.name);
-    EXPECT_TRUE(IsError(result.replies[r++], c.code, s++, c.message_has));
+    EXPECT_TRUE(
+        IsError(result.replies[r++], c.code, s++, c.message_has, ExpectedFields().at(c.name)));
     ASSERT_TRUE(result.replies[r].has_cloud()) << result.replies[r].error().message();
     EXPECT_EQ(result.replies[r].cloud().sequence(), s++);
     EXPECT_TRUE(CloudMatches(expected, result.replies[r++].cloud()));
   }
   for (const BadConfigCase& c : config_cases) {
     SCOPED_TRACE(c.name);
-    EXPECT_TRUE(IsError(result.replies[r++], grpc::StatusCode::INVALID_ARGUMENT, 0, c.message_has));
+    EXPECT_TRUE(IsError(result.replies[r++], grpc::StatusCode::INVALID_ARGUMENT, 0, c.message_has,
+                        ExpectedFields().at(c.name)));
     // The previous config (leaf 0.1) is still in force.
     ASSERT_TRUE(result.replies[r].has_cloud()) << result.replies[r].error().message();
     EXPECT_EQ(result.replies[r].cloud().sequence(), s++);
     EXPECT_TRUE(CloudMatches(expected, result.replies[r++].cloud()));
   }
-  EXPECT_TRUE(IsError(result.replies[r++], grpc::StatusCode::INVALID_ARGUMENT, 0, {"neither"}));
+  EXPECT_TRUE(
+      IsError(result.replies[r++], grpc::StatusCode::INVALID_ARGUMENT, 0, {"neither"}, "kind"));
   EXPECT_TRUE(result.replies[r++].has_cloud());
 
   ASSERT_TRUE(bystander.status.ok()) << bystander.status.error_message();
@@ -378,10 +439,18 @@ TEST_F(ServerTest, ProcessRpcReturnsFrameErrorsAsStatus) {
   v1::ProcessRequest request;
   *request.mutable_frame() = MakeFrame(f, 1);
   request.mutable_frame()->mutable_disparity()->mutable_raw()->set_row_stride(100);
+  // Every refusal carries its field and rule in the status details (google.rpc.BadRequest).
+  auto violation = [](const grpc::Status& st) {
+    v1::BadRequest bad;
+    EXPECT_TRUE(convert::ParseStatusDetails(st.error_details(), &bad)) << st.error_message();
+    return bad.field_violations_size() == 1 ? bad.field_violations(0) : v1::FieldViolation();
+  };
   grpc::Status status = process(request);
   EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
   EXPECT_NE(status.error_message().find("frame.disparity.raw.row_stride is 100"), std::string::npos)
       << status.error_message();
+  EXPECT_EQ(violation(status).field(), "frame.disparity.raw.row_stride");
+  EXPECT_EQ(violation(status).reason(), "INVALID");
 
   *request.mutable_frame() = MakeFrame(f, 1);
   request.mutable_config()->mutable_camera()->set_fx(0);
@@ -389,13 +458,16 @@ TEST_F(ServerTest, ProcessRpcReturnsFrameErrorsAsStatus) {
   EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
   EXPECT_NE(status.error_message().find("config.camera.fx"), std::string::npos)
       << status.error_message();
+  EXPECT_EQ(violation(status).field(), "config.camera.fx");
 
   request.clear_config();
-  request.mutable_frame()->mutable_colour()->mutable_raw()->set_width(100000);
+  request.mutable_frame()->mutable_color()->mutable_raw()->set_width(100000);
   status = process(request);
   EXPECT_EQ(status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
-  EXPECT_NE(status.error_message().find("frame.colour.raw is 100000x480"), std::string::npos)
+  EXPECT_NE(status.error_message().find("frame.color.raw is 100000x480"), std::string::npos)
       << status.error_message();
+  EXPECT_EQ(violation(status).field(), "frame.color.raw");
+  EXPECT_EQ(violation(status).reason(), "OVER_LIMIT");
 
   *request.mutable_frame() = MakeFrame(f, 1);
   EXPECT_TRUE(process(request).ok());

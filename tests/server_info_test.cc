@@ -83,6 +83,9 @@ TEST_F(ServerTest, GetInfoReportsLimitsAndDefaults) {
   EXPECT_EQ(info.limits().max_streams_per_client(), 32u);
   EXPECT_EQ(info.limits().max_process_per_client(), 32u);
   EXPECT_EQ(info.limits().shed_quiet_after_ms(), 2000u);
+  EXPECT_EQ(info.contract_revision(), "2");
+  // The suite's server runs with the preset new_tsukuba as its operator's defaults
+  // (TestServerOptions); the contract's own, without a camera: contract_test.
   const v1::StreamConfig& d = info.defaults();
   EXPECT_EQ(d.camera().fx(), 615.0);
   EXPECT_EQ(d.camera().fy(), 615.0);
@@ -116,7 +119,7 @@ TEST(ServerMetricsTest, PrometheusEndpointServesTheCounters) {
   ASSERT_GT(server->metrics_port(), 0);
   auto stub = testing::NewStub(*server);
   v1::Frame bad = MakeFrame(Frames()[0], 2);
-  bad.clear_colour();
+  bad.clear_color();
   const StreamResult result =
       RunStream(*stub, {ConfigRequest(ConfigFor(Params{}, v1::DELIVERY_ALL)),
                         FrameRequest(MakeFrame(Frames()[0], 1)), FrameRequest(bad),

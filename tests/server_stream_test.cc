@@ -78,9 +78,9 @@ TEST_F(ServerTest, RawRowsWithPaddingAndOtherEncodings) {
   }
   frame.mutable_disparity()->mutable_raw()->set_row_stride(w + 13);
   frame.mutable_disparity()->mutable_raw()->set_pixels(disparity);
-  frame.mutable_colour()->mutable_raw()->set_encoding(v1::COLOR_RGBA8);
-  frame.mutable_colour()->mutable_raw()->set_row_stride(w * 4 + 5);
-  frame.mutable_colour()->mutable_raw()->set_pixels(colour);
+  frame.mutable_color()->mutable_raw()->set_encoding(v1::COLOR_RGBA8);
+  frame.mutable_color()->mutable_raw()->set_row_stride(w * 4 + 5);
+  frame.mutable_color()->mutable_raw()->set_pixels(colour);
   const StreamResult result = RunStream(*stub_, {FrameRequest(frame)});
   ASSERT_TRUE(result.status.ok()) << result.status.error_message();
   ASSERT_EQ(result.replies.size(), 1u);

@@ -589,14 +589,14 @@ TEST(UplinkTest, EachEncodingGivesTheInputsAndProtoImagesItPromises) {
   v1::Frame raw;
   ASSERT_TRUE(uplink.ToProto(&raw).ok());
   EXPECT_EQ(raw.disparity().raw().pixels().size(), 64u * 48 * 2);
-  EXPECT_EQ(raw.colour().raw().pixels().size(), 64u * 48 * 3);
+  EXPECT_EQ(raw.color().raw().pixels().size(), 64u * 48 * 3);
 
   ASSERT_TRUE(uplink.Encode(u16, {Uplink::kZstd}).ok());
   EXPECT_TRUE(std::holds_alternative<client::CompressedDisparityView>(uplink.disparity()));
   v1::Frame zstd;
   ASSERT_TRUE(uplink.ToProto(&zstd).ok());
   EXPECT_TRUE(zstd.disparity().has_compressed());
-  EXPECT_TRUE(zstd.colour().has_compressed());
+  EXPECT_TRUE(zstd.color().has_compressed());
   EXPECT_LT(zstd.ByteSizeLong(), raw.ByteSizeLong());
 
   // png: lossless files, a 16-bit disparity as PNG, a float one as TIFF.
@@ -606,7 +606,7 @@ TEST(UplinkTest, EachEncodingGivesTheInputsAndProtoImagesItPromises) {
   ASSERT_TRUE(uplink.ToProto(&png).ok());
   EXPECT_EQ(png.disparity().encoded().substr(1, 3), "PNG");
   EXPECT_TRUE(SameMat(Decode(png.disparity().encoded(), cv::IMREAD_UNCHANGED), u16.disparity()));
-  EXPECT_TRUE(SameMat(Decode(png.colour().encoded(), cv::IMREAD_COLOR), u16.colour()));
+  EXPECT_TRUE(SameMat(Decode(png.color().encoded(), cv::IMREAD_COLOR), u16.colour()));
   const client::DisparityInput input = uplink.disparity();
   const auto* file = std::get_if<client::EncodedImage>(&input);
   ASSERT_NE(file, nullptr);
@@ -622,13 +622,13 @@ TEST(UplinkTest, EachEncodingGivesTheInputsAndProtoImagesItPromises) {
   ASSERT_TRUE(uplink.Encode(u16, jpeg).ok());
   v1::Frame high;
   ASSERT_TRUE(uplink.ToProto(&high).ok());
-  EXPECT_EQ(high.colour().encoded().substr(0, 2), "\xff\xd8");
+  EXPECT_EQ(high.color().encoded().substr(0, 2), "\xff\xd8");
   EXPECT_EQ(high.disparity().encoded(), png.disparity().encoded());
   jpeg.jpeg_quality = 20;
   ASSERT_TRUE(uplink.Encode(u16, jpeg).ok());
   v1::Frame low;
   ASSERT_TRUE(uplink.ToProto(&low).ok());
-  EXPECT_LT(low.colour().encoded().size(), high.colour().encoded().size());
+  EXPECT_LT(low.color().encoded().size(), high.color().encoded().size());
 }
 
 TEST(UplinkTest, ImagesTheProtocolCannotCarryNameTheImage) {
@@ -646,8 +646,8 @@ TEST(UplinkTest, ImagesTheProtocolCannotCarryNameTheImage) {
   ASSERT_TRUE(uplink.ToProto(&proto).ok());
   std::string bgr;
   for (int i = 0; i < 16; ++i) bgr += "\x01\x02\x03";
-  EXPECT_EQ(proto.colour().raw().pixels(), bgr);
-  EXPECT_EQ(proto.colour().raw().encoding(), v1::COLOR_BGR8);
+  EXPECT_EQ(proto.color().raw().pixels(), bgr);
+  EXPECT_EQ(proto.color().raw().encoding(), v1::COLOR_BGR8);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -829,12 +829,12 @@ TEST(UplinkTest, DepthAndStereoFramesTravelInTheirOwnFields) {
   ASSERT_TRUE(std::holds_alternative<client::StereoFrame>(input));
   v1::Frame raw_pair;
   ASSERT_TRUE(uplink.ToProto(&raw_pair).ok());
-  EXPECT_EQ(raw_pair.colour().raw().pixels().size(), 64u * 48 * 3);
+  EXPECT_EQ(raw_pair.color().raw().pixels().size(), 64u * 48 * 3);
   EXPECT_EQ(raw_pair.right().raw().pixels().size(), 64u * 48 * 3);
   ASSERT_TRUE(uplink.Encode(pair, {Uplink::kJpeg}).ok());
   v1::Frame jpeg;
   ASSERT_TRUE(uplink.ToProto(&jpeg).ok());
-  EXPECT_EQ(jpeg.colour().encoded().substr(0, 2), "\xff\xd8");
+  EXPECT_EQ(jpeg.color().encoded().substr(0, 2), "\xff\xd8");
   EXPECT_EQ(jpeg.right().encoded().substr(0, 2), "\xff\xd8");
   ASSERT_TRUE(uplink.Encode(pair, {Uplink::kPng}).ok());
   v1::Frame png;

@@ -162,8 +162,8 @@ TEST(UplinkCodec, EveryColourEncodingPredictorAndOddSizeRoundTrips) {
         for (int level : {-1, 1, 3}) {
           ASSERT_TRUE(convert::ToProto(f.colour, {c, level}, "colour", &msg).ok());
           ColorView back;
-          const absl::Status st = convert::DecodeCompressed(msg, "frame.colour.compressed",
-                                                            Limits{}, &decompressor, &back);
+          const absl::Status st = convert::DecodeCompressed(msg, "frame.color.compressed", Limits{},
+                                                            &decompressor, &back);
           ASSERT_TRUE(st.ok()) << st;
           EXPECT_EQ(back.encoding, e);
           EXPECT_EQ(Packed(back), Packed(f.colour))
@@ -225,10 +225,10 @@ TEST(UplinkValidation, BombClaimingSixteenKSquaredInAFewBytesIsRefusedBeforeAllo
   EXPECT_LT(c.payload().size(), 32u);
   ColorView view;
   const absl::Status s =
-      convert::DecodeCompressed(c, "frame.colour.compressed", Limits{}, &d, &view);
+      convert::DecodeCompressed(c, "frame.color.compressed", Limits{}, &d, &view);
   EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument);
   EXPECT_EQ(s.message(),
-            "frame.colour.compressed.payload decompresses to 805306368 bytes; 640x480 COLOR_BGR8 "
+            "frame.color.compressed.payload decompresses to 805306368 bytes; 640x480 COLOR_BGR8 "
             "needs 921600");
   EXPECT_EQ(d.capacity(), 0u) << "nothing may be allocated for a refused payload";
 }
@@ -415,7 +415,7 @@ TEST(UplinkValidation, ServerFrameInputDecodesAndNamesTheField) {
   ASSERT_TRUE(convert::ToProto(f.disparity, {}, "disparity",
                                frame.mutable_disparity()->mutable_compressed())
                   .ok());
-  ASSERT_TRUE(convert::ToProto(f.colour, "colour", frame.mutable_colour()->mutable_raw()).ok());
+  ASSERT_TRUE(convert::ToProto(f.colour, "colour", frame.mutable_color()->mutable_raw()).ok());
   server::DecodeScratch scratch;
   server::FrameImages images;
   ASSERT_TRUE(server::PrepareFrameImages(frame, Limits{}, &scratch, &images).ok());
@@ -423,15 +423,15 @@ TEST(UplinkValidation, ServerFrameInputDecodesAndNamesTheField) {
   EXPECT_EQ(Packed(images.disparity), Packed(f.disparity));
   EXPECT_EQ(Packed(images.colour), Packed(f.colour));
 
-  frame.mutable_colour()->mutable_compressed()->set_payload("garbage");
-  frame.mutable_colour()->mutable_compressed()->set_width(31);
-  frame.mutable_colour()->mutable_compressed()->set_height(17);
-  frame.mutable_colour()->mutable_compressed()->set_encoding(v1::COLOR_RGB8);
-  frame.mutable_colour()->mutable_compressed()->set_compression(v1::COMPRESSION_ZSTD);
+  frame.mutable_color()->mutable_compressed()->set_payload("garbage");
+  frame.mutable_color()->mutable_compressed()->set_width(31);
+  frame.mutable_color()->mutable_compressed()->set_height(17);
+  frame.mutable_color()->mutable_compressed()->set_encoding(v1::COLOR_RGB8);
+  frame.mutable_color()->mutable_compressed()->set_compression(v1::COMPRESSION_ZSTD);
   const absl::Status s = server::PrepareFrameImages(frame, Limits{}, &scratch, &images);
   EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument);
   EXPECT_THAT(std::string(s.message()),
-              HasSubstr("frame.colour.compressed.payload is not a zstd frame"));
+              HasSubstr("frame.color.compressed.payload is not a zstd frame"));
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -441,6 +441,7 @@ class UplinkServerTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
     server::ServerOptions options;
+    EXPECT_TRUE(ApplyPreset("new_tsukuba", &options.defaults.frame).ok());  // camera-less frames
     options.listen = "127.0.0.1:0";
     options.metrics_listen = "";
     options.threads = 2;
@@ -583,7 +584,7 @@ TEST_F(UplinkServerTest, BadPayloadsAreAnsweredNamingTheFieldAndTheStreamGoesOn)
     *c = good;
     c->set_payload(b.payload);
     ASSERT_TRUE(convert::ToProto(f.colour.view(), "colour",
-                                 request.mutable_frame()->mutable_colour()->mutable_raw())
+                                 request.mutable_frame()->mutable_color()->mutable_raw())
                     .ok());
     grpc::ClientContext context;
     v1::CloudReply reply;

@@ -41,12 +41,26 @@ StageFlags::StageFlags(CLI::App& app, Groups groups, const FrameSettings& defaul
       draco_bits_(defaults.draco.position_bits),
       draco_speed_(defaults.draco.encode_speed) {
   const std::string& cam = groups.camera;
-  app.add_option("--focal", focal_,
-                 "Focal length in pixels, fx = fy (z = focal * baseline / d); the default is the "
-                 "source's camera where it has one")
-      ->check(Positive())
-      ->capture_default_str()
+  app.add_option("--camera-preset", preset_,
+                 "A known camera, by name: new_tsukuba (the paper's: fx = fy = 615, baseline 1, "
+                 "0 and 2047 invalid, and its passthrough z in [3, 12] unless passthrough flags "
+                 "are given). The camera flags below override its values")
+      ->check(CLI::IsMember(PresetNames()))
       ->group(cam);
+  CLI::Option* focal =
+      app.add_option("--focal", focal_,
+                     std::string("Focal length in pixels, fx = fy (z = focal * baseline / d)") +
+                         (defaults.focal_given ? ""
+                                               : "; no default: give it, or --camera-preset, "
+                                                 "unless the source has its own camera"))
+          ->check(Positive())
+          ->group(cam);
+  // A program that captures every default (cloudcast-server) must not show one it does not have.
+  if (defaults.focal_given) {
+    focal->capture_default_str();
+  } else {
+    focal->default_str("");
+  }
   app.add_option("--fy", fy_, "Vertical focal length in pixels [default: --focal]")
       ->check(Positive())
       ->group(cam);
@@ -58,12 +72,17 @@ StageFlags::StageFlags(CLI::App& app, Groups groups, const FrameSettings& defaul
   app.add_option("--cy", cy_, "Principal point row [default: height/2 of each frame]")
       ->check(Finite())
       ->group(cam);
-  app.add_option("--baseline", baseline_,
-                 "Stereo baseline, in the unit wanted for x y z (1 reproduces PCL: z = f/d; New "
-                 "Tsukuba: 0.1 for metres)")
-      ->check(Positive())
-      ->capture_default_str()
-      ->group(cam);
+  CLI::Option* baseline =
+      app.add_option("--baseline", baseline_,
+                     "Stereo baseline, in the unit wanted for x y z (1 reproduces PCL: z = f/d; "
+                     "New Tsukuba: 0.1 for metres); disparity and stereo input need it")
+          ->check(Positive())
+          ->group(cam);
+  if (defaults.baseline_given) {
+    baseline->capture_default_str();
+  } else {
+    baseline->default_str("");
+  }
   app.add_option("--disparity-scale", disparity_scale_,
                  "Multiplies raw disparity values (0.0625 for 1/16 fixed point)")
       ->check(NumberCheck("a finite number other than 0",
@@ -81,18 +100,27 @@ StageFlags::StageFlags(CLI::App& app, Groups groups, const FrameSettings& defaul
       ->check(CLI::IsMember({"x", "y", "z"}))
       ->capture_default_str()
       ->group(st);
-  app.add_option("--min", min_, "Passthrough lower limit, inclusive")
-      ->check(Finite())
-      ->capture_default_str()
-      ->group(st);
-  app.add_option("--max", max_, "Passthrough upper limit, inclusive")
-      ->check(Finite())
-      ->capture_default_str()
-      ->group(st);
+  // The passthrough is off unless asked for: --min or --max switches it on.
+  const bool pt_on = defaults.pipeline.passthrough.enabled;
+  CLI::Option* min = app.add_option(
+      "--min", min_, "Passthrough lower limit, inclusive, in the cloud's unit; switches it on");
+  min->check(Finite())->group(st);
+  CLI::Option* max = app.add_option(
+      "--max", max_, "Passthrough upper limit, inclusive, in the cloud's unit; switches it on");
+  max->check(Finite())->group(st);
+  if (pt_on) {
+    min->capture_default_str();
+    max->capture_default_str();
+  } else {
+    min->default_str("");
+    max->default_str("");
+  }
   app.add_flag("--negative", negative_, "Passthrough keeps the points outside [min, max]")
       ->group(st);
   app.add_flag("--no-passthrough", no_passthrough_,
-               "Switch the passthrough off (points without a valid disparity are still removed)")
+               std::string("Switch the passthrough off (points without a valid disparity are "
+                           "still removed)") +
+                   (pt_on ? "" : "; it is off unless --min, --max or a preset asks for it"))
       ->group(st);
   app.add_option("--leaf", leaf_, "Voxel grid leaf size on x, y and z; 0 switches it off")
       ->check(NumberCheck("a finite number >= 0 (0 switches the voxel grid off)",
@@ -120,17 +148,34 @@ StageFlags::StageFlags(CLI::App& app, Groups groups, const FrameSettings& defaul
 
 bool StageFlags::Given(const std::string& flag) const { return app_.count(flag) > 0; }
 
+bool StageFlags::PassThroughGiven() const {
+  return Given("--no-passthrough") || Given("--axis") || Given("--min") || Given("--max") ||
+         Given("--negative");
+}
+
 absl::StatusOr<FrameSettings> StageFlags::Apply(FrameSettings base) const {
+  if (Given("--camera-preset")) {
+    if (auto s = ApplyPreset(preset_, &base, "--camera-preset", !PassThroughGiven()); !s.ok()) {
+      return s;
+    }
+  }
   CameraModel& camera = base.pipeline.camera;
-  if (Given("--focal")) camera.fx = camera.fy = focal_;
+  if (Given("--focal")) {
+    camera.fx = camera.fy = focal_;
+    base.focal_given = true;
+  }
   if (fy_) camera.fy = *fy_;
   if (cx_) base.cx = *cx_;
   if (cy_) base.cy = *cy_;
-  if (Given("--baseline")) camera.baseline = baseline_;
+  if (Given("--baseline")) {
+    camera.baseline = baseline_;
+    base.baseline_given = true;
+  }
   if (Given("--disparity-scale")) camera.disparity_scale = disparity_scale_;
   if (Given("--disparity-offset")) camera.disparity_offset = disparity_offset_;
 
   PassThroughParams& pt = base.pipeline.passthrough;
+  if (Given("--min") || Given("--max")) pt.enabled = true;
   if (Given("--no-passthrough")) pt.enabled = !no_passthrough_;
   if (Given("--axis") && !ParseAxis(axis_, &pt.axis)) {
     return absl::InvalidArgumentError("--axis must be x, y or z, got " + axis_);
@@ -159,10 +204,17 @@ absl::StatusOr<FrameSettings> StageFlags::Apply(FrameSettings base) const {
   return base;
 }
 
+bool StageFlags::CameraGiven() const { return Given("--camera-preset") || Given("--focal"); }
+
 v1::StreamConfig StageFlags::GivenStageConfig() const {
   v1::StreamConfig config;
-  if (Given("--no-passthrough") || Given("--axis") || Given("--min") || Given("--max") ||
-      Given("--negative")) {
+  if (Given("--camera-preset") && !PassThroughGiven()) {
+    // The preset's depth range goes with it.
+    FrameSettings preset;
+    if (ApplyPreset(preset_, &preset).ok())
+      convert::SetPassThrough(preset.pipeline.passthrough, &config);
+  }
+  if (PassThroughGiven()) {
     v1::PassThroughConfig* p = config.mutable_passthrough();
     if (Given("--no-passthrough")) p->set_enabled(!no_passthrough_);
     Axis axis;

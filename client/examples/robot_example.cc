@@ -210,8 +210,9 @@ int main(int argc, char** argv) {
     }
     std::printf("\n");
   };
-  // f = 615 px (New Tsukuba's camera), passthrough z in [3, 12], 3 cm voxels: core's defaults.
-  cc::StreamConfig config = cc::MakeStreamConfig(cloudcast::PipelineOptions{});
+  // The server assumes no camera: this stand-in camera is New Tsukuba's, the paper's preset
+  // (f = 615 px, baseline 1, passthrough z in [3, 12]). A real robot sends its CameraInfo's.
+  cc::StreamConfig config = cc::PresetConfig("new_tsukuba").value();
   if (!matcher_name.empty()) cc::SetStereo(stereo, &config);  // how the server matches pairs
   if (camera.input == Input::kStereo && camera.files_a.empty()) {
     config.mutable_camera()->set_baseline(cloudcast::kSyntheticStereoBaseline);

@@ -120,14 +120,14 @@ absl::Status FillImages(const FrameInput& input, v1::Frame* frame) {
     if (absl::Status s = FillDisparity(f->disparity, frame->mutable_disparity()); !s.ok()) {
       return s;
     }
-    return FillColour(f->colour, frame->mutable_colour());
+    return FillColour(f->colour, frame->mutable_color());
   }
   if (const auto* f = std::get_if<DepthFrame>(&input)) {
     if (absl::Status s = FillDepth(f->depth, frame->mutable_depth()); !s.ok()) return s;
-    return FillColour(f->colour, frame->mutable_colour());
+    return FillColour(f->colour, frame->mutable_color());
   }
   const auto& f = std::get<StereoFrame>(input);
-  if (absl::Status s = FillColour(f.left, frame->mutable_colour(), "left"); !s.ok()) return s;
+  if (absl::Status s = FillColour(f.left, frame->mutable_color(), "left"); !s.ok()) return s;
   return FillColour(f.right, frame->mutable_right(), "right");
 }
 
@@ -141,7 +141,7 @@ std::uint64_t BytesOf(const Image& image) {
 }  // namespace
 
 std::uint64_t ImageBytes(const v1::Frame& frame) {
-  return BytesOf(frame.disparity()) + BytesOf(frame.depth()) + BytesOf(frame.colour()) +
+  return BytesOf(frame.disparity()) + BytesOf(frame.depth()) + BytesOf(frame.color()) +
          BytesOf(frame.right());
 }
 
@@ -150,6 +150,11 @@ void FillMeta(const FrameMeta& meta, std::uint64_t sequence, v1::Frame* frame) {
   frame->set_capture_time_unix_ns(meta.capture_time_unix_ns != 0 ? meta.capture_time_unix_ns
                                                                  : UnixNanosNow());
   frame->set_frame_id(meta.frame_id);
+  if (meta.camera.has_value()) {
+    *frame->mutable_camera() = *meta.camera;
+  } else {
+    frame->clear_camera();  // a reused Frame must not keep an earlier frame's camera
+  }
 }
 
 namespace {
@@ -216,8 +221,8 @@ absl::Status RequestWriter::Write(const FrameInput& input, const FrameMeta& meta
                                     frame->mutable_disparity(), &v1::DisparityImage::mutable_raw,
                                     FillDisparity, &planes[0]);
     if (s.ok()) {
-      s = FillOrHeader<ColorView>(f->colour, v1::Frame::kColourFieldNumber, "colour",
-                                  frame->mutable_colour(), &v1::ColorImage::mutable_raw,
+      s = FillOrHeader<ColorView>(f->colour, v1::Frame::kColorFieldNumber, "colour",
+                                  frame->mutable_color(), &v1::ColorImage::mutable_raw,
                                   fill_colour("colour"), &planes[1]);
     }
   } else if (const auto* f = std::get_if<DepthFrame>(&input)) {
@@ -225,14 +230,14 @@ absl::Status RequestWriter::Write(const FrameInput& input, const FrameMeta& meta
                                 frame->mutable_depth(), &v1::DepthImage::mutable_raw, FillDepth,
                                 &planes[0]);
     if (s.ok()) {
-      s = FillOrHeader<ColorView>(f->colour, v1::Frame::kColourFieldNumber, "colour",
-                                  frame->mutable_colour(), &v1::ColorImage::mutable_raw,
+      s = FillOrHeader<ColorView>(f->colour, v1::Frame::kColorFieldNumber, "colour",
+                                  frame->mutable_color(), &v1::ColorImage::mutable_raw,
                                   fill_colour("colour"), &planes[1]);
     }
   } else {
     const auto& pair = std::get<StereoFrame>(input);
-    s = FillOrHeader<ColorView>(pair.left, v1::Frame::kColourFieldNumber, "left",
-                                frame->mutable_colour(), &v1::ColorImage::mutable_raw,
+    s = FillOrHeader<ColorView>(pair.left, v1::Frame::kColorFieldNumber, "left",
+                                frame->mutable_color(), &v1::ColorImage::mutable_raw,
                                 fill_colour("left"), &planes[0]);
     if (s.ok()) {
       s = FillOrHeader<ColorView>(pair.right, v1::Frame::kRightFieldNumber, "right",

@@ -3,6 +3,9 @@
 #include <algorithm>
 #include <string>
 
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_join.h"
+
 namespace cloudcast {
 
 PipelineOptions FrameSettings::PipelineFor(std::uint32_t width, std::uint32_t height) const {
@@ -27,6 +30,41 @@ absl::Status FrameSettings::Validate(std::string_view field) const {
   if (auto s = PipelineFor(2, 2).Validate(field); !s.ok()) return s;
   if (auto s = Draco().Validate(prefix + "draco"); !s.ok()) return s;
   return stereo.Validate(prefix + "stereo");
+}
+
+const std::vector<std::string>& PresetNames() {
+  static const std::vector<std::string> names = {"new_tsukuba"};
+  return names;
+}
+
+absl::Status ApplyPreset(std::string_view name, FrameSettings* settings, std::string_view field,
+                         bool with_passthrough) {
+  if (name != "new_tsukuba") {
+    return absl::InvalidArgumentError(absl::StrCat(std::string(field), " is \"", std::string(name),
+                                                   "\"; it must be one of ",
+                                                   absl::StrJoin(PresetNames(), ", ")));
+  }
+  CameraModel& camera = settings->pipeline.camera;
+  const CameraModel pcl = CameraModel::PclCompatible(640, 480, 615.0);
+  camera.fx = pcl.fx;
+  camera.fy = pcl.fy;
+  camera.baseline = pcl.baseline;
+  camera.disparity_scale = pcl.disparity_scale;
+  camera.disparity_offset = pcl.disparity_offset;
+  camera.invalid_disparities = pcl.invalid_disparities;
+  settings->cx.reset();  // the centre of each frame, as PCL
+  settings->cy.reset();
+  settings->focal_given = true;
+  settings->baseline_given = true;
+  if (with_passthrough) {
+    PassThroughParams& pt = settings->pipeline.passthrough;
+    pt.enabled = true;
+    pt.axis = Axis::kZ;
+    pt.min = 3.0f;
+    pt.max = 12.0f;
+    pt.negative = false;
+  }
+  return absl::OkStatus();
 }
 
 }  // namespace cloudcast

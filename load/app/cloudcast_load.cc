@@ -276,7 +276,8 @@ std::unique_ptr<cloudcast::cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
 
   const std::string stages = "Camera and stages (stage flags left out: the server's defaults)";
   auto stage_flags = std::make_unique<cloudcast::cli::StageFlags>(
-      app, cloudcast::cli::StageFlags::Groups{stages, stages, stages});
+      app, cloudcast::cli::StageFlags::Groups{stages, stages, stages},
+      cloudcast::convert::ContractDefaults().frame);  // what a server has out of the box
   f.stereo = std::make_unique<cloudcast::cli::StereoFlags>(
       app, "Stereo matcher (--input stereo; flags left out: the server's defaults)");
 

@@ -1,11 +1,18 @@
 #include "cloudcast/proto/convert.h"
 
+#include <algorithm>
+#include <cctype>
 #include <cstring>
 #include <limits>
 #include <string>
 
+#include "absl/strings/cord.h"
 #include "absl/strings/str_cat.h"
 #include "cloudcast/core/checks.h"
+#include "google/protobuf/any.pb.h"
+#include "google/protobuf/io/coded_stream.h"
+#include "google/protobuf/io/zero_copy_stream_impl_lite.h"
+#include "google/protobuf/wire_format_lite.h"
 
 namespace cloudcast::convert {
 namespace {
@@ -49,9 +56,15 @@ absl::Status ResolveCamera(const v1::CameraModel& c, std::string_view p, FrameSe
     if (auto st = check::Positive(Path(p, "fx"), c.fx()); !st.ok()) return st;
     cam.fx = c.fx();
     cam.fy = c.fx();  // fy follows fx unless set
+    s->focal_given = true;
   }
   if (c.has_fy()) {
     if (auto st = check::Positive(Path(p, "fy"), c.fy()); !st.ok()) return st;
+    if (!c.has_fx() && !s->focal_given) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(Path(p, "fy"), " is set but ", Path(p, "fx"),
+                       " is not: fx is required, fy only overrides it (it defaults to fx)"));
+    }
     cam.fy = c.fy();
   }
   if (c.has_cx()) {
@@ -65,6 +78,7 @@ absl::Status ResolveCamera(const v1::CameraModel& c, std::string_view p, FrameSe
   if (c.has_baseline()) {
     if (auto st = check::Positive(Path(p, "baseline"), c.baseline()); !st.ok()) return st;
     cam.baseline = c.baseline();
+    s->baseline_given = true;
   }
   if (c.has_disparity_scale()) {
     if (auto st = check::NonZero(Path(p, "disparity_scale"), c.disparity_scale()); !st.ok()) {
@@ -103,6 +117,9 @@ absl::Status ResolvePassThrough(const v1::PassThroughConfig& c, std::string_view
                                 FrameSettings* s) {
   PassThroughParams& pt = s->pipeline.passthrough;
   if (c.has_enabled()) pt.enabled = c.enabled();
+  // A client that gives a limit (and says nothing of `enabled`) wants the range applied, also on
+  // a server whose default is no passthrough.
+  if (!c.has_enabled() && (c.has_min() || c.has_max())) pt.enabled = true;
   if (auto st = FromProto(c.axis(), Path(p, "axis"), &pt.axis); !st.ok()) return st;
   if (c.has_min()) {
     if (auto st = check::FiniteFloat(Path(p, "min"), c.min()); !st.ok()) return st;
@@ -440,6 +457,49 @@ absl::Status FromProto(v1::ColorEncoding encoding, std::string_view field, Color
 
 // ---------------------------------------------------------------------------------------------
 
+StreamSettings ContractDefaults() {
+  StreamSettings s;
+  s.frame.focal_given = false;
+  s.frame.baseline_given = false;
+  PassThroughParams& pt = s.frame.pipeline.passthrough;
+  pt.enabled = false;
+  pt.axis = Axis::kZ;
+  pt.min = std::numeric_limits<float>::lowest();
+  pt.max = std::numeric_limits<float>::max();
+  pt.negative = false;
+  return s;
+}
+
+absl::Status ApplyCamera(const v1::CameraModel& camera, std::string_view field,
+                         FrameSettings* settings) {
+  return ResolveCamera(camera, field, settings);
+}
+
+absl::Status RequireCamera(const FrameSettings& settings, v1::Frame::GeometryCase geometry,
+                           std::string_view field) {
+  const char* kind = geometry == v1::Frame::kDepth       ? "a depth frame"
+                     : geometry == v1::Frame::kDisparity ? "a disparity frame"
+                                                         : "a stereo pair";
+  if (!settings.focal_given) {
+    if (geometry == v1::Frame::kRight && settings.stereo.has_calibration) return absl::OkStatus();
+    return RequiredError(
+        Path(field, "fx"),
+        absl::StrCat(Path(field, "fx"), " is not set and ", kind,
+                     " needs the camera's focal length in pixels: set StreamConfig.camera (or "
+                     "Frame.camera) fx, fy, cx, cy, or use a preset (cloudcast-client "
+                     "--camera-preset new_tsukuba); this server has no default camera"));
+  }
+  if (!settings.baseline_given && geometry != v1::Frame::kDepth &&
+      !(geometry == v1::Frame::kRight && settings.stereo.has_calibration)) {
+    return RequiredError(
+        Path(field, "baseline"),
+        absl::StrCat(Path(field, "baseline"), " is not set and ", kind,
+                     " needs the stereo baseline (z = fx * baseline / disparity, in the unit "
+                     "wanted for x, y and z); this server has no default baseline"));
+  }
+  return absl::OkStatus();
+}
+
 absl::StatusOr<StreamSettings> Resolve(const v1::StreamConfig& config,
                                        const StreamSettings& defaults, std::string_view field) {
   StreamSettings s = defaults;
@@ -470,6 +530,12 @@ v1::StreamConfig ToProto(const StreamSettings& settings) {
   const FrameSettings& f = settings.frame;
   v1::StreamConfig c;
   SetCamera(f.pipeline.camera, &c);
+  // No default camera unless the operator gave one: a client must send its own.
+  if (!f.focal_given) {
+    c.mutable_camera()->clear_fx();
+    c.mutable_camera()->clear_fy();
+  }
+  if (!f.baseline_given) c.mutable_camera()->clear_baseline();
   if (f.cx.has_value()) {
     c.mutable_camera()->set_cx(*f.cx);
   } else {
@@ -570,6 +636,17 @@ void SetDraco(const DracoOptions& options, v1::StreamConfig* config) {
   } else {
     d->clear_max_position_error();
   }
+}
+
+absl::StatusOr<v1::StreamConfig> PresetConfig(std::string_view name, std::string_view field) {
+  FrameSettings settings;
+  if (absl::Status s = ApplyPreset(name, &settings, field); !s.ok()) return s;
+  v1::StreamConfig config;
+  SetCamera(settings.pipeline.camera, &config);
+  config.mutable_camera()->clear_cx();
+  config.mutable_camera()->clear_cy();
+  SetPassThrough(settings.pipeline.passthrough, &config);
+  return config;
 }
 
 v1::StreamConfig MakeStreamConfig(const PipelineOptions& options) {
@@ -860,6 +937,61 @@ absl::Status DecodeCompressed(const v1::CompressedColor& compressed, std::string
 
 // ---------------------------------------------------------------------------------------------
 
+namespace {
+
+// Where a status carries its field and rule when its message does not start with the field, or
+// the rule is not the code's (RequiredError).
+constexpr char kFieldPayload[] = "type.cloudcast.io/cloudcast.field";
+constexpr char kReasonPayload[] = "type.cloudcast.io/cloudcast.reason";
+constexpr char kBadRequestTypeUrl[] = "type.googleapis.com/google.rpc.BadRequest";
+
+// A proto field path: "frame.depth.raw.row_stride", "config.stereo.calibration.left_d",
+// "config.camera.invalid_disparities.values[3]".
+bool IsFieldPath(std::string_view token) {
+  if (token.empty() || !std::islower(static_cast<unsigned char>(token.front()))) return false;
+  for (char c : token) {
+    const auto u = static_cast<unsigned char>(c);
+    if (!(std::islower(u) || std::isdigit(u) || c == '_' || c == '.' || c == '[' || c == ']')) {
+      return false;
+    }
+  }
+  return token.back() != '.';
+}
+
+}  // namespace
+
+absl::Status RequiredError(std::string_view field, std::string_view message) {
+  absl::Status status = absl::InvalidArgumentError(S(message));
+  status.SetPayload(kFieldPayload, absl::Cord(S(field)));
+  status.SetPayload(kReasonPayload, absl::Cord("REQUIRED"));
+  return status;
+}
+
+v1::FieldViolation FieldViolationOf(const absl::Status& status, std::string_view fallback_field) {
+  v1::FieldViolation v;
+  v.set_description(std::string(status.message()));
+  if (auto field = status.GetPayload(kFieldPayload); field.has_value()) {
+    v.set_field(std::string(*field));
+  } else {
+    // Every message names its field first (core/checks.h words them so; the server's tests
+    // hold every error path to it), e.g. "frame.color.raw.height is 0".
+    const std::string message(status.message());
+    const std::size_t end = std::min(message.find_first_of(" :,;("), message.size());
+    const std::string_view token = std::string_view(message).substr(0, end);
+    // A dotted path ("frame.color.raw.height is 0"), or one word before a colon ("frame: ...");
+    // a plain first word ("the ...") is no field.
+    const bool path = IsFieldPath(token) && (token.find('.') != std::string_view::npos ||
+                                             (end < message.size() && message[end] == ':'));
+    v.set_field(path ? std::string(token) : S(fallback_field));
+  }
+  if (auto reason = status.GetPayload(kReasonPayload); reason.has_value()) {
+    v.set_reason(std::string(*reason));
+  } else {
+    v.set_reason(status.code() == absl::StatusCode::kResourceExhausted ? "OVER_LIMIT" : "INVALID");
+  }
+  return v;
+}
+
 void FillError(const absl::Status& status, v1::ErrorKind kind, std::uint64_t sequence,
                const std::string& frame_id, v1::FrameError* error) {
   error->set_sequence(sequence);
@@ -867,12 +999,79 @@ void FillError(const absl::Status& status, v1::ErrorKind kind, std::uint64_t seq
   error->set_code(static_cast<int>(status.code()));  // absl and gRPC share the numbering
   error->set_message(std::string(status.message()));
   error->set_kind(kind);
+  const char* fallback = kind == v1::ERROR_KIND_CONFIG    ? "config"
+                         : kind == v1::ERROR_KIND_REQUEST ? "kind"
+                                                          : "frame";
+  v1::BadRequest* bad = error->mutable_bad_request();
+  bad->clear_field_violations();
+  *bad->add_field_violations() = FieldViolationOf(status, fallback);
+  // A request with neither a config nor a frame: the oneof `kind` is what it got wrong.
+  if (kind == v1::ERROR_KIND_REQUEST) bad->mutable_field_violations(0)->set_field("kind");
+}
+
+std::string StatusDetails(const absl::Status& status, std::string_view fallback_field) {
+  v1::BadRequest bad;
+  *bad.add_field_violations() = FieldViolationOf(status, fallback_field);
+  google::protobuf::Any any;
+  any.set_type_url(kBadRequestTypeUrl);
+  any.set_value(bad.SerializeAsString());
+  const std::string any_bytes = any.SerializeAsString();
+  const std::string message(status.message());
+  // google.rpc.Status: code = 1, message = 2, repeated google.protobuf.Any details = 3.
+  std::string out;
+  {
+    google::protobuf::io::StringOutputStream stream(&out);
+    google::protobuf::io::CodedOutputStream coded(&stream);
+    coded.WriteTag(google::protobuf::internal::WireFormatLite::MakeTag(
+        1, google::protobuf::internal::WireFormatLite::WIRETYPE_VARINT));
+    coded.WriteVarint32SignExtended(static_cast<int>(status.code()));
+    for (const auto& [number, bytes] : {std::pair<int, const std::string*>{2, &message},
+                                        std::pair<int, const std::string*>{3, &any_bytes}}) {
+      coded.WriteTag(google::protobuf::internal::WireFormatLite::MakeTag(
+          number, google::protobuf::internal::WireFormatLite::WIRETYPE_LENGTH_DELIMITED));
+      coded.WriteVarint32(static_cast<std::uint32_t>(bytes->size()));
+      coded.WriteString(*bytes);
+    }
+  }
+  return out;
+}
+
+bool ParseStatusDetails(const std::string& details, v1::BadRequest* out) {
+  google::protobuf::io::CodedInputStream in(reinterpret_cast<const std::uint8_t*>(details.data()),
+                                            static_cast<int>(details.size()));
+  bool found = false;
+  while (std::uint32_t tag = in.ReadTag()) {
+    using google::protobuf::internal::WireFormatLite;
+    if (WireFormatLite::GetTagFieldNumber(tag) == 3 &&
+        WireFormatLite::GetTagWireType(tag) == WireFormatLite::WIRETYPE_LENGTH_DELIMITED) {
+      std::uint32_t size = 0;
+      std::string bytes;
+      if (!in.ReadVarint32(&size) || !in.ReadString(&bytes, static_cast<int>(size))) return false;
+      google::protobuf::Any any;
+      if (!any.ParseFromString(bytes)) return false;
+      if (any.type_url() != kBadRequestTypeUrl) continue;
+      v1::BadRequest bad;
+      if (!bad.ParseFromString(any.value())) return false;
+      out->MergeFrom(bad);
+      found = true;
+    } else if (!WireFormatLite::SkipField(&in, tag)) {
+      return false;
+    }
+  }
+  return found;
 }
 
 absl::Status ToStatus(const v1::FrameError& error) {
   int code = error.code();
   if (code <= 0 || code > 16) code = static_cast<int>(absl::StatusCode::kUnknown);
-  return absl::Status(static_cast<absl::StatusCode>(code), error.message());
+  absl::Status status(static_cast<absl::StatusCode>(code), error.message());
+  // The field and rule ride along, so that FieldViolationOf(status) gives them back.
+  if (error.bad_request().field_violations_size() > 0) {
+    const v1::FieldViolation& v = error.bad_request().field_violations(0);
+    status.SetPayload(kFieldPayload, absl::Cord(v.field()));
+    status.SetPayload(kReasonPayload, absl::Cord(v.reason()));
+  }
+  return status;
 }
 
 bool AnswersNoFrame(const v1::FrameError& error) {

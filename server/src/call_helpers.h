@@ -12,6 +12,7 @@
 
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
+#include "cloudcast/proto/convert.h"
 
 namespace cloudcast::server {
 
@@ -25,11 +26,21 @@ inline std::int64_t UnixNanos() {
 
 inline double Seconds(Clock::duration d) { return std::chrono::duration<double>(d).count(); }
 
-// `what`: the message the bytes should have been ("StreamRequest").
+// A refusal of what the client sent, as a call status: its FieldViolation goes in the status
+// details (a google.rpc.BadRequest), so that a client never parses the message. `fallback_field`:
+// the field when the message does not start with one (convert::FieldViolationOf).
+inline grpc::Status RequestError(const absl::Status& s, std::string_view fallback_field) {
+  return grpc::Status(static_cast<grpc::StatusCode>(s.code()), std::string(s.message()),
+                      convert::StatusDetails(s, fallback_field));
+}
+
+// `what`: the message the bytes should have been ("StreamRequest"). The field at fault is the
+// whole request: the empty path.
 inline grpc::Status Unparsable(const char* what, std::size_t bytes) {
-  return grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
-                      absl::StrCat("the request could not be parsed as a cloudcast.v1.", what, " (",
-                                   bytes, " bytes): not a valid protobuf message"));
+  return RequestError(absl::InvalidArgumentError(
+                          absl::StrCat("the request could not be parsed as a cloudcast.v1.", what,
+                                       " (", bytes, " bytes): not a valid protobuf message")),
+                      "");
 }
 
 inline grpc::Status ToGrpc(const absl::Status& s) {

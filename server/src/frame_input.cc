@@ -158,22 +158,22 @@ absl::Status PrepareFrameImages(const v1::Frame& frame, const Limits& limits,
       return absl::InvalidArgumentError(
           "frame.disparity is missing, and so are frame.depth and frame.right: set one (a "
           "disparity map, a depth image, or the right image of a stereo pair whose left is "
-          "frame.colour)");
+          "frame.color)");
   }
   if (!s.ok()) return s;
-  s = PrepareImage(frame.colour(), "frame.colour", limits, Plane(in_place, &InPlacePixels::colour),
+  s = PrepareImage(frame.color(), "frame.color", limits, Plane(in_place, &InPlacePixels::colour),
                    /*lossless=*/false, decode_colour, &scratch->colour_rows, &scratch->colour,
                    &scratch->colour_codec, &out->colour, &out->decoded);
   if (!s.ok()) return s;
   switch (out->kind) {
     case FrameKind::kDisparity:
-      return CheckSameSize(out->disparity, geometry_field, out->colour, "frame.colour");
+      return CheckSameSize(out->disparity, geometry_field, out->colour, "frame.color");
     case FrameKind::kDepth:
-      return CheckSameSize(out->depth, geometry_field, out->colour, "frame.colour");
+      return CheckSameSize(out->depth, geometry_field, out->colour, "frame.color");
     case FrameKind::kStereo:
       break;
   }
-  return CheckSameSize(out->colour, "frame.colour", out->right, geometry_field);
+  return CheckSameSize(out->colour, "frame.color", out->right, geometry_field);
 }
 
 namespace {
@@ -260,7 +260,7 @@ FrameMemoryCost EstimateFrameMemory(const v1::Frame& frame, const StereoParams& 
     default:
       g = CostOf<v1::DisparityImage, DisparityEncoding>(frame.disparity());
   }
-  const ImageCost c = CostOf<v1::ColorImage, ColorEncoding>(frame.colour());
+  const ImageCost c = CostOf<v1::ColorImage, ColorEncoding>(frame.color());
   FrameMemoryCost cost;
   // Both images are decoded before their sizes are compared: each is charged its own.
   cost.pixels = std::max(g.pixels, c.pixels);

@@ -4,7 +4,10 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <exception>
+#include <functional>
+#include <limits>
 #include <string>
 #include <utility>
 
@@ -22,7 +25,74 @@ std::uint32_t Micros(double seconds) {
   return static_cast<std::uint32_t>(std::clamp(seconds * 1e6, 0.0, 4.0e9));
 }
 
+// "z in [3, 12]", "x outside [-1, 1]", with the server's "no limit" floats shown as such.
+std::string RangeText(const PassThroughParams& pt) {
+  auto limit = [](float v) {
+    if (v <= std::numeric_limits<float>::lowest()) return std::string("-inf");
+    if (v >= std::numeric_limits<float>::max()) return std::string("+inf");
+    return absl::StrCat(v);
+  };
+  return absl::StrCat(std::string(Name(pt.axis)), pt.negative ? " outside [" : " in [",
+                      limit(pt.min), ", ", limit(pt.max), "]");
+}
+
 }  // namespace
+
+void FrameProcessor::ExplainEmpty(
+    const StageCounts& counts, const PipelineOptions& options,
+    const std::function<absl::Status(const PipelineOptions&, PointCloud*)>& rerun,
+    v1::CloudReply* reply) {
+  if (counts.pixels == 0 || counts.after_voxel > 0) return;
+  v1::EmptyCloud* empty = reply->mutable_empty();
+  if (counts.valid_points == 0) {
+    empty->set_stage(v1::STAGE_CONVERSION);
+    empty->set_reason("NO_VALID_PIXELS");
+    empty->set_message(absl::StrCat(
+        "conversion: none of the ", counts.pixels,
+        " pixels had a valid disparity or depth (0, NaN, infinite, an invalid disparity value, "
+        "or a point behind the camera): check the image's encoding and config.camera"));
+    return;
+  }
+  if (counts.after_passthrough == 0) {
+    const PassThroughParams& pt = options.passthrough;
+    empty->set_stage(v1::STAGE_PASSTHROUGH);
+    empty->set_reason("OUTSIDE_RANGE");
+    std::string seen;
+    // The points the passthrough saw, once more without it, for the range they span: only for a
+    // frame that came out empty, so the common case pays nothing.
+    PipelineOptions unfiltered = options;
+    unfiltered.passthrough.enabled = false;
+    unfiltered.voxel.enabled = false;
+    if (rerun(unfiltered, &unfiltered_).ok() && !unfiltered_.empty()) {
+      const int axis = pt.axis == Axis::kX ? 0 : pt.axis == Axis::kY ? 1 : 2;
+      float lo = std::numeric_limits<float>::max();
+      float hi = std::numeric_limits<float>::lowest();
+      for (const Point& p : unfiltered_.points) {
+        const float v = axis == 0 ? p.x : axis == 1 ? p.y : p.z;
+        if (!std::isfinite(v)) continue;
+        lo = std::min(lo, v);
+        hi = std::max(hi, v);
+      }
+      if (lo <= hi) {
+        empty->set_observed_min(lo);
+        empty->set_observed_max(hi);
+        seen = absl::StrCat(", and the points' ", std::string(Name(pt.axis)), " lies in [", lo,
+                            ", ", hi, "]");
+      }
+      unfiltered_.ResizeUnorganized(0);
+    }
+    empty->set_message(absl::StrCat("passthrough removed all ", counts.valid_points,
+                                    " valid points: it keeps ", RangeText(pt),
+                                    " (config.passthrough)", seen,
+                                    "; x, y and z are in the unit of the depth or the baseline"));
+    return;
+  }
+  empty->set_stage(v1::STAGE_VOXEL_GRID);
+  empty->set_reason("VOXELS_UNDER_MIN_POINTS");
+  empty->set_message(absl::StrCat(
+      "voxel grid: none of its voxels held ", options.voxel.min_points_per_voxel, " of the ",
+      counts.after_passthrough, " points (config.voxel_grid.min_points_per_voxel)"));
+}
 
 double ThreadCpuSeconds() {
   timespec ts{};
@@ -38,6 +108,28 @@ absl::Status FrameProcessor::Process(const v1::Frame& frame, const InPlacePixels
   reply->set_frame_id(frame.frame_id());
   reply->set_capture_time_unix_ns(frame.capture_time_unix_ns());
 
+  // The frame's own camera, field by field over the stream's; then the camera this frame needs.
+  const FrameSettings* effective = &settings;
+  FrameSettings with_frame_camera;
+  if (frame.has_camera()) {
+    with_frame_camera = settings;
+    if (absl::Status s = convert::ApplyCamera(frame.camera(), "frame.camera", &with_frame_camera);
+        !s.ok()) {
+      return s;
+    }
+    effective = &with_frame_camera;
+  }
+  if (frame.geometry_case() != v1::Frame::GEOMETRY_NOT_SET) {
+    if (absl::Status s = convert::RequireCamera(*effective, frame.geometry_case()); !s.ok()) {
+      return s;
+    }
+  }
+  return ProcessWith(frame, in_place, *effective, reply, costs);
+}
+
+absl::Status FrameProcessor::ProcessWith(const v1::Frame& frame, const InPlacePixels* in_place,
+                                         const FrameSettings& settings, v1::CloudReply* reply,
+                                         FrameCosts* costs) {
   const Clock::time_point t0 = Clock::now();
   FrameImages images;
   if (absl::Status s =
@@ -53,6 +145,8 @@ absl::Status FrameProcessor::Process(const v1::Frame& frame, const InPlacePixels
   StageCounts counts;
   const double cpu0 = ThreadCpuSeconds();
   absl::Status status;
+  PipelineOptions ran = options;
+  MatchedPair pair;
   switch (images.kind) {
     case FrameKind::kDisparity:
       status = pipeline_.Run(options, images.disparity, images.colour, &cloud_, &counts);
@@ -62,15 +156,13 @@ absl::Status FrameProcessor::Process(const v1::Frame& frame, const InPlacePixels
       break;
     case FrameKind::kStereo: {
       // The stream's camera for this size; a calibration gives the rectified one instead.
-      MatchedPair pair;
       status = stereo_.Match(images.colour, images.right, settings, options.camera,
                              settings.pipeline.limits.max_stereo_volume, &pair);
       costs->rectify_seconds = pair.rectify_seconds;
       costs->match_seconds = pair.match_seconds;
       if (!status.ok()) break;
-      PipelineOptions matched = options;
-      matched.camera = pair.camera;
-      status = pipeline_.Run(matched, pair.disparity, pair.colour, &cloud_, &counts);
+      ran.camera = pair.camera;
+      status = pipeline_.Run(ran, pair.disparity, pair.colour, &cloud_, &counts);
       if (status.ok() && settings.stereo.return_disparity) {
         status = convert::ToProto(pair.disparity, convert::Compression{}, "disparity",
                                   reply->mutable_disparity(), &disparity_compressor_);
@@ -95,6 +187,20 @@ absl::Status FrameProcessor::Process(const v1::Frame& frame, const InPlacePixels
   // frame (e.g. a cloud too wide for 30 position bits under the error bound).
   if (!status.ok()) return status;
 
+  ExplainEmpty(
+      counts, ran,
+      [&](const PipelineOptions& o, PointCloud* out) {
+        switch (images.kind) {
+          case FrameKind::kDisparity:
+            return pipeline_.Run(o, images.disparity, images.colour, out);
+          case FrameKind::kDepth:
+            return pipeline_.Run(o, images.depth, images.colour, out);
+          case FrameKind::kStereo:
+            return pipeline_.Run(o, pair.disparity, pair.colour, out);
+        }
+        return absl::OkStatus();
+      },
+      reply);
   reply->set_point_count(static_cast<std::uint32_t>(counts.after_voxel));
   reply->set_position_error_bound(info.position_error_bound);
   reply->set_position_bits(info.position_bits);

@@ -4,6 +4,7 @@
 
 #include <chrono>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -48,8 +49,19 @@ class FrameProcessor {
                        const FrameSettings& settings, v1::CloudReply* reply, FrameCosts* costs);
 
  private:
+  // Process with the frame's camera applied and checked.
+  absl::Status ProcessWith(const v1::Frame& frame, const InPlacePixels* in_place,
+                           const FrameSettings& settings, v1::CloudReply* reply, FrameCosts* costs);
+  // A frame with pixels whose cloud came out empty: reply.empty says which stage took the last
+  // points and why; for the passthrough, `rerun` runs the pipeline again without it to measure
+  // the range the points spanned.
+  void ExplainEmpty(const StageCounts& counts, const PipelineOptions& options,
+                    const std::function<absl::Status(const PipelineOptions&, PointCloud*)>& rerun,
+                    v1::CloudReply* reply);
+
   Pipeline pipeline_;
   PointCloud cloud_;
+  PointCloud unfiltered_;  // ExplainEmpty's
   DecodeScratch decode_;
   StereoStage stereo_;
   PlaneCompressor disparity_compressor_;  // the disparity map sent back on request

@@ -64,8 +64,10 @@ void ProcessCall::OnReadDone(bool ok) {
   if (!ok) {
     // Cancelled, or the client half-closed without a request.
     admitted.ticket.Release();
-    Finish(grpc::Status(grpc::StatusCode::INVALID_ARGUMENT,
-                        "the Process call ended before its ProcessRequest arrived"));
+    // The whole request is what is missing: the empty field path, as for one that does not parse.
+    Finish(RequestError(absl::InvalidArgumentError(
+                            "the Process call ended before its ProcessRequest arrived"),
+                        ""));
     return;
   }
   const Arrival arrival{Clock::now(), UnixNanos()};

@@ -36,7 +36,7 @@ Plane PlaneOf(std::uint64_t number) {
       return Plane::kDisparity;
     case v1::Frame::kDepthFieldNumber:
       return Plane::kDepth;
-    case v1::Frame::kColourFieldNumber:
+    case v1::Frame::kColorFieldNumber:
       return Plane::kColour;
     case v1::Frame::kRightFieldNumber:
       return Plane::kRight;
@@ -348,7 +348,7 @@ void RequestReader::PutPixelsBack(v1::Frame* frame) const {
     frame->mutable_depth()->mutable_raw()->set_pixels(Joined(pixels_.depth));
   }
   if (pixels_.colour.size > 0) {
-    frame->mutable_colour()->mutable_raw()->set_pixels(Joined(pixels_.colour));
+    frame->mutable_color()->mutable_raw()->set_pixels(Joined(pixels_.colour));
   }
   if (pixels_.right.size > 0) {
     frame->mutable_right()->mutable_raw()->set_pixels(Joined(pixels_.right));

@@ -36,7 +36,7 @@ struct ScatteredBytes {
 struct InPlacePixels {
   ScatteredBytes disparity;  // frame.disparity.raw.pixels
   ScatteredBytes depth;      // frame.depth.raw.pixels
-  ScatteredBytes colour;     // frame.colour.raw.pixels
+  ScatteredBytes colour;     // frame.color.raw.pixels
   ScatteredBytes right;      // frame.right.raw.pixels
 
   bool empty() const {

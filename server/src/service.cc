@@ -90,7 +90,7 @@ void CloudCastService::ServeProcess(ProcessCall* process, AdmittedCall admitted,
   auto settings = convert::Resolve(call->request.config(), *admitted.caller.defaults);
   if (!settings.ok()) {
     metrics_->FrameErrors(settings.status().code()).Increment();
-    return fail(ToGrpc(settings.status()));
+    return fail(RequestError(settings.status(), "config"));
   }
   call->settings = std::make_shared<const StreamSettings>(*std::move(settings));
   bool for_memory = false;
@@ -98,9 +98,9 @@ void CloudCastService::ServeProcess(ProcessCall* process, AdmittedCall admitted,
                                      call->settings->frame.stereo, &for_memory);
   if (!charge.ok()) {
     metrics_->FrameErrors(charge.status().code()).Increment();
-    if (!for_memory) return fail(ToGrpc(charge.status()));
+    if (!for_memory) return fail(RequestError(charge.status(), "frame"));
     RefuseLater(process, std::make_shared<Admission::Ticket>(std::move(call->ticket)),
-                ToGrpc(charge.status()));
+                RequestError(charge.status(), "frame"));
     return;
   }
   call->charge = *std::move(charge);
@@ -118,7 +118,7 @@ void CloudCastService::ServeProcess(ProcessCall* process, AdmittedCall admitted,
           metrics_->total_seconds.Observe(Seconds(Clock::now() - arrival.time));
           metrics_->bytes_sent.Increment(static_cast<double>(process->Reply(call->reply)));
         } else {
-          process->Fail(ToGrpc(status));
+          process->Fail(RequestError(status, "frame"));
         }
         ProcessDone();
       },
@@ -139,6 +139,7 @@ grpc::ServerUnaryReactor* CloudCastService::GetInfo(grpc::CallbackServerContext*
     return reactor;
   }
   info->set_version(CLOUDCAST_VERSION);
+  info->set_contract_revision(convert::kContractRevision);
   v1::ServerLimits* limits = info->mutable_limits();
   limits->set_max_message_bytes(options_.max_message_bytes);
   limits->set_max_side(options_.limits.max_side);

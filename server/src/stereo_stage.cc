@@ -78,8 +78,8 @@ absl::Status StereoStage::Match(const ColorView& left, const ColorView& right,
     const StereoCalibration& k = params.calibration;
     if (left.width != k.width || left.height != k.height) {
       return absl::InvalidArgumentError(absl::StrCat(
-          "frame.colour is ", left.width, "x", left.height,
-          " but config.stereo.calibration is for ", k.width, "x", k.height, " images"));
+          "frame.color is ", left.width, "x", left.height, " but config.stereo.calibration is for ",
+          k.width, "x", k.height, " images"));
     }
     absl::StatusOr<std::shared_ptr<const stereo::Rectifier>> rectifier = rectifiers_->Get(k);
     if (!rectifier.ok()) return rectifier.status();
@@ -96,7 +96,7 @@ absl::Status StereoStage::Match(const ColorView& left, const ColorView& right,
     matched_camera.baseline = rc.baseline;
   }
   const Clock::time_point t1 = Clock::now();
-  if (auto s = stereo::ToGrey(l, &grey_left_, "frame.colour"); !s.ok()) return s;
+  if (auto s = stereo::ToGrey(l, &grey_left_, "frame.color"); !s.ok()) return s;
   if (auto s = stereo::ToGrey(r, &grey_right_, "frame.right"); !s.ok()) return s;
   if (matcher_ == nullptr || !SameMatcher(matcher_params_, params)) {
     absl::StatusOr<std::unique_ptr<stereo::Matcher>> m = stereo::MakeMatcher(params);

@@ -201,12 +201,12 @@ absl::Status UplinkFrame::ToProto(v1::Frame* frame) const {
       if (absl::Status s = DisparityToProto(disparity(), frame->mutable_disparity()); !s.ok()) {
         return s;
       }
-      return ColourToProto(colour(), "colour", frame->mutable_colour());
+      return ColourToProto(colour(), "colour", frame->mutable_color());
     case FrameKind::kDepth:
       if (absl::Status s = DepthToProto(depth(), frame->mutable_depth()); !s.ok()) return s;
-      return ColourToProto(colour(), "colour", frame->mutable_colour());
+      return ColourToProto(colour(), "colour", frame->mutable_color());
     case FrameKind::kStereo:
-      if (absl::Status s = ColourToProto(colour(), "left", frame->mutable_colour()); !s.ok()) {
+      if (absl::Status s = ColourToProto(colour(), "left", frame->mutable_color()); !s.ok()) {
         return s;
       }
       return ColourToProto(right(), "right", frame->mutable_right());

@@ -262,7 +262,7 @@ absl::StatusOr<v1::Frame> BigFrame(std::uint32_t side, const std::string& encodi
     if (!cv::imencode(".png", rgb, bytes, {cv::IMWRITE_PNG_COMPRESSION, 9})) {
       return absl::InternalError("PNG encoding failed");
     }
-    frame.mutable_colour()->set_encoded(bytes.data(), bytes.size());
+    frame.mutable_color()->set_encoded(bytes.data(), bytes.size());
     return frame;
   }
   DisparityView dv;
@@ -281,7 +281,7 @@ absl::StatusOr<v1::Frame> BigFrame(std::uint32_t side, const std::string& encodi
     if (auto s = convert::ToProto(dv, "d", frame.mutable_disparity()->mutable_raw()); !s.ok()) {
       return s;
     }
-    if (auto s = convert::ToProto(cv_, "c", frame.mutable_colour()->mutable_raw()); !s.ok()) {
+    if (auto s = convert::ToProto(cv_, "c", frame.mutable_color()->mutable_raw()); !s.ok()) {
       return s;
     }
     return frame;
@@ -292,7 +292,7 @@ absl::StatusOr<v1::Frame> BigFrame(std::uint32_t side, const std::string& encodi
       !s.ok()) {
     return s;
   }
-  if (auto s = convert::ToProto(cv_, z, "c", frame.mutable_colour()->mutable_compressed());
+  if (auto s = convert::ToProto(cv_, z, "c", frame.mutable_color()->mutable_compressed());
       !s.ok()) {
     return s;
   }

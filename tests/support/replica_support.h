@@ -65,7 +65,10 @@ class ServerProcess {
     for (const std::string& a :
          {BinDir() + "/cloudcast-server", std::string("--listen"), address,
           std::string("--metrics-listen"), metrics_listen, std::string("--instance"), instance,
-          std::string("--log-level"), log_level}) {
+          std::string("--log-level"), log_level,
+          // The paper's camera and range as the defaults, stated: the tests stream its frames
+          // (or the synthetic scene's, the same camera) without a camera of their own.
+          std::string("--camera-preset"), std::string("new_tsukuba")}) {
       args.push_back(a);
     }
     if (!ready_path_.empty()) {

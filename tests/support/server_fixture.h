@@ -23,12 +23,22 @@
 namespace cloudcast::testing {
 
 // 127.0.0.1 on a free port, no metrics exporter, two workers (the cores of these machines; the
-// GetInfo test checks the number), everything else at its default.
-inline server::ServerOptions TestServerOptions() {
+// GetInfo test checks the number), everything else at its default, but for the stream defaults:
+// the paper's setting (preset new_tsukuba), stated as an operator would (cloudcast-server
+// --camera-preset new_tsukuba), since most tests send New Tsukuba frames (or the synthetic
+// scene's, with the same camera at 640x480) and leave the camera and passthrough to the server.
+// The contract's own defaults (no camera, no passthrough): ContractServerOptions().
+inline server::ServerOptions ContractServerOptions() {
   server::ServerOptions options;
   options.listen = "127.0.0.1:0";
   options.metrics_listen = "";
   options.threads = 2;
+  return options;
+}
+
+inline server::ServerOptions TestServerOptions() {
+  server::ServerOptions options = ContractServerOptions();
+  EXPECT_TRUE(ApplyPreset("new_tsukuba", &options.defaults.frame).ok());
   return options;
 }
 

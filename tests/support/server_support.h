@@ -135,14 +135,14 @@ inline v1::Frame MakeFrame(const SourceFrame& f, std::uint64_t sequence,
     d->set_width(f.disparity.width);
     d->set_height(f.disparity.height);
     d->set_pixels(f.disparity.pixels.data(), f.disparity.pixels.size());
-    v1::RawColor* c = frame.mutable_colour()->mutable_raw();
+    v1::RawColor* c = frame.mutable_color()->mutable_raw();
     c->set_encoding(v1::COLOR_BGR8);
     c->set_width(f.colour.width);
     c->set_height(f.colour.height);
     c->set_pixels(f.colour.pixels.data(), f.colour.pixels.size());
   } else {
     frame.mutable_disparity()->set_encoded(f.disparity_png);
-    frame.mutable_colour()->set_encoded(input == Input::kPng ? f.colour_png : f.colour_jpeg);
+    frame.mutable_color()->set_encoded(input == Input::kPng ? f.colour_png : f.colour_jpeg);
   }
   return frame;
 }

@@ -226,7 +226,8 @@ std::unique_ptr<cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
 
   const std::string stages = "Camera and stages (stage flags left out: the server's defaults)";
   auto stage_flags =
-      std::make_unique<cli::StageFlags>(app, cli::StageFlags::Groups{stages, stages, stages});
+      std::make_unique<cli::StageFlags>(app, cli::StageFlags::Groups{stages, stages, stages},
+                                        convert::ContractDefaults().frame);
   f.stereo = std::make_unique<cli::StereoFlags>(
       app, "Stereo matcher (--input stereo; flags left out: the server's defaults)");
 
@@ -296,10 +297,34 @@ std::unique_ptr<cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
   return stage_flags;
 }
 
+sources::FrameKind InputKind(const Flags& f) {
+  sources::FrameKind kind = sources::FrameKind::kDisparity;
+  sources::ParseFrameKind(f.input, &kind);  // checked by --input's IsMember
+  return kind;
+}
+
 // The StreamConfig the flags ask for. The camera is always sent (it belongs to the source);
 // stage settings only when given, so that the server's configured defaults apply otherwise.
-StreamConfig BuildConfig(const Flags& f, const cli::StageFlags& stages,
-                         const sources::SourceInfo& info) {
+// Image files and videos carry no camera: they need --camera-preset or --focal (and --baseline
+// for disparity and stereo input), since no data set's camera is assumed.
+absl::StatusOr<StreamConfig> BuildConfig(const Flags& f, const cli::StageFlags& stages,
+                                         const sources::SourceInfo& info) {
+  const bool source_camera = info.kind == "tsukuba" || info.kind == "synthetic";
+  const sources::FrameKind kind = InputKind(f);
+  if (!source_camera && !stages.CameraGiven()) {
+    return absl::InvalidArgumentError(fmt::format(
+        "the camera of {} input ({}) is unknown: give --focal (and --cx/--cy if the principal "
+        "point is not the image centre{}), or a preset (--camera-preset {})",
+        f.input, info.kind, kind == sources::FrameKind::kDepth ? "" : "; --baseline too",
+        absl::StrJoin(PresetNames(), "|")));
+  }
+  if (!source_camera && kind != sources::FrameKind::kDepth && !stages.Given("--camera-preset") &&
+      !stages.Given("--baseline")) {
+    return absl::InvalidArgumentError(fmt::format(
+        "--input {} needs the stereo baseline: give --baseline (in the unit wanted for x, y and "
+        "z; 1 gives z = focal / disparity, as PCL), or --camera-preset",
+        f.input));
+  }
   StreamConfig config = stages.GivenStageConfig();
   FrameSettings source;
   source.pipeline.camera = info.camera;
@@ -321,12 +346,6 @@ StreamConfig BuildConfig(const Flags& f, const cli::StageFlags& stages,
   config.set_delivery(f.lossless ? v1::DELIVERY_ALL : v1::DELIVERY_LATEST);
   if (f.stereo->AnyGiven()) *config.mutable_stereo() = f.stereo->GivenStereoConfig();
   return config;
-}
-
-sources::FrameKind InputKind(const Flags& f) {
-  sources::FrameKind kind = sources::FrameKind::kDisparity;
-  sources::ParseFrameKind(f.input, &kind);  // checked by --input's IsMember
-  return kind;
 }
 
 // Opens the source the flags name, or the default one.
@@ -493,7 +512,9 @@ int Run(const Flags& f, const cli::StageFlags& stages) {
   options.security = f.security;
   options.connect_timeout = std::chrono::milliseconds(
       static_cast<std::int64_t>(std::llround(f.connect_timeout_s * 1000)));
-  options.config = BuildConfig(f, stages, src.info());
+  auto config = BuildConfig(f, stages, src.info());
+  if (!config.ok()) return Fail(config.status());
+  options.config = *std::move(config);
   options.fps = f.fps;
   options.max_in_flight = f.in_flight;
   sources::ParseUplink(f.encoding, &options.uplink.encoding);
@@ -514,7 +535,15 @@ int Run(const Flags& f, const cli::StageFlags& stages) {
   CloudMailbox mailbox(/*wait_for_viewer=*/f.fps == 0);
   std::mutex record_mu;
   absl::Status record_status;
+  // An empty cloud is said once per stage that emptied it, so a wrong camera or range is never
+  // silent (the reply says which stage took the points and why).
+  std::atomic<int> empty_stage{v1::STAGE_UNSPECIFIED};
   auto on_result = [&](Result& result) {
+    if (result.status.ok() && result.reply.has_empty() &&
+        empty_stage.exchange(result.reply.empty().stage()) != result.reply.empty().stage()) {
+      spdlog::warn("frame {}: empty cloud: {}", result.reply.sequence(),
+                   result.reply.empty().message());
+    }
     if (f.print_frames) PrintFrameLine(result, stereo);
     if (recorder) {
       absl::Status s = recorder->Save(result);

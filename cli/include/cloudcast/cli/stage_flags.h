@@ -1,7 +1,8 @@
 // The stage flags, defined once for every program (cloudcast-process, cloudcast-server,
-// cloudcast-client, cloudcast-load): camera, passthrough, voxel grid and Draco. Defaults come
-// from the FrameSettings the program passes (the core structs' own unless it says otherwise), and
-// --help shows them.
+// cloudcast-client, cloudcast-load): camera (a preset, or its values), passthrough, voxel grid
+// and Draco. Defaults come from the FrameSettings the program passes (the core structs' own unless
+// it says otherwise), and --help shows them; a camera or passthrough the defaults do not have
+// (FrameSettings::focal_given, passthrough off) shows none.
 //
 //   CLI::App app;
 //   cloudcast::cli::StageFlags stages(app, {"Camera", "Stages", "Draco"});
@@ -43,9 +44,14 @@ class StageFlags {
 
   // Whether a flag was given, e.g. Given("--focal").
   bool Given(const std::string& flag) const;
+  // Whether the camera was given: --camera-preset or --focal.
+  bool CameraGiven() const;
+  // Whether any passthrough flag was given (a preset's range then stays out).
+  bool PassThroughGiven() const;
 
  private:
   CLI::App& app_;
+  std::string preset_;
   double focal_;
   std::optional<double> fy_, cx_, cy_;
   double baseline_, disparity_scale_, disparity_offset_;

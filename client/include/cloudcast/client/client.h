@@ -10,7 +10,7 @@
 //
 // Errors are absl::Status values with gRPC's codes (the two share numbering). RPC failures keep
 // the server's message (which names the offending field) behind the call and target, e.g.
-// "Process on robot-pc:50051: frame.colour.raw.width is ...". cv::Mat inputs: opencv.h.
+// "Process on robot-pc:50051: frame.color.raw.width is ...". cv::Mat inputs: opencv.h.
 #pragma once
 
 #include <cstdint>

@@ -21,6 +21,9 @@ using convert::SetVoxelGrid;
 using convert::SetDraco;
 // The stereo matcher's settings (StreamConfig.stereo) for frames that are stereo pairs.
 using convert::SetStereo;
+// A named preset's camera and passthrough, e.g. PresetConfig("new_tsukuba"), the paper's: the
+// server assumes no camera, so a client states its own or a preset's.
+using convert::PresetConfig;
 // Camera, passthrough and voxel grid of `options` (its limits are the server's business).
 // Draco and delivery stay at the server defaults.
 using convert::MakeStreamConfig;

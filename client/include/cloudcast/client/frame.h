@@ -125,6 +125,9 @@ struct FrameMeta {
   std::int64_t capture_time_unix_ns = 0;
   // The camera's coordinate frame, like a ROS frame_id.
   std::string frame_id;
+  // This frame's own camera (Frame.camera): each field set overrides the stream's for this frame
+  // only (a zoom, an auto-calibration, a CameraInfo per message). Unset: the stream's.
+  std::optional<v1::CameraModel> camera;
 };
 
 // Nanoseconds since the Unix epoch, now (std::chrono::system_clock).

@@ -6,7 +6,9 @@
 
 #include <cstdint>
 #include <optional>
+#include <string>
 #include <string_view>
+#include <vector>
 
 #include "absl/status/status.h"
 #include "cloudcast/core/draco_codec.h"
@@ -28,6 +30,11 @@ struct FrameSettings {
   // Unset: a quarter of the smallest voxel leaf while the voxel grid is on (each decoded point
   // stays within a quarter of its voxel), and no bound while it is off. 0: no bound.
   std::optional<float> max_position_error;
+  // Whether the camera's focal length and baseline were given (by a client, an operator or a
+  // preset) rather than left at CameraModel's values. The contract assumes no data set's camera
+  // (convert::ContractDefaults clears both); the core's own programs start from a given camera.
+  bool focal_given = true;
+  bool baseline_given = true;
 
   // The pipeline options for a width x height frame.
   PipelineOptions PipelineFor(std::uint32_t width, std::uint32_t height) const;
@@ -37,5 +44,18 @@ struct FrameSettings {
   // Everything in range, for any frame size; errors name the member under `field`.
   absl::Status Validate(std::string_view field = "") const;
 };
+
+// Named settings for a known camera, for programs and clients that stream one. Each sets the
+// camera (focal length, baseline, invalid values; the principal point stays the image centre)
+// and the depth range it was published with:
+//   new_tsukuba  the paper's: New Tsukuba's ground-truth disparities through PCL's conversion,
+//                fx = fy = 615, baseline 1 (z = 615 / d), 0 and 2047 invalid, passthrough z in
+//                [3, 12].
+// The names, for --help and errors.
+const std::vector<std::string>& PresetNames();
+// Applies preset `name` to `settings`; INVALID_ARGUMENT naming `field` for an unknown name.
+// `with_passthrough` false keeps `settings`' passthrough (a caller that was given one).
+absl::Status ApplyPreset(std::string_view name, FrameSettings* settings,
+                         std::string_view field = "preset", bool with_passthrough = true);
 
 }  // namespace cloudcast

@@ -26,6 +26,10 @@
 
 namespace cloudcast::convert {
 
+// The revision of cloudcast.proto this code speaks (ServerInfo.contract_revision); each one is
+// described in docs/migration.md.
+inline constexpr char kContractRevision[] = "2";
+
 // ---------------------------------------------------------------------------------------------
 // Delivery: how a stream treats frames that arrive faster than they are processed.
 
@@ -73,6 +77,22 @@ absl::StatusOr<StreamSettings> Resolve(const v1::StreamConfig& config,
                                        const StreamSettings& defaults,
                                        std::string_view field = "config");
 
+// The contract's defaults, what a server starts from before its operator's flags: no camera (a
+// client must give fx, and a baseline for disparities; see RequireCamera), no passthrough (its
+// limits the lowest and highest floats), the core's voxel grid, Draco and stereo defaults.
+StreamSettings ContractDefaults();
+
+// Applies a CameraModel's set fields to `settings` (Resolve's camera section), checked, errors
+// naming the fields under `field`: for a Frame's own camera, "frame.camera".
+absl::Status ApplyCamera(const v1::CameraModel& camera, std::string_view field,
+                         FrameSettings* settings);
+
+// Whether `settings` have the camera a frame with `geometry` needs: fx always, and a baseline
+// for disparity maps and uncalibrated stereo pairs (a calibration gives both for a pair).
+// Otherwise INVALID_ARGUMENT naming `field`.fx or `field`.baseline with the reason REQUIRED.
+absl::Status RequireCamera(const FrameSettings& settings, v1::Frame::GeometryCase geometry,
+                           std::string_view field = "config.camera");
+
 // Every field of a StreamConfig filled from `settings` (GetInfo's defaults); cx and cy only when
 // they are set, since unset they follow each frame's size. max_position_error is the bound these
 // settings' leaf gives.
@@ -88,6 +108,11 @@ void SetVoxelGrid(const VoxelGridParams& params, v1::StreamConfig* config);
 void SetDraco(const DracoOptions& options, v1::StreamConfig* config);
 // Every matcher field, return_disparity, and the calibration when it has one.
 void SetStereo(const StereoParams& params, v1::StreamConfig* config);
+// A StreamConfig holding preset `name`'s camera (the principal point left to each frame's
+// centre) and passthrough (cloudcast/core/settings.h, ApplyPreset); the other sections unset.
+// INVALID_ARGUMENT naming `field` for an unknown name.
+absl::StatusOr<v1::StreamConfig> PresetConfig(std::string_view name,
+                                              std::string_view field = "preset");
 // Camera, passthrough and voxel grid of `options` (its limits are the server's business).
 // Draco and delivery stay at the server defaults.
 v1::StreamConfig MakeStreamConfig(const PipelineOptions& options);
@@ -181,11 +206,29 @@ absl::Status DecodeCompressed(const v1::CompressedColor& compressed, std::string
 // ---------------------------------------------------------------------------------------------
 // Errors.
 
-// `error` from a status: its code and message, its kind, and what it answers. frames_dropped and
-// server_instance are left to the caller.
+// `error` from a status: its code and message, its kind, what it answers, and its
+// FieldViolation (bad_request; fallback field "frame", "config" or "kind" by `kind`).
+// frames_dropped and server_instance are left to the caller.
 void FillError(const absl::Status& status, v1::ErrorKind kind, std::uint64_t sequence,
                const std::string& frame_id, v1::FrameError* error);
-// The status a FrameError carries. An out-of-range code becomes UNKNOWN.
+// The structured form of an error, FieldViolation: its field path and its rule (reason).
+// Messages name their field first (core/checks.h), so the path is the message's first word when
+// it is a dotted path or one word before a colon ("frame: ..."), unless the status carries one
+// (RequiredError); a message that starts otherwise gets `fallback_field`. The reason: REQUIRED (RequiredError), OVER_LIMIT (RESOURCE_EXHAUSTED) or
+// INVALID.
+v1::FieldViolation FieldViolationOf(const absl::Status& status, std::string_view fallback_field);
+// INVALID_ARGUMENT for a field that is needed and not set: its FieldViolation names `field` with
+// the reason REQUIRED.
+absl::Status RequiredError(std::string_view field, std::string_view message);
+// A call status's details (grpc::Status error_details, sent as grpc-status-details-bin): a
+// google.rpc.Status holding the status's code and message and a google.rpc.BadRequest with its
+// FieldViolation.
+std::string StatusDetails(const absl::Status& status, std::string_view fallback_field);
+// The BadRequest in a call status's details, for clients and tests; false when there is none.
+bool ParseStatusDetails(const std::string& details, v1::BadRequest* out);
+
+// The status a FrameError carries, with its FieldViolation (FieldViolationOf gives it back). An
+// out-of-range code becomes UNKNOWN.
 absl::Status ToStatus(const v1::FrameError& error);
 // Whether a FrameError answers a request other than a frame (a StreamConfig, or a request with
 // neither a config nor a frame). A server older than FrameError.kind leaves it unset: a frame.

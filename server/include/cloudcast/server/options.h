@@ -1,7 +1,6 @@
 // The server's options, with their documented defaults. What a stream gets for the StreamConfig
-// fields it leaves unset is `defaults`, whose own defaults are the core structs' (the paper's
-// parameters: PCL's conversion with focal 615, passthrough z in [3, 12], 3 cm voxels, Draco speed
-// 10 at 10 bits).
+// fields it leaves unset is `defaults`, whose own defaults are the contract's
+// (convert::ContractDefaults: no camera, no passthrough, 3 cm voxels, Draco speed 10 at 10 bits).
 #pragma once
 
 #include <chrono>
@@ -126,7 +125,7 @@ struct ServerOptions {
   bool reflection = true;
   // What a stream gets for every StreamConfig field it leaves unset (GetInfo's `defaults`).
   // Its pipeline limits are ignored: `limits` above apply.
-  StreamSettings defaults;
+  StreamSettings defaults = convert::ContractDefaults();
 
   // Everything in range: threads >= 0, positive limits, max_queued_frames >= 1, valid defaults.
   // Errors name the command-line flag.
