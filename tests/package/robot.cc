@@ -1,6 +1,11 @@
 // Streams one frame (a tilted plane, made here, no OpenCV) to the server named on the command
-// line through the installed client library, and checks the cloud that comes back.
+// line through the installed client library, and checks the cloud that comes back. With OUT_DIR
+// it also writes the reply's Draco bytes (cloud.drc) and the cloud it decoded from them
+// (cloud.points, cloudcast::Point as is): the arm64 test decodes the same bytes on amd64 and
+// compares (tests/arm64/).
 #include <cstdio>
+#include <fstream>
+#include <string>
 #include <cstdint>
 #include <vector>
 
@@ -9,10 +14,11 @@
 namespace cc = cloudcast::client;
 
 int main(int argc, char** argv) {
-  if (argc != 2) {
-    std::fprintf(stderr, "usage: robot HOST:PORT\n");
+  if (argc != 2 && argc != 3) {
+    std::fprintf(stderr, "usage: robot HOST:PORT [OUT_DIR]\n");
     return 2;
   }
+  const std::string out_dir = argc == 3 ? argv[2] : "";
   auto client = cc::Client::Connect(argv[1]);
   if (!client.ok()) {
     std::fprintf(stderr, "connect: %s\n", client.status().ToString().c_str());
@@ -61,6 +67,12 @@ int main(int argc, char** argv) {
                 static_cast<unsigned long>(result.sequence),
                 result.reply.server_instance().c_str(), result.cloud.size(), result.draco_bytes());
     if (result.cloud.size() == 0) return 1;
+    if (!out_dir.empty()) {
+      std::ofstream(out_dir + "/cloud.drc", std::ios::binary) << result.reply.draco();
+      std::ofstream(out_dir + "/cloud.points", std::ios::binary)
+          .write(reinterpret_cast<const char*>(result.cloud.points.data()),
+                 static_cast<std::streamsize>(result.cloud.size() * sizeof(cloudcast::Point)));
+    }
     ++clouds;
   }
   const absl::Status done = (*stream)->Finish();
