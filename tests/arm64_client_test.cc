@@ -1,9 +1,9 @@
 // The client library on arm64, under qemu-user: tests/arm64/cross_build.sh cross-builds it
 // (scripts/build-arm64, warm through ccache), runs its unit tests under qemu-user, installs it and
 // builds a robot project against the install tree with find_package(cloudcast); this test then
-// streams a frame from that arm64 robot to this machine's amd64 cloudcast-server on loopback and
-// decodes the reply's Draco bytes here too: the arm64 client's cloud must equal amd64's bit for
-// bit. Skips, saying what is missing, without the cross toolchain, qemu-user or the arm64
+// streams a frame from that arm64 robot to this machine's amd64 cloudcast-server on loopback, raw
+// and through the lossless uplink codec, and decodes the reply's Draco bytes here too: the arm64
+// client's cloud must equal amd64's bit for bit. Skips, saying what is missing, without the cross toolchain, qemu-user or the arm64
 // packages (scripts/setup --arm64 installs them).
 #include <gtest/gtest.h>
 
@@ -67,7 +67,10 @@ TEST_F(Arm64Client, StreamsToAnAmd64ServerAndDecodesAsAmd64Does) {
   const testing::RunResult robot =
       RunProgram(CLOUDCAST_QEMU_AARCH64, {kScratch + "/robot/robot", server.address(), out}, out);
   ASSERT_EQ(robot.code, 0) << robot << "\nserver log:\n" << server.log();
-  EXPECT_NE(robot.out.find("from amd64-server"), std::string::npos) << robot;
+  // Frame 0 raw, frame 1 through the uplink codec (compressed on arm64, decompressed on amd64):
+  // the robot checked that both gave the same Draco bytes.
+  EXPECT_NE(robot.out.find("frame 0 from amd64-server"), std::string::npos) << robot;
+  EXPECT_NE(robot.out.find("frame 1 from amd64-server"), std::string::npos) << robot;
 
   // The same Draco bytes, decoded by the amd64 engine: the same points, in the same order.
   const std::string draco = ReadText(out + "/cloud.drc");

@@ -14,6 +14,8 @@
 #include "cloudcast/core/checks.h"
 #include "cloudcast/core/draco_codec.h"
 #include "cloudcast/core/limits.h"
+#include "draco/attributes/attribute_quantization_transform.h"
+#include "draco/attributes/attribute_transform_data.h"
 #include "draco/attributes/geometry_attribute.h"
 #include "draco/attributes/point_attribute.h"
 #include "draco/compression/config/compression_shared.h"
@@ -62,8 +64,53 @@ bool NumericType(draco::DataType type) {
   return type >= draco::DT_INT8 && type <= draco::DT_FLOAT64;
 }
 
+// Quantized positions (the sequential decoders leave them so, see RunCapped), dequantized as
+// Draco 1.5.5's AttributeQuantizationTransform::InverseTransformAttribute does: one delta,
+// range / (2^bits - 1), then float(q) * delta, rounded, plus the axis' minimum, rounded. Here, and
+// not in libdraco, so that every architecture gets the same floats: Debian's arm64 libdraco fuses
+// the multiply and the add (GCC contracts them into FMA there), which moved 677 of 821 points of a
+// test cloud by one ulp. This library builds with -ffp-contract=off (core/CMakeLists.txt).
+// Returns false when the attribute holds no quantization or an unreadable value.
+bool DequantizePositions(const draco::PointAttribute& position, int num_points, PointCloud* out) {
+  const draco::AttributeTransformData* transform = position.GetAttributeTransformData();
+  if (transform == nullptr ||
+      transform->transform_type() != draco::ATTRIBUTE_QUANTIZATION_TRANSFORM) {
+    return false;
+  }
+  draco::AttributeQuantizationTransform quantization;
+  if (!quantization.InitFromAttribute(position) || position.num_components() != 3 ||
+      quantization.min_values().size() != 3 || quantization.quantization_bits() < 1 ||
+      quantization.quantization_bits() > kMaxPositionBits ||
+      (position.data_type() != draco::DT_INT32 && position.data_type() != draco::DT_UINT32)) {
+    return false;
+  }
+  const auto max_quantized =
+      static_cast<float>((std::uint32_t{1} << quantization.quantization_bits()) - 1);
+  const float delta = quantization.range() / max_quantized;
+  const float* min = quantization.min_values().data();
+  Point* dst = out->points.data();
+  for (int i = 0; i < num_points; ++i) {
+    const draco::AttributeValueIndex avi = position.mapped_index(draco::PointIndex(i));
+    if (avi.value() >= position.size()) return false;
+    std::int32_t q[3];
+    if (!position.ConvertValue<std::int32_t>(avi, 3, q)) return false;
+    float v[3];
+    for (int c = 0; c < 3; ++c) {
+      const float scaled = static_cast<float>(q[c]) * delta;
+      v[c] = scaled + min[c];
+    }
+    dst[i].x = v[0];
+    dst[i].y = v[1];
+    dst[i].z = v[2];
+  }
+  return true;
+}
+
 // Reads positions into out->points[i].x/y/z. Returns false on an unreadable value.
 bool ReadPositions(const draco::PointAttribute& position, int num_points, PointCloud* out) {
+  if (position.GetAttributeTransformData() != nullptr) {
+    return DequantizePositions(position, num_points, out);
+  }
   if (!NumericType(position.data_type())) return false;
   Point* dst = out->points.data();
   const std::size_t needed = static_cast<std::size_t>(num_points) * 12;
@@ -194,13 +241,18 @@ class CappedDecoder : public Base {
   std::string refusal_;
 };
 
-template <typename Decoder, typename Geometry>
+// kOwnDequantization: the decoder (a sequential one) leaves quantized positions as they are, with
+// their quantization, for DequantizePositions.
+template <typename Decoder, typename Geometry, bool kOwnDequantization = false>
 absl::Status RunCapped(draco::DecoderBuffer* buffer, std::unique_ptr<draco::PointCloud>* out) {
   auto geometry = std::make_unique<Geometry>();
   const std::int64_t size = buffer->remaining_size();  // the whole file: nothing read yet
   const std::uint64_t max_points = MaxPointsFor(static_cast<std::size_t>(size));
   Decoder decoder(max_points);
-  const draco::DecoderOptions options;
+  draco::DecoderOptions options;
+  if (kOwnDequantization) {
+    options.SetAttributeBool(draco::GeometryAttribute::POSITION, "skip_attribute_transform", true);
+  }
   const draco::Status status = decoder.Decode(options, buffer, geometry.get());
   if (!decoder.refusal().empty()) {
     return FileClaims(static_cast<std::size_t>(size), decoder.refusal());
@@ -233,8 +285,8 @@ absl::Status DecodeCapped(std::string_view bytes, std::unique_ptr<draco::PointCl
   if (header.encoder_type == draco::POINT_CLOUD) {
     switch (header.encoder_method) {
       case draco::POINT_CLOUD_SEQUENTIAL_ENCODING:
-        return RunCapped<CappedDecoder<draco::PointCloudSequentialDecoder>, draco::PointCloud>(
-            &buffer, out);
+        return RunCapped<CappedDecoder<draco::PointCloudSequentialDecoder>, draco::PointCloud,
+                         true>(&buffer, out);
       case draco::POINT_CLOUD_KD_TREE_ENCODING:
         return RunCapped<CappedDecoder<draco::PointCloudKdTreeDecoder>, draco::PointCloud>(&buffer,
                                                                                            out);
@@ -242,7 +294,8 @@ absl::Status DecodeCapped(std::string_view bytes, std::unique_ptr<draco::PointCl
   } else if (header.encoder_type == draco::TRIANGULAR_MESH) {
     switch (header.encoder_method) {
       case draco::MESH_SEQUENTIAL_ENCODING:
-        return RunCapped<CappedDecoder<draco::MeshSequentialDecoder>, draco::Mesh>(&buffer, out);
+        return RunCapped<CappedDecoder<draco::MeshSequentialDecoder>, draco::Mesh, true>(&buffer,
+                                                                                          out);
       case draco::MESH_EDGEBREAKER_ENCODING:
         // libdraco 1.5.5's Edgebreaker decoder sizes its connectivity buffers from counts in
         // the file before any of the caps above can see them: a fuzzed 146-byte file made it
