@@ -1,15 +1,20 @@
 # `cmake --install` puts the client library where a robot project finds it with
 #   find_package(cloudcast REQUIRED)
 #   target_link_libraries(robot PRIVATE cloudcast::client)
-# Installed: the engine (cloudcast::core) and its uplink codec (cloudcast::frame_codec), the
-# contract and its boundary (cloudcast::proto, cloudcast::convert), the client (cloudcast::client), their headers, the .proto file, and
-# cloudcast-config.cmake, which finds gRPC, Protobuf, Abseil, Draco and zstd for the user.
+# Installed: the engine (cloudcast::core, x86-64 only; cloudcast::core_portable, the part the
+# client uses) and its uplink codec (cloudcast::frame_codec), the contract and its boundary
+# (cloudcast::proto, cloudcast::convert), the client (cloudcast::client), their headers, the
+# .proto file, and cloudcast-config.cmake, which finds gRPC, Protobuf, Abseil, Draco and zstd for the user.
 include(GNUInstallDirs)
 include(CMakePackageConfigHelpers)
 
 set(CLOUDCAST_INSTALL_CMAKEDIR ${CMAKE_INSTALL_LIBDIR}/cmake/cloudcast)
-set(_cloudcast_installed
-  cloudcast_core cloudcast_frame_codec cloudcast_proto cloudcast_convert cloudcast_client)
+set(_cloudcast_installed cloudcast_core_portable cloudcast_frame_codec cloudcast_proto
+  cloudcast_convert cloudcast_client)
+# The engine's stages and encoder exist only where they build (x86-64, core/CMakeLists.txt).
+if(TARGET cloudcast_core)
+  list(PREPEND _cloudcast_installed cloudcast_core)
+endif()
 foreach(target ${_cloudcast_installed})
   string(REPLACE "cloudcast_" "" export_name ${target})
   set_target_properties(${target} PROPERTIES EXPORT_NAME ${export_name})

@@ -30,9 +30,11 @@
 #include "cloudcast/core/draco_codec.h"
 #include "cloudcast/core/point.h"
 // Draco itself (linked through cloudcast_core) is used only to craft files in layouts our
-// encoder never writes: float or 16-bit colour, no colour, meshes, raw float positions.
+// encoder never writes (float or 16-bit colour, no colour, meshes, raw float positions), and as
+// the reference decoder for our own dequantization.
 #include "draco/attributes/point_attribute.h"
 #include "draco/compression/config/compression_shared.h"
+#include "draco/compression/decode.h"
 #include "draco/compression/expert_encode.h"
 #include "draco/mesh/mesh.h"
 #include "draco/point_cloud/point_cloud.h"
@@ -917,6 +919,51 @@ TEST(DracoTools, DracoDecoderReadsOurFiles) {
     EXPECT_NE(out.find("element vertex " + std::to_string(cloud.size()) + "\n"), std::string::npos)
         << out.substr(0, 300);
     EXPECT_NE(out.find("property uchar red"), std::string::npos) << out.substr(0, 300);
+  }
+}
+
+
+// DecodeDraco dequantizes sequentially coded positions itself (draco_decode.cc: the same floats
+// on every architecture; Debian's arm64 libdraco fuses the multiply-add). On this machine it must
+// give exactly libdraco's floats, at every bit depth, for our encoder's files and libdraco's
+// (sequential and kd-tree). arm64_client_test compares arm64 with it.
+TEST(DracoDecode, PositionsAreLibdracosFloatsBitForBit) {
+  const auto libdraco_positions = [](const std::string& bytes, std::vector<float>* xyz) {
+    draco::DecoderBuffer buffer;
+    buffer.Init(bytes.data(), bytes.size());
+    draco::Decoder decoder;
+    auto decoded = decoder.DecodePointCloudFromBuffer(&buffer);
+    if (!decoded.ok()) return false;
+    const draco::PointAttribute* position =
+        decoded.value()->GetNamedAttribute(draco::GeometryAttribute::POSITION);
+    const auto n = static_cast<int>(decoded.value()->num_points());
+    xyz->resize(3 * static_cast<std::size_t>(n));
+    for (int i = 0; i < n; ++i) {
+      if (!position->ConvertValue<float>(position->mapped_index(draco::PointIndex(i)), 3,
+                                         xyz->data() + 3 * i)) {
+        return false;
+      }
+    }
+    return true;
+  };
+  const PointCloud cloud = RandomCloud(5000, 77, 12.0f, -3.0f);
+  for (int speed : {0, 7, 10}) {
+    for (int bits : {1, 8, 11, 14, 20, 24, 30}) {
+      std::string bytes;
+      ASSERT_TRUE(EncodeDraco(cloud, Options(speed, bits), &bytes).ok());
+      PointCloud ours;
+      ASSERT_TRUE(DecodeDraco(bytes, &ours).ok());
+      std::vector<float> theirs;
+      ASSERT_TRUE(libdraco_positions(bytes, &theirs)) << "speed " << speed << " bits " << bits;
+      ASSERT_EQ(theirs.size(), 3 * ours.size());
+      for (std::size_t i = 0; i < ours.size(); ++i) {
+        const Point& p = ours.points[i];
+        ASSERT_EQ(std::memcmp(&p.x, &theirs[3 * i], 3 * sizeof(float)), 0)
+            << "speed " << speed << " bits " << bits << " point " << i << ": " << p.x << " "
+            << p.y << " " << p.z << " against " << theirs[3 * i] << " " << theirs[3 * i + 1]
+            << " " << theirs[3 * i + 2];
+      }
+    }
   }
 }
 

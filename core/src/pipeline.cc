@@ -12,13 +12,6 @@
 
 namespace cloudcast {
 
-absl::Status PipelineOptions::Validate(std::string_view field) const {
-  const std::string prefix = field.empty() ? "" : std::string(field) + ".";
-  if (auto s = camera.Validate(prefix + "camera"); !s.ok()) return s;
-  if (auto s = passthrough.Validate(prefix + "passthrough"); !s.ok()) return s;
-  return voxel.Validate(prefix + "voxel");
-}
-
 namespace {
 
 using internal::DepthConstants;

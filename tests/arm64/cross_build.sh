@@ -1,0 +1,61 @@
+#!/usr/bin/env bash
+# The arm64 client, as a robot builds and uses it (tests/arm64_client_test.cc drives this):
+#  1. scripts/build-arm64: the client-only cross build with its unit tests (warm through ccache);
+#  2. those unit tests under qemu-user (ctest uses the toolchain's CMAKE_CROSSCOMPILING_EMULATOR);
+#  3. `cmake --install` into a scratch prefix: an arm64 install tree, without the x86-64 engine;
+#  4. tests/package, a robot's own project, cross-built against it with find_package(cloudcast).
+# The test then runs that robot under qemu-user against an amd64 cloudcast-server.
+#   cross_build.sh SOURCE_DIR SCRATCH_DIR
+# Exit 77 (the test skips) when the cross toolchain, qemu-user or the arm64 packages are missing.
+set -euo pipefail
+src=$1 scratch=$2
+missing=()
+for tool in aarch64-linux-gnu-g++ aarch64-linux-gnu-pkg-config qemu-aarch64-static; do
+  command -v "$tool" >/dev/null || missing+=("$tool")
+done
+for pkg in libgrpc++-dev:arm64 libprotobuf-dev:arm64 libdraco-dev:arm64 libzstd-dev:arm64 \
+           libgtest-dev:arm64; do
+  dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" ||
+    missing+=("$pkg")
+done
+if [ ${#missing[@]} -gt 0 ]; then
+  echo "missing ${missing[*]} (scripts/setup --arm64 installs them)" >&2
+  exit 77
+fi
+mkdir -p "$scratch"
+
+echo "== cross build (scripts/build-arm64)"
+start=$SECONDS
+"$src/scripts/build-arm64" "$scratch/cloudcast" >"$scratch/build.log" 2>&1 ||
+  { tail -50 "$scratch/build.log" >&2; exit 1; }
+echo "cross build: $((SECONDS - start)) s"
+# Only the client's own dependencies, and none of the x86-64 engine.
+if grep -qiE "opencv|pcl_|open3d|prometheus|CLI11|glfw|epoxy" "$scratch/cloudcast/build.ninja"; then
+  echo "the arm64 client build references OpenCV, PCL, Open3D, prometheus-cpp, CLI11 or GL" >&2
+  exit 1
+fi
+if grep -qE "draco_sequential_encoder|voxel_grid\.cc|pipeline\.cc|filters\.cc" \
+     "$scratch/cloudcast/build.ninja"; then
+  echo "the arm64 client build compiles the engine's SIMD stages or the Draco encoder" >&2
+  exit 1
+fi
+
+echo "== the client's unit tests under qemu-user"
+grep -ho "qemu-aarch64[a-z-]*" "$scratch"/cloudcast/tests/client_only/*_tests.cmake | sort -u
+ctest --test-dir "$scratch/cloudcast" --output-on-failure --timeout 120 \
+  >"$scratch/ctest.log" 2>&1 ||
+  { cat "$scratch/ctest.log" >&2; exit 1; }
+grep "tests passed" "$scratch/ctest.log"
+
+echo "== install, and a robot project finds it with find_package(cloudcast)"
+rm -rf "$scratch/prefix" "$scratch/robot"
+cmake --install "$scratch/cloudcast" --prefix "$scratch/prefix" >/dev/null
+launcher=()
+command -v ccache >/dev/null && launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
+cmake -S "$src/tests/package" -B "$scratch/robot" -G Ninja -DCMAKE_BUILD_TYPE=Release \
+  -DCMAKE_TOOLCHAIN_FILE="$src/cmake/toolchain-aarch64-linux-gnu.cmake" \
+  -DCMAKE_PREFIX_PATH="$scratch/prefix" "${launcher[@]}" >"$scratch/robot-configure.log" 2>&1 ||
+  { cat "$scratch/robot-configure.log" >&2; exit 1; }
+cmake --build "$scratch/robot" >"$scratch/robot-build.log" 2>&1 ||
+  { cat "$scratch/robot-build.log" >&2; exit 1; }
+echo "robot: $(aarch64-linux-gnu-readelf -h "$scratch/robot/robot" | awk '/Machine:/ {print $2}')"

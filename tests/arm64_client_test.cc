@@ -1,0 +1,89 @@
+// The client library on arm64, under qemu-user: tests/arm64/cross_build.sh cross-builds it
+// (scripts/build-arm64, warm through ccache), runs its unit tests under qemu-user, installs it and
+// builds a robot project against the install tree with find_package(cloudcast); this test then
+// streams a frame from that arm64 robot to this machine's amd64 cloudcast-server on loopback, raw
+// and through the lossless uplink codec, and decodes the reply's Draco bytes here too: the arm64
+// client's cloud must equal amd64's bit for bit. Skips, saying what is missing, without the cross toolchain, qemu-user or the arm64
+// packages (scripts/setup --arm64 installs them).
+#include <gtest/gtest.h>
+
+#include <cstring>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "cloudcast/core/draco_codec.h"
+#include "cloudcast/core/point.h"
+#include "support/program_support.h"
+#include "support/replica_support.h"
+
+namespace cloudcast {
+namespace {
+
+using testing::ReadText;
+using testing::RunProgram;
+using testing::ServerProcess;
+
+// Where the cross build and the robot project live between runs (so that a second run rebuilds
+// only what changed), and the script that makes them.
+const std::string kScratch = CLOUDCAST_ARM64_SCRATCH_DIR;
+const std::string kSourceDir = CLOUDCAST_SOURCE_DIR;
+
+class Arm64Client : public ::testing::Test {
+ protected:
+  // Runs the cross build (idempotent); skips when the tools are missing (exit 77).
+  void SetUp() override {
+    std::filesystem::create_directories(kScratch);
+    build_ = RunProgram(kSourceDir + "/tests/arm64/cross_build.sh", {kSourceDir, kScratch},
+                        kScratch);
+    if (build_.exited && build_.code == 77) {
+      GTEST_SKIP() << "arm64 cross build not possible here: " << build_.err;
+    }
+    ASSERT_EQ(build_.code, 0) << build_;
+  }
+
+  testing::RunResult build_;
+};
+
+// The client's unit tests (tests/client_only/) ran under qemu-user in cross_build.sh, through
+// ctest with the toolchain's CMAKE_CROSSCOMPILING_EMULATOR: every one listed and passed.
+TEST_F(Arm64Client, UnitTestsPassUnderQemu) {
+  EXPECT_NE(build_.out.find("tests passed, 0 tests failed"), std::string::npos) << build_;
+  EXPECT_NE(build_.out.find("qemu-aarch64"), std::string::npos)
+      << "the tests did not run under qemu-user\n"
+      << build_;
+  // The robot links the installed library, and the binary is arm64 code.
+  EXPECT_NE(build_.out.find("robot: AArch64"), std::string::npos)
+      << build_;
+}
+
+TEST_F(Arm64Client, StreamsToAnAmd64ServerAndDecodesAsAmd64Does) {
+  ServerProcess server("127.0.0.1:0", "amd64-server", {}, kScratch + "/server.log");
+  ASSERT_TRUE(server.WaitUntilServing()) << server.log();
+
+  const std::string out = kScratch + "/robot-out";
+  std::filesystem::remove_all(out);
+  std::filesystem::create_directories(out);
+  const testing::RunResult robot =
+      RunProgram(CLOUDCAST_QEMU_AARCH64, {kScratch + "/robot/robot", server.address(), out}, out);
+  ASSERT_EQ(robot.code, 0) << robot << "\nserver log:\n" << server.log();
+  // Frame 0 raw, frame 1 through the uplink codec (compressed on arm64, decompressed on amd64):
+  // the robot checked that both gave the same Draco bytes.
+  EXPECT_NE(robot.out.find("frame 0 from amd64-server"), std::string::npos) << robot;
+  EXPECT_NE(robot.out.find("frame 1 from amd64-server"), std::string::npos) << robot;
+
+  // The same Draco bytes, decoded by the amd64 engine: the same points, in the same order.
+  const std::string draco = ReadText(out + "/cloud.drc");
+  const std::string arm64_points = ReadText(out + "/cloud.points");
+  ASSERT_FALSE(draco.empty());
+  PointCloud here;
+  ASSERT_TRUE(DecodeDraco(draco, &here).ok());
+  ASSERT_GT(here.size(), 0u);
+  ASSERT_EQ(arm64_points.size(), here.size() * sizeof(Point));
+  EXPECT_EQ(std::memcmp(arm64_points.data(), here.points.data(), arm64_points.size()), 0)
+      << "the arm64 client decoded a different cloud from the same " << draco.size()
+      << " Draco bytes";
+}
+
+}  // namespace
+}  // namespace cloudcast
