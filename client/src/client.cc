@@ -139,7 +139,6 @@ struct Stream::Impl : public StreamSink {
 
   absl::Status Send(const FrameInput& input, const FrameMeta& meta) {
     std::lock_guard<std::mutex> lock(send_mu);
-    if (core->ended()) return Ended();
     const std::uint64_t sequence = meta.sequence.value_or(next_sequence);
     grpc::ByteBuffer bytes;
     if (absl::Status s = frames.Write(input, meta, sequence, &bytes); !s.ok()) return s;

@@ -104,6 +104,7 @@ class Fleet::Driver : public client::StreamSink {
     std::uint64_t seq;
     {
       std::lock_guard<std::mutex> lock(mu_);
+      ++due_;
       if (ended_ || no_more_) {
         ctx_->recorder->Unsent(1);
         ++stats_.unsent;
@@ -131,6 +132,11 @@ class Fleet::Driver : public client::StreamSink {
   std::uint64_t sent() {
     std::lock_guard<std::mutex> lock(mu_);
     return stats_.sent;
+  }
+  // Frames that fell due (sent or not).
+  std::uint64_t due() {
+    std::lock_guard<std::mutex> lock(mu_);
+    return due_;
   }
   std::int64_t last_send_ns() {
     std::lock_guard<std::mutex> lock(mu_);
@@ -318,6 +324,7 @@ class Fleet::Driver : public client::StreamSink {
         }
         seq = next_seq_++;
         ++submitted_;
+        ++due_;
       }
       Submit(seq, Ns(Clock::now()), /*scheduler_late=*/false);
     }
@@ -336,6 +343,7 @@ class Fleet::Driver : public client::StreamSink {
   bool answered_on_call_ = false;
   std::uint64_t next_seq_ = 1;
   std::uint64_t submitted_ = 0;  // closed loop
+  std::uint64_t due_ = 0;
   std::int64_t last_send_ns_ = 0;
   std::uint64_t server_dropped_before_ = 0;  // frames_dropped of the calls that ended
   std::uint64_t server_dropped_this_call_ = 0;
@@ -622,12 +630,11 @@ FleetResult Fleet::Run(const std::function<void(const SecondStats&)>& on_second)
         if (reason != EndReason::kCancel) {
           bool count_bound = o.frames > 0;
           if (count_bound) {
-            std::uint64_t sent = 0;
+            std::uint64_t due = 0;
             lock.unlock();
-            for (auto& d : drivers_) sent += d->sent();
+            for (auto& d : drivers_) due += d->due();
             lock.lock();
-            const Totals t = recorder_.totals();
-            count_bound = sent + t.unsent + t.replaced >= o.frames;
+            count_bound = due >= o.frames;
           }
           reason = count_bound ? EndReason::kNormal : EndReason::kTimeout;
         }

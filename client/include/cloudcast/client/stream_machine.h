@@ -163,8 +163,8 @@ class StreamMachine {
 
   // A new frame from the application.
   Submitted Submit(std::uint64_t sequence, Payload payload, Record record, Clock::time_point now) {
-    if (ended_) return Submitted::kEnded;
     if (writes_closed_) return Submitted::kClosed;
+    if (ended_) return Submitted::kEnded;
     if (options_.latest) {
       for (auto it = queue_.begin(); it != queue_.end();) {
         if (!it->is_frame) {
