@@ -262,7 +262,7 @@ struct Stream::Impl : public StreamSink {
         break;
       case FrameFate::kUnsent:
         r.status = absl::UnavailableError(absl::StrCat(
-            "frame ", s.sequence, " was never sent: ",
+            "frame ", s.sequence, " was never answered (never sent): ",
             s.why.ok() ? "the stream ended first" : s.why.message()));
         break;
     }
@@ -512,7 +512,7 @@ absl::StatusOr<std::unique_ptr<Stream>> Client::OpenStream(const StreamConfig& c
   // Client-side replacement only when the stream asks for DELIVERY_LATEST itself: an unset
   // delivery may be a server's DELIVERY_ALL, whose frames must all be sent.
   core.machine.latest = config.delivery() == v1::DELIVERY_LATEST;
-  core.machine.max_queued = 1;
+  core.machine.max_queued = std::max<std::size_t>(1, impl->options.max_queued_frames);
   core.machine.resilient = impl->options.resilient;
   core.machine.reconnect_timeout = impl->options.reconnect_timeout;
   core.wait_for_ready = impl_->options.wait_for_ready;

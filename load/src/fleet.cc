@@ -87,7 +87,8 @@ class Fleet::Driver : public client::StreamSink {
   void Start(std::shared_ptr<grpc::Channel> channel, const Context* context) {
     ctx_ = context;
     client::StreamCoreOptions o;
-    o.machine.name = fmt::format("stream {}", index_);
+    o.machine.name = "stream";  // the same words for every stream, so the report groups them
+    o.machine.reconnect_timeout_name = "--reconnect-timeout";
     // As robots send: DELIVERY_LATEST replaces a frame still waiting for the write slot;
     // DELIVERY_ALL queues every frame due (the generator itself never waits).
     o.machine.latest = !ctx_->lossless;

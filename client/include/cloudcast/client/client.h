@@ -46,8 +46,8 @@ class Stream {
   // waits for the network: the frame waits for the write slot, and a newer frame replaces it if
   // it is still waiting then (the replaced frame comes back as a Result with fate kReplaced).
   // Otherwise (DELIVERY_ALL, or delivery unset) nothing is replaced and the stream is lossless:
-  // Send waits while one frame already waits for the write slot, i.e. while gRPC flow control
-  // (or a resilient stream's reconnect) holds the stream back.
+  // Send waits while StreamOptions::max_queued_frames frames already wait for the write slot,
+  // i.e. while gRPC flow control (or a resilient stream's reconnect) holds the stream back.
   //
   // Errors: INVALID_ARGUMENT for an input that cannot be read safely (null data, a buffer
   // smaller than its rows, a stride under the row size); FAILED_PRECONDITION after CloseSend;

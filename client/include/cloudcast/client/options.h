@@ -99,6 +99,12 @@ struct StreamOptions {
   // control bounds (a few per stream).
   bool resilient = false;
   std::chrono::milliseconds reconnect_timeout{30000};
+  // DELIVERY_ALL (or delivery unset): how many frames may wait for the call's write slot before
+  // Send waits (back-pressure). A few let a camera loop ride out a short stall or a reconnect
+  // without waiting; each one waiting adds a frame time of latency. At least 1.
+  // (DELIVERY_LATEST: one frame waits, the newest; Send never waits.)
+  std::size_t max_queued_frames = 4;
+
   // Called after each reconnect (on a gRPC callback thread, in order with the results).
   std::function<void(const Reconnect&)> on_reconnect;
 };

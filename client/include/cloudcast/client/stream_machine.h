@@ -72,6 +72,8 @@ struct StreamMachineOptions {
   std::size_t max_queued = 1;   // DELIVERY_ALL: frames that may wait for the write slot; 0: any
   bool resilient = false;
   std::chrono::nanoseconds reconnect_timeout = std::chrono::seconds(30);
+  // How the give-up message names the setting (the library's option, a program's flag).
+  std::string reconnect_timeout_name = "StreamOptions::reconnect_timeout";
   std::chrono::nanoseconds first_backoff = std::chrono::milliseconds(20);
   std::chrono::nanoseconds max_backoff = std::chrono::seconds(1);
 };
@@ -488,7 +490,7 @@ class StreamMachine {
     End(absl::UnavailableError(absl::StrCat(
         options_.name, " lost its call (", cause_.message(), ") and could not open a new one within ",
         std::chrono::duration_cast<std::chrono::milliseconds>(options_.reconnect_timeout).count(),
-        " ms (StreamOptions::reconnect_timeout)")));
+        " ms (", options_.reconnect_timeout_name, ")")));
   }
 
   // The stream is over: every frame it still holds is settled as `status` says.
