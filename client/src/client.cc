@@ -106,6 +106,8 @@ struct Stream::Impl : public StreamSink {
   std::string target;
   bool decode_clouds = true;
   StreamOptions options;
+  // The channel outlives the core's end (the core holds none: stream_core.h); so does this.
+  std::shared_ptr<grpc::Channel> channel;
   std::shared_ptr<StreamCore> core;
 
   // Sending side: frames become request bytes on the caller's thread, one sender at a time.
@@ -517,7 +519,8 @@ absl::StatusOr<std::unique_ptr<Stream>> Client::OpenStream(const StreamConfig& c
   core.machine.reconnect_timeout = impl->options.reconnect_timeout;
   core.wait_for_ready = impl_->options.wait_for_ready;
   core.config = SerializedConfig(config);
-  impl->core = StreamCore::Start(impl_->channel, std::move(core), impl.get());
+  impl->channel = impl_->channel;
+  impl->core = StreamCore::Start(impl->channel.get(), std::move(core), impl.get());
   return std::unique_ptr<Stream>(new Stream(std::move(impl)));
 }
 

@@ -73,9 +73,9 @@ class StreamCore::Call : public grpc::ClientBidiReactor<grpc::ByteBuffer, grpc::
   std::shared_ptr<StreamCore> core_;
 };
 
-std::shared_ptr<StreamCore> StreamCore::Start(std::shared_ptr<grpc::Channel> channel,
-                                              StreamCoreOptions options, StreamSink* sink) {
-  std::shared_ptr<StreamCore> core(new StreamCore(std::move(channel), std::move(options), sink));
+std::shared_ptr<StreamCore> StreamCore::Start(grpc::Channel* channel, StreamCoreOptions options,
+                                              StreamSink* sink) {
+  std::shared_ptr<StreamCore> core(new StreamCore(channel, std::move(options), sink));
   {
     std::lock_guard<std::mutex> lock(core->mu_);
     core->machine_.Start(Clock::now());
@@ -85,10 +85,9 @@ std::shared_ptr<StreamCore> StreamCore::Start(std::shared_ptr<grpc::Channel> cha
   return core;
 }
 
-StreamCore::StreamCore(std::shared_ptr<grpc::Channel> channel, StreamCoreOptions options,
-                       StreamSink* sink)
-    : channel_(std::move(channel)),
-      stub_(channel_),
+StreamCore::StreamCore(grpc::Channel* channel, StreamCoreOptions options, StreamSink* sink)
+    // The stub's reference does not own the channel (an empty owner): see Start.
+    : stub_(std::shared_ptr<grpc::ChannelInterface>(std::shared_ptr<void>(), channel)),
       options_(std::move(options)),
       sink_(sink),
       machine_(options_.machine, options_.config) {}

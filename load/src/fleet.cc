@@ -84,7 +84,8 @@ class Fleet::Driver : public client::StreamSink {
     stats_.index = index;
   }
 
-  void Start(std::shared_ptr<grpc::Channel> channel, const Context* context) {
+  // `channel` (the fleet's) outlives the stream.
+  void Start(grpc::Channel* channel, const Context* context) {
     ctx_ = context;
     client::StreamCoreOptions o;
     o.machine.name = "stream";  // the same words for every stream, so the report groups them
@@ -96,7 +97,7 @@ class Fleet::Driver : public client::StreamSink {
     o.machine.resilient = ctx_->resilient;
     o.machine.reconnect_timeout = std::chrono::nanoseconds(ctx_->reconnect_timeout_ns);
     if (config_ != nullptr) o.config = *config_;
-    core_ = client::StreamCore::Start(std::move(channel), std::move(o), this);
+    core_ = client::StreamCore::Start(channel, std::move(o), this);
     if (ctx_->closed_loop) TopUp();
   }
 
@@ -578,7 +579,7 @@ FleetResult Fleet::Run(const std::function<void(const SecondStats&)>& on_second)
       std::chrono::duration_cast<std::chrono::nanoseconds>(result.start.time_since_epoch())
           .count()};
   for (int s = 0; s < n; ++s) {
-    drivers_[s]->Start(channels_[static_cast<std::size_t>(s) % channels_.size()], &ctx);
+    drivers_[s]->Start(channels_[static_cast<std::size_t>(s) % channels_.size()].get(), &ctx);
   }
 
   std::vector<std::thread> schedulers;

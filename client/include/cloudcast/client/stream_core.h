@@ -88,9 +88,12 @@ class StreamCore : public std::enable_shared_from_this<StreamCore> {
  public:
   using Clock = std::chrono::steady_clock;
 
-  // Starts the first call at once. `sink` must outlive the core's last event (OnEnded).
-  static std::shared_ptr<StreamCore> Start(std::shared_ptr<grpc::Channel> channel,
-                                           StreamCoreOptions options, StreamSink* sink);
+  // Starts the first call at once. `sink` must outlive the core's last event (OnEnded), and the
+  // caller keeps `channel` alive until then too: the core holds no reference of its own,
+  // because it may go last on one of gRPC's callback threads, and a channel destroyed there
+  // (the last user of gRPC's callback queue) would shut that queue down from its own thread.
+  static std::shared_ptr<StreamCore> Start(grpc::Channel* channel, StreamCoreOptions options,
+                                           StreamSink* sink);
   ~StreamCore();
   StreamCore(const StreamCore&) = delete;
   StreamCore& operator=(const StreamCore&) = delete;
@@ -126,7 +129,7 @@ class StreamCore : public std::enable_shared_from_this<StreamCore> {
   class Call;  // stream_core.cc
 
  private:
-  StreamCore(std::shared_ptr<grpc::Channel> channel, StreamCoreOptions options, StreamSink* sink);
+  StreamCore(grpc::Channel* channel, StreamCoreOptions options, StreamSink* sink);
 
   // One operation on a call, carried out in order outside the lock.
   struct Op {
@@ -169,7 +172,6 @@ class StreamCore : public std::enable_shared_from_this<StreamCore> {
   void OnDone(Call* call, const grpc::Status& status);
   void OnTimer();
 
-  const std::shared_ptr<grpc::Channel> channel_;
   grpc::TemplatedGenericStub<grpc::ByteBuffer, grpc::ByteBuffer> stub_;
   const StreamCoreOptions options_;
   StreamSink* const sink_;
