@@ -51,26 +51,24 @@ ReplyInfo InfoOf(const v1::StreamReply& reply) {
 
 }  // namespace
 
-// One gRPC call of the stream. Owned by the core (a few per stream); keeps the core alive until
-// its OnDone. A hold keeps it open while writes may still start from the application's threads;
-// another while reading is paused.
+// One gRPC call of the stream. Owned by the core (a few per stream). The core outlives it: its
+// owner waits in AwaitEnd until every call's OnDone has returned, then releases the calls on the
+// owner's thread (a call's ClientContext holds a reference to the channel, which must not be
+// dropped last on one of gRPC's callback threads). A hold keeps the call open while writes may
+// still start from the application's threads; another while reading is paused.
 class StreamCore::Call : public grpc::ClientBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer> {
  public:
-  explicit Call(std::shared_ptr<StreamCore> core) : core_(std::move(core)) {}
+  explicit Call(StreamCore* core) : core_(core) {}
   void OnWriteDone(bool ok) override { core_->OnWriteDone(this, ok); }
   void OnReadDone(bool ok) override { core_->OnReadDone(this, ok); }
-  void OnDone(const grpc::Status& status) override {
-    // The last reaction: the core may go with the last reference, and this call with it.
-    std::shared_ptr<StreamCore> keep = std::move(core_);
-    keep->OnDone(this, status);
-  }
+  void OnDone(const grpc::Status& status) override { core_->OnDone(this, status); }
 
   grpc::ClientContext context;
   grpc::ByteBuffer write_buf, read_buf;
   bool read_paused = false;  // under the core's mu_
 
  private:
-  std::shared_ptr<StreamCore> core_;
+  StreamCore* const core_;
 };
 
 std::shared_ptr<StreamCore> StreamCore::Start(grpc::Channel* channel, StreamCoreOptions options,
@@ -189,13 +187,16 @@ void StreamCore::RunOps() {
     Call* c = current_;
     switch (op.kind) {
       case Op::kOpen: {
-        auto owned = std::make_unique<Call>(shared_from_this());
+        auto owned = std::make_unique<Call>(this);
         c = owned.get();
         // A call replacing a lost one waits for a ready replica (the give-up timer bounds it).
         c->context.set_wait_for_ready(op.after_failure || options_.wait_for_ready);
         stub_.PrepareBidiStreamingCall(&c->context, kStreamMethod, grpc::StubOptions(), c);
         c->AddHold();  // released when no more writes can start (kReleaseWrites)
         c->StartRead(&c->read_buf);
+        lock.lock();
+        ++live_calls_;  // before the call can end
+        lock.unlock();
         c->StartCall();
         current_ = c;
         lock.lock();
@@ -427,12 +428,22 @@ void StreamCore::OnDone(Call* call, const grpc::Status& status) {
     CollectLocked(now);
   }
   Run(/*deliver=*/true);
+  // The last this call does: AwaitEnd may release it (and the core) once this is seen.
+  std::lock_guard<std::mutex> lock(mu_);
+  --live_calls_;
+  changed_.notify_all();
 }
 
 absl::Status StreamCore::AwaitEnd() {
-  std::unique_lock<std::mutex> lock(mu_);
-  changed_.wait(lock, [&] { return end_delivered_; });
-  return machine_.status();
+  std::vector<std::unique_ptr<Call>> done;
+  absl::Status status;
+  {
+    std::unique_lock<std::mutex> lock(mu_);
+    changed_.wait(lock, [&] { return end_delivered_ && live_calls_ == 0; });
+    status = machine_.status();
+    done.swap(calls_);
+  }
+  return status;  // `done` goes here, on the caller's thread
 }
 
 bool StreamCore::ended() const {

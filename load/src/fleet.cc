@@ -83,6 +83,10 @@ class Fleet::Driver : public client::StreamSink {
       : index_(index), frame_limit_(frame_limit), config_(config) {
     stats_.index = index;
   }
+  // The stream has ended by now (Run waits for every stream); its calls are released here.
+  ~Driver() {
+    if (core_ != nullptr) core_->AwaitEnd().IgnoreError();
+  }
 
   // `channel` (the fleet's) outlives the stream.
   void Start(grpc::Channel* channel, const Context* context) {

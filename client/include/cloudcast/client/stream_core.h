@@ -112,7 +112,9 @@ class StreamCore : public std::enable_shared_from_this<StreamCore> {
   // until resumed. For consumers that buffer replies.
   void PauseReads(bool paused);
 
-  // Waits until OnEnded has been delivered; returns the final status.
+  // Waits until OnEnded has been delivered and every call's reactor is done, releases the calls
+  // on this thread, and returns the final status. The owner calls it before letting the core
+  // (and the channel) go; never from the sink.
   absl::Status AwaitEnd();
   bool ended() const;
 
@@ -186,6 +188,7 @@ class StreamCore : public std::enable_shared_from_this<StreamCore> {
   bool end_delivered_ = false;
   bool pause_reads_ = false;
   std::vector<std::unique_ptr<Call>> calls_;  // every call made; a few per stream
+  int live_calls_ = 0;                        // started, OnDone not returned yet
   Call* current_ = nullptr;                   // ops' call (touched by the op runner only)
   // Timers (backoff, give-up, event delivery), one grpc::Alarm each.
   struct Timer {
