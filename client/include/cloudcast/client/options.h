@@ -93,10 +93,11 @@ struct StreamOptions {
   // sends again every frame that was sent but not answered, in order, so each frame is answered
   // exactly once; with DELIVERY_LATEST those frames count as dropped (each comes back as a
   // Result with fate kDropped). While a new call is being opened, Send waits with DELIVERY_ALL
-  // (back-pressure) and replaces the waiting frame with DELIVERY_LATEST. After `reconnect_timeout` without a working call the stream gives up:
-  // every frame still unanswered comes back as a Result with UNAVAILABLE, and Finish returns
-  // UNAVAILABLE saying so. The frames kept for resending are those in flight, which gRPC flow
-  // control bounds (a few per stream).
+  // (back-pressure) and replaces the waiting frame with DELIVERY_LATEST. After
+  // `reconnect_timeout` without a working call the stream gives up: every frame still
+  // unanswered comes back as a Result with UNAVAILABLE, and Finish returns UNAVAILABLE saying
+  // so. The frames kept for resending are those in flight, which gRPC flow control bounds (a few
+  // per stream).
   bool resilient = false;
   std::chrono::milliseconds reconnect_timeout{30000};
   // DELIVERY_ALL (or delivery unset): how many frames may wait for the call's write slot before

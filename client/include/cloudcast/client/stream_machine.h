@@ -356,7 +356,9 @@ class StreamMachine {
     } else if (retry_at_) {
       Wake(*retry_at_);
     }
-    if (!ended_ && failing_since_ && !giving_up_) Wake(*failing_since_ + options_.reconnect_timeout);
+    if (!ended_ && failing_since_ && !giving_up_) {
+      Wake(*failing_since_ + options_.reconnect_timeout);
+    }
   }
 
   Effects TakeEffects() {
@@ -488,7 +490,8 @@ class StreamMachine {
   void GiveUp() {
     gave_up_ = true;
     End(absl::UnavailableError(absl::StrCat(
-        options_.name, " lost its call (", cause_.message(), ") and could not open a new one within ",
+        options_.name, " lost its call (", cause_.message(),
+        ") and could not open a new one within ",
         std::chrono::duration_cast<std::chrono::milliseconds>(options_.reconnect_timeout).count(),
         " ms (", options_.reconnect_timeout_name, ")")));
   }
