@@ -171,8 +171,13 @@ void StreamCore::Run(bool deliver) {
   if (deliver) {
     DeliverEvents();
   } else {
+    // Only what the application waits for is worth a timer's thread hop; write and call-opened
+    // notes go with the reaction that always follows them (the write's completion).
     std::lock_guard<std::mutex> lock(mu_);
-    if (!events_.empty() && !delivering_) KickLocked(Clock::now());
+    const bool urgent = std::any_of(events_.begin(), events_.end(), [](const Event& e) {
+      return e.kind != Event::kWrite && e.kind != Event::kCallOpened;
+    });
+    if (urgent && !delivering_) KickLocked(Clock::now());
   }
 }
 
