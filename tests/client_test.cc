@@ -27,6 +27,7 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <set>
 #include <string>
 #include <thread>
 #include <tuple>
@@ -704,18 +705,34 @@ TEST_F(ClientTest, LatestDeliveryAnswersTheLastFrameAndCountsTheRest) {
   reader.join();
   EXPECT_TRUE(stream->Finish().ok());
   ASSERT_FALSE(results.empty());
-  std::uint64_t previous = 0;
-  for (std::size_t i = 0; i < results.size(); ++i) {
-    EXPECT_TRUE(results[i].ok()) << results[i].status;
-    if (i > 0) {
-      EXPECT_GT(results[i].sequence, previous);
+  // Every frame comes back exactly once: answered, or (DELIVERY_LATEST) replaced in the client
+  // before it was sent, or skipped by the server for a newer one.
+  std::set<std::uint64_t> seen;
+  std::uint64_t previous = 0, answered = 0;
+  for (const Result& r : results) {
+    EXPECT_TRUE(seen.insert(r.sequence).second) << "frame " << r.sequence << " came back twice";
+    if (r.fate != FrameFate::kAnswered) {
+      EXPECT_TRUE(r.fate == FrameFate::kReplaced || r.fate == FrameFate::kDropped)
+          << FateName(r.fate);
+      EXPECT_EQ(r.status.code(), absl::StatusCode::kAborted) << r.status;
+      continue;
     }
-    previous = results[i].sequence;
+    EXPECT_TRUE(r.ok()) << r.status;
+    if (answered > 0) {
+      EXPECT_GT(r.sequence, previous);
+    }
+    ++answered;
+    previous = r.sequence;
     // The send record was found even when earlier frames were skipped.
-    EXPECT_GT(results[i].times.send_unix_ns, 0) << "sequence " << results[i].sequence;
+    EXPECT_GT(r.times.send_unix_ns, 0) << "sequence " << r.sequence;
   }
-  EXPECT_EQ(results.back().sequence, static_cast<std::uint64_t>(kFrames - 1));
-  EXPECT_EQ(results.size() + results.back().frames_dropped, static_cast<std::size_t>(kFrames));
+  EXPECT_EQ(seen.size(), static_cast<std::size_t>(kFrames));
+  EXPECT_EQ(previous, static_cast<std::uint64_t>(kFrames - 1));  // the newest is answered
+  const Result& last = results.back();
+  EXPECT_EQ(last.fate, FrameFate::kAnswered);
+  EXPECT_EQ(last.frames_replaced, stream->frames_replaced());
+  EXPECT_EQ(answered + last.frames_dropped + last.frames_replaced,
+            static_cast<std::uint64_t>(kFrames));
 }
 
 TEST_F(ClientTest, DestroyingAnUnfinishedStreamCancelsIt) {

@@ -253,8 +253,10 @@ TEST_F(FleetTest, LatestDeliveryDropsUnderOverloadAndAccountsForEveryFrame) {
   Report report;
   Run(o, store, &report);
   const Totals& t = report.totals;
-  EXPECT_EQ(t.sent, 200u);
-  EXPECT_GT(t.drops, 0u);
+  // As robots send: a frame still waiting for the write slot when the next is due is replaced
+  // in the client; every frame sent is answered, dropped by the server, errored or lost.
+  EXPECT_EQ(t.sent + t.replaced + t.unsent, 200u);
+  EXPECT_GT(t.drops + t.replaced, 0u);
   EXPECT_EQ(t.answered + t.drops + t.frame_errors + t.lost, t.sent);
 }
 

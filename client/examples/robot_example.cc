@@ -197,7 +197,7 @@ int main(int argc, char** argv) {
   auto client = cc::Client::Connect(target, client_options);  // waits up to 5 s for the server
   if (!client.ok()) return Fail(client.status());
 
-  cc::StreamOptions options;  // replies arrive on the library's receiver thread, in order
+  cc::StreamOptions options;  // replies arrive on gRPC's callback threads, one at a time, in order
   options.on_result = [](cc::Result&& r) {
     if (!r.ok()) {
       std::printf("frame %" PRIu64 ": %s\n", r.sequence, r.status.ToString().c_str());

@@ -7,17 +7,16 @@
 #include <chrono>
 #include <climits>
 #include <cstdint>
+#include <condition_variable>
 #include <deque>
 #include <memory>
 #include <mutex>
-#include <optional>
 #include <string>
-#include <thread>
 #include <utility>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
-#include "cloudcast/client/resend_ledger.h"
+#include "cloudcast/client/stream_core.h"
 #include "cloudcast/core/draco_codec.h"
 #include "cloudcast/proto/convert.h"
 #include "cloudcast/v1/cloudcast.grpc.pb.h"
@@ -35,14 +34,6 @@ absl::Status FromGrpc(const grpc::Status& status, const std::string& what) {
   if (status.ok()) return absl::OkStatus();
   return absl::Status(static_cast<absl::StatusCode>(status.error_code()),
                       absl::StrCat(what, ": ", status.error_message()));
-}
-
-// How a resilient stream knows its call was lost rather than refused: UNAVAILABLE (the replica
-// was killed, drained, sent GOAWAY, or cannot be reached), or CANCELLED when the stream itself
-// did not cancel it (a server that stops while a call is opening cancels that call).
-bool EndedByTheServerSide(const absl::Status& ended) {
-  return ended.code() == absl::StatusCode::kUnavailable ||
-         ended.code() == absl::StatusCode::kCancelled;
 }
 
 const char* StateName(grpc_connectivity_state state) {
@@ -82,91 +73,64 @@ void DecodeInto(bool decode, Result* result) {
   result->times.decode_us = MicrosSince(start);
 }
 
-// What the stream keeps of a frame sent and not answered yet. `bytes` are kept only where a
-// resilient stream may have to send it again (DELIVERY_ALL): they share the slices gRPC wrote, so
-// keeping them copies nothing.
-struct Pending {
-  std::string frame_id;
-  std::int64_t capture_time_unix_ns = 0;
-  Clock::time_point send;
-  std::int64_t send_unix_ns = 0;
-  std::optional<grpc::ByteBuffer> bytes;
-};
-
-// Stream calls write bytes the client serialized itself (internal::RequestWriter) and read typed
-// replies. The generated stub only writes StreamRequest messages, so the call is made as the
-// generated code makes it, with ByteBuffer for the message type.
-using StreamRpc = grpc::ClientReaderWriter<grpc::ByteBuffer, v1::StreamReply>;
-
-const char* StreamMethodName() {
-  static const std::string name = absl::StrCat("/", v1::CloudCast::service_full_name(), "/Stream");
-  return name.c_str();
-}
-
-grpc::ByteBuffer Serialized(const google::protobuf::Message& message) {
-  grpc::ByteBuffer bytes;
-  bool own;
-  (void)grpc::SerializationTraits<google::protobuf::Message>::Serialize(message, &bytes, &own);
-  return bytes;
-}
-
 }  // namespace
 
 // ---------------------------------------------------------------------------------------------
-// Stream
-//
-// Locks, always taken in this order: finish_mu, read_mu, write_mu, then pending_mu or call_mu
-// (each held briefly). The reading side ends a call and opens the next one (a resilient
-// reconnect) while it holds write_mu, so no Send writes meanwhile.
+// Stream: the library's blocking and callback interfaces over the one stream core
+// (stream_core.h). The core runs the call; this side turns frames into request bytes (on the
+// sending thread), and the core's events into Results.
 
-struct Stream::Impl {
-  std::shared_ptr<grpc::Channel> channel;
-  std::optional<grpc::internal::RpcMethod> stream_method;  // on `channel`
+namespace {
+
+grpc::ByteBuffer SerializedConfig(const v1::StreamConfig& config) {
+  v1::StreamRequest request;
+  *request.mutable_config() = config;
+  const std::string bytes = request.SerializeAsString();
+  grpc::Slice slice(bytes.data(), bytes.size());
+  return grpc::ByteBuffer(&slice, 1);
+}
+
+std::int64_t UnixNanosAt(Clock::time_point t) {
+  if (t == Clock::time_point{}) return 0;
+  return UnixNanosNow() -
+         std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now() - t).count();
+}
+
+// Blocking mode: replies buffered for Read before reading pauses (gRPC flow control then holds
+// the server back, as an unread stream always did).
+constexpr std::size_t kMaxBufferedResults = 16;
+
+}  // namespace
+
+struct Stream::Impl : public StreamSink {
   std::string target;
   bool decode_clouds = true;
-  bool wait_for_ready = false;
   StreamOptions options;
+  // The channel outlives the core's end (the core holds none: stream_core.h); so does this.
+  std::shared_ptr<grpc::Channel> channel;
+  std::shared_ptr<StreamCore> core;
 
-  // The current call; replaced on reconnect. Cancel() reaches it through call_mu from any thread.
-  struct Call {
-    grpc::ClientContext context;
-    std::unique_ptr<StreamRpc> rpc;
-  };
-  std::mutex call_mu;
-  std::unique_ptr<Call> call;
-  bool cancelled = false;  // under call_mu
-
-  // Writer side.
-  std::timed_mutex write_mu;
-  v1::StreamRequest config_request;  // the stream's config, sent again on each new call
-  internal::RequestWriter frames;    // serializes each frame
-  bool writes_closed = false;
-  bool write_failed = false;  // the current call refused a write; the reader learns why
+  // Sending side: frames become request bytes on the caller's thread, one sender at a time.
+  std::mutex send_mu;
+  internal::RequestWriter frames;
   std::uint64_t next_sequence = 0;
-  std::atomic<std::uint64_t> frames_sent{0};
   std::atomic<std::uint64_t> image_bytes_sent{0};
 
-  // Frames sent and not answered yet (resend_ledger.h: replies in send order, frames the server
-  // skipped passed over, what a new call sends again).
-  std::mutex pending_mu;
-  ResendLedger<Pending> pending;
-
-  // Reader side.
-  std::mutex read_mu;
-  v1::StreamReply reply;
-  bool read_done = false;
-  std::deque<Result> lost;  // frames given up on, handed out before the stream ends
-  std::optional<Clock::time_point> failing_since;  // calls failing, no reply since
-  std::uint64_t dropped_before = 0;                // drops on earlier calls of this stream
-  std::uint64_t dropped_this_call = 0;
-  std::string last_instance;
-  std::thread receiver;
+  // Receiving side (the core's events, one at a time).
+  std::uint64_t dropped_seen = 0;
+  std::uint64_t replaced_seen = 0;
   std::atomic<int> reconnects{0};
-  std::atomic<std::uint64_t> frames_resent{0};
+
+  std::mutex results_mu;
+  std::condition_variable results_cv;
+  std::deque<Result> results;  // blocking mode: ready for Read, undecoded
+  bool reads_paused = false;
+  bool discard = false;  // Finish: nobody reads any more
+  bool ended = false;
+  absl::Status final_status;
 
   std::mutex finish_mu;
   bool finished = false;
-  absl::Status final_status;
 
   std::string What() const { return absl::StrCat("stream to ", target); }
 
@@ -175,310 +139,206 @@ struct Stream::Impl {
         absl::StrCat(What(), " has ended; Stream::Finish() returns the reason"));
   }
 
-  // Frames are kept for a resend unless the stream says DELIVERY_LATEST (whose unanswered frames
-  // would be dropped anyway). An unset delivery may be the server's DELIVERY_ALL.
-  bool KeepsFrames() const {
-    return options.resilient && config_request.config().delivery() != v1::DELIVERY_LATEST;
-  }
-
-  std::unique_ptr<Call> StartCall() {
-    auto c = std::make_unique<Call>();
-    // A new call after a failure waits for a replica to be ready (bounded by the caller).
-    c->context.set_wait_for_ready(wait_for_ready || failing_since.has_value());
-    c->rpc.reset(
-        grpc::internal::ClientReaderWriterFactory<grpc::ByteBuffer, v1::StreamReply>::Create(
-            channel.get(), *stream_method, &c->context));
-    return c;
-  }
-
-  static bool WriteConfig(StreamRpc* rpc, const v1::StreamRequest& config) {
-    return rpc->Write(Serialized(config));
-  }
-
-  // Books the reply to `sequence`: its send record, or that the reply is a duplicate.
-  ResendLedger<Pending>::Reply TakePending(std::uint64_t sequence) {
-    std::lock_guard<std::mutex> lock(pending_mu);
-    return pending.Answer(sequence);
-  }
-
   absl::Status Send(const FrameInput& input, const FrameMeta& meta) {
-    std::lock_guard<std::timed_mutex> lock(write_mu);
-    if (writes_closed) {
-      return absl::FailedPreconditionError(
-          absl::StrCat(What(), ": Send after CloseSend or Finish"));
-    }
+    std::lock_guard<std::mutex> lock(send_mu);
     const std::uint64_t sequence = meta.sequence.value_or(next_sequence);
     grpc::ByteBuffer bytes;
-    if (absl::Status s = frames.Write(input, meta, sequence, &bytes); !s.ok()) {
-      return s;
-    }
-    const std::uint64_t image_bytes = frames.image_bytes();
-    {
-      // Recorded before the write: the reply may arrive before Write returns.
-      Pending p{meta.frame_id, frames.frame().capture_time_unix_ns(), Clock::now(), UnixNanosNow(),
-                std::nullopt};
-      const bool keep = KeepsFrames();
-      if (keep) p.bytes = bytes;  // shares the slices
-      std::lock_guard<std::mutex> plock(pending_mu);
-      pending.Sent(sequence, std::move(p), keep);
+    if (absl::Status s = frames.Write(input, meta, sequence, &bytes); !s.ok()) return s;
+    FrameRecord record;
+    record.frame_id = meta.frame_id;
+    record.capture_time_unix_ns = frames.frame().capture_time_unix_ns();
+    record.image_bytes = frames.image_bytes();
+    // DELIVERY_ALL waits here while a frame already waits for the write slot (back-pressure);
+    // DELIVERY_LATEST never waits.
+    const CoreMachine::Submitted submitted =
+        core->SubmitWaiting(sequence, std::move(bytes), std::move(record));
+    switch (submitted) {
+      case CoreMachine::Submitted::kClosed:
+        return absl::FailedPreconditionError(
+            absl::StrCat(What(), ": Send after CloseSend or Finish"));
+      case CoreMachine::Submitted::kEnded:
+      case CoreMachine::Submitted::kFull:
+        return Ended();
+      case CoreMachine::Submitted::kWriting:
+      case CoreMachine::Submitted::kQueued:
+        break;
     }
     next_sequence = sequence + 1;
-    if (!write_failed && !call->rpc->Write(bytes)) write_failed = true;
-    if (write_failed && !options.resilient) return Ended();
-    // A resilient stream sends the frame again on its next call (or reports it lost).
-    frames_sent.fetch_add(1, std::memory_order_relaxed);
-    image_bytes_sent.fetch_add(image_bytes, std::memory_order_relaxed);
+    image_bytes_sent.fetch_add(frames.image_bytes(), std::memory_order_relaxed);
     return absl::OkStatus();
   }
 
   absl::Status Reconfigure(const StreamConfig& config) {
-    std::lock_guard<std::timed_mutex> lock(write_mu);
-    if (writes_closed) {
-      return absl::FailedPreconditionError(absl::StrCat(What(), ": already closed by CloseSend"));
-    }
-    *config_request.mutable_config() = config;
-    if (!write_failed && !WriteConfig(call->rpc.get(), config_request)) write_failed = true;
-    return write_failed && !options.resilient ? Ended() : absl::OkStatus();
+    std::lock_guard<std::mutex> lock(send_mu);
+    absl::Status s = core->Reconfigure(SerializedConfig(config));
+    if (s.code() == absl::StatusCode::kUnavailable) return Ended();
+    return s;
   }
 
-  absl::Status CloseSend() {
-    std::lock_guard<std::timed_mutex> lock(write_mu);
-    if (writes_closed) return absl::OkStatus();
-    writes_closed = true;
-    if (write_failed) return absl::OkStatus();  // nothing to close; Finish reports why
-    if (!call->rpc->WritesDone()) {
-      write_failed = true;
-      if (!options.resilient) return Ended();
+  // Hands `r` to the application: the callback, or the buffer Read takes from.
+  void Deliver(Result&& r) {
+    if (options.on_result) {
+      if (r.status.ok()) DecodeInto(decode_clouds, &r);
+      options.on_result(std::move(r));
+      return;
     }
-    return absl::OkStatus();
-  }
-
-  // The current call's reads have ended: takes write_mu from the writers. A Write blocked on an
-  // ended call fails by itself once gRPC sees the end (trailers, RST_STREAM or a dead
-  // connection); if one still holds on after a while, the call is cancelled, which would turn
-  // an OK ending into CANCELLED, so it is the last resort.
-  std::unique_lock<std::timed_mutex> TakeWriters() {
-    std::unique_lock<std::timed_mutex> writers(write_mu, std::defer_lock);
-    if (!writers.try_lock_for(std::chrono::seconds(2))) {
-      {
-        std::lock_guard<std::mutex> lock(call_mu);
-        call->context.TryCancel();
-      }
-      writers.lock();
-    }
-    return writers;
-  }
-
-  // Opens a new call after `cause` ended the last one and sends it the config and (DELIVERY_ALL)
-  // every unanswered frame. Holds write_mu. False once reconnect_timeout has passed since the
-  // calls started failing, or on Cancel.
-  bool Reconnect(const absl::Status& cause, Reconnect* event) {
-    const Clock::time_point start = Clock::now();
-    if (!failing_since) failing_since = start;
-    const Clock::time_point give_up = *failing_since + options.reconnect_timeout;
-    event->cause = cause;
-    event->old_instance = last_instance;
+    bool pause = false;
     {
-      // DELIVERY_LATEST frames are not sent again: the server would have dropped them anyway.
-      std::lock_guard<std::mutex> lock(pending_mu);
-      event->frames_dropped = pending.CallLost();
+      std::lock_guard<std::mutex> lock(results_mu);
+      if (discard) return;
+      results.push_back(std::move(r));
+      if (results.size() >= kMaxBufferedResults && !reads_paused) pause = reads_paused = true;
     }
-    dropped_before += dropped_this_call + event->frames_dropped;
-    dropped_this_call = 0;
-    auto backoff = std::chrono::milliseconds(20);
-    while (Clock::now() < give_up) {
-      {
-        std::lock_guard<std::mutex> lock(call_mu);
-        if (cancelled) return false;
-      }
-      // Bounded waits, so that a Cancel or the deadline is noticed.
-      const auto wait_until = std::min(give_up, Clock::now() + std::chrono::seconds(1));
-      if (!channel->WaitForConnected(std::chrono::system_clock::now() +
-                                     (wait_until - Clock::now()))) {
-        continue;
-      }
-      std::unique_ptr<Call> next = StartCall();
-      bool ok = next->rpc != nullptr && WriteConfig(next->rpc.get(), config_request);
-      std::uint64_t resent = 0;
-      {
-        std::lock_guard<std::mutex> lock(pending_mu);
-        while (ok) {
-          const ResendLedger<Pending>::Entry* again = pending.NextResend();
-          if (again == nullptr) break;
-          ok = next->rpc->Write(*again->record.bytes);
-          ++resent;
-        }
-        if (!ok) pending.CallLost();  // what this attempt resent goes again on the next
-      }
-      if (ok && writes_closed) ok = next->rpc->WritesDone();
-      if (ok) {
-        std::lock_guard<std::mutex> lock(call_mu);
-        if (cancelled) next->context.TryCancel();
-        call = std::move(next);
-        write_failed = false;
-        event->attempt = reconnects.fetch_add(1) + 1;
-        event->frames_resent = resent;
-        event->took =
-            std::chrono::duration_cast<std::chrono::milliseconds>(Clock::now() - *failing_since);
-        frames_resent.fetch_add(resent);
-        return true;
-      }
-      if (next->rpc != nullptr) next->rpc->Finish().IgnoreError();
-      std::this_thread::sleep_until(std::min(give_up, Clock::now() + backoff));
-      backoff = std::min<std::chrono::milliseconds>(backoff * 2, std::chrono::seconds(1));
-    }
-    return false;
+    results_cv.notify_all();
+    if (pause) core->PauseReads(true);
   }
 
-  // The stream is over: `why` is its final status. A resilient stream reports every frame still
-  // unanswered as lost.
-  void GiveUp(absl::Status why) {
-    read_done = true;
-    final_status = std::move(why);
-    if (!options.resilient) return;
-    std::lock_guard<std::mutex> lock(pending_mu);
-    for (ResendLedger<Pending>::Entry& e : pending.TakeUnanswered()) {
-      Result r;
-      r.status = absl::UnavailableError(absl::StrCat(
-          "frame ", e.sequence, " was sent but never answered: ", final_status.message()));
-      r.sequence = e.sequence;
-      r.frame_id = std::move(e.record.frame_id);
-      r.capture_time_unix_ns = e.record.capture_time_unix_ns;
-      r.times.send = e.record.send;
-      r.times.send_unix_ns = e.record.send_unix_ns;
-      r.frames_dropped = dropped_before + dropped_this_call;
-      lost.push_back(std::move(r));
-    }
-  }
-
-  // The next reply, or false once the stream has ended (its status then in final_status).
-  bool ReadOne(Result* result, bool decode) {
-    std::lock_guard<std::mutex> lock(read_mu);
-    for (;;) {
-      if (!lost.empty()) {
-        *result = std::move(lost.front());
-        lost.pop_front();
-        return true;
-      }
-      if (read_done) return false;
-      if (call->rpc->Read(&reply)) {
-        failing_since.reset();
-        if (!Fill(result, decode)) continue;  // a second answer to a resent frame
-        return true;
-      }
-      std::unique_lock<std::timed_mutex> writers = TakeWriters();
-      const absl::Status ended = FromGrpc(call->rpc->Finish(), What());
-      bool is_cancelled;
-      {
-        std::lock_guard<std::mutex> c(call_mu);
-        is_cancelled = cancelled;
-      }
-      if (options.resilient && !is_cancelled && EndedByTheServerSide(ended)) {
-        ::cloudcast::client::Reconnect event;
-        if (Reconnect(ended, &event)) {
-          writers.unlock();
-          if (options.on_reconnect) options.on_reconnect(event);
-          continue;
-        }
-        GiveUp(absl::UnavailableError(absl::StrCat(
-            What(), " lost its call (", ended.message(), ") and could not open a new one within ",
-            options.reconnect_timeout.count(), " ms (StreamOptions::reconnect_timeout)")));
-        continue;
-      }
-      GiveUp(ended);
-    }
-  }
-
-  // Fills `result` from `reply`. False for a reply that answers a frame already answered (each
-  // frame is answered once), which is not handed out.
-  bool Fill(Result* result, bool decode) {
-    result->times = ClientTimes{};
-    result->times.receive = Clock::now();
-    result->times.receive_unix_ns = UnixNanosNow();
-    result->status = absl::OkStatus();
-    result->config_rejected = false;
-    bool answers_frame = true;
-    std::uint64_t dropped = 0;
+  void OnReply(v1::StreamReply& reply, std::size_t /*reply_bytes*/, const SettledFrame* frame,
+               Clock::time_point received) override {
+    Result r;
+    r.times.receive = received;
+    r.times.receive_unix_ns = UnixNanosAt(received);
     switch (reply.kind_case()) {
       case v1::StreamReply::kCloud:
         // Swapped, not copied: the Draco bytes move into the result.
-        result->reply.Swap(reply.mutable_cloud());
-        result->sequence = result->reply.sequence();
-        result->frame_id = result->reply.frame_id();
-        result->capture_time_unix_ns = result->reply.capture_time_unix_ns();
-        result->server_instance = result->reply.server_instance();
-        dropped = result->reply.frames_dropped();
+        r.reply.Swap(reply.mutable_cloud());
+        r.sequence = r.reply.sequence();
+        r.frame_id = r.reply.frame_id();
+        r.capture_time_unix_ns = r.reply.capture_time_unix_ns();
+        r.server_instance = r.reply.server_instance();
         break;
       case v1::StreamReply::kError: {
         const v1::FrameError& error = reply.error();
-        result->status = convert::ToStatus(error);
-        result->reply.Clear();
-        result->sequence = error.sequence();
-        result->frame_id = error.frame_id();
-        result->capture_time_unix_ns = 0;
-        result->server_instance = error.server_instance();
-        dropped = error.frames_dropped();
-        if (convert::AnswersNoFrame(error)) {
-          answers_frame = false;
-          result->config_rejected = error.kind() == v1::ERROR_KIND_CONFIG;
-        }
+        r.status = convert::ToStatus(error);
+        r.sequence = error.sequence();
+        r.frame_id = error.frame_id();
+        r.server_instance = error.server_instance();
+        r.config_rejected = error.kind() == v1::ERROR_KIND_CONFIG;
         break;
       }
       case v1::StreamReply::KIND_NOT_SET:
-        answers_frame = false;
-        result->status = absl::InternalError(
+        r.status = absl::InternalError(
             absl::StrCat(What(), ": the server sent a reply with neither a cloud nor an error"));
-        result->reply.Clear();
-        result->sequence = 0;
-        result->frame_id.clear();
-        result->capture_time_unix_ns = 0;
-        result->server_instance.clear();
         break;
     }
-    if (!result->server_instance.empty()) last_instance = result->server_instance;
-    dropped_this_call = std::max(dropped_this_call, dropped);
-    result->frames_dropped = dropped_before + dropped_this_call;
-    if (answers_frame) {
-      const ResendLedger<Pending>::Reply booked = TakePending(result->sequence);
-      if (booked.match == ResendLedger<Pending>::Match::kDuplicate) return false;
-      if (booked.entry) {
-        const Pending& p = booked.entry->record;
-        result->times.send = p.send;
-        result->times.send_unix_ns = p.send_unix_ns;
-        // FrameError does not echo the capture time; the client knows what it sent.
-        if (result->capture_time_unix_ns == 0) {
-          result->capture_time_unix_ns = p.capture_time_unix_ns;
-        }
+    if (frame != nullptr) {
+      r.times.send = frame->frame.written;
+      r.times.send_unix_ns = UnixNanosAt(frame->frame.written);
+      // FrameError does not echo the capture time; the client knows what it sent.
+      if (r.capture_time_unix_ns == 0) {
+        r.capture_time_unix_ns = frame->frame.record.capture_time_unix_ns;
       }
     }
-    if (result->status.ok()) {
-      DecodeInto(decode, result);
-    } else {
-      result->cloud.ResizeUnorganized(0);
+    r.frames_dropped = dropped_seen;
+    r.frames_replaced = replaced_seen;
+    Deliver(std::move(r));
+  }
+
+  void OnSettled(SettledFrame& s) override {
+    Result r;
+    r.fate = s.fate;
+    r.sequence = s.sequence;
+    r.frame_id = std::move(s.frame.record.frame_id);
+    r.capture_time_unix_ns = s.frame.record.capture_time_unix_ns;
+    r.times.send = s.frame.written;
+    r.times.send_unix_ns = UnixNanosAt(s.frame.written);
+    switch (s.fate) {
+      case FrameFate::kReplaced:
+        ++replaced_seen;
+        r.status = absl::AbortedError(
+            absl::StrCat("frame ", s.sequence,
+                         " was replaced by a newer frame before it was sent (DELIVERY_LATEST)"));
+        break;
+      case FrameFate::kDropped:
+        ++dropped_seen;
+        r.status = absl::AbortedError(absl::StrCat(
+            "frame ", s.sequence,
+            " was sent but skipped for a newer frame (DELIVERY_LATEST: by the server, or with a "
+            "lost call)"));
+        break;
+      case FrameFate::kLost:
+      case FrameFate::kAnswered:
+        r.status = absl::UnavailableError(absl::StrCat(
+            "frame ", s.sequence, " was sent but never answered: ",
+            s.why.ok() ? "the stream ended first" : s.why.message()));
+        break;
+      case FrameFate::kUnsent:
+        r.status = absl::UnavailableError(absl::StrCat(
+            "frame ", s.sequence, " was never answered (never sent): ",
+            s.why.ok() ? "the stream ended first" : s.why.message()));
+        break;
     }
+    r.frames_dropped = dropped_seen;
+    r.frames_replaced = replaced_seen;
+    r.cloud.ResizeUnorganized(0);
+    Deliver(std::move(r));
+  }
+
+  void OnReconnected(const Reconnected& e) override {
+    reconnects.fetch_add(1);
+    if (!options.on_reconnect) return;
+    ::cloudcast::client::Reconnect event;
+    event.attempt = e.attempt;
+    event.cause = e.cause;
+    event.old_instance = e.old_instance;
+    event.took = std::chrono::duration_cast<std::chrono::milliseconds>(e.took);
+    event.frames_resent = e.frames_resent;
+    event.frames_dropped = e.frames_dropped;
+    options.on_reconnect(event);
+  }
+
+  void OnEnded(const absl::Status& status) override {
+    {
+      std::lock_guard<std::mutex> lock(results_mu);
+      ended = true;
+      final_status = status;
+    }
+    results_cv.notify_all();
+  }
+
+  bool Read(Result* result) {
+    bool resume = false;
+    {
+      std::unique_lock<std::mutex> lock(results_mu);
+      results_cv.wait(lock, [&] { return !results.empty() || ended; });
+      if (results.empty()) return false;
+      *result = std::move(results.front());
+      results.pop_front();
+      if (reads_paused && results.size() <= kMaxBufferedResults / 2) {
+        reads_paused = false;
+        resume = true;
+      }
+    }
+    if (resume) core->PauseReads(false);
+    if (result->status.ok()) DecodeInto(decode_clouds, result);
     return true;
+  }
+
+  absl::Status CloseSend() {
+    std::lock_guard<std::mutex> lock(send_mu);
+    core->CloseSend();
+    return absl::OkStatus();
   }
 
   absl::Status Finish() {
     std::lock_guard<std::mutex> lock(finish_mu);
     if (finished) return final_status;
-    CloseSend().IgnoreError();  // a dead call still finishes below, with its real status
-    if (receiver.joinable()) {
-      receiver.join();
-    } else {
-      // The call's status follows its last read: drain what nobody will read, undecoded.
-      Result discard;
-      while (ReadOne(&discard, /*decode=*/false)) {
-      }
+    core->CloseSend();  // a dead call still finishes, with its real status
+    bool resume = false;
+    {
+      // Nobody reads what is still to come: it is discarded, and reading goes on to the end.
+      std::lock_guard<std::mutex> lock(results_mu);
+      discard = true;
+      results.clear();
+      resume = reads_paused;
+      reads_paused = false;
     }
+    if (resume) core->PauseReads(false);
+    const absl::Status status = core->AwaitEnd();
+    std::lock_guard<std::mutex> results_lock(results_mu);
+    final_status = status;
     finished = true;
     return final_status;
-  }
-
-  void Cancel() {
-    std::lock_guard<std::mutex> lock(call_mu);
-    cancelled = true;
-    if (call != nullptr) call->context.TryCancel();
   }
 };
 
@@ -488,7 +348,7 @@ Stream::~Stream() {
   if (impl_ == nullptr) return;
   {
     std::lock_guard<std::mutex> lock(impl_->finish_mu);
-    if (!impl_->finished) impl_->Cancel();
+    if (!impl_->finished) impl_->core->Cancel();
   }
   impl_->Finish().IgnoreError();
 }
@@ -506,26 +366,28 @@ absl::Status Stream::Reconfigure(const StreamConfig& config) { return impl_->Rec
 
 bool Stream::Read(Result* result) {
   if (impl_->options.on_result) return false;
-  return impl_->ReadOne(result, impl_->decode_clouds);
+  return impl_->Read(result);
 }
 
 absl::Status Stream::CloseSend() { return impl_->CloseSend(); }
 
 absl::Status Stream::Finish() { return impl_->Finish(); }
 
-void Stream::Cancel() { impl_->Cancel(); }
+void Stream::Cancel() { impl_->core->Cancel(); }
 
 std::uint64_t Stream::image_bytes_sent() const {
   return impl_->image_bytes_sent.load(std::memory_order_relaxed);
 }
 
 std::uint64_t Stream::frames_sent() const {
-  return impl_->frames_sent.load(std::memory_order_relaxed);
+  return impl_->core->submitted() - impl_->core->replaced();
 }
 
-int Stream::reconnects() const { return impl_->reconnects.load(); }
+std::uint64_t Stream::frames_replaced() const { return impl_->core->replaced(); }
 
-std::uint64_t Stream::frames_resent() const { return impl_->frames_resent.load(); }
+int Stream::reconnects() const { return impl_->core->reconnects(); }
+
+std::uint64_t Stream::frames_resent() const { return impl_->core->resent(); }
 
 // ---------------------------------------------------------------------------------------------
 // Client
@@ -644,33 +506,21 @@ absl::StatusOr<std::unique_ptr<Stream>> Client::OpenStream(const StreamConfig& c
                      impl_->target, " within ", impl_->options.connect_timeout.count(), " ms"));
   }
   auto impl = std::make_unique<Stream::Impl>();
-  impl->channel = impl_->channel;
-  impl->stream_method.emplace(StreamMethodName(), grpc::internal::RpcMethod::BIDI_STREAMING,
-                              impl->channel);
   impl->target = impl_->target;
   impl->decode_clouds = impl_->options.decode_clouds;
-  impl->wait_for_ready = impl_->options.wait_for_ready;
   impl->options = std::move(options);
-  *impl->config_request.mutable_config() = config;
-  impl->call = impl->StartCall();
-  if (impl->call->rpc == nullptr) {
-    return absl::InternalError(absl::StrCat("cannot start a stream to ", impl_->target));
-  }
-  if (!Stream::Impl::WriteConfig(impl->call->rpc.get(), impl->config_request)) {
-    // The call is dead before it began; its status says why (e.g. UNAVAILABLE).
-    absl::Status s = FromGrpc(impl->call->rpc->Finish(), impl->What());
-    impl->finished = true;  // the destructor must not Finish twice
-    impl->final_status = s;
-    if (s.ok()) s = absl::UnavailableError(absl::StrCat(impl->What(), ": ended at once"));
-    return s;
-  }
-  Stream::Impl* raw = impl.get();
-  if (raw->options.on_result) {
-    raw->receiver = std::thread([raw] {
-      Result result;
-      while (raw->ReadOne(&result, raw->decode_clouds)) raw->options.on_result(std::move(result));
-    });
-  }
+  StreamCoreOptions core;
+  core.machine.name = impl->What();
+  // Client-side replacement only when the stream asks for DELIVERY_LATEST itself: an unset
+  // delivery may be a server's DELIVERY_ALL, whose frames must all be sent.
+  core.machine.latest = config.delivery() == v1::DELIVERY_LATEST;
+  core.machine.max_queued = std::max<std::size_t>(1, impl->options.max_queued_frames);
+  core.machine.resilient = impl->options.resilient;
+  core.machine.reconnect_timeout = impl->options.reconnect_timeout;
+  core.wait_for_ready = impl_->options.wait_for_ready;
+  core.config = SerializedConfig(config);
+  impl->channel = impl_->channel;
+  impl->core = StreamCore::Start(impl->channel.get(), std::move(core), impl.get());
   return std::unique_ptr<Stream>(new Stream(std::move(impl)));
 }
 

@@ -1,12 +1,9 @@
 #include "cloudcast/load/fleet.h"
 
-#include <grpcpp/generic/generic_stub.h>
 #include <grpcpp/grpcpp.h>
-#include <grpcpp/support/proto_buffer_reader.h>
 #include <spdlog/fmt/fmt.h>
 
 #include <algorithm>
-#include <deque>
 #include <optional>
 #include <queue>
 #include <random>
@@ -14,14 +11,14 @@
 #include <thread>
 
 #include "absl/status/status.h"
-#include "cloudcast/client/resend_ledger.h"
+#include "cloudcast/client/stream_core.h"
+#include "cloudcast/proto/convert.h"
 #include "cloudcast/v1/cloudcast.grpc.pb.h"
 
 namespace cloudcast::load {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-constexpr char kStreamMethod[] = "/cloudcast.v1.CloudCast/Stream";
 // A send the scheduler itself issues this much after its intended time counts as late.
 constexpr auto kSchedulerSlack = std::chrono::milliseconds(1);
 
@@ -64,12 +61,10 @@ const char* CodeName(int code) {
   return code >= 0 && code <= 16 ? kNames[code] : "UNKNOWN";
 }
 
-// One robot's stream: a sequence of gRPC calls (one, unless resilient), each a callback reactor
-// (Call). Writes start from the scheduler threads (Due), from the calls' own callbacks (the next
-// queued frame when a write completes) and from Run's timers (a reconnect after a backoff). A
-// hold keeps each call alive until no more writes can start on it; one write at a time per call,
-// as gRPC requires. Everything below is guarded by the stream's mu_.
-class Fleet::Driver {
+// One robot's stream: the client library's stream core (its calls, queue, replacement, resends,
+// reconnects and give-up), fed by the scheduler threads (Due) or, in closed loop, by its own
+// answers; its events become the recorder's counts and the stream's account.
+class Fleet::Driver : public client::StreamSink {
  public:
   struct Context {
     const FrameStore* store;
@@ -88,106 +83,66 @@ class Fleet::Driver {
       : index_(index), frame_limit_(frame_limit), config_(config) {
     stats_.index = index;
   }
+  // The stream has ended by now (Run waits for every stream); its calls are released here.
+  ~Driver() {
+    if (core_ != nullptr) core_->AwaitEnd().IgnoreError();
+  }
 
-  void Start(grpc::GenericStub* stub, const Context* context) {
+  // `channel` (the fleet's) outlives the stream.
+  void Start(grpc::Channel* channel, const Context* context) {
     ctx_ = context;
-    stub_ = stub;
-    {
-      std::lock_guard<std::mutex> lock(mu_);
-      opening_ = true;
-    }
-    OpenCall(/*after_failure=*/false);
+    client::StreamCoreOptions o;
+    o.machine.name = "stream";  // the same words for every stream, so the report groups them
+    o.machine.reconnect_timeout_name = "--reconnect-timeout";
+    // As robots send: DELIVERY_LATEST replaces a frame still waiting for the write slot;
+    // DELIVERY_ALL queues every frame due (the generator itself never waits).
+    o.machine.latest = !ctx_->lossless;
+    o.machine.max_queued = 0;
+    o.machine.resilient = ctx_->resilient;
+    o.machine.reconnect_timeout = std::chrono::nanoseconds(ctx_->reconnect_timeout_ns);
+    if (config_ != nullptr) o.config = *config_;
+    core_ = client::StreamCore::Start(channel, std::move(o), this);
+    if (ctx_->closed_loop) TopUp();
   }
 
   // The scheduler: the next frame is due at `intended` (steady clock, ns).
   void Due(std::int64_t intended, bool scheduler_late) {
-    Call* release = nullptr;
+    std::uint64_t seq;
     {
       std::lock_guard<std::mutex> lock(mu_);
-      if (ended_ || no_more_ || (call_ != nullptr && call_->broken && !ctx_->resilient)) {
+      ++due_;
+      if (ended_ || no_more_) {
         ctx_->recorder->Unsent(1);
         ++stats_.unsent;
         return;
       }
-      due_.push_back({next_seq_++, intended});
-      if (call_ == nullptr || call_->write_in_flight) {
-        ctx_->recorder->Late(/*flow_control=*/true);  // the previous write (or call) is not done
-      } else if (scheduler_late) {
-        ctx_->recorder->Late(/*flow_control=*/false);
-      }
-      release = TryWriteLocked(call_);
+      seq = next_seq_++;
     }
-    if (release != nullptr) release->RemoveHold();
+    Submit(seq, intended, scheduler_late);
   }
 
   // No more frames will be due. `discard`: frames still queued are not sent (a stop); frames
   // waiting for a resend were sent once, so they still go and are awaited.
   void NoMoreFrames(bool discard) {
-    Call* release = nullptr;
     {
       std::lock_guard<std::mutex> lock(mu_);
       if (no_more_) return;
       no_more_ = true;
-      if (discard && !due_.empty()) {
-        ctx_->recorder->Unsent(due_.size());
-        stats_.unsent += due_.size();
-        due_.clear();
-      }
-      release = TryWriteLocked(call_);
     }
-    if (release != nullptr) release->RemoveHold();
+    core_->CloseSend(discard);
   }
 
-  // The drain timeout: the current call is cancelled (its OnDone reports what it held); a stream
-  // waiting to reconnect ends at once.
-  void Cancel() {
-    Call* cancel = nullptr;
-    bool ended_now = false;
-    {
-      std::lock_guard<std::mutex> lock(mu_);
-      if (ended_) return;
-      cancelled_ = true;
-      if (call_ != nullptr) {
-        cancel = call_;
-      } else if (!opening_) {
-        EndLocked(grpc::Status(grpc::StatusCode::CANCELLED, "cancelled at the drain timeout"));
-        ended_now = true;
-      }
-    }
-    if (cancel != nullptr) cancel->context.TryCancel();
-    if (ended_now) ctx_->fleet->StreamEnded();
-  }
-
-  // Run's loop, at or after a time this stream asked for: a reconnect whose backoff is over, or
-  // the give-up deadline of a stream that has not found a working call.
-  void OnTimer(std::int64_t now) {
-    Call* cancel = nullptr;
-    bool open = false, ended_now = false;
-    {
-      std::lock_guard<std::mutex> lock(mu_);
-      if (ended_ || failing_since_ == 0) return;
-      if (now - failing_since_ >= ctx_->reconnect_timeout_ns) {
-        if (call_ != nullptr) {
-          giving_up_ = true;  // its OnDone gives up
-          cancel = call_;
-        } else if (!opening_) {
-          GiveUpLocked();
-          ended_now = true;
-        }
-      } else if (retry_at_ != 0 && now >= retry_at_ && call_ == nullptr && !opening_) {
-        retry_at_ = 0;
-        opening_ = true;
-        open = true;
-      }
-    }
-    if (cancel != nullptr) cancel->context.TryCancel();
-    if (open) OpenCall(/*after_failure=*/true);
-    if (ended_now) ctx_->fleet->StreamEnded();
-  }
+  // The drain timeout: the stream is cancelled; what it still holds is reported lost.
+  void Cancel() { core_->Cancel(); }
 
   std::uint64_t sent() {
     std::lock_guard<std::mutex> lock(mu_);
-    return sent_;
+    return stats_.sent;
+  }
+  // Frames that fell due (sent or not).
+  std::uint64_t due() {
+    std::lock_guard<std::mutex> lock(mu_);
+    return due_;
   }
   std::int64_t last_send_ns() {
     std::lock_guard<std::mutex> lock(mu_);
@@ -198,376 +153,206 @@ class Fleet::Driver {
     return stats_;
   }
 
- private:
-  // A frame that is due and not written yet.
-  struct DueFrame {
-    std::uint64_t seq;
-    std::int64_t intended;
-  };
-  // What the stream keeps of a frame written and not answered (the ledger holds its sequence).
-  struct Written {
-    std::int64_t intended = 0, actual = 0;
-    std::size_t bytes = 0;
-  };
-  using Ledger = client::ResendLedger<Written>;
-
-  // One gRPC call of the stream. Its fields are guarded by the driver's mu_; the driver owns it
-  // until the driver itself goes (a call ends a few times per stream at most).
-  class Call : public grpc::ClientBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer> {
-   public:
-    explicit Call(Driver* driver) : driver_(driver) {}
-    void OnWriteDone(bool ok) override { driver_->WriteDone(this, ok); }
-    void OnReadDone(bool ok) override { driver_->ReadDone(this, ok); }
-    void OnDone(const grpc::Status& status) override { driver_->CallDone(this, status); }
-
-    grpc::ClientContext context;
-    grpc::ByteBuffer write_buf, read_buf;
-    bool started = false;
-    bool after_failure = false;  // opened to replace a failed call
-    bool config_sent = false;
-    bool wrote_once = false;  // a write completed: the call is on a replica
-    bool write_in_flight = false;
-    bool broken = false;  // a read or write failed: the call is ending
-    std::int64_t broken_at = 0;
-    bool hold_released = false;
-    bool answered = false;
-    std::uint64_t server_dropped = 0;
-
-   private:
-    Driver* const driver_;
-  };
-
-  // Opens a call (the first, or one replacing a failed call) and starts its reads and writes.
-  // The caller set opening_.
-  void OpenCall(bool after_failure) {
-    auto owned = std::make_unique<Call>(this);
-    Call* c = owned.get();
-    c->after_failure = after_failure;
-    // A replacement waits for a ready replica rather than failing on a channel that has just
-    // lost one; the give-up deadline bounds the wait.
-    if (after_failure) c->context.set_wait_for_ready(true);
-    stub_->PrepareBidiStreamingCall(&c->context, kStreamMethod, grpc::StubOptions(), c);
-    c->AddHold();  // released when no more writes can start (TryWriteLocked)
-    c->StartRead(&c->read_buf);
-    bool cancel = false;
-    {
-      std::lock_guard<std::mutex> lock(mu_);
-      calls_.push_back(std::move(owned));
-      call_ = c;
-      opening_ = false;
-      c->started = true;
-      ++stats_.calls;
-      if (after_failure) {
-        ++stats_.reconnect_attempts;
-        ctx_->recorder->ReconnectAttempt();
-      }
-      cancel = cancelled_ || giving_up_;
-      TryWriteLocked(c);  // the config (and frames) queue until StartCall
-    }
-    c->StartCall();
-    if (cancel) c->context.TryCancel();
-  }
-
-  // Starts the next write on `c` if it is the current call and its slot is free, or half-closes
-  // when nothing is left to write. Returns the call whose hold the caller must release (outside
-  // the lock), or nullptr.
-  Call* TryWriteLocked(Call* c) {
-    if (c == nullptr || !c->started || c->write_in_flight || c->hold_released) return nullptr;
-    if (c->broken) {
-      c->hold_released = true;
-      return c;
-    }
-    if (config_ != nullptr && !c->config_sent) {
-      c->config_sent = true;
-      c->write_in_flight = true;
-      c->write_buf = *config_;
-      c->StartWrite(&c->write_buf);
-      return nullptr;
-    }
-    // Frames sent on a lost call go again first, in order, with their intended times.
-    if (Ledger::Entry* again = ledger_.NextResend()) {
-      Written& w = again->record;
-      WriteFrameLocked(c, again->sequence, w.intended, &w);
+  // The core's events (one at a time, on gRPC's threads).
+  void OnWrite(const client::WriteEvent& w) override {
+    if (!w.is_frame) return;
+    std::lock_guard<std::mutex> lock(mu_);
+    last_send_ns_ = Ns(w.at);
+    if (w.resend) {
       ++stats_.resent;
       ctx_->recorder->Resent(w.bytes);
-      return nullptr;
-    }
-    if (due_.empty() && ctx_->closed_loop && !no_more_ && sent_ < frame_limit_ &&
-        static_cast<int>(ledger_.in_flight()) < ctx_->in_flight) {
-      // Closed loop: the frame is intended now; there is no schedule to fall behind.
-      due_.push_back({next_seq_++, Ns(Clock::now())});
-    }
-    if (!due_.empty()) {
-      const DueFrame d = due_.front();
-      due_.pop_front();
-      Written w;
-      WriteFrameLocked(c, d.seq, d.intended, &w);
-      ++sent_;
+    } else {
       ++stats_.sent;
       ctx_->recorder->Sent(w.bytes);
-      ledger_.Sent(d.seq, w, /*resendable=*/ctx_->lossless);
-      if (ctx_->closed_loop && sent_ >= frame_limit_) no_more_ = true;
-      return nullptr;
-    }
-    if (no_more_) {
-      c->hold_released = true;
-      c->StartWritesDone();
-      return c;
-    }
-    return nullptr;
-  }
-
-  // Starts the write of frame `seq` on `c`, and notes when and how big it went in `w`.
-  void WriteFrameLocked(Call* c, std::uint64_t seq, std::int64_t intended, Written* w) {
-    w->intended = intended;
-    w->actual = Ns(Clock::now());
-    // The same bytes as the first send: a new 20-byte header before the shared image slice.
-    const std::size_t frame_index = static_cast<std::size_t>(index_) + seq - 1;
-    c->write_buf =
-        ctx_->store->Request(frame_index, seq, ctx_->t0_unix_ns + (intended - ctx_->t0_steady_ns));
-    w->bytes = c->write_buf.Length();
-    last_send_ns_ = w->actual;
-    c->write_in_flight = true;
-    c->StartWrite(&c->write_buf);
-  }
-
-  void MarkBrokenLocked(Call* c) {
-    if (c->broken) return;
-    c->broken = true;
-    c->broken_at = Ns(Clock::now());
-  }
-
-  void WriteDone(Call* c, bool ok) {
-    Call* release = nullptr;
-    {
-      std::lock_guard<std::mutex> lock(mu_);
-      c->write_in_flight = false;
-      if (ok) {
-        if (!c->wrote_once && c->after_failure && ledger_.empty() && due_.empty()) {
-          // Nothing awaits an answer: the new call being on a replica is the reconnect.
-          ReconnectedLocked();
-        }
-        c->wrote_once = true;
-      } else {
-        MarkBrokenLocked(c);  // the call is ending; OnDone tells how
-      }
-      release = TryWriteLocked(c);
-    }
-    if (release != nullptr) release->RemoveHold();
-  }
-
-  void ReadDone(Call* c, bool ok) {
-    if (!ok) {
-      Call* release = nullptr;
-      {
-        std::lock_guard<std::mutex> lock(mu_);
-        MarkBrokenLocked(c);
-        release = TryWriteLocked(c);
-      }
-      if (release != nullptr) release->RemoveHold();
-      return;
-    }
-    const std::int64_t now = Ns(Clock::now());
-    v1::StreamReply reply;
-    const std::size_t bytes = c->read_buf.Length();
-    {
-      grpc::ProtoBufferReader reader(&c->read_buf);
-      if (!reply.ParseFromZeroCopyStream(&reader)) reply.Clear();
-    }
-    c->read_buf.Clear();
-    Call* release = nullptr;
-    {
-      std::lock_guard<std::mutex> lock(mu_);
-      Match(c, reply, now, bytes);
-      release = TryWriteLocked(c);  // closed loop: the answer frees a slot
-    }
-    c->StartRead(&c->read_buf);
-    if (release != nullptr) release->RemoveHold();
-  }
-
-  void CallDone(Call* c, const grpc::Status& status) {
-    bool open = false, ended_now = false;
-    std::optional<Clock::time_point> wake;
-    {
-      std::lock_guard<std::mutex> lock(mu_);
-      const std::string code = CodeName(status.error_code());
-      ctx_->recorder->CallStatus(code);
-      if (ended_) return;  // a call the stream no longer waited for
-      stats_.end_status = code;
-      server_dropped_before_ += c->server_dropped;
-      if (call_ == c) call_ = nullptr;
-      const bool has_work = !ledger_.empty() || !due_.empty() || !no_more_;
-      if (giving_up_) {
-        GiveUpLocked();
-        ended_now = true;
-      } else if (ctx_->resilient && !cancelled_ && has_work &&
-                 (status.error_code() == grpc::StatusCode::UNAVAILABLE ||
-                  // a server stopping while this call was opening cancels it
-                  status.error_code() == grpc::StatusCode::CANCELLED)) {
-        const std::int64_t now = Ns(Clock::now());
-        if (failing_since_ == 0) failing_since_ = c->broken_at != 0 ? c->broken_at : now;
-        cause_ = status.error_message();
-        if (now - failing_since_ >= ctx_->reconnect_timeout_ns) {
-          GiveUpLocked();
-          ended_now = true;
-        } else {
-          RequeueUnansweredLocked();
-          // The first attempt goes at once; a replacement that failed too backs off (20 ms,
-          // doubling, at most 1 s), so a replica refusing calls is not hammered.
-          ++attempts_;
-          if (attempts_ == 1) {
-            opening_ = true;
-            open = true;
-          } else {
-            const std::int64_t backoff =
-                std::min<std::int64_t>(20'000'000LL << std::min(attempts_ - 2, 6), 1'000'000'000);
-            retry_at_ = now + backoff;
-            wake = Clock::time_point(std::chrono::nanoseconds(retry_at_));
-          }
-          // Run's loop checks the give-up deadline too (a replacement may wait for a replica).
-          ctx_->fleet->WakeAt(index_, Clock::time_point(std::chrono::nanoseconds(
-                                          failing_since_ + ctx_->reconnect_timeout_ns)));
-        }
-      } else {
-        EndLocked(status);
-        ended_now = true;
-      }
-    }
-    if (wake) ctx_->fleet->WakeAt(index_, *wake);
-    if (open) OpenCall(/*after_failure=*/true);
-    if (ended_now) ctx_->fleet->StreamEnded();
-  }
-
-  // The frames the lost call left unanswered: in DELIVERY_ALL they go again first, in order, on
-  // the next call; in DELIVERY_LATEST they count as dropped (the server would have skipped
-  // them for newer ones anyway).
-  void RequeueUnansweredLocked() {
-    if (const std::uint64_t dropped = ledger_.CallLost(); dropped > 0) {
-      ctx_->recorder->Dropped(dropped);
-      stats_.dropped += dropped;
     }
   }
 
-  void ReconnectedLocked() {
-    if (failing_since_ == 0) return;
-    stats_.reconnect_ns.push_back(Ns(Clock::now()) - failing_since_);
-    ctx_->recorder->Reconnected();
-    failing_since_ = 0;
-    attempts_ = 0;
-  }
-
-  // The stream is over: frames it still holds are accounted for as the final status says.
-  void EndLocked(const grpc::Status& status) {
-    const std::string code = CodeName(status.error_code());
-    const std::uint64_t unanswered = ledger_.TakeUnanswered().size();
-    const std::uint64_t unsent = due_.size();
-    if (status.ok() && !ctx_->lossless) {
-      // DELIVERY_LATEST: a clean end with frames unanswered means the server skipped them.
-      ctx_->recorder->Dropped(unanswered);
-      stats_.dropped += unanswered;
-    } else {
-      ctx_->recorder->Lost(unanswered, code, status.error_message());
-      stats_.lost += unanswered;
-    }
-    if (unsent > 0) {
-      ctx_->recorder->Unsent(unsent);
-      stats_.unsent += unsent;
-    }
-    due_.clear();
-    ctx_->recorder->StreamEnded(server_dropped_before_);
-    ended_ = true;
-  }
-
-  // reconnect_timeout passed without a working call: every frame sent and unanswered is
-  // reported lost, saying so.
-  void GiveUpLocked() {
-    stats_.gave_up = true;
-    stats_.end_status = "UNAVAILABLE";  // the stream's end, whatever the last call's was
-    ctx_->recorder->GaveUp();
-    EndLocked(grpc::Status(
-        grpc::StatusCode::UNAVAILABLE,
-        fmt::format("gave up: no working call within --reconnect-timeout {:g} s (last: {})",
-                    ctx_->reconnect_timeout_ns / 1e9, cause_.empty() ? "none" : cause_)));
-  }
-
-  void Match(Call* c, const v1::StreamReply& reply, std::int64_t now, std::size_t bytes) {
-    std::uint64_t seq = 0;
+  void OnReply(v1::StreamReply& reply, std::size_t bytes, const client::SettledFrame* frame,
+               Clock::time_point received) override {
+    const std::int64_t now = Ns(received);
     std::string instance;
-    if (reply.has_cloud()) {
-      seq = reply.cloud().sequence();
-      instance = reply.cloud().server_instance();
-      c->server_dropped = reply.cloud().frames_dropped();
-    } else if (reply.has_error()) {
-      seq = reply.error().sequence();
-      instance = reply.error().server_instance();
-      c->server_dropped = reply.error().frames_dropped();
-      if (reply.error().kind() == v1::ERROR_KIND_CONFIG ||
-          reply.error().kind() == v1::ERROR_KIND_REQUEST) {
-        ctx_->recorder->FrameError(CodeName(reply.error().code()),
-                                   "config: " + reply.error().message(), instance);
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      if (reply.has_cloud()) {
+        instance = reply.cloud().server_instance();
+        server_dropped_this_call_ = reply.cloud().frames_dropped();
+      } else if (reply.has_error()) {
+        instance = reply.error().server_instance();
+        server_dropped_this_call_ = reply.error().frames_dropped();
+        if (convert::AnswersNoFrame(reply.error())) {
+          ctx_->recorder->FrameError(CodeName(reply.error().code()),
+                                     "config: " + reply.error().message(), instance);
+          return;
+        }
+      } else {
+        ctx_->recorder->FrameError("INTERNAL", "a reply with neither cloud nor error", instance);
         return;
       }
-    } else {
-      ctx_->recorder->FrameError("INTERNAL", "a reply with neither cloud nor error", instance);
-      return;
+      if (!answered_on_call_) {
+        answered_on_call_ = true;
+        stats_.replicas.push_back(instance.empty() ? "(unnamed)" : instance);
+      }
+      if (frame == nullptr) {
+        ctx_->recorder->FrameError("INTERNAL", "a reply to a frame not in flight", instance);
+        return;
+      }
+      // Latency from the intended time (the schedule's), service time from the latest write.
+      const std::int64_t intended = frame->frame.record.intended_ns;
+      const std::int64_t actual = Ns(frame->frame.written);
+      if (reply.has_cloud()) {
+        ++stats_.answered;
+        ctx_->recorder->Answered(now - intended, now - actual, instance, bytes);
+      } else {
+        ++stats_.frame_errors;
+        ctx_->recorder->FrameError(CodeName(reply.error().code()), reply.error().message(),
+                                   instance);
+      }
     }
-    if (!c->answered) {
-      c->answered = true;
-      stats_.replicas.push_back(instance.empty() ? "(unnamed)" : instance);
+    if (ctx_->closed_loop) TopUp();
+  }
+
+  void OnSettled(client::SettledFrame& s) override {
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      switch (s.fate) {
+        case client::FrameFate::kReplaced:
+          ++stats_.replaced;
+          ctx_->recorder->Replaced(1);
+          break;
+        case client::FrameFate::kDropped:
+          ++stats_.dropped;
+          ctx_->recorder->Dropped(1);
+          break;
+        case client::FrameFate::kLost:
+        case client::FrameFate::kAnswered:
+          ++stats_.lost;
+          ctx_->recorder->Lost(1, CodeName(static_cast<int>(s.why.code())),
+                               std::string(s.why.message()));
+          break;
+        case client::FrameFate::kUnsent:
+          ++stats_.unsent;
+          ctx_->recorder->Unsent(1);
+          break;
+      }
     }
-    // Exactly once: a sequence answered before (on an earlier call) is not counted again.
-    Ledger::Reply booked = ledger_.Answer(seq);
-    if (booked.match == Ledger::Match::kDuplicate) {
-      ++stats_.duplicates;
-      ctx_->recorder->Duplicate();
-      return;
+    if (ctx_->closed_loop) TopUp();
+  }
+
+  void OnCallOpened(bool after_failure) override {
+    std::lock_guard<std::mutex> lock(mu_);
+    ++stats_.calls;
+    answered_on_call_ = false;
+    if (after_failure) {
+      ++stats_.reconnect_attempts;
+      ctx_->recorder->ReconnectAttempt();
     }
-    if (booked.match == Ledger::Match::kUnknown) {
-      ctx_->recorder->FrameError("INTERNAL", "a reply to a frame not in flight", instance);
-      return;
+  }
+
+  void OnCallEnded(const absl::Status& status) override {
+    std::lock_guard<std::mutex> lock(mu_);
+    const std::string code = CodeName(static_cast<int>(status.code()));
+    ctx_->recorder->CallStatus(code);
+    stats_.end_status = code;
+    server_dropped_before_ += server_dropped_this_call_;
+    server_dropped_this_call_ = 0;
+  }
+
+  void OnReconnected(const client::Reconnected& r) override {
+    std::lock_guard<std::mutex> lock(mu_);
+    stats_.reconnect_ns.push_back(r.took.count());
+    ctx_->recorder->Reconnected();
+  }
+
+  void OnDuplicate() override {
+    std::lock_guard<std::mutex> lock(mu_);
+    ++stats_.duplicates;
+    ctx_->recorder->Duplicate();
+  }
+
+  void OnEnded(const absl::Status& /*status*/) override {
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      if (core_->gave_up()) {
+        stats_.gave_up = true;
+        stats_.end_status = "UNAVAILABLE";  // the stream's end, whatever the last call's was
+        ctx_->recorder->GaveUp();
+      }
+      ctx_->recorder->StreamEnded(server_dropped_before_ + server_dropped_this_call_);
+      ended_ = true;
     }
-    // Replies come in order: frames before this one that got none were skipped by the server.
-    if (booked.skipped > 0) {
-      ctx_->recorder->Dropped(booked.skipped);
-      stats_.dropped += booked.skipped;
+    ctx_->fleet->StreamEnded();
+  }
+
+ private:
+  // Hands frame `seq`, due at `intended`, to the core.
+  void Submit(std::uint64_t seq, std::int64_t intended, bool scheduler_late) {
+    // The same bytes for every send of a frame: a new 20-byte header before the shared image.
+    const std::size_t frame_index = static_cast<std::size_t>(index_) + seq - 1;
+    grpc::ByteBuffer bytes = ctx_->store->Request(
+        frame_index, seq, ctx_->t0_unix_ns + (intended - ctx_->t0_steady_ns));
+    client::FrameRecord record;
+    record.intended_ns = intended;
+    switch (core_->Submit(seq, std::move(bytes), std::move(record))) {
+      case client::CoreMachine::Submitted::kWriting:
+        if (scheduler_late) ctx_->recorder->Late(/*flow_control=*/false);
+        break;
+      case client::CoreMachine::Submitted::kQueued:
+        // The previous write (or call) is not done. (Closed loop has no schedule to be late for.)
+        if (!ctx_->closed_loop) ctx_->recorder->Late(/*flow_control=*/true);
+        break;
+      case client::CoreMachine::Submitted::kFull:
+      case client::CoreMachine::Submitted::kClosed:
+      case client::CoreMachine::Submitted::kEnded: {
+        std::lock_guard<std::mutex> lock(mu_);
+        ctx_->recorder->Unsent(1);
+        ++stats_.unsent;
+        break;
+      }
     }
-    const Written& f = booked.entry->record;
-    ReconnectedLocked();
-    if (reply.has_cloud()) {
-      ++stats_.answered;
-      ctx_->recorder->Answered(now - f.intended, now - f.actual, instance, bytes);
-    } else {
-      ++stats_.frame_errors;
-      ctx_->recorder->FrameError(CodeName(reply.error().code()), reply.error().message(), instance);
+  }
+
+  // Closed loop: frames intended now, while fewer than `in_flight` await their fate.
+  void TopUp() {
+    for (;;) {
+      std::uint64_t seq;
+      {
+        std::lock_guard<std::mutex> lock(mu_);
+        if (ended_ || no_more_) return;
+        if (submitted_ >= frame_limit_) {
+          no_more_ = true;
+          break;
+        }
+        const std::uint64_t settled = stats_.answered + stats_.frame_errors + stats_.lost +
+                                      stats_.dropped + stats_.replaced + stats_.unsent;
+        if (submitted_ - std::min(submitted_, settled) >=
+            static_cast<std::uint64_t>(ctx_->in_flight)) {
+          return;
+        }
+        seq = next_seq_++;
+        ++submitted_;
+        ++due_;
+      }
+      Submit(seq, Ns(Clock::now()), /*scheduler_late=*/false);
     }
+    core_->CloseSend();  // the frame limit is reached
   }
 
   const int index_;
   const std::uint64_t frame_limit_;
   const grpc::ByteBuffer* config_;
   const Context* ctx_ = nullptr;
-  grpc::GenericStub* stub_ = nullptr;
+  std::shared_ptr<client::StreamCore> core_;
 
   std::mutex mu_;
-  std::vector<std::unique_ptr<Call>> calls_;
-  Call* call_ = nullptr;  // the current call; nullptr between a failed call and its replacement
-  bool opening_ = false;  // a call is being opened (OpenCall has not taken the lock yet)
   bool no_more_ = false;
-  bool cancelled_ = false;
-  bool giving_up_ = false;
   bool ended_ = false;
+  bool answered_on_call_ = false;
   std::uint64_t next_seq_ = 1;
-  std::uint64_t sent_ = 0;
+  std::uint64_t submitted_ = 0;  // closed loop
+  std::uint64_t due_ = 0;
   std::int64_t last_send_ns_ = 0;
   std::uint64_t server_dropped_before_ = 0;  // frames_dropped of the calls that ended
-  // Resilience: when the calls started failing (0: they are not), the attempts since, the time
-  // of the next attempt after a backoff (0: none), and how the last call ended.
-  std::int64_t failing_since_ = 0;
-  int attempts_ = 0;
-  std::int64_t retry_at_ = 0;
-  std::string cause_;
-  std::deque<DueFrame> due_;  // due, not yet written
-  Ledger ledger_;             // written, not yet answered: in flight, or to be sent again
+  std::uint64_t server_dropped_this_call_ = 0;
   StreamStats stats_;
 };
 
@@ -697,12 +482,6 @@ std::vector<StreamStats> Fleet::streams() const {
   return out;
 }
 
-void Fleet::WakeAt(int driver, Clock::time_point when) {
-  std::lock_guard<std::mutex> lock(mu_);
-  timers_.push({when, driver});
-  cv_.notify_all();
-}
-
 void Fleet::Stop() {
   stop_.store(true);
   std::lock_guard<std::mutex> lock(mu_);
@@ -777,9 +556,6 @@ FleetResult Fleet::Run(const std::function<void(const SecondStats&)>& on_second)
   if (o.send_config) config = SerializeConfig(o.config);
   const bool lossless = o.config.delivery() == v1::DELIVERY_ALL;
 
-  std::vector<std::unique_ptr<grpc::GenericStub>> stubs;
-  for (const auto& channel : channels_)
-    stubs.push_back(std::make_unique<grpc::GenericStub>(channel));
   std::vector<std::uint64_t> limit(n, UINT64_MAX);
   if (o.frames > 0) {
     for (int s = 0; s < n; ++s) {
@@ -807,7 +583,7 @@ FleetResult Fleet::Run(const std::function<void(const SecondStats&)>& on_second)
       std::chrono::duration_cast<std::chrono::nanoseconds>(result.start.time_since_epoch())
           .count()};
   for (int s = 0; s < n; ++s) {
-    drivers_[s]->Start(stubs[static_cast<std::size_t>(s) % stubs.size()].get(), &ctx);
+    drivers_[s]->Start(channels_[static_cast<std::size_t>(s) % channels_.size()].get(), &ctx);
   }
 
   std::vector<std::thread> schedulers;
@@ -836,20 +612,8 @@ FleetResult Fleet::Run(const std::function<void(const SecondStats&)>& on_second)
     Clock::time_point wake = sending_over && !cancelled
                                  ? std::min(next_second, sending_over_at + o.drain_timeout)
                                  : next_second;
-    if (!timers_.empty()) wake = std::min(wake, timers_.top().first);
     cv_.wait_until(lock, wake);
     const Clock::time_point now = Clock::now();
-    // Drivers' timers that are due (reconnects after a backoff, give-up deadlines).
-    std::vector<int> due;
-    while (!timers_.empty() && timers_.top().first <= now) {
-      due.push_back(timers_.top().second);
-      timers_.pop();
-    }
-    if (!due.empty()) {
-      lock.unlock();
-      for (int d : due) drivers_[d]->OnTimer(Ns(now));
-      lock.lock();
-    }
     if (stop_.load() && reason != EndReason::kCancel) reason = EndReason::kCancel;
     if (!sending_over) {
       const bool duration_over = o.duration.count() > 0 && now - t0 >= o.duration;
@@ -872,11 +636,11 @@ FleetResult Fleet::Run(const std::function<void(const SecondStats&)>& on_second)
         if (reason != EndReason::kCancel) {
           bool count_bound = o.frames > 0;
           if (count_bound) {
-            std::uint64_t sent = 0;
+            std::uint64_t due = 0;
             lock.unlock();
-            for (auto& d : drivers_) sent += d->sent();
+            for (auto& d : drivers_) due += d->due();
             lock.lock();
-            count_bound = sent + recorder_.totals().unsent >= o.frames;
+            count_bound = due >= o.frames;
           }
           reason = count_bound ? EndReason::kNormal : EndReason::kTimeout;
         }

@@ -1,8 +1,7 @@
 #include "cloudcast/load/probe.h"
 
+#include <grpcpp/generic/generic_stub.h>
 #include <grpcpp/grpcpp.h>
-#include <grpcpp/impl/codegen/client_unary_call.h>
-#include <grpcpp/impl/codegen/rpc_method.h>
 #include <spdlog/fmt/fmt.h>
 
 #include <vector>
@@ -24,13 +23,24 @@ absl::Status ProbeHealth(const std::string& target, const std::string& service,
   grpc::ClientContext context;
   context.set_deadline(std::chrono::system_clock::now() + timeout);
   context.set_wait_for_ready(true);  // a replica still starting is waited for, up to the deadline
-  // A blocking call on this thread, as the generated stubs make it (with ByteBuffers as the
-  // messages): GenericStub only offers the callback form, whose completion runs on a gRPC thread
-  // that still holds the call after the waiter has moved on.
-  const grpc::internal::RpcMethod method("/grpc.health.v1.Health/Check",
-                                         grpc::internal::RpcMethod::NORMAL_RPC, channel);
-  const grpc::Status status = grpc::internal::BlockingUnaryCall<grpc::ByteBuffer, grpc::ByteBuffer>(
-      channel.get(), method, &context, in, &out);
+  // A generic call on a completion queue of this function's own, waited for here: everything
+  // the call touches (context, buffers, queue) outlives it, and no gRPC thread is involved.
+  grpc::CompletionQueue cq;
+  grpc::GenericStub stub(channel);
+  std::unique_ptr<grpc::GenericClientAsyncResponseReader> call =
+      stub.PrepareUnaryCall(&context, "/grpc.health.v1.Health/Check", in, &cq);
+  grpc::Status status;
+  call->StartCall();
+  int tag = 1;
+  call->Finish(&out, &status, &tag);
+  void* got = nullptr;
+  bool ok = false;
+  if (!cq.Next(&got, &ok) || got != &tag || !ok) {
+    status = grpc::Status(grpc::StatusCode::INTERNAL, "the health check did not complete");
+  }
+  cq.Shutdown();
+  while (cq.Next(&got, &ok)) {
+  }
   if (!status.ok()) {
     return absl::UnavailableError(fmt::format("{}: health check of '{}' failed: {} {}", target,
                                               service, static_cast<int>(status.error_code()),
@@ -38,7 +48,7 @@ absl::Status ProbeHealth(const std::string& target, const std::string& service,
   }
   // HealthCheckResponse { ServingStatus status = 1; } with SERVING = 1; an absent field is 0.
   std::vector<grpc::Slice> slices;
-  out.Dump(&slices);
+  if (!out.Dump(&slices).ok()) slices.clear();
   std::string bytes;
   for (const auto& s : slices) bytes.append(reinterpret_cast<const char*>(s.begin()), s.size());
   int serving = 0;

@@ -66,6 +66,11 @@ void Recorder::Unsent(std::uint64_t frames) {
   totals_.unsent += frames;
 }
 
+void Recorder::Replaced(std::uint64_t frames) {
+  std::lock_guard<std::mutex> lock(mu_);
+  totals_.replaced += frames;
+}
+
 void Recorder::CallStatus(const std::string& code) {
   std::lock_guard<std::mutex> lock(mu_);
   ++call_status_[code];

@@ -115,7 +115,7 @@ void Bridge::OnFrame(const OutgoingFrame& frame) {
   link_->Send(frame);
 }
 
-// On the stream's receiver thread (roscpp's publish is thread-safe).
+// On a gRPC callback thread, one reply at a time (roscpp's publish is thread-safe).
 void Bridge::OnCloud(client::Result&& result, const SentFrame& frame) {
   if (options_.publish_disparity) PublishDisparity(result, frame);
   sensor_msgs::PointCloud2Ptr msg = boost::make_shared<sensor_msgs::PointCloud2>();

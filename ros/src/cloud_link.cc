@@ -39,14 +39,28 @@ absl::StatusOr<v1::ServerInfo> CloudLink::Probe() {
   if (!connected.ok()) return connected.status();  // a malformed target or TLS setting
   client_ = *std::move(connected);
   if (!probe.ok()) return probe.status();
-  return (*probe)->GetInfo();
+  absl::StatusOr<v1::ServerInfo> info = (*probe)->GetInfo();
+  if (info.ok()) server_delivery_ = info->defaults().delivery();
+  return info;
+}
+
+client::StreamConfig CloudLink::StreamConfigFor(const CameraModel& camera) const {
+  client::StreamConfig config = ConfigFor(options_.config, camera);
+  // The client library replaces a frame still waiting to be sent only when the stream says
+  // DELIVERY_LATEST itself; when the bridge leaves delivery to the server and the server's is
+  // latest, it is said explicitly, so that Send never holds up the ROS callback thread.
+  if (config.delivery() == v1::DELIVERY_UNSPECIFIED &&
+      server_delivery_ == v1::DELIVERY_LATEST) {
+    config.set_delivery(v1::DELIVERY_LATEST);
+  }
+  return config;
 }
 
 absl::Status CloudLink::EnsureStream(const CameraModel& camera) {
   if (client_ == nullptr) return absl::FailedPreconditionError("no client (Probe not called)");
   if (stream_ != nullptr) {
     if (camera_ && SameCamera(*camera_, camera)) return absl::OkStatus();
-    if (absl::Status s = stream_->Reconfigure(ConfigFor(options_.config, camera)); !s.ok()) {
+    if (absl::Status s = stream_->Reconfigure(StreamConfigFor(camera)); !s.ok()) {
       return s;
     }
     camera_ = camera;
@@ -71,7 +85,7 @@ absl::Status CloudLink::EnsureStream(const CameraModel& camera) {
         static_cast<unsigned long long>(r.frames_resent),
         static_cast<unsigned long long>(r.frames_dropped));
   };
-  auto opened = client_->OpenStream(ConfigFor(options_.config, camera), std::move(so));
+  auto opened = client_->OpenStream(StreamConfigFor(camera), std::move(so));
   if (!opened.ok()) return opened.status();
   stream_ = *std::move(opened);
   camera_ = camera;
@@ -150,10 +164,20 @@ void CloudLink::OnResult(client::Result&& result) {
               std::string(result.status.message()).c_str());
     return;
   }
+  if (result.fate == client::FrameFate::kReplaced || result.fate == client::FrameFate::kDropped) {
+    // Delivery latest: a newer frame took its place, in the client or on the server. Counted
+    // with the stream's drops, not as an error.
+    {
+      std::lock_guard<std::mutex> lock(sent_mu_);
+      sent_.erase(result.sequence);
+    }
+    stats_->StreamDropped(result.frames_dropped + result.frames_replaced);
+    return;
+  }
   SentFrame sent;
   bool known = false;
   {
-    // Replies come in send order; frames the server skipped (delivery latest) are passed over.
+    // Replies come in send order; frames passed over have had their own Result.
     std::lock_guard<std::mutex> lock(sent_mu_);
     auto it = sent_.find(result.sequence);
     if (it != sent_.end()) {
@@ -162,7 +186,7 @@ void CloudLink::OnResult(client::Result&& result) {
       sent_.erase(sent_.begin(), std::next(it));
     }
   }
-  stats_->StreamDropped(result.frames_dropped);
+  stats_->StreamDropped(result.frames_dropped + result.frames_replaced);
   stats_->Reply(result);
   if (!result.ok()) {
     ROS_WARN_THROTTLE(5, "cloudcast: frame %llu: %s",

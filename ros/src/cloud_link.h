@@ -1,7 +1,10 @@
 // The bridge's side of the cloudcast stream: one Client, one Stream at a time (resilient by
 // default), opened on the first frame and again after a stream has ended; the camera sent as
 // the stream's config, and sent again when it changes; each reply matched to the ROS header of
-// its frame.
+// its frame. The stream is the client library's stream core (cloudcast/client/stream_core.h):
+// with delivery latest (the bridge's setting, or the server's default when the bridge leaves it
+// unset) Send never waits for the network; a frame still waiting to be sent when the next comes
+// is replaced, and counted with the stream's drops.
 #pragma once
 
 #include <std_msgs/Header.h>
@@ -29,7 +32,8 @@ struct SentFrame {
 
 class CloudLink {
  public:
-  // Called on the stream's receiver thread for each cloud, with what was kept of its frame.
+  // Called on a gRPC callback thread for each cloud (one at a time, in order), with what was
+  // kept of its frame.
   using CloudSink = std::function<void(client::Result&&, const SentFrame&)>;
 
   CloudLink(const BridgeOptions& options, BridgeStats* stats, CloudSink on_cloud);
@@ -49,6 +53,7 @@ class CloudLink {
 
  private:
   absl::Status EnsureStream(const CameraModel& camera);
+  client::StreamConfig StreamConfigFor(const CameraModel& camera) const;
   void CloseStream(const absl::Status& why);
   void OnResult(client::Result&& result);
 
@@ -58,6 +63,7 @@ class CloudLink {
   std::unique_ptr<client::Client> client_;
   std::unique_ptr<client::Stream> stream_;
   std::optional<CameraModel> camera_;  // the camera of the stream's config
+  v1::DeliveryMode server_delivery_ = v1::DELIVERY_UNSPECIFIED;  // GetInfo's default
   std::chrono::steady_clock::time_point last_open_attempt_{};
   std::uint64_t next_sequence_ = 0;  // across streams, so that headers are never confused
 

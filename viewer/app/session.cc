@@ -96,6 +96,19 @@ void Session::ReceiveLoop() {
   Result result;
   std::uint64_t errors = 0;
   while (stream_->Read(&result)) {
+    if (result.fate == client::FrameFate::kReplaced ||
+        result.fate == client::FrameFate::kDropped) {
+      // Delivery latest: a newer frame took its place (in the client before it was sent, or on
+      // the server). Not an error; it frees its place in the window.
+      {
+        std::lock_guard<std::mutex> lock(mu_);
+        ++settled_;
+        replaced_ += result.fate == client::FrameFate::kReplaced ? 1 : 0;
+        dropped_ = std::max<std::uint64_t>(dropped_, result.frames_dropped);
+      }
+      cv_.notify_all();
+      continue;
+    }
     if (result.config_rejected) {
       SetError(absl::InvalidArgumentError(
           absl::StrCat("the server rejected the stream settings: ", result.status.message())));
@@ -116,6 +129,7 @@ void Session::ReceiveLoop() {
     {
       std::lock_guard<std::mutex> lock(mu_);
       ++answered_;
+      ++settled_;
       dropped_ = std::max<std::uint64_t>(dropped_, result.frames_dropped);
     }
     cv_.notify_all();
@@ -157,7 +171,7 @@ void Session::SendLoop() {
         due += period;
       } else {
         cv_.wait(lock, [&] {
-          return stop_ || receiver_done_ || sent_ - std::min(sent_, answered_ + dropped_) < window;
+          return stop_ || receiver_done_ || sent_ - std::min(sent_, settled_) < window;
         });
       }
       if (stop_ || receiver_done_) break;

@@ -86,6 +86,10 @@ class Session {
   std::uint64_t sent_ = 0;
   std::uint64_t answered_ = 0;  // replies to frames (clouds and frame errors)
   std::uint64_t dropped_ = 0;   // the server's running count
+  // Frames whose fate is known (each comes back once from the stream: answered, replaced,
+  // dropped or lost), and those of them replaced before they were sent.
+  std::uint64_t settled_ = 0;
+  std::uint64_t replaced_ = 0;
   bool receiver_done_ = false;
   bool stop_ = false;
   absl::Status error_;

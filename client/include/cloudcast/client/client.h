@@ -34,13 +34,20 @@ namespace cloudcast::client {
 // are safe too). Finish, Cancel and the destructor may be called from any thread.
 class Stream {
  public:
-  ~Stream();  // Cancels the call unless Finish has run; joins the receiver thread.
+  ~Stream();  // Cancels the call unless Finish has run, and waits for its end.
   Stream(const Stream&) = delete;
   Stream& operator=(const Stream&) = delete;
 
   // Sends one frame. Raw pixels are copied once, straight into the buffer gRPC sends from, rows
   // packed tightly whatever the input stride; encoded images are copied as they are. The inputs may
-  // be reused as soon as Send returns. Blocks while gRPC flow control holds the stream back.
+  // be reused as soon as Send returns.
+  //
+  // Waiting: with DELIVERY_LATEST (set in the StreamConfig given to OpenStream) Send never
+  // waits for the network: the frame waits for the write slot, and a newer frame replaces it if
+  // it is still waiting then (the replaced frame comes back as a Result with fate kReplaced).
+  // Otherwise (DELIVERY_ALL, or delivery unset) nothing is replaced and the stream is lossless:
+  // Send waits while StreamOptions::max_queued_frames frames already wait for the write slot,
+  // i.e. while gRPC flow control (or a resilient stream's reconnect) holds the stream back.
   //
   // Errors: INVALID_ARGUMENT for an input that cannot be read safely (null data, a buffer
   // smaller than its rows, a stride under the row size); FAILED_PRECONDITION after CloseSend;
@@ -55,9 +62,14 @@ class Stream {
   // (the server does not merge it with the previous config).
   absl::Status Reconfigure(const StreamConfig& config);
 
-  // Blocks for the next reply, in the order the frames were sent. Returns false once the stream
+  // Blocks for the next Result: each frame accepted by Send comes back exactly once, answered
+  // (a cloud or the server's error) or with its other fate (Result::fate: replaced, dropped,
+  // lost, unsent), in the order their fates became known (replies in the order the frames were
+  // sent). Returns false once the stream
   // has ended (after CloseSend and the last reply, or on any failure); Finish then gives the
-  // status. Not available with StreamOptions::on_result (returns false at once).
+  // status. Not available with StreamOptions::on_result (returns false at once). Replies not
+  // read yet are buffered up to a small bound; beyond it the stream stops reading, and gRPC flow
+  // control holds the server back.
   bool Read(Result* result);
 
   // Tells the server no more frames follow (gRPC WritesDone). Replies keep coming until every
@@ -74,10 +86,14 @@ class Stream {
   // Aborts the call (any thread): pending Send and Read return promptly, Finish gives CANCELLED.
   void Cancel();
 
-  // Frames written so far (each once, however often a resilient stream sent it again).
+  // Frames accepted by Send and not replaced (each once, however often a resilient stream sent
+  // it again).
   std::uint64_t frames_sent() const;
-  // Image bytes of those frames as they went out: raw pixels, compressed payloads or encoded
-  // files (what the uplink carried, without the protocol's few bytes of framing).
+  // DELIVERY_LATEST: frames replaced by a newer one before they were sent.
+  std::uint64_t frames_replaced() const;
+  // Image bytes of the frames accepted by Send (replaced ones included, so that the count only
+  // grows): raw pixels, compressed payloads or encoded files (what the uplink carries, without
+  // the protocol's few bytes of framing).
   std::uint64_t image_bytes_sent() const;
   // Resilient streams (StreamOptions::resilient): new calls opened after a lost one, and frames
   // sent again on them.

@@ -78,10 +78,11 @@ struct Reconnect {
 
 // How one Stream delivers its replies.
 struct StreamOptions {
-  // Empty (the default): the caller reads replies with Stream::Read. Otherwise the stream starts
-  // a receiver thread that calls this once per reply, in order, and Stream::Read must not be
-  // used. It runs on that thread, so a slow callback delays the next reply, never a Send. It
-  // must not destroy or Finish its own Stream (Finish joins that thread).
+  // Empty (the default): the caller reads replies with Stream::Read. Otherwise this is called
+  // once per frame (its reply, or its other fate), in order, one call at a time, on gRPC's
+  // callback threads, and Stream::Read must not be used. A slow callback delays the next reply
+  // (the stream reads no more meanwhile), never a Send; keep it short, and never destroy or
+  // Finish its own Stream from it (Finish waits for the last callback).
   std::function<void(Result&&)> on_result;
 
   // Resilience. false (the default): a lost connection ends the stream (Finish says why). true:
@@ -90,14 +91,22 @@ struct StreamOptions {
   // was opening), the stream opens a new call (on another replica when the channel has one, see
   // ClientOptions::load_balancing) and sends its StreamConfig again. With DELIVERY_ALL it also
   // sends again every frame that was sent but not answered, in order, so each frame is answered
-  // exactly once; with DELIVERY_LATEST those frames count as dropped. Send blocks while a new
-  // call is being opened. After `reconnect_timeout` without a working call the stream gives up:
-  // every frame still unanswered comes back as a Result with UNAVAILABLE, and Finish returns
-  // UNAVAILABLE saying so. The frames kept for resending are those in flight, which gRPC flow
-  // control bounds (a few per stream).
+  // exactly once; with DELIVERY_LATEST those frames count as dropped (each comes back as a
+  // Result with fate kDropped). While a new call is being opened, Send waits with DELIVERY_ALL
+  // (back-pressure) and replaces the waiting frame with DELIVERY_LATEST. After
+  // `reconnect_timeout` without a working call the stream gives up: every frame still
+  // unanswered comes back as a Result with UNAVAILABLE, and Finish returns UNAVAILABLE saying
+  // so. The frames kept for resending are those in flight, which gRPC flow control bounds (a few
+  // per stream).
   bool resilient = false;
   std::chrono::milliseconds reconnect_timeout{30000};
-  // Called on the reading thread after each reconnect.
+  // DELIVERY_ALL (or delivery unset): how many frames may wait for the call's write slot before
+  // Send waits (back-pressure). A few let a camera loop ride out a short stall or a reconnect
+  // without waiting; each one waiting adds a frame time of latency. At least 1.
+  // (DELIVERY_LATEST: one frame waits, the newest; Send never waits.)
+  std::size_t max_queued_frames = 4;
+
+  // Called after each reconnect (on a gRPC callback thread, in order with the results).
   std::function<void(const Reconnect&)> on_reconnect;
 };
 

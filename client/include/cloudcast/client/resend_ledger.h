@@ -48,6 +48,7 @@ class ResendLedger {
     Match match = Match::kUnknown;
     std::optional<Entry> entry;  // kAnswered: the frame, out of the book
     std::uint64_t skipped = 0;   // kAnswered: unanswered frames sent before it, out of the book
+    std::vector<Entry> skipped_entries;  // those frames, in send order (reported one by one)
   };
 
   // A new frame written on the current call.
@@ -64,6 +65,9 @@ class ResendLedger {
       if (it->sequence != sequence) continue;
       reply.match = Match::kAnswered;
       reply.skipped = static_cast<std::uint64_t>(std::distance(in_flight_.begin(), it));
+      for (auto skipped = in_flight_.begin(); skipped != it; ++skipped) {
+        reply.skipped_entries.push_back(std::move(*skipped));
+      }
       reply.entry = std::move(*it);
       in_flight_.erase(in_flight_.begin(), it + 1);
       last_answered_ = sequence;
@@ -77,18 +81,23 @@ class ResendLedger {
 
   // The current call has ended. Its unanswered resendable frames wait to be sent again, ahead of
   // those still waiting from an earlier loss (they were sent before them); the others leave the
-  // book. Returns how many left.
-  std::uint64_t CallLost() {
-    std::uint64_t dropped = 0;
+  // book (into `dropped`, in send order, when given). Returns how many left.
+  std::uint64_t CallLost(std::vector<Entry>* dropped = nullptr) {
+    std::uint64_t count = 0;
+    std::deque<Entry> gone;
     for (auto it = in_flight_.rbegin(); it != in_flight_.rend(); ++it) {
       if (it->resendable) {
         resend_.push_front(std::move(*it));
       } else {
-        ++dropped;
+        ++count;
+        if (dropped != nullptr) gone.push_front(std::move(*it));
       }
     }
     in_flight_.clear();
-    return dropped;
+    if (dropped != nullptr) {
+      for (Entry& e : gone) dropped->push_back(std::move(e));
+    }
+    return count;
   }
 
   // The next frame to send again, now counted in flight on the current call (its `sends` one

@@ -7,6 +7,7 @@
 #include <string>
 
 #include "absl/status/status.h"
+#include "cloudcast/client/stream_machine.h"
 #include "cloudcast/core/point.h"
 #include "cloudcast/v1/cloudcast.pb.h"
 
@@ -28,8 +29,15 @@ struct ClientTimes {
 struct Result {
   // OK: `cloud` and `reply` hold the frame's cloud. Otherwise why this frame has none: the
   // server's FrameError (its google.rpc code, INVALID_ARGUMENT or RESOURCE_EXHAUSTED, and a
-  // message naming the field and the limit), or DATA_LOSS when the Draco bytes did not decode.
+  // message naming the field and the limit), DATA_LOSS when the Draco bytes did not decode, or
+  // (streams) the frame's fate when it got no reply at all: ABORTED for a frame replaced or
+  // dropped under DELIVERY_LATEST, UNAVAILABLE for one lost or never sent when the stream ended.
   absl::Status status;
+
+  // Streams: how this frame ended. Every frame a Stream accepted comes back exactly once, as an
+  // answer (a cloud or the server's error) or as one of the other fates (frame_id, sequence,
+  // capture time and send time from the client's record of it; no reply, no cloud).
+  FrameFate fate = FrameFate::kAnswered;
 
   // Echoed from the frame (set for clouds and errors alike; FrameError does not echo the
   // capture time, so errors on a stream take it from the client's record of the frame).
@@ -39,6 +47,9 @@ struct Result {
   // Frames skipped on this stream so far (DELIVERY_LATEST only): by the server, and by a
   // resilient stream's reconnects.
   std::uint64_t frames_dropped = 0;
+  // Frames this stream replaced so far before sending them (DELIVERY_LATEST: a newer frame came
+  // while they waited for the write slot). Each also comes back as a Result of its own.
+  std::uint64_t frames_replaced = 0;
   // The replica that answered (its --instance); empty for frames a stream gave up on.
   std::string server_instance;
   // The error answers a StreamConfig (OpenStream's or a Reconfigure), not a frame: the server

@@ -8,6 +8,10 @@
 // Every answer's latency counts from the intended time, so a slow server cannot hide its stalls
 // by slowing the sender (coordinated omission).
 //
+// Each stream is the client library's stream core (cloudcast/client/stream_core.h), as robots
+// run it: with DELIVERY_LATEST a frame still waiting for the write slot when the next is due is
+// replaced (counted as replaced); with DELIVERY_ALL every frame waits its turn.
+//
 // Resilient streams (FleetOptions::resilient): a stream is a sequence of calls. When a call ends
 // with UNAVAILABLE (a replica killed, drained, or sending GOAWAY), the stream opens a new one (the
 // channel's round_robin picks a live replica), sends its StreamConfig again and, in DELIVERY_ALL,
@@ -23,7 +27,6 @@
 #include <functional>
 #include <memory>
 #include <mutex>
-#include <queue>
 #include <string>
 #include <vector>
 
@@ -79,8 +82,8 @@ std::string DefaultLbPolicy(const std::string& target);
 // The addresses an "ipv4:" / "ipv6:" target lists; 0 for any other target (the resolver decides).
 int ListedAddresses(const std::string& target);
 
-// One stream's account, for the per-stream report. Every frame sent ends in exactly one of
-// answered, frame_errors, dropped or lost.
+// One stream's account, for the per-stream report. Every frame due ends in exactly one of
+// answered, frame_errors, dropped, lost, replaced or unsent.
 struct StreamStats {
   int index = 0;
   std::uint64_t sent = 0;          // distinct frames sent (a resend is not counted again)
@@ -90,11 +93,12 @@ struct StreamStats {
   std::uint64_t lost = 0;          // sent, never answered, reported lost
   std::uint64_t dropped = 0;       // skipped (DELIVERY_LATEST)
   std::uint64_t unsent = 0;        // due, never sent
+  std::uint64_t replaced = 0;      // due, replaced by a newer frame before it was sent (LATEST)
   std::uint64_t duplicates = 0;    // answers to a sequence already answered (ignored)
   int calls = 0;                   // gRPC calls the stream used
   int reconnect_attempts = 0;      // calls opened after a failure
-  // Reconnects that worked: from the failure to the first answer on the new call (or, when no
-  // frame awaited an answer, to the new call's first write), ns.
+  // Reconnects that worked: from the failure to the new call having written the config and every
+  // frame it sent again, ns.
   std::vector<std::int64_t> reconnect_ns;
   std::vector<std::string> replicas;  // the replica of each call that answered, in order
   std::string end_status;             // the last call's status code
@@ -150,8 +154,6 @@ class Fleet {
   void WarmUp(std::chrono::system_clock::time_point deadline);
   void StreamEnded();
   int OpenStreams() const;
-  // A driver's timer (reconnect backoff, give-up deadline): Run's loop calls its OnTimer then.
-  void WakeAt(int driver, std::chrono::steady_clock::time_point when);
 
   const FleetOptions options_;
   const FrameStore* store_;
@@ -168,9 +170,6 @@ class Fleet {
   int ended_ = 0;
   int schedulers_running_ = 0;
   bool ran_ = false;
-  // Drivers' timers, earliest first (under mu_).
-  using Timer = std::pair<std::chrono::steady_clock::time_point, int>;
-  std::priority_queue<Timer, std::vector<Timer>, std::greater<Timer>> timers_;
 };
 
 // The name of a gRPC status code as gRPC spells it ("OK", "UNAVAILABLE", ...).

@@ -44,6 +44,7 @@ struct Totals {
   std::uint64_t lost = 0;          // sent, never answered: the call ended first
   std::uint64_t unsent = 0;        // due, never sent: the call ended or the run stopped first
   std::uint64_t drops = 0;
+  std::uint64_t replaced = 0;  // due, never sent: a newer frame replaced it (DELIVERY_LATEST)
   std::uint64_t server_dropped = 0;     // sum over streams of the last frames_dropped reported
   std::uint64_t late_flow_control = 0;  // the stream's previous write had not completed
   std::uint64_t late_scheduler = 0;     // the generator itself was over 1 ms behind
@@ -74,6 +75,8 @@ class Recorder {
   // with code "OK" for frames whose call ended cleanly without answering them).
   void Lost(std::uint64_t frames, const std::string& code, const std::string& message);
   void Unsent(std::uint64_t frames);
+  // A frame replaced by a newer one before it was sent (DELIVERY_LATEST, as robots send).
+  void Replaced(std::uint64_t frames);
   void CallStatus(const std::string& code);
   // Resilient streams: a frame written again on a new call; an answer to a sequence already
   // answered; a call opened after a failure; a reconnect that worked (its time is in the
