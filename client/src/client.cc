@@ -256,16 +256,21 @@ struct Stream::Impl : public StreamSink {
             " was sent but skipped for a newer frame (DELIVERY_LATEST: by the server, or with a "
             "lost call)"));
         break;
+      // A frame the call took down with it keeps the call's code: a refused call
+      // (UNAUTHENTICATED, RESOURCE_EXHAUSTED, INVALID_ARGUMENT, ...) says so on its frames as
+      // Finish does, and a caller that stops at the first failed Result learns why.
       case FrameFate::kLost:
       case FrameFate::kAnswered:
-        r.status = absl::UnavailableError(absl::StrCat(
-            "frame ", s.sequence, " was sent but never answered: ",
-            s.why.ok() ? "the stream ended first" : s.why.message()));
+        r.status = absl::Status(
+            s.why.ok() ? absl::StatusCode::kUnavailable : s.why.code(),
+            absl::StrCat("frame ", s.sequence, " was sent but never answered: ",
+                         s.why.ok() ? "the stream ended first" : s.why.message()));
         break;
       case FrameFate::kUnsent:
-        r.status = absl::UnavailableError(absl::StrCat(
-            "frame ", s.sequence, " was never answered (never sent): ",
-            s.why.ok() ? "the stream ended first" : s.why.message()));
+        r.status = absl::Status(
+            s.why.ok() ? absl::StatusCode::kUnavailable : s.why.code(),
+            absl::StrCat("frame ", s.sequence, " was never answered (never sent): ",
+                         s.why.ok() ? "the stream ended first" : s.why.message()));
         break;
     }
     r.frames_dropped = dropped_seen;
