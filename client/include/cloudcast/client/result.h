@@ -31,7 +31,9 @@ struct Result {
   // server's FrameError (its google.rpc code, INVALID_ARGUMENT or RESOURCE_EXHAUSTED, and a
   // message naming the field and the limit), DATA_LOSS when the Draco bytes did not decode, or
   // (streams) the frame's fate when it got no reply at all: ABORTED for a frame replaced or
-  // dropped under DELIVERY_LATEST, UNAVAILABLE for one lost or never sent when the stream ended.
+  // dropped under DELIVERY_LATEST; for one lost or never sent when the stream ended, the code
+  // the stream ended with (UNAVAILABLE when the server went away, UNAUTHENTICATED or
+  // RESOURCE_EXHAUSTED when it refused the call, CANCELLED after Cancel).
   absl::Status status;
 
   // Streams: how this frame ended. Every frame a Stream accepted comes back exactly once, as an
