@@ -784,6 +784,26 @@ TEST(DracoDecode, LegacyBitstreamsAreRefusedFromTheHeader) {
   EXPECT_EQ(out.size(), 0u);
 }
 
+// Found by the draco-decode fuzzer: a 69-byte kd-tree cloud of bitstream 2.2 (254 points) whose
+// legacy attribute decoding made libdraco allocate and zero 6.8 GB, past the point and attribute
+// caps. Refused from its header now (kd-tree clouds are read from bitstream 2.3 on).
+TEST(DracoDecode, LegacyKdTreeCloudsAreRefusedFromTheHeader) {
+  // fuzz/corpus/draco_decode/kdtree_v22_allocation_bomb
+  const unsigned char bytes[] = {
+      0x44, 0x52, 0x41, 0x43, 0x4f, 0x02, 0x02, 0x00, 0x01, 0x00, 0x00, 0xfe, 0x00, 0x00,
+      0x00, 0x01, 0x02, 0x00, 0x09, 0x03, 0x00, 0x00, 0x02, 0x02, 0x03, 0x01, 0x01, 0x01,
+      0x00, 0x01, 0x01, 0x01, 0x22, 0x00, 0x26, 0x01, 0x01, 0x00, 0x01, 0x01, 0x00, 0x01,
+      0x01, 0x00, 0x01, 0x01, 0x00, 0x01, 0x01, 0x01, 0x01, 0x00, 0x01, 0x01, 0x00, 0x01,
+      0x03, 0x45, 0x00, 0x00, 0x01, 0x00, 0x80, 0x01, 0x00, 0x01, 0x01, 0x00, 0xf8,
+  };
+  PointCloud out;
+  const absl::Status s =
+      DecodeDraco(std::string_view(reinterpret_cast<const char*>(bytes), sizeof(bytes)), &out);
+  EXPECT_EQ(s.code(), absl::StatusCode::kDataLoss) << s;
+  EXPECT_THAT(std::string(s.message()), HasSubstr("kd-tree cloud of bitstream version 2.2")) << s;
+  EXPECT_EQ(out.size(), 0u);
+}
+
 TEST(DracoDecode, MeshDecodesAsPoints) {
   // A tetrahedron: 4 vertices shared by 4 consistently oriented faces (with inconsistent
   // orientation Edgebreaker splits the vertices, legitimately giving more points).
