@@ -49,6 +49,12 @@ ReplyInfo InfoOf(const v1::StreamReply& reply) {
   return info;
 }
 
+// One mutex for every core's alarm callbacks (KickLocked): alarms are rare, a few per reconnect.
+std::mutex& AlarmHandoff() {
+  static std::mutex mu;
+  return mu;
+}
+
 }  // namespace
 
 // One gRPC call of the stream. Owned by the core (a few per stream). The core outlives it: its
@@ -58,16 +64,25 @@ ReplyInfo InfoOf(const v1::StreamReply& reply) {
 // still start from the application's threads; another while reading is paused.
 class StreamCore::Call : public grpc::ClientBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer> {
  public:
-  explicit Call(StreamCore* core) : core_(core) {}
-  void OnWriteDone(bool ok) override { core_->OnWriteDone(this, ok); }
-  void OnReadDone(bool ok) override { core_->OnReadDone(this, ok); }
-  void OnDone(const grpc::Status& status) override { core_->OnDone(this, status); }
+  // handoff_ orders the reactions after the constructor for TSan: gRPC orders them through its
+  // own uninstrumented locks, which TSan cannot see (it reported core_'s read in OnDone as a race
+  // with the constructor). The server's reactors take their mutex first for the same reason.
+  explicit Call(StreamCore* core) : core_(core) { std::lock_guard<std::mutex> lock(handoff_); }
+  void OnWriteDone(bool ok) override { Core()->OnWriteDone(this, ok); }
+  void OnReadDone(bool ok) override { Core()->OnReadDone(this, ok); }
+  void OnDone(const grpc::Status& status) override { Core()->OnDone(this, status); }
 
   grpc::ClientContext context;
   grpc::ByteBuffer write_buf, read_buf;
   bool read_paused = false;  // under the core's mu_
 
  private:
+  StreamCore* Core() {
+    std::lock_guard<std::mutex> lock(handoff_);
+    return core_;
+  }
+
+  std::mutex handoff_;
   StreamCore* const core_;
 };
 
@@ -146,7 +161,12 @@ void StreamCore::KickLocked(Clock::time_point at) {
   Timer timer{std::make_unique<grpc::Alarm>(), std::make_shared<std::atomic<bool>>(false)};
   std::weak_ptr<StreamCore> weak = weak_from_this();
   std::shared_ptr<std::atomic<bool>> fired = timer.fired;
+  // AlarmHandoff() orders the callback after its captures were written, for TSan: grpc::Alarm
+  // hands the callback to gRPC's thread through locks TSan cannot see. gRPC never runs it inside
+  // Set (it runs on its executor), so holding the mutex here cannot deadlock.
+  std::lock_guard<std::mutex> handoff(AlarmHandoff());
   timer.alarm->Set(SystemTime(at), [weak, fired](bool expired) {
+    { std::lock_guard<std::mutex> ordered(AlarmHandoff()); }
     if (expired) {
       if (std::shared_ptr<StreamCore> core = weak.lock()) core->OnTimer();
     }
