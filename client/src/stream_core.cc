@@ -361,16 +361,20 @@ void StreamCore::Cancel() {
     CollectLocked(Clock::now());
     // A paused reader would keep the cancelled call from ending.
     pause_reads_ = false;
-    for (auto& c : calls_) {
-      if (c->read_paused) {
-        c->read_paused = false;
-        Op op{Op::kResumeRead};
-        op.call = c.get();
-        ops_.push_back(std::move(op));
-      }
-    }
+    ResumePausedReadsLocked();
   }
   Run(/*deliver=*/false);
+}
+
+void StreamCore::ResumePausedReadsLocked() {
+  for (auto& c : calls_) {
+    if (c->read_paused) {
+      c->read_paused = false;
+      Op op{Op::kResumeRead};
+      op.call = c.get();
+      ops_.push_back(std::move(op));
+    }
+  }
 }
 
 void StreamCore::PauseReads(bool paused) {
@@ -378,14 +382,7 @@ void StreamCore::PauseReads(bool paused) {
     std::lock_guard<std::mutex> lock(mu_);
     pause_reads_ = paused;
     if (paused) return;
-    for (auto& c : calls_) {
-      if (c->read_paused) {
-        c->read_paused = false;
-        Op op{Op::kResumeRead};
-        op.call = c.get();
-        ops_.push_back(std::move(op));
-      }
-    }
+    ResumePausedReadsLocked();
   }
   Run(/*deliver=*/false);
 }

@@ -160,6 +160,8 @@ class StreamCore : public std::enable_shared_from_this<StreamCore> {
   };
 
   // Turns the machine's effects into ops and events (under mu_).
+  // Under mu_: every call whose reads were paused reads again (queued as kResumeRead ops).
+  void ResumePausedReadsLocked();
   void CollectLocked(Clock::time_point now);
   // Carries out the queued ops (any thread) and, `deliver`, the events (gRPC threads only; other
   // threads ask a timer to deliver them).
