@@ -292,7 +292,7 @@ struct Stream::Impl : public StreamSink {
     options.on_reconnect(event);
   }
 
-  void OnEnded(const absl::Status& status) override {
+  void OnEnded(const absl::Status& status, bool /*gave_up*/) override {
     {
       std::lock_guard<std::mutex> lock(results_mu);
       ended = true;

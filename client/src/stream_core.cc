@@ -147,6 +147,7 @@ void StreamCore::CollectLocked(Clock::time_point now) {
   if (e.ended) {
     Event ev{Event::kEnded};
     ev.status = machine_.status();
+    ev.gave_up = machine_.gave_up();
     events_.push_back(std::move(ev));
   }
 }
@@ -283,7 +284,7 @@ void StreamCore::DeliverEvents() {
         sink_->OnDuplicate();
         break;
       case Event::kEnded:
-        sink_->OnEnded(ev.status);
+        sink_->OnEnded(ev.status, ev.gave_up);
         break;
     }
     lock.lock();

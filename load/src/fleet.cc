@@ -269,10 +269,10 @@ class Fleet::Driver : public client::StreamSink {
     ctx_->recorder->Duplicate();
   }
 
-  void OnEnded(const absl::Status& /*status*/) override {
+  void OnEnded(const absl::Status& /*status*/, bool gave_up) override {
     {
       std::lock_guard<std::mutex> lock(mu_);
-      if (core_->gave_up()) {
+      if (gave_up) {
         stats_.gave_up = true;
         stats_.end_status = "UNAVAILABLE";  // the stream's end, whatever the last call's was
         ctx_->recorder->GaveUp();

@@ -70,7 +70,10 @@ class StreamSink {
                        std::chrono::steady_clock::time_point received) = 0;
   // A frame replaced, dropped, lost or unsent.
   virtual void OnSettled(SettledFrame& frame) = 0;
-  virtual void OnEnded(const absl::Status& status) = 0;
+  // The stream's end: `gave_up` when the machine stopped reconnecting (status is then the last
+  // call's). It may come before Start has returned (a call refused at once), so a sink learns
+  // everything here and never asks the core.
+  virtual void OnEnded(const absl::Status& status, bool gave_up) = 0;
   virtual void OnWrite(const WriteEvent& /*write*/) {}
   virtual void OnCallOpened(bool /*after_failure*/) {}
   virtual void OnCallEnded(const absl::Status& /*status*/) {}
@@ -156,6 +159,7 @@ class StreamCore : public std::enable_shared_from_this<StreamCore> {
     Reconnected reconnected;
     WriteEvent write;
     bool after_failure = false;
+    bool gave_up = false;  // kEnded
     Clock::time_point at;
   };
 
