@@ -27,9 +27,50 @@ using testing::Png;
 using testing::PnmHeader;
 using testing::ReadText;
 using testing::Samples;
+using testing::Tiff;
+using testing::TiffEntry;
 using testing::WriteFile;
 
 using ImageIoTest = testing::ScratchDirTest;
+
+// A TIFF's size must be the one libtiff reads, and nothing in its directory may make OpenCV
+// allocate more than that size allows. Both files below passed the check as 1x1 images, then made
+// OpenCV allocate 900 MB and 1 GB (found by fuzz-frame-images; seeds tiff_repeated_size_tags and
+// tiff_tile_bomb in fuzz/corpus/frame_images).
+TEST(CheckEncodedImageTest, TiffDirectoriesMustAgreeWithTheSizeTheyGive) {
+  const std::string pixel(1, '\x10');
+  const std::vector<TiffEntry> rest = {{258, 3, 8}, {259, 3, 1}, {262, 3, 1},
+                                       {273, 4, 8}, {277, 3, 1}, {279, 4, 1}};
+  auto with = [&](std::vector<TiffEntry> size_tags) {
+    std::vector<TiffEntry> all = std::move(size_tags);
+    all.insert(all.end(), rest.begin(), rest.end());
+    std::sort(all.begin(), all.end());  // ascending tags, as the spec wants
+    return Tiff(pixel, all);
+  };
+  Limits limits;
+  const char* format = nullptr;
+  EXPECT_TRUE(CheckEncodedImage(with({{256, 4, 1}, {257, 4, 1}}), "f", limits, &format).ok());
+  // ImageWidth and ImageLength twice: libtiff keeps the first (30000), a reader of the last sees 1.
+  const absl::Status repeated = CheckEncodedImage(
+      with({{256, 4, 30000}, {256, 4, 1}, {257, 4, 30000}, {257, 4, 1}}), "f", limits);
+  EXPECT_EQ(repeated.code(), absl::StatusCode::kInvalidArgument) << repeated;
+  EXPECT_NE(repeated.message().find("f"), std::string::npos);
+  EXPECT_NE(repeated.message().find("ascending"), std::string::npos) << repeated;
+  // Out of order (the spec wants ascending tags; libtiff sorts them and warns): refused alike.
+  std::vector<TiffEntry> unsorted = {{257, 4, 1}, {256, 4, 1}};
+  unsorted.insert(unsorted.end(), rest.begin(), rest.end());
+  EXPECT_EQ(CheckEncodedImage(Tiff(pixel, unsorted), "f", limits).code(),
+            absl::StatusCode::kInvalidArgument);
+  // Tiles larger than the image: OpenCV allocates a whole tile (up to 1 GB) for a 1x1 image.
+  const absl::Status tiles = CheckEncodedImage(
+      with({{256, 4, 1}, {257, 4, 1}, {322, 4, 16000}, {323, 4, 16000}}), "f", limits);
+  EXPECT_EQ(tiles.code(), absl::StatusCode::kInvalidArgument) << tiles;
+  EXPECT_NE(tiles.message().find("tile"), std::string::npos) << tiles;
+  // Tiles of the spec's 16-pixel grid over a small image are fine.
+  EXPECT_TRUE(
+      CheckEncodedImage(with({{256, 4, 20}, {257, 4, 5}, {322, 4, 32}, {323, 4, 16}}), "f", limits)
+          .ok());
+}
 
 TEST_F(ImageIoTest, DisparityKeepsDepthAndValues) {
   WriteFile(Path("d8.png"), Png(3, 2, 8, 0, Bytes({0, 1, 2, 100, 254, 255})));

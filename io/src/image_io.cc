@@ -11,6 +11,7 @@
 #include <cstring>
 #include <exception>
 #include <filesystem>
+#include <optional>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -214,6 +215,77 @@ auto Guarded(const std::string& what, Fn fn) -> decltype(fn()) {
   }
 }
 
+// The first image file directory of a TIFF, as far as sizes go: what libtiff (through OpenCV)
+// would allocate for. Nothing for anything that is not a classic TIFF or is cut short.
+struct TiffDirectory {
+  std::uint32_t width = 0, height = 0;
+  bool have_width = false, have_height = false;
+  std::uint32_t tile_width = 0, tile_height = 0;  // 0: not tiled
+  // Why OpenCV could not be trusted with it (empty: nothing): libtiff keeps the first of two
+  // equal tags where a reader of the last sees another size, and OpenCV allocates a whole tile
+  // (up to 1 GB) whatever the image's size.
+  std::string problem;
+};
+
+std::optional<TiffDirectory> ReadTiffDirectory(std::string_view bytes) {
+  const auto* p = reinterpret_cast<const unsigned char*>(bytes.data());
+  const std::size_t n = bytes.size();
+  const bool le = n >= 8 && p[0] == 'I' && p[1] == 'I' && p[2] == 42 && p[3] == 0;
+  const bool be = n >= 8 && p[0] == 'M' && p[1] == 'M' && p[2] == 0 && p[3] == 42;
+  if (!le && !be) return std::nullopt;
+  // The directory: a count, then 12-byte entries (tag, type, count, value); ImageWidth is tag
+  // 256, ImageLength 257, TileWidth 322, TileLength 323, each a SHORT (3) or LONG (4).
+  auto u16 = [&](std::size_t i) {
+    return le ? std::uint32_t{p[i]} | std::uint32_t{p[i + 1]} << 8 : BigEndian16(p + i);
+  };
+  auto u32 = [&](std::size_t i) { return le ? u16(i) | u16(i + 2) << 16 : BigEndian32(p + i); };
+  const std::size_t ifd = u32(4);
+  if (ifd + 2 > n) return std::nullopt;
+  const std::size_t entries = u16(ifd);
+  TiffDirectory dir;
+  std::uint32_t previous_tag = 0;
+  for (std::size_t e = 0; e < entries; ++e) {
+    const std::size_t at = ifd + 2 + 12 * e;
+    if (at + 12 > n) return std::nullopt;
+    const std::uint32_t tag = u16(at);
+    const std::uint32_t type = u16(at + 2);
+    if (e > 0 && tag <= previous_tag && dir.problem.empty()) {
+      dir.problem = absl::StrCat("its directory's tags are not in ascending order (tag ", tag,
+                                 " after ", previous_tag, "), as the TIFF specification requires");
+    }
+    previous_tag = tag;
+    if (tag != 256 && tag != 257 && tag != 322 && tag != 323) continue;
+    if (type != 3 && type != 4) return std::nullopt;
+    const std::uint32_t value = type == 3 ? u16(at + 8) : u32(at + 8);
+    switch (tag) {
+      case 256:
+        if (!dir.have_width) dir.width = value;  // libtiff keeps the first
+        dir.have_width = true;
+        break;
+      case 257:
+        if (!dir.have_height) dir.height = value;
+        dir.have_height = true;
+        break;
+      case 322:
+        dir.tile_width = value;
+        break;
+      case 323:
+        dir.tile_height = value;
+        break;
+    }
+  }
+  // Tiles are multiples of 16 pixels (the spec); more than one tile's rounding past the image
+  // buys nothing but memory.
+  auto rounded = [](std::uint32_t side) { return (std::uint64_t{side} + 15) / 16 * 16; };
+  if (dir.problem.empty() && (dir.tile_width != 0 || dir.tile_height != 0) &&
+      (dir.tile_width > rounded(dir.width) || dir.tile_height > rounded(dir.height))) {
+    dir.problem = absl::StrCat("its tiles (", dir.tile_width, "x", dir.tile_height,
+                               ") are larger than the image (", dir.width, "x", dir.height,
+                               ") rounded up to 16 pixels");
+  }
+  return dir;
+}
+
 }  // namespace
 
 absl::StatusOr<OwnedDisparity> LoadDisparity(const std::string& path) {
@@ -312,38 +384,10 @@ bool SniffImageSize(std::string_view bytes, std::uint32_t* width, std::uint32_t*
     }
     return false;
   }
-  const bool tiff_le = n >= 8 && p[0] == 'I' && p[1] == 'I' && p[2] == 42 && p[3] == 0;
-  const bool tiff_be = n >= 8 && p[0] == 'M' && p[1] == 'M' && p[2] == 0 && p[3] == 42;
-  if (tiff_le || tiff_be) {
-    // The first image file directory: a count, then 12-byte entries (tag, type, count, value);
-    // ImageWidth is tag 256, ImageLength tag 257, each a SHORT (3) or LONG (4).
-    auto u16 = [&](std::size_t i) {
-      return tiff_le ? std::uint32_t{p[i]} | std::uint32_t{p[i + 1]} << 8 : BigEndian16(p + i);
-    };
-    auto u32 = [&](std::size_t i) {
-      return tiff_le ? u16(i) | u16(i + 2) << 16 : BigEndian32(p + i);
-    };
-    const std::size_t ifd = u32(4);
-    if (ifd + 2 > n) return false;
-    const std::size_t entries = u16(ifd);
-    bool have_width = false, have_height = false;
-    for (std::size_t e = 0; e < entries; ++e) {
-      const std::size_t at = ifd + 2 + 12 * e;
-      if (at + 12 > n) return false;
-      const std::uint32_t tag = u16(at);
-      const std::uint32_t type = u16(at + 2);
-      if (tag != 256 && tag != 257) continue;
-      if (type != 3 && type != 4) return false;
-      const std::uint32_t value = type == 3 ? u16(at + 8) : u32(at + 8);
-      if (tag == 256) {
-        *width = value;
-        have_width = true;
-      } else {
-        *height = value;
-        have_height = true;
-      }
-    }
-    if (!have_width || !have_height) return false;
+  if (std::optional<TiffDirectory> tiff = ReadTiffDirectory(bytes)) {
+    if (!tiff->have_width || !tiff->have_height) return false;
+    *width = tiff->width;
+    *height = tiff->height;
     *format = "TIFF";
     return true;
   }
@@ -394,6 +438,11 @@ absl::Status CheckEncodedImage(std::string_view bytes, std::string_view field_na
   if (w == 0 || h == 0) {
     return absl::InvalidArgumentError(
         absl::StrCat(field, " is a ", format, " of ", w, "x", h, " pixels"));
+  }
+  if (std::string_view(format) == "TIFF") {
+    if (const std::string problem = ReadTiffDirectory(bytes)->problem; !problem.empty()) {
+      return absl::InvalidArgumentError(absl::StrCat(field, " is a TIFF whose ", problem));
+    }
   }
   if (format_out != nullptr) *format_out = format;
   return check::ImageSize(absl::StrCat(field, " (", format, ")"), w, h, limits);

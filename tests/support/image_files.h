@@ -9,6 +9,7 @@
 #include <cstring>
 #include <fstream>
 #include <string>
+#include <string_view>
 #include <tuple>
 #include <vector>
 
@@ -92,15 +93,14 @@ inline std::string RgbaRowsFromBgr(const std::vector<std::uint8_t>& bgr) {
   return s;
 }
 
-// Baseline little-endian TIFF, one strip, uncompressed, one 32-bit float sample per pixel.
-inline std::string FloatTiff(std::uint32_t w, std::uint32_t h, const std::vector<float>& v) {
-  const std::uint32_t data_bytes = static_cast<std::uint32_t>(v.size() * 4);
+using TiffEntry = std::tuple<int, int, std::uint32_t>;  // tag, type (3 SHORT, 4 LONG), value
+
+// A little-endian TIFF: `pixels` at offset 8, then one image file directory of `entries` (count 1
+// each), written in the order given (the spec wants ascending tags; tests of bad files do not).
+inline std::string Tiff(std::string_view pixels, const std::vector<TiffEntry>& entries) {
   std::string s("II*\0", 4);
-  PutLe(&s, 8 + data_bytes, 4);  // the IFD follows the pixels
-  s.append(reinterpret_cast<const char*>(v.data()), data_bytes);
-  const std::vector<std::tuple<int, int, std::uint32_t>> entries = {
-      {256, 4, w}, {257, 4, h}, {258, 3, 32}, {259, 3, 1},          {262, 3, 1},
-      {273, 4, 8}, {277, 3, 1}, {278, 4, h},  {279, 4, data_bytes}, {339, 3, 3}};
+  PutLe(&s, static_cast<std::uint32_t>(8 + pixels.size()), 4);  // the IFD follows the pixels
+  s.append(pixels);
   PutLe(&s, static_cast<std::uint32_t>(entries.size()), 2);
   for (const auto& [tag, type, value] : entries) {
     PutLe(&s, tag, 2);
@@ -110,6 +110,14 @@ inline std::string FloatTiff(std::uint32_t w, std::uint32_t h, const std::vector
   }
   PutLe(&s, 0, 4);
   return s;
+}
+
+// Baseline little-endian TIFF, one strip, uncompressed, one 32-bit float sample per pixel.
+inline std::string FloatTiff(std::uint32_t w, std::uint32_t h, const std::vector<float>& v) {
+  const std::uint32_t data_bytes = static_cast<std::uint32_t>(v.size() * 4);
+  return Tiff(std::string_view(reinterpret_cast<const char*>(v.data()), data_bytes),
+              {{256, 4, w}, {257, 4, h}, {258, 3, 32}, {259, 3, 1}, {262, 3, 1},
+               {273, 4, 8}, {277, 3, 1}, {278, 4, h}, {279, 4, data_bytes}, {339, 3, 3}});
 }
 
 inline std::string PnmHeader(const char* magic, std::uint32_t w, std::uint32_t h, int maxval) {
