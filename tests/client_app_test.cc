@@ -477,6 +477,24 @@ TEST_F(ClientProgramTest, NoWindowPrintsStatisticsAndJson) {
   EXPECT_EQ(j["source"]["width"], 640);
 }
 
+// --rate-control: the progress lines carry the controller's target, round trip, queueing delay
+// and the JPEG quality it set; with --lossless it is a usage error naming both flags.
+TEST_F(ClientProgramTest, RateControlShowsItsTargetInTheProgressLines) {
+  const RunResult r =
+      Run(Join(SourceArgs(), {"--server", shared_target(), "--no-window", "--rate-control",
+                              "--encoding", "jpeg", "--fps", "30", "--progress", "0.05"}),
+          "env -u DISPLAY");
+  ASSERT_TRUE(r.exited && r.code == 0) << r;
+  const std::string all = r.out + r.err;
+  EXPECT_NE(all.find("Mbit/s, rtt"), std::string::npos) << r;
+  EXPECT_NE(all.find("JPEG quality"), std::string::npos) << r;
+  const RunResult bad = Run(Join(SourceArgs(), {"--server", shared_target(), "--no-window",
+                                                "--rate-control", "--lossless"}),
+                            "env -u DISPLAY");
+  EXPECT_EQ(bad.code, 2) << bad;
+  EXPECT_NE((bad.out + bad.err).find("--rate-control"), std::string::npos) << bad;
+}
+
 TEST_F(ClientProgramTest, DefaultSourceIsTsukubaWhenPresentElseSynthetic) {
   const RunResult r = Run({"--server", shared_target(), "--no-window", "--frames", "3",
                            "--lossless", "--json", Path("default.json")},

@@ -735,6 +735,49 @@ TEST_F(ClientTest, LatestDeliveryAnswersTheLastFrameAndCountsTheRest) {
             static_cast<std::uint64_t>(kFrames));
 }
 
+// StreamOptions::rate_control on loopback: every answered frame carries the controller's
+// estimate, the server's byte count grows with each frame, and no more frames are in flight
+// than the window allows (the rest are replaced, each still coming back once).
+TEST_F(ClientTest, RateControlReportsItsEstimateAndKeepsItsWindow) {
+  const SyntheticFrame f = Render(320, 240, 4);
+  StreamConfig config = MakeStreamConfig(OptionsFor(f.camera, 0.03f));
+  config.set_delivery(v1::DELIVERY_LATEST);
+  StreamOptions options;
+  options.rate_control = RateControlOptions{};
+  auto stream = client_->OpenStream(config, std::move(options));
+  ASSERT_TRUE(stream.ok()) << stream.status();
+  constexpr int kFrames = 40;
+  std::vector<Result> results;
+  std::thread reader([&] {
+    Result r;
+    while ((*stream)->Read(&r)) results.push_back(std::move(r));
+  });
+  for (int i = 0; i < kFrames; ++i) {
+    EXPECT_TRUE((*stream)->Send(f.disparity_view(), f.colour_view()).ok());
+  }
+  EXPECT_TRUE((*stream)->CloseSend().ok());
+  reader.join();
+  EXPECT_TRUE((*stream)->Finish().ok());
+  ASSERT_EQ(results.size(), static_cast<std::size_t>(kFrames));
+  std::uint64_t previous_bytes = 0;
+  int answered = 0;
+  for (const Result& r : results) {
+    if (r.fate != FrameFate::kAnswered) continue;
+    ++answered;
+    ASSERT_TRUE(r.rate.has_value()) << "sequence " << r.sequence;
+    EXPECT_GT(r.rate->target_bps, 0);
+    EXPECT_GE(r.rate->frames_in_flight, RateControlOptions{}.min_frames_in_flight);
+    EXPECT_LE(r.rate->frames_in_flight, RateControlOptions{}.max_frames_in_flight);
+    EXPECT_GT(r.reply.stream_bytes_received(), previous_bytes) << "sequence " << r.sequence;
+    previous_bytes = r.reply.stream_bytes_received();
+    EXPECT_GT(r.reply.receive_time_unix_ns(), 0);
+  }
+  EXPECT_GT(answered, 0);
+  ASSERT_TRUE((*stream)->rate().has_value());
+  // Sent as fast as Send is called: the window held most of them back, replaced.
+  EXPECT_GT((*stream)->frames_replaced(), 0u);
+}
+
 TEST_F(ClientTest, DestroyingAnUnfinishedStreamCancelsIt) {
   const SyntheticFrame f = Render(160, 120, 6);
   std::unique_ptr<Stream> stream = Open(ConfigFor(OptionsFor(f.camera)));

@@ -360,5 +360,49 @@ TEST(StreamMachineTest, EveryFrameIsSettledExactlyOnceInARandomLife) {
   }
 }
 
+// A rate controller's window: past it a frame waits in the queue (and DELIVERY_LATEST replaces
+// it there), a reply that opens the window lets the newest one out, configs are never held.
+TEST(StreamMachineTest, FramesPastTheWindowWaitInTheQueue) {
+  Machine m(Latest(), std::string("config"));
+  m.SetMaxUnanswered(2, kT0);
+  m.Start(kT0);
+  m.TakeEffects();
+  m.WriteDone(true, kT0);  // the config
+  EXPECT_EQ(m.Submit(1, "f1", "", kT0), Submitted::kWriting);
+  m.TakeEffects();
+  m.WriteDone(true, kT0);
+  EXPECT_EQ(m.Submit(2, "f2", "", kT0), Submitted::kWriting);
+  m.TakeEffects();
+  m.WriteDone(true, kT0);
+  // Two unanswered: the window is full although the write slot is free.
+  EXPECT_EQ(m.Submit(3, "f3", "", kT0), Submitted::kQueued);
+  EXPECT_FALSE(m.TakeEffects().write);
+  EXPECT_EQ(m.Submit(4, "f4", "", kT0), Submitted::kQueued);
+  Machine::Effects e = m.TakeEffects();
+  EXPECT_FALSE(e.write);
+  EXPECT_EQ(Sequences(e.settled, FrameFate::kReplaced), std::vector<std::uint64_t>{3});
+  ASSERT_TRUE(m.Reply(Answer(1)).frame);
+  m.SetMaxUnanswered(2, kT0);
+  e = m.TakeEffects();
+  ASSERT_TRUE(e.write);
+  EXPECT_EQ(e.write->sequence, 4u);
+  m.WriteDone(true, kT0);
+  // A smaller window holds the next frame until two replies came.
+  m.SetMaxUnanswered(1, kT0);
+  EXPECT_EQ(m.Submit(5, "f5", "", kT0), Submitted::kQueued);
+  ASSERT_TRUE(m.Reply(Answer(2)).frame);
+  m.SetMaxUnanswered(1, kT0);
+  EXPECT_FALSE(m.TakeEffects().write);
+  ASSERT_TRUE(m.Reply(Answer(4)).frame);
+  m.SetMaxUnanswered(1, kT0);
+  e = m.TakeEffects();
+  ASSERT_TRUE(e.write);
+  EXPECT_EQ(e.write->sequence, 5u);
+  // 0: no limit.
+  m.WriteDone(true, kT0);
+  m.SetMaxUnanswered(0, kT0);
+  EXPECT_EQ(m.Submit(6, "f6", "", kT0), Submitted::kWriting);
+}
+
 }  // namespace
 }  // namespace cloudcast::client

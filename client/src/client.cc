@@ -11,6 +11,7 @@
 #include <deque>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -119,6 +120,7 @@ struct Stream::Impl : public StreamSink {
   // Receiving side (the core's events, one at a time).
   std::uint64_t dropped_seen = 0;
   std::uint64_t replaced_seen = 0;
+  std::optional<RateEstimate> last_rate;  // OnRate -> the next OnReply (gRPC callbacks, in order)
   std::atomic<int> reconnects{0};
 
   std::mutex results_mu;
@@ -231,8 +233,12 @@ struct Stream::Impl : public StreamSink {
     }
     r.frames_dropped = dropped_seen;
     r.frames_replaced = replaced_seen;
+    r.rate = std::exchange(last_rate, std::nullopt);
     Deliver(std::move(r));
   }
+
+  // Just before the OnReply it belongs to (the core's events come one at a time).
+  void OnRate(const RateEstimate& estimate) override { last_rate = estimate; }
 
   void OnSettled(SettledFrame& s) override {
     Result r;
@@ -389,6 +395,7 @@ std::uint64_t Stream::frames_sent() const {
 }
 
 std::uint64_t Stream::frames_replaced() const { return impl_->core->replaced(); }
+std::optional<RateEstimate> Stream::rate() const { return impl_->core->rate(); }
 
 int Stream::reconnects() const { return impl_->core->reconnects(); }
 
@@ -524,6 +531,7 @@ absl::StatusOr<std::unique_ptr<Stream>> Client::OpenStream(const StreamConfig& c
   core.machine.reconnect_timeout = impl->options.reconnect_timeout;
   core.wait_for_ready = impl_->options.wait_for_ready;
   core.config = SerializedConfig(config);
+  core.rate_control = impl->options.rate_control;
   impl->channel = impl_->channel;
   impl->core = StreamCore::Start(impl->channel.get(), std::move(core), impl.get());
   return std::unique_ptr<Stream>(new Stream(std::move(impl)));

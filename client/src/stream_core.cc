@@ -103,7 +103,12 @@ StreamCore::StreamCore(grpc::Channel* channel, StreamCoreOptions options, Stream
     : stub_(std::shared_ptr<grpc::ChannelInterface>(std::shared_ptr<void>(), channel)),
       options_(std::move(options)),
       sink_(sink),
-      machine_(options_.machine, options_.config) {}
+      machine_(options_.machine, options_.config) {
+  if (options_.rate_control) {
+    rate_.emplace(*options_.rate_control);
+    machine_.SetMaxUnanswered(static_cast<std::size_t>(rate_->frames_in_flight()), Clock::now());
+  }
+}
 
 StreamCore::~StreamCore() {
   // Alarms still set are cancelled; their callbacks hold only a weak reference.
@@ -113,6 +118,7 @@ StreamCore::~StreamCore() {
 void StreamCore::CollectLocked(Clock::time_point now) {
   CoreMachine::Effects e = machine_.TakeEffects();
   if (e.open_call) {
+    if (rate_) rate_->OnCallOpened();
     Op op{Op::kOpen};
     op.after_failure = e.after_failure;
     ops_.push_back(std::move(op));
@@ -121,6 +127,10 @@ void StreamCore::CollectLocked(Clock::time_point now) {
     events_.push_back(std::move(ev));
   }
   if (e.write) {
+    if (rate_ && e.write->is_frame && !e.write->resend) {
+      rate_->OnFrameWritten(e.write->payload.Length());
+      written_bytes_.emplace_back(e.write->sequence, e.write->payload.Length());
+    }
     Event ev{Event::kWrite};
     ev.write = WriteEvent{e.write->is_frame, e.write->resend, e.write->sequence,
                           e.write->payload.Length(), now};
@@ -263,6 +273,7 @@ void StreamCore::DeliverEvents() {
     lock.unlock();
     switch (ev.kind) {
       case Event::kReply:
+        if (ev.rate) sink_->OnRate(*ev.rate);
         sink_->OnReply(ev.reply, ev.bytes, ev.frame ? &*ev.frame : nullptr, ev.at);
         break;
       case Event::kSettled:
@@ -421,6 +432,21 @@ void StreamCore::OnReadDone(Call* call, bool ok) {
   {
     std::lock_guard<std::mutex> lock(mu_);
     CoreMachine::Answer answer = machine_.Reply(InfoOf(ev.reply));
+    if (rate_ && answer.frame) {
+      // The frame's size as written; frames before it that got no reply are gone too.
+      std::size_t frame_bytes = 0;
+      while (!written_bytes_.empty() && written_bytes_.front().first <= answer.frame->sequence) {
+        if (written_bytes_.front().first == answer.frame->sequence) {
+          frame_bytes = written_bytes_.front().second;
+        }
+        written_bytes_.pop_front();
+      }
+      const v1::CloudReply& cloud = ev.reply.cloud();  // the default instance for an error
+      rate_->OnReply(answer.frame->frame.written, now, frame_bytes, cloud.receive_time_unix_ns(),
+                     cloud.stream_bytes_received());
+      machine_.SetMaxUnanswered(static_cast<std::size_t>(rate_->frames_in_flight()), now);
+      ev.rate = rate_->estimate();
+    }
     CollectLocked(now);  // frames skipped before this one come first
     if (answer.kind == CoreMachine::Answer::kDuplicate) {
       events_.push_back(Event{Event::kDuplicate});
@@ -472,6 +498,12 @@ absl::Status StreamCore::AwaitEnd() {
 bool StreamCore::ended() const {
   std::lock_guard<std::mutex> lock(mu_);
   return machine_.ended();
+}
+
+std::optional<RateEstimate> StreamCore::rate() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  if (!rate_) return std::nullopt;
+  return rate_->estimate();
 }
 
 #define CLOUDCAST_CORE_COUNTER(type, name)         \

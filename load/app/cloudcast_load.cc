@@ -91,6 +91,7 @@ struct Flags {
   int synthetic_frames = FrameDefaults().synthetic_frames;
   std::string encoding = cloudcast::sources::Name(FrameDefaults().uplink.encoding);
   int jpeg_quality = FrameDefaults().uplink.jpeg_quality;
+  bool rate_control = false;
   bool lossless = false;
   // Server memory and the soak
   std::string watch_memory;
@@ -269,6 +270,13 @@ std::unique_ptr<cloudcast::cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
       ->check(CLI::Range(1, 100))
       ->capture_default_str()
       ->group(frames);
+  app.add_flag("--rate-control", f.rate_control,
+               "The adaptive sender, as robots on real links should send: each stream's rate "
+               "controller (delay-based, from the replies' timing and the server's byte count) "
+               "sets how many frames may be in flight and the bitrate each frame is made at: "
+               "disparity and depth lossless (zstd), colour JPEG at the best quality of a ladder "
+               "(95 to 10) that fits the target. Replaces --encoding and --jpeg-quality")
+      ->group(frames);
   app.add_flag("--lossless", f.lossless,
                "Every frame is answered (DELIVERY_ALL). Default: DELIVERY_LATEST, the server "
                "skips stale frames (counted as drops)")
@@ -414,6 +422,10 @@ int main(int argc, char** argv) {
       return usage("--watch-memory " + std::string(rss.status().message()));
     }
   }
+  if (f.rate_control && (app.count("--encoding") || app.count("--jpeg-quality"))) {
+    return usage("--rate-control chooses the encoding itself; leave out --encoding and "
+                 "--jpeg-quality");
+  }
   if (f.fps > 0 && app.count("--in-flight")) {
     return usage("--in-flight is for the closed loop (--fps 0); open loop sends on schedule");
   }
@@ -435,6 +447,7 @@ int main(int argc, char** argv) {
   source.synthetic_frames = f.synthetic_frames;
   cloudcast::sources::ParseUplink(f.encoding, &source.uplink.encoding);
   source.uplink.jpeg_quality = f.jpeg_quality;
+  if (f.rate_control) source.jpeg_ladder = {95, 90, 80, 70, 60, 50, 40, 30, 20, 10};
 
   load::FleetOptions o;
   o.security = *security;
@@ -458,6 +471,7 @@ int main(int argc, char** argv) {
   o.scheduler_threads = f.scheduler_threads;
   o.lb_policy = f.lb;
   o.resilient = f.resilient;
+  o.rate_control = f.rate_control;
   o.reconnect_timeout =
       std::chrono::nanoseconds(static_cast<std::int64_t>(f.reconnect_timeout_s * 1e9));
   std::string schedule_text =
@@ -570,7 +584,8 @@ int main(int argc, char** argv) {
       {"duration", o.duration.count()},
       {"drain-timeout", o.drain_timeout.count()},
       {"delivery", f.lossless ? "all" : "latest"},
-      {"encoding", f.encoding},
+      {"encoding", f.rate_control ? "adaptive" : f.encoding},
+      {"rate-control", f.rate_control},
       {"input", f.input},
       {"frames-source", store->description()},
       {"seed", f.seed},

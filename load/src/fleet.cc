@@ -77,6 +77,8 @@ class Fleet::Driver : public client::StreamSink {
     std::int64_t reconnect_timeout_ns;
     std::int64_t t0_steady_ns;  // time zero of the schedule, steady clock
     std::int64_t t0_unix_ns;    // the same instant, Unix time (capture_time_unix_ns)
+    bool rate_control;
+    double fps;  // the schedule's rate at its start (the rate controller's frame budget)
   };
 
   Driver(int index, std::uint64_t frame_limit, const grpc::ByteBuffer* config)
@@ -101,6 +103,7 @@ class Fleet::Driver : public client::StreamSink {
     o.machine.resilient = ctx_->resilient;
     o.machine.reconnect_timeout = std::chrono::nanoseconds(ctx_->reconnect_timeout_ns);
     if (config_ != nullptr) o.config = *config_;
+    if (ctx_->rate_control) o.rate_control = client::RateControlOptions{};
     core_ = client::StreamCore::Start(channel, std::move(o), this);
     if (ctx_->closed_loop) TopUp();
   }
@@ -202,6 +205,11 @@ class Fleet::Driver : public client::StreamSink {
       if (reply.has_cloud()) {
         ++stats_.answered;
         ctx_->recorder->Answered(now - intended, now - actual, instance, bytes);
+        if (rate_) {
+          ctx_->recorder->RateSample(index_, rate_->target_bps, rate_->rtt_ms,
+                                     rate_->queue_delay_ms, rate_->frames_in_flight,
+                                     frame->frame.record.image_bytes);
+        }
       } else {
         ++stats_.frame_errors;
         ctx_->recorder->FrameError(CodeName(reply.error().code()), reply.error().message(),
@@ -209,6 +217,11 @@ class Fleet::Driver : public client::StreamSink {
       }
     }
     if (ctx_->closed_loop) TopUp();
+  }
+
+  void OnRate(const client::RateEstimate& estimate) override {
+    std::lock_guard<std::mutex> lock(mu_);
+    rate_ = estimate;
   }
 
   void OnSettled(client::SettledFrame& s) override {
@@ -288,10 +301,18 @@ class Fleet::Driver : public client::StreamSink {
   void Submit(std::uint64_t seq, std::int64_t intended, bool scheduler_late) {
     // The same bytes for every send of a frame: a new 20-byte header before the shared image.
     const std::size_t frame_index = static_cast<std::size_t>(index_) + seq - 1;
+    std::size_t level = 0;
+    if (ctx_->rate_control) {
+      std::lock_guard<std::mutex> lock(mu_);
+      // Before the first reply: the controller's starting rate.
+      const double target = rate_ ? rate_->target_bps : client::RateControlOptions{}.start_bps;
+      level = ctx_->store->LevelFor(target / 8 / ctx_->fps);
+    }
     grpc::ByteBuffer bytes = ctx_->store->Request(
-        frame_index, seq, ctx_->t0_unix_ns + (intended - ctx_->t0_steady_ns));
+        frame_index, seq, ctx_->t0_unix_ns + (intended - ctx_->t0_steady_ns), level);
     client::FrameRecord record;
     record.intended_ns = intended;
+    record.image_bytes = bytes.Length();
     switch (core_->Submit(seq, std::move(bytes), std::move(record))) {
       case client::CoreMachine::Submitted::kWriting:
         if (scheduler_late) ctx_->recorder->Late(/*flow_control=*/false);
@@ -342,6 +363,7 @@ class Fleet::Driver : public client::StreamSink {
   const grpc::ByteBuffer* config_;
   const Context* ctx_ = nullptr;
   std::shared_ptr<client::StreamCore> core_;
+  std::optional<client::RateEstimate> rate_;  // the controller's, after the latest reply
 
   std::mutex mu_;
   bool no_more_ = false;
@@ -581,7 +603,9 @@ FleetResult Fleet::Run(const std::function<void(const SecondStats&)>& on_second)
       o.reconnect_timeout.count(),
       Ns(t0),
       std::chrono::duration_cast<std::chrono::nanoseconds>(result.start.time_since_epoch())
-          .count()};
+          .count(),
+      o.rate_control,
+      o.closed_loop ? 30.0 : o.schedule.start};
   for (int s = 0; s < n; ++s) {
     drivers_[s]->Start(channels_[static_cast<std::size_t>(s) % channels_.size()].get(), &ctx);
   }

@@ -55,24 +55,55 @@ absl::StatusOr<FrameStore> FrameStore::Prepare(const FrameSourceOptions& o) {
   const std::uint64_t frames =
       info.frames_per_pass.value_or(static_cast<std::uint64_t>(std::max(1, o.synthetic_frames)));
   FrameStore store;
+  if (!o.jpeg_ladder.empty()) store.levels_.resize(o.jpeg_ladder.size());
   sources::SourceFrame frame;
   sources::UplinkFrame uplink;
+  auto encode = [&](const sources::UplinkOptions& options, v1::Frame* f) {
+    if (absl::Status s = uplink.Encode(frame, options); !s.ok()) return s;
+    f->set_frame_id(frame.name);
+    return uplink.ToProto(f);
+  };
   for (std::uint64_t i = 0; i < frames; ++i) {
     auto got = (*source)->Next(&frame);
     if (!got.ok()) return got.status();
     if (!*got) break;
-    if (absl::Status s = uplink.Encode(frame, o.uplink); !s.ok()) return s;
-    v1::Frame f;
-    f.set_frame_id(frame.name);
-    if (absl::Status s = uplink.ToProto(&f); !s.ok()) return s;
-    store.AddTail(f);
+    if (o.jpeg_ladder.empty()) {
+      v1::Frame f;
+      if (absl::Status s = encode(o.uplink, &f); !s.ok()) return s;
+      store.AddTail(f);
+      continue;
+    }
+    // The ladder: the geometry lossless once, the colour at every quality.
+    sources::UplinkOptions lossless = o.uplink;
+    lossless.encoding = sources::Uplink::kZstd;
+    v1::Frame geometry;
+    if (absl::Status s = encode(lossless, &geometry); !s.ok()) return s;
+    for (std::size_t level = 0; level < o.jpeg_ladder.size(); ++level) {
+      sources::UplinkOptions jpeg = o.uplink;
+      jpeg.encoding = sources::Uplink::kJpeg;
+      jpeg.jpeg_quality = o.jpeg_ladder[level];
+      v1::Frame f;
+      if (absl::Status s = encode(jpeg, &f); !s.ok()) return s;
+      if (geometry.has_disparity()) *f.mutable_disparity() = geometry.disparity();
+      if (geometry.has_depth()) *f.mutable_depth() = geometry.depth();
+      store.AddTail(f, level);
+    }
   }
   store.camera_ = info.camera;
   store.kind_ = o.kind;
-  store.description_ =
-      fmt::format("{} ({} {} frames, {}x{}), {}, {:.0f} KB per frame", Label(info), store.size(),
-                  sources::Name(o.kind), info.width, info.height, sources::Name(o.uplink.encoding),
-                  store.MeanRequestBytes() / 1024);
+  if (o.jpeg_ladder.empty()) {
+    store.description_ =
+        fmt::format("{} ({} {} frames, {}x{}), {}, {:.0f} KB per frame", Label(info),
+                    store.size(), sources::Name(o.kind), info.width, info.height,
+                    sources::Name(o.uplink.encoding), store.MeanRequestBytes() / 1024);
+  } else {
+    store.description_ = fmt::format(
+        "{} ({} {} frames, {}x{}), adaptive: lossless geometry, JPEG colour at quality {} to {}, "
+        "{:.0f} to {:.0f} KB per frame",
+        Label(info), store.size(), sources::Name(o.kind), info.width, info.height,
+        o.jpeg_ladder.front(), o.jpeg_ladder.back(), store.MeanRequestBytes(0) / 1024,
+        store.MeanRequestBytes(store.levels() - 1) / 1024);
+  }
   return store;
 }
 
@@ -85,16 +116,17 @@ FrameStore FrameStore::FromFrames(const std::vector<v1::Frame>& frames, const Ca
   return store;
 }
 
-void FrameStore::AddTail(const v1::Frame& frame) {
+void FrameStore::AddTail(const v1::Frame& frame, std::size_t level) {
   v1::Frame tail = frame;
   tail.clear_sequence();
   tail.clear_capture_time_unix_ns();
-  tails_.push_back(std::make_shared<const std::string>(tail.SerializeAsString()));
+  levels_[level].push_back(std::make_shared<const std::string>(tail.SerializeAsString()));
 }
 
 grpc::ByteBuffer FrameStore::Request(std::size_t index, std::uint64_t sequence,
-                                     std::int64_t capture_time_unix_ns) const {
-  const std::string& tail = *tails_[index % tails_.size()];
+                                     std::int64_t capture_time_unix_ns, std::size_t level) const {
+  const auto& tails = levels_[std::min(level, levels_.size() - 1)];
+  const std::string& tail = *tails[index % tails.size()];
   const auto time = static_cast<std::uint64_t>(capture_time_unix_ns);  // int64 as varint
   const std::size_t frame_bytes = 1 + VarintSize(sequence) + 1 + VarintSize(time) + tail.size();
   std::uint8_t header[1 + 10 + 1 + 10 + 1 + 10];
@@ -111,14 +143,24 @@ grpc::ByteBuffer FrameStore::Request(std::size_t index, std::uint64_t sequence,
 }
 
 std::size_t FrameStore::RequestBytes(std::size_t index) const {
-  return tails_[index % tails_.size()]->size() + 16;
+  return levels_.front()[index % size()]->size() + 16;
 }
 
-double FrameStore::MeanRequestBytes() const {
-  if (tails_.empty()) return 0;
+double FrameStore::MeanRequestBytes() const { return MeanRequestBytes(0); }
+
+double FrameStore::MeanRequestBytes(std::size_t level) const {
+  const auto& tails = levels_[level];
+  if (tails.empty()) return 0;
   double sum = 0;
-  for (const auto& t : tails_) sum += static_cast<double>(t->size() + 16);
-  return sum / static_cast<double>(tails_.size());
+  for (const auto& t : tails) sum += static_cast<double>(t->size() + 16);
+  return sum / static_cast<double>(tails.size());
+}
+
+std::size_t FrameStore::LevelFor(double budget_bytes) const {
+  for (std::size_t level = 0; level < levels_.size(); ++level) {
+    if (MeanRequestBytes(level) <= budget_bytes) return level;
+  }
+  return levels_.size() - 1;
 }
 
 grpc::ByteBuffer SerializeConfig(const v1::StreamConfig& config) {

@@ -282,6 +282,22 @@ std::string Html(const Report& r) {
   page += LineChart("latency-chart", "Latency from the intended send time, per second", "ms", x,
                     {p50, p90, p99});
   page += LineChart("throughput-chart", "Throughput", "frames/s", x, {fps, sent});
+  if (r.rate.samples > 0) {
+    // --rate-control: what the senders' controllers decided, beside what they measured.
+    std::vector<double> rx;
+    Line target{"target (Mbit/s, all streams)", "#4c78a8", {}};
+    Line queue{"queueing delay (ms / 10)", "#e45756", {}, true};
+    Line kb{"KB per frame / 10", "#54a24b", {}, true};
+    for (const SecondStats& s : r.series) {
+      if (s.duration_s < 0.05 || s.rate.samples == 0) continue;
+      rx.push_back(s.t_end_s);
+      target.y.push_back(s.rate.target_bps / 1e6);
+      queue.y.push_back(s.rate.queue_delay_ms / 10);
+      kb.y.push_back(s.rate.frame_bytes / 1e4);
+    }
+    page += LineChart("rate-chart", "Rate control: target bitrate, queueing delay, frame size",
+                      "", rx, {target, queue, kb});
+  }
   if (!r.memory.empty()) {
     std::vector<double> mx;
     Line rss{"RSS", "#b279a2", {}};

@@ -116,6 +116,8 @@ SecondStats Recorder::CloseInterval(double t_end_s, int open_streams) {
   s.max = interval_latency_.max();
   s.service_p50 = interval_service_.Percentile(50);
   s.service_p99 = interval_service_.Percentile(99);
+  s.rate = interval_rate_.Summary();
+  interval_rate_ = RateSums{};
   series_.push_back(s);
   interval_ = SecondStats{};
   interval_latency_.Reset();
@@ -155,6 +157,40 @@ std::map<std::string, std::uint64_t> Recorder::call_status() const {
 std::vector<SecondStats> Recorder::series() const {
   std::lock_guard<std::mutex> lock(mu_);
   return series_;
+}
+
+void Recorder::RateSample(int stream, double target_bps, double rtt_ms, double queue_delay_ms,
+                          int window, std::size_t frame_bytes) {
+  std::lock_guard<std::mutex> lock(mu_);
+  for (RateSums* sums : {&interval_rate_, &run_rate_}) {
+    ++sums->n;
+    sums->rtt += rtt_ms;
+    sums->queue += queue_delay_ms;
+    sums->window += window;
+    sums->bytes += static_cast<double>(frame_bytes);
+    sums->target_sum[stream] += target_bps;
+    ++sums->target_n[stream];
+  }
+}
+
+RateSummary Recorder::RateSums::Summary() const {
+  RateSummary r;
+  if (n == 0) return r;
+  const double count = static_cast<double>(n);
+  r.samples = n;
+  r.rtt_ms = rtt / count;
+  r.queue_delay_ms = queue / count;
+  r.window = window / count;
+  r.frame_bytes = bytes / count;
+  for (const auto& [stream, sum] : target_sum) {
+    r.target_bps += sum / static_cast<double>(target_n.at(stream));
+  }
+  return r;
+}
+
+RateSummary Recorder::rate() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return run_rate_.Summary();
 }
 
 }  // namespace cloudcast::load

@@ -34,6 +34,12 @@ std::string Rfc3339(std::chrono::system_clock::time_point t) {
   return buf;
 }
 
+nlohmann::json RateJson(const RateSummary& r) {
+  return {{"samples", r.samples},     {"targetBps", r.target_bps},
+          {"rttMs", r.rtt_ms},        {"queueDelayMs", r.queue_delay_ms},
+          {"window", r.window},       {"frameBytes", r.frame_bytes}};
+}
+
 nlohmann::json Percentiles(const Histogram& h) {
   nlohmann::json j;
   j["count"] = h.count();
@@ -83,6 +89,7 @@ Report MakeReport(Fleet& fleet, const FleetResult& result, const std::string& fr
   r.errors = rec.errors();
   r.call_status = rec.call_status();
   r.series = rec.series();
+  r.rate = rec.rate();
   r.lb_policy = fleet.lb_policy();
   r.resilient = o.resilient;
   r.reconnect_timeout_s = o.reconnect_timeout.count() / 1e9;
@@ -329,8 +336,10 @@ nlohmann::json GhzJson(const Report& r) {
                       {"max", s.max},
                       {"serviceP50", s.service_p50},
                       {"serviceP99", s.service_p99}});
+    if (s.rate.samples > 0) series.back()["rate"] = RateJson(s.rate);
   }
   j["timeSeries"] = series;
+  if (r.rate.samples > 0) j["rateControl"] = RateJson(r.rate);
   if (!r.memory.empty()) {
     json memory = json::array();
     for (const MemorySample& m : r.memory) {
@@ -358,6 +367,11 @@ std::string ProgressLine(const SecondStats& s, std::uint64_t errors, std::uint64
       s.t_end_s, s.fps(), Ms(s.p50), Ms(s.p99), errors, drops, s.late, s.open_streams);
   if (s.reconnects > 0 || s.resent > 0) {
     line += fmt::format("  reconnects {}  resent {}", s.reconnects, s.resent);
+  }
+  if (s.rate.samples > 0) {
+    line += fmt::format("  target {:.1f} Mbit/s  rtt {:.0f} ms  queueing {:.0f} ms  {:.0f} KB/frame",
+                        s.rate.target_bps / 1e6, s.rate.rtt_ms, s.rate.queue_delay_ms,
+                        s.rate.frame_bytes / 1024);
   }
   return line;
 }

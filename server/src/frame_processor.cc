@@ -278,6 +278,7 @@ absl::Status FrameRunner::Run(std::size_t worker, const v1::Frame& frame,
   if (status.ok()) {
     reply->mutable_times()->set_queue_us(Micros(Seconds(start - arrival.time)));
     reply->set_receive_time_unix_ns(arrival.unix_ns);
+    reply->set_stream_bytes_received(arrival.stream_bytes);
     reply->set_server_instance(instance_);
     m.frames_processed.Increment();
     m.pipeline_seconds.Observe(costs.pipeline_seconds);

@@ -71,6 +71,7 @@ class FrameProcessor {
 struct Arrival {
   std::chrono::steady_clock::time_point time;
   std::int64_t unix_ns = 0;
+  std::uint64_t stream_bytes = 0;  // the call's request bytes read by then (Stream calls)
 };
 
 // One FrameProcessor per worker, and the bookkeeping every frame gets.

@@ -97,6 +97,7 @@ void StreamReactor::OnReadDone(bool ok) {
     Release(job);
   } else {
     services_.metrics->bytes_received.Increment(static_cast<double>(bytes));
+    bytes_received_ += bytes;
     Accept(job, bytes);
   }
   Pump(lock);
@@ -323,7 +324,7 @@ void StreamReactor::AcceptFrame(Job* job, std::size_t bytes) {
   job->charge = *std::move(charge);
   job->settings = settings_;
   job->delivery = settings_->delivery;
-  job->arrival = {last_activity_, UnixNanos()};
+  job->arrival = {last_activity_, UnixNanos(), bytes_received_};
   std::vector<StreamSlot*> dropped;
   queue_.PushFrame(job, &dropped);
   for (StreamSlot* s : dropped) {

@@ -146,6 +146,7 @@ class StreamReactor final : public grpc::ServerBidiReactor<grpc::ByteBuffer, grp
   Job* reading_ = nullptr;
   Job* writing_ = nullptr;
   std::uint64_t messages_read_ = 0;  // none yet: --first-message-timeout applies
+  std::uint64_t bytes_received_ = 0;  // request bytes read (CloudReply.stream_bytes_received)
   std::chrono::steady_clock::time_point last_activity_;
   std::chrono::steady_clock::time_point last_frame_;  // the last frame read, or the opening
 };

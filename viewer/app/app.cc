@@ -91,6 +91,7 @@ struct Flags {
   double fps = SessionDefaults().fps;
   int in_flight = SessionDefaults().max_in_flight;
   bool lossless = false;
+  bool rate_control = false;
   std::string encoding = sources::Name(SessionDefaults().uplink.encoding);
   int jpeg_quality = SessionDefaults().uplink.jpeg_quality;
 
@@ -222,6 +223,13 @@ std::unique_ptr<cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
   app.add_option("--jpeg-quality", f.jpeg_quality, "JPEG quality with --encoding jpeg")
       ->check(CLI::Range(1, 100))
       ->capture_default_str()
+      ->group(streaming);
+  app.add_flag("--rate-control", f.rate_control,
+               "Follow the link instead of queueing behind it: a rate controller holds frames "
+               "past its window in the sender (a newer frame replaces a waiting one) and, with "
+               "--encoding jpeg, sets each frame's JPEG quality (from --jpeg-quality down to 10) "
+               "from its target bitrate. The progress lines show its target, round trip and "
+               "queueing delay. Not with --lossless")
       ->group(streaming);
 
   const std::string stages = "Camera and stages (stage flags left out: the server's defaults)";
@@ -517,6 +525,7 @@ int Run(const Flags& f, const cli::StageFlags& stages) {
   options.config = *std::move(config);
   options.fps = f.fps;
   options.max_in_flight = f.in_flight;
+  options.rate_control = f.rate_control;
   sources::ParseUplink(f.encoding, &options.uplink.encoding);
   options.uplink.jpeg_quality = f.jpeg_quality;
 
@@ -697,6 +706,10 @@ int ClientMain(int argc, char** argv) {
                     f.stereo->GivenFlags().front(), f.input));
   }
   if (absl::Status s = f.stereo->Check(); !s.ok()) return usage(std::string(s.message()));
+  if (f.rate_control && f.lossless) {
+    return usage("--rate-control needs DELIVERY_LATEST (a frame past the window is replaced by "
+                 "a newer one): drop --lossless");
+  }
   if (f.no_window) {
     for (const char* flag : {"--open", "--snapshot", "--hidden", "--window"}) {
       if (app.count(flag) > 0)

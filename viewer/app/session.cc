@@ -49,7 +49,9 @@ absl::StatusOr<std::unique_ptr<Session>> Session::Start(const SessionOptions& op
                s->server_info_.version(), s->server_info_.worker_threads(),
                s->server_info_.draco_version());
 
-  auto stream = s->client_->OpenStream(options.config);
+  StreamOptions stream_options;
+  if (options.rate_control) stream_options.rate_control = RateControlOptions{};
+  auto stream = s->client_->OpenStream(options.config, std::move(stream_options));
   if (!stream.ok()) {
     return absl::Status(stream.status().code(),
                         absl::StrCat("--server ", options.server, ": ", stream.status().message()));
@@ -125,6 +127,7 @@ void Session::ReceiveLoop() {
       }
     }
     stats_->RecordResult(result);
+    if (result.rate) stats_->RecordRate(*result.rate, jpeg_quality_.load());
     if (on_result_) on_result_(result);
     {
       std::lock_guard<std::mutex> lock(mu_);
@@ -151,6 +154,9 @@ void Session::SendLoop() {
   sources::SourceFrame frame;
   sources::UplinkFrame uplink;
   bool tiff_noted = false;
+  sources::UplinkOptions uplink_options = options_.uplink;
+  const bool follow = options_.rate_control && uplink_options.encoding == sources::Uplink::kJpeg;
+  QualityFollower quality(uplink_options.jpeg_quality, 10, 95);
 
   for (;;) {
     // The next frame is read (decoded) before waiting, so its decoding overlaps the wait.
@@ -180,7 +186,11 @@ void Session::SendLoop() {
     FrameMeta meta;
     meta.capture_time_unix_ns = UnixNanosNow();  // encoding below counts as latency
     meta.frame_id = frame.name;
-    if (absl::Status s = uplink.Encode(frame, options_.uplink); !s.ok()) {
+    if (follow) {
+      uplink_options.jpeg_quality = quality.quality();
+      jpeg_quality_.store(quality.quality());
+    }
+    if (absl::Status s = uplink.Encode(frame, uplink_options); !s.ok()) {
       SetError(absl::Status(s.code(), absl::StrCat("frame ", frame.name, ": ", s.message())));
       break;
     }
@@ -198,7 +208,15 @@ void Session::SendLoop() {
       }
       break;
     }
-    stats_->RecordSent(stream_->image_bytes_sent() - bytes_before);
+    const std::uint64_t frame_bytes = stream_->image_bytes_sent() - bytes_before;
+    stats_->RecordSent(frame_bytes);
+    if (follow) {
+      if (const std::optional<RateEstimate> rate = stream_->rate()) {
+        // Unpaced: the budget of a frame at the rate the replies come back (30 fps at most).
+        const double fps = paced ? options_.fps : 30.0;
+        quality.Encoded(frame_bytes, static_cast<std::size_t>(rate->target_bps / 8 / fps));
+      }
+    }
     {
       std::lock_guard<std::mutex> lock(mu_);
       ++sent_;

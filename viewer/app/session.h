@@ -37,6 +37,10 @@ struct SessionOptions {
   sources::UplinkOptions uplink;
   // Decode the Draco replies (off for pure load measurements).
   bool decode_clouds = true;
+  // The adaptive sender (--rate-control): the stream's rate controller holds frames past its
+  // window (the stream must be DELIVERY_LATEST), and with JPEG colour the quality follows its
+  // target bitrate frame by frame (QualityFollower).
+  bool rate_control = false;
 };
 
 class Session {
@@ -94,6 +98,7 @@ class Session {
   bool stop_ = false;
   absl::Status error_;
   std::atomic<bool> done_{false};
+  std::atomic<int> jpeg_quality_{0};  // --rate-control with JPEG: the quality in force
 
   std::thread sender_, receiver_;
 };

@@ -106,6 +106,12 @@ StatsSnapshot StreamStats::Snapshot() const {
   return s;
 }
 
+void StreamStats::RecordRate(const RateEstimate& estimate, int jpeg_quality) {
+  std::lock_guard<std::mutex> lock(mu_);
+  rate_ = estimate;
+  jpeg_quality_ = jpeg_quality;
+}
+
 std::string StreamStats::ProgressLine() {
   const StatsSnapshot s = Snapshot();
   const Clock::time_point now = Clock::now();
@@ -131,6 +137,15 @@ std::string StreamStats::ProgressLine() {
     line += fmt::format(" | latency {:.1f} ms | {:.0f} points, {:.1f} KB per cloud",
                         s.latency_smoothed_ms, PerFrame(s.points, s.received),
                         PerFrame(s.draco_bytes, s.received) / 1024.0);
+  }
+  std::lock_guard<std::mutex> lock(mu_);
+  if (rate_) {
+    line += fmt::format(
+        " | target {:.1f} Mbit/s, rtt {:.0f} ms, queueing {:.0f} ms, {} in flight, {:.1f} KB per "
+        "frame",
+        rate_->target_bps / 1e6, rate_->rtt_ms, rate_->queue_delay_ms, rate_->frames_in_flight,
+        PerFrame(s.uplink_bytes, s.sent) / 1024.0);
+    if (jpeg_quality_ > 0) line += fmt::format(", JPEG quality {}", jpeg_quality_);
   }
   return line;
 }

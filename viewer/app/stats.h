@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cstdint>
 #include <mutex>
+#include <optional>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -68,6 +69,8 @@ class StreamStats {
   void RecordResult(const Result& result);
   // The viewer drew a new cloud.
   void RecordDisplayed();
+  // --rate-control: the controller's estimate with a reply, and the JPEG quality in force.
+  void RecordRate(const RateEstimate& estimate, int jpeg_quality);
 
   StatsSnapshot Snapshot() const;
 
@@ -88,6 +91,8 @@ class StreamStats {
   Smoothed latency_smoothed_;
   double sum_server_decode_us_ = 0, sum_pipeline_us_ = 0, sum_encode_us_ = 0, sum_queue_us_ = 0;
   double sum_client_decode_us_ = 0;
+  std::optional<RateEstimate> rate_;
+  int jpeg_quality_ = 0;
 
   // ProgressLine's previous totals.
   Clock::time_point progress_at_;

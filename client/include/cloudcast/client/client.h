@@ -91,6 +91,9 @@ class Stream {
   std::uint64_t frames_sent() const;
   // DELIVERY_LATEST: frames replaced by a newer one before they were sent.
   std::uint64_t frames_replaced() const;
+  // StreamOptions::rate_control: the controller's estimate now (its target bitrate is what the
+  // next frame's encoder should aim at). Unset without rate control.
+  std::optional<RateEstimate> rate() const;
   // Image bytes of the frames accepted by Send (replaced ones included, so that the count only
   // grows): raw pixels, compressed payloads or encoded files (what the uplink carries, without
   // the protocol's few bytes of framing).

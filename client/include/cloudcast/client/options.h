@@ -8,9 +8,11 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include "absl/status/status.h"
+#include "cloudcast/client/rate_controller.h"
 #include "cloudcast/client/security.h"
 
 namespace cloudcast::client {
@@ -108,6 +110,16 @@ struct StreamOptions {
 
   // Called after each reconnect (on a gRPC callback thread, in order with the results).
   std::function<void(const Reconnect&)> on_reconnect;
+
+  // A sender that follows the link (rate_controller.h; docs/client.md, "Sending over a real
+  // link"). Unset (the default): every frame is written as soon as the call's write slot is free,
+  // and on a link slower than the frames TCP's buffers fill and latency grows for as long as the
+  // stream lasts. Set: a rate controller estimates the link from the replies (their round trip
+  // and the server's byte count) and holds frames past its window in the sender, where
+  // DELIVERY_LATEST replaces them with newer ones (so use it with DELIVERY_LATEST); its target
+  // bitrate (Stream::rate(), Result::rate) is what the caller's encoder should follow, for
+  // example with QualityFollower (rate_controller.h).
+  std::optional<RateControlOptions> rate_control;
 };
 
 }  // namespace cloudcast::client

@@ -4,9 +4,11 @@
 
 #include <chrono>
 #include <cstdint>
+#include <optional>
 #include <string>
 
 #include "absl/status/status.h"
+#include "cloudcast/client/rate_controller.h"
 #include "cloudcast/client/stream_machine.h"
 #include "cloudcast/core/point.h"
 #include "cloudcast/v1/cloudcast.pb.h"
@@ -57,6 +59,10 @@ struct Result {
   // The error answers a StreamConfig (OpenStream's or a Reconfigure), not a frame: the server
   // keeps the previous settings, and sequence / frame_id are 0 / empty. Streams only.
   bool config_rejected = false;
+  // StreamOptions::rate_control: the rate controller's estimate after this reply (its target
+  // bitrate, round trip, queueing delay, window). Unset without rate control and for frames that
+  // got no reply.
+  std::optional<RateEstimate> rate;
 
   // The decoded cloud: unorganized, finite points, alpha 255. Empty on errors, when the filters
   // left nothing, or with ClientOptions::decode_clouds off.

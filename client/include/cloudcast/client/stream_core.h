@@ -35,6 +35,7 @@
 #include <vector>
 
 #include "absl/status/status.h"
+#include "cloudcast/client/rate_controller.h"
 #include "cloudcast/client/stream_machine.h"
 #include "cloudcast/v1/cloudcast.pb.h"
 
@@ -79,12 +80,18 @@ class StreamSink {
   virtual void OnCallEnded(const absl::Status& /*status*/) {}
   virtual void OnReconnected(const Reconnected& /*event*/) {}
   virtual void OnDuplicate() {}  // a second answer to a resent frame (ignored)
+  // With rate control: the controller's estimate after a reply, just before that OnReply.
+  virtual void OnRate(const RateEstimate& /*estimate*/) {}
 };
 
 struct StreamCoreOptions {
   StreamMachineOptions machine;
   bool wait_for_ready = false;  // of the first call; later calls always wait (for a replica)
   std::optional<grpc::ByteBuffer> config;  // written first on every call (none: nothing)
+  // A sender that follows the link (rate_controller.h): frames past its window wait in the
+  // queue, and rate() gives the bitrate to make frames at. None: every frame is written as soon
+  // as the write slot is free (TCP's buffers then hold what the link cannot carry).
+  std::optional<RateControlOptions> rate_control;
 };
 
 class StreamCore : public std::enable_shared_from_this<StreamCore> {
@@ -130,6 +137,8 @@ class StreamCore : public std::enable_shared_from_this<StreamCore> {
   int calls() const;
   bool gave_up() const;
   std::uint64_t frames_dropped_reported() const;
+  // The rate controller's estimate (StreamCoreOptions::rate_control; none without it).
+  std::optional<RateEstimate> rate() const;
 
   class Call;  // stream_core.cc
 
@@ -160,6 +169,7 @@ class StreamCore : public std::enable_shared_from_this<StreamCore> {
     WriteEvent write;
     bool after_failure = false;
     bool gave_up = false;  // kEnded
+    std::optional<RateEstimate> rate;  // kReply, with rate control
     Clock::time_point at;
   };
 
@@ -187,6 +197,8 @@ class StreamCore : public std::enable_shared_from_this<StreamCore> {
   mutable std::mutex mu_;
   std::condition_variable changed_;  // queue space, the end
   CoreMachine machine_;
+  std::optional<RateController> rate_;
+  std::deque<std::pair<std::uint64_t, std::size_t>> written_bytes_;  // sequence, bytes (rate_)
   std::deque<Op> ops_;
   bool running_ops_ = false;
   std::deque<Event> events_;

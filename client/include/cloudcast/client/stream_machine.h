@@ -340,6 +340,14 @@ class StreamMachine {
     }
   }
 
+  // At most `frames` frames written and not yet answered on the current call (0: no limit): a
+  // rate controller's window. A frame past it waits in the queue (replaced there under
+  // DELIVERY_LATEST); configs and resends are not held. Writes what the new window allows.
+  void SetMaxUnanswered(std::size_t frames, Clock::time_point now) {
+    max_unanswered_ = frames;
+    Pump(now);
+  }
+
   // At or after a time asked for in Effects::wake_at.
   void Timer(Clock::time_point now) {
     if (ended_ || !failing_since_) return;
@@ -462,6 +470,10 @@ class StreamMachine {
     }
     write_in_flight_resend_ = false;
     if (!queue_.empty()) {
+      if (queue_.front().is_frame && max_unanswered_ > 0 &&
+          ledger_.unanswered() >= max_unanswered_) {
+        return;  // the window is full: a reply (SetMaxUnanswered) opens it again
+      }
       Item item = std::move(queue_.front());
       queue_.pop_front();
       if (!item.is_frame) {
@@ -523,6 +535,7 @@ class StreamMachine {
 
   std::deque<Item> queue_;
   std::size_t queued_frames_ = 0;
+  std::size_t max_unanswered_ = 0;  // SetMaxUnanswered
   Ledger ledger_;
 
   // The current call.

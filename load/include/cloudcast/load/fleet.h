@@ -71,6 +71,10 @@ struct FleetOptions {
   std::string lb_policy;
   bool resilient = false;
   std::chrono::nanoseconds reconnect_timeout = client::StreamOptions{}.reconnect_timeout;
+  // The adaptive sender (client::RateControlOptions): each stream's rate controller sets its
+  // window and picks each frame's level of the store's ladder (FrameSourceOptions::jpeg_ladder)
+  // from its target bitrate at the schedule's rate.
+  bool rate_control = false;
   // TLS and the bearer token of every channel (cloudcast/client/security.h); default plaintext.
   client::ChannelSecurity security;
 };

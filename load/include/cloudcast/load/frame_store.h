@@ -35,6 +35,10 @@ struct FrameSourceOptions {
   double baseline = sources::SourceOptions{}.baseline;
   int synthetic_frames = 10;  // distinct synthetic frames (the camera moves from one to the next)
   sources::UplinkOptions uplink;
+  // The adaptive sender's ladder (--rate-control): every frame also at each of these JPEG
+  // qualities for its colour images (best first), its disparity or depth lossless (zstd with
+  // row deltas). The stream picks a level per frame from its rate controller's target.
+  std::vector<int> jpeg_ladder;
 };
 
 class FrameStore {
@@ -46,11 +50,17 @@ class FrameStore {
   static FrameStore FromFrames(const std::vector<v1::Frame>& frames, const CameraModel& camera,
                                const std::string& description);
 
-  std::size_t size() const { return tails_.size(); }
-  // The bytes of frame `index % size()` on the wire, sequence and time patched in. Only a small
-  // header slice is new; the image bytes are shared with every other send of that frame.
+  std::size_t size() const { return levels_.front().size(); }
+  // The bytes of frame `index % size()` on the wire, sequence and time patched in, at `level`
+  // of the ladder (0: the best, and the only one without a ladder). Only a small header slice is
+  // new; the image bytes are shared with every other send of that frame.
   grpc::ByteBuffer Request(std::size_t index, std::uint64_t sequence,
-                           std::int64_t capture_time_unix_ns) const;
+                           std::int64_t capture_time_unix_ns, std::size_t level = 0) const;
+  // The ladder: its levels (1 without one), and the best level whose frames average at most
+  // `budget_bytes` (the last, smallest, when none does).
+  std::size_t levels() const { return levels_.size(); }
+  std::size_t LevelFor(double budget_bytes) const;
+  double MeanRequestBytes(std::size_t level) const;
   // The request's size in bytes (about the same for every send of that frame).
   std::size_t RequestBytes(std::size_t index) const;
   double MeanRequestBytes() const;
@@ -64,10 +74,11 @@ class FrameStore {
 
  private:
   FrameStore() = default;
-  void AddTail(const v1::Frame& frame);
+  void AddTail(const v1::Frame& frame, std::size_t level = 0);
 
-  // Owned strings, so their slices can be static (no refcount, no copy) for the store's life.
-  std::vector<std::shared_ptr<const std::string>> tails_;
+  // Per level, owned strings, so their slices can be static (no refcount, no copy) for the
+  // store's life.
+  std::vector<std::vector<std::shared_ptr<const std::string>>> levels_{1};
   CameraModel camera_;
   sources::FrameKind kind_ = sources::FrameKind::kDisparity;
   std::string description_;

@@ -19,6 +19,13 @@
 
 namespace cloudcast::load {
 
+// What the streams' rate controllers said in an interval (or the whole run).
+struct RateSummary {
+  std::uint64_t samples = 0;
+  double target_bps = 0;  // summed over streams (the mean per stream times the streams seen)
+  double rtt_ms = 0, queue_delay_ms = 0, window = 0, frame_bytes = 0;  // means
+};
+
 // One second of the run (or the last, partial one).
 struct SecondStats {
   double t_end_s = 0;          // end of the interval, seconds since the run's start
@@ -34,6 +41,10 @@ struct SecondStats {
   // Latency from the intended time and service time of the frames answered in it, ns.
   std::int64_t p50 = 0, p90 = 0, p99 = 0, max = 0;
   std::int64_t service_p50 = 0, service_p99 = 0;
+  // The adaptive sender (--rate-control), means over the replies of the interval (0: none):
+  // its target bitrate summed over the streams, round trip, queueing delay, window, and the
+  // request bytes of the frames it made.
+  RateSummary rate;
   double fps() const { return duration_s > 0 ? answered / duration_s : 0; }
 };
 
@@ -86,6 +97,10 @@ class Recorder {
   void ReconnectAttempt();
   void Reconnected();
   void GaveUp();
+  // An adaptive stream's controller after a reply: its target, round trip and queueing delay,
+  // window (frames in flight), and the request bytes of the frame answered.
+  void RateSample(int stream, double target_bps, double rtt_ms, double queue_delay_ms, int window,
+                  std::size_t frame_bytes);
 
   // Closes the interval ending at `t_end_s` (seconds since the start) and starts the next.
   SecondStats CloseInterval(double t_end_s, int open_streams);
@@ -99,6 +114,7 @@ class Recorder {
   std::map<std::string, std::uint64_t> errors() const;        // "CODE: message" -> frames
   std::map<std::string, std::uint64_t> call_status() const;   // per Stream call
   std::vector<SecondStats> series() const;
+  RateSummary rate() const;  // over the whole run
 
  private:
   mutable std::mutex mu_;
@@ -109,6 +125,15 @@ class Recorder {
   double interval_start_s_ = 0;
   std::map<std::string, std::uint64_t> per_instance_, status_codes_, errors_, call_status_;
   std::vector<SecondStats> series_;
+  // Rate samples: sums over the interval and the run, and each stream's last target.
+  struct RateSums {
+    std::uint64_t n = 0;
+    double rtt = 0, queue = 0, window = 0, bytes = 0;
+    std::map<int, double> target_sum;  // per stream
+    std::map<int, std::uint64_t> target_n;
+    RateSummary Summary() const;
+  };
+  RateSums interval_rate_, run_rate_;
 };
 
 }  // namespace cloudcast::load

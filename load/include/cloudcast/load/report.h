@@ -29,6 +29,7 @@ struct Report {
   Histogram latency, service;
   std::map<std::string, std::uint64_t> per_instance, status_codes, errors, call_status;
   std::vector<SecondStats> series;
+  RateSummary rate;  // --rate-control: the controllers over the run (samples 0: none)
   // Resilience and spread: the channels' policy, each stream's account, and per replica.
   std::string lb_policy;
   bool resilient = false;

@@ -1,0 +1,133 @@
+#include "cloudcast/client/rate_controller.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace cloudcast::client {
+namespace {
+
+double Ms(RateController::Clock::duration d) {
+  return std::chrono::duration<double, std::milli>(d).count();
+}
+
+// The delivered rate is measured over this much of the server's clock (at least the shorter
+// span below, so that two frames back to back do not make a rate of their own).
+constexpr std::int64_t kDeliveredSpanNs = 400'000'000;
+constexpr std::int64_t kMinDeliveredSpanNs = 150'000'000;
+
+}  // namespace
+
+RateController::RateController(RateControlOptions options) : options_(options) {
+  estimate_.target_bps = std::clamp(options_.start_bps, options_.min_bps, options_.max_bps);
+  estimate_.frames_in_flight = options_.min_frames_in_flight;
+}
+
+void RateController::OnFrameWritten(std::size_t bytes) {
+  const double b = static_cast<double>(bytes);
+  mean_frame_bytes_ = mean_frame_bytes_ == 0 ? b : 0.8 * mean_frame_bytes_ + 0.2 * b;
+  UpdateWindow();
+}
+
+void RateController::OnCallOpened() { delivered_.clear(); }
+
+void RateController::OnReply(Clock::time_point written, Clock::time_point received,
+                             std::size_t frame_bytes, std::int64_t server_receive_unix_ns,
+                             std::uint64_t stream_bytes_received) {
+  if (server_receive_unix_ns > 0 && stream_bytes_received > 0) {
+    delivered_.emplace_back(server_receive_unix_ns, stream_bytes_received);
+    while (delivered_.size() > 2 &&
+           delivered_.back().first - delivered_[1].first >= kDeliveredSpanNs) {
+      delivered_.pop_front();
+    }
+    const std::int64_t span = delivered_.back().first - delivered_.front().first;
+    if (span >= kMinDeliveredSpanNs && delivered_.back().second > delivered_.front().second) {
+      estimate_.delivered_bps =
+          static_cast<double>(delivered_.back().second - delivered_.front().second) * 8e9 /
+          static_cast<double>(span);
+    }
+  }
+
+  // The round trip less the frame's own serialization at the delivered rate: what is left grows
+  // only with queueing (behind earlier frames, in the link's queue, on the server).
+  const double rtt = std::max(0.0, Ms(received - written));
+  const double serialization =
+      estimate_.delivered_bps > 0
+          ? static_cast<double>(frame_bytes) * 8 / estimate_.delivered_bps * 1000
+          : 0;
+  const double base = std::max(0.0, rtt - serialization);
+  // The windowed minimum: a deque ascending in base delay, oldest first.
+  while (!rtts_.empty() && rtts_.back().second >= base) rtts_.pop_back();
+  rtts_.emplace_back(received, base);
+  while (received - rtts_.front().first > options_.min_rtt_window) rtts_.pop_front();
+  estimate_.min_rtt_ms = rtts_.front().second;
+  estimate_.rtt_ms = estimate_.rtt_ms == 0 ? rtt : 0.875 * estimate_.rtt_ms + 0.125 * rtt;
+  const double queue_sample = base - estimate_.min_rtt_ms;
+  estimate_.queue_delay_ms = 0.7 * estimate_.queue_delay_ms + 0.3 * queue_sample;
+
+  const double target_delay = static_cast<double>(options_.target_delay.count());
+  double dt = last_update_ ? std::chrono::duration<double>(received - *last_update_).count() : 0;
+  dt = std::clamp(dt, 0.0, 0.2);  // a long silence is no licence to grow
+  last_update_ = received;
+  double& target = estimate_.target_bps;
+  // Overuse on the smoothed delay, or at once on a sample four times the target (a step down
+  // to a third of the rate shows there within a frame or two).
+  estimate_.overuse = estimate_.queue_delay_ms > target_delay || queue_sample > 4 * target_delay;
+  if (estimate_.overuse) {
+    seen_overuse_ = true;
+    const auto since = last_decrease_ ? received - *last_decrease_ : Clock::duration::max();
+    const auto once_a_round_trip = std::chrono::duration_cast<Clock::duration>(
+        std::chrono::duration<double, std::milli>(std::max(estimate_.rtt_ms, 100.0)));
+    if (since >= once_a_round_trip) {
+      const double cut = estimate_.delivered_bps > 0 ? options_.backoff * estimate_.delivered_bps
+                                                     : 0.5 * target;
+      target = std::min(target, cut);
+      last_decrease_ = received;
+      capacity_bps_ = estimate_.delivered_bps;
+    }
+  } else if (estimate_.queue_delay_ms < target_delay / 2) {
+    const bool near_capacity =
+        capacity_bps_ > 0 && target >= 0.95 * capacity_bps_ && target <= 1.3 * capacity_bps_;
+    const double growth = !seen_overuse_ ? options_.startup_growth_per_second
+                          : near_capacity ? options_.near_capacity_growth_per_second
+                                          : options_.growth_per_second;
+    // Never more than a probe's margin over what the link delivered: a sender held back by its
+    // window sees no queueing delay, so the delay alone would let the target drift up (GCC caps
+    // its estimate at 1.5 times the received rate for the same reason).
+    const double grown = target * (1 + growth * dt);
+    const double cap = estimate_.delivered_bps > 0
+                           ? options_.max_over_delivered * estimate_.delivered_bps
+                           : grown;
+    target = std::max(target, std::min(grown, cap));
+  }
+  target = std::clamp(target, options_.min_bps, options_.max_bps);
+  UpdateWindow();
+}
+
+void RateController::UpdateWindow() {
+  if (mean_frame_bytes_ <= 0 || rtts_.empty()) {
+    estimate_.frames_in_flight = options_.min_frames_in_flight;
+    return;
+  }
+  const double seconds =
+      (estimate_.min_rtt_ms + static_cast<double>(options_.target_delay.count())) / 1000;
+  const double frames = estimate_.target_bps / 8 * seconds / mean_frame_bytes_;
+  estimate_.frames_in_flight = std::clamp(static_cast<int>(std::floor(frames)),
+                                          options_.min_frames_in_flight,
+                                          options_.max_frames_in_flight);
+}
+
+std::size_t RateController::FrameBudgetBytes(double fps) const {
+  if (fps <= 0) return static_cast<std::size_t>(estimate_.target_bps / 8);
+  return static_cast<std::size_t>(estimate_.target_bps / 8 / fps);
+}
+
+void QualityFollower::Encoded(std::size_t bytes, std::size_t budget_bytes) {
+  const double ratio = static_cast<double>(bytes) / static_cast<double>(std::max<std::size_t>(1, budget_bytes));
+  // JPEG's size roughly doubles from quality 50 to 90: steps of 2 to 10 settle in a few frames.
+  int step = 0;
+  if (ratio > 1.0) step = -std::clamp(static_cast<int>((ratio - 1.0) * 20), 2, 10);
+  else if (ratio < 0.8) step = std::clamp(static_cast<int>((0.8 - ratio) * 20), 1, 5);
+  quality_ = std::clamp(quality_ + step, min_, max_);
+}
+
+}  // namespace cloudcast::client

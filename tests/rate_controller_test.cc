@@ -1,0 +1,187 @@
+// The sender's rate controller (cloudcast/client/rate_controller.h) against a simulated link: a
+// FIFO bottleneck whose rate steps and stops, a fixed propagation delay, a server that answers
+// each frame 5 ms after its last byte, and a camera at 30 fps whose frames are as large as the
+// controller's budget (between an encoder's floor and ceiling) and wait for the controller's
+// window, the newest replacing an older one, as DELIVERY_LATEST does. Simulated time: these
+// assert what the controller does, never how fast this machine is.
+#include "cloudcast/client/rate_controller.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cstdint>
+#include <deque>
+#include <functional>
+#include <optional>
+#include <vector>
+
+namespace cloudcast::client {
+namespace {
+
+using Clock = RateController::Clock;
+using std::chrono::milliseconds;
+
+struct Sample {
+  double t_ms;
+  double target_bps;
+  double queue_ms;     // the bottleneck's queue, in ms at its rate then
+  double latency_ms;   // of the frame answered then: capture to reply
+  int window;
+};
+
+// One millisecond a step. `rate_bps(t_ms)` is the bottleneck's rate (0: an outage).
+class LinkSimulation {
+ public:
+  LinkSimulation(std::function<double(double)> rate_bps, double one_way_ms)
+      : rate_bps_(std::move(rate_bps)), one_way_ms_(one_way_ms) {}
+
+  std::vector<Sample> Run(double seconds) {
+    std::vector<Sample> samples;
+    const double fps = 30;
+    double next_capture = 0;
+    for (double t = 0; t < seconds * 1000; t += 1) {
+      // Bottleneck: serve bytes at the rate of this millisecond.
+      double budget = rate_bps_(t) / 8 / 1000;
+      while (budget > 0 && !link_.empty()) {
+        InLink& f = link_.front();
+        const double served = std::min(budget, f.bytes_left);
+        f.bytes_left -= served;
+        budget -= served;
+        if (f.bytes_left <= 0) {
+          server_bytes_ += f.bytes;
+          replies_.push_back({t + one_way_ms_ + 5 + one_way_ms_, f.written_ms, f.captured_ms,
+                              t + one_way_ms_, f.bytes, server_bytes_});
+          link_.pop_front();
+        }
+      }
+      // Replies arriving now.
+      while (!replies_.empty() && replies_.front().at_ms <= t) {
+        const Reply r = replies_.front();
+        replies_.pop_front();
+        --in_flight_;
+        controller_.OnReply(At(r.written_ms), At(t), static_cast<std::size_t>(r.bytes),
+                            static_cast<std::int64_t>(r.server_ms * 1e6), r.server_bytes);
+        samples.push_back({t, controller_.estimate().target_bps, QueueMs(t), t - r.captured_ms,
+                           controller_.frames_in_flight()});
+      }
+      // The camera: the newest frame replaces one still waiting.
+      if (t >= next_capture) {
+        waiting_ = t;
+        next_capture += 1000 / fps;
+      }
+      if (waiting_ && in_flight_ < controller_.frames_in_flight()) {
+        const double bytes = std::clamp<double>(
+            static_cast<double>(controller_.FrameBudgetBytes(fps)), 8'000, 60'000);
+        controller_.OnFrameWritten(static_cast<std::size_t>(bytes));
+        link_.push_back({bytes, bytes, t, *waiting_});
+        ++in_flight_;
+        waiting_.reset();
+      }
+    }
+    return samples;
+  }
+
+ private:
+  struct InLink {
+    double bytes, bytes_left, written_ms, captured_ms;
+  };
+  struct Reply {
+    double at_ms, written_ms, captured_ms, server_ms, bytes;
+    std::uint64_t server_bytes;
+  };
+  static Clock::time_point At(double ms) {
+    return Clock::time_point(std::chrono::microseconds(static_cast<std::int64_t>(ms * 1000)));
+  }
+  double QueueMs(double t) const {
+    double bytes = 0;
+    for (const InLink& f : link_) bytes += f.bytes_left;
+    const double rate = rate_bps_(t);
+    return rate > 0 ? bytes * 8 / rate * 1000 : 0;
+  }
+
+  std::function<double(double)> rate_bps_;
+  double one_way_ms_;
+  RateController controller_;
+  std::deque<InLink> link_;
+  std::deque<Reply> replies_;
+  std::optional<double> waiting_;
+  int in_flight_ = 0;
+  std::uint64_t server_bytes_ = 0;
+};
+
+template <typename Pred>
+std::vector<Sample> Between(const std::vector<Sample>& s, double from_ms, double to_ms, Pred p) {
+  std::vector<Sample> out;
+  for (const Sample& x : s) {
+    if (x.t_ms >= from_ms && x.t_ms < to_ms && p(x)) out.push_back(x);
+  }
+  return out;
+}
+auto Any = [](const Sample&) { return true; };
+
+TEST(RateControllerTest, ItFindsASteadyLinkAndKeepsItsQueueShort) {
+  LinkSimulation sim([](double) { return 10e6; }, 20);
+  const std::vector<Sample> s = sim.Run(15);
+  const std::vector<Sample> late = Between(s, 5000, 15000, Any);
+  ASSERT_GT(late.size(), 200u);  // frames kept coming back
+  for (const Sample& x : late) {
+    EXPECT_LT(x.target_bps, 10e6 * 1.6) << x.t_ms;
+    EXPECT_LT(x.queue_ms, 150) << x.t_ms;
+    EXPECT_LT(x.latency_ms, 300) << x.t_ms;
+  }
+  // It uses the link: over the last ten seconds the target averages more than half its rate.
+  double sum = 0;
+  for (const Sample& x : late) sum += x.target_bps;
+  EXPECT_GT(sum / static_cast<double>(late.size()), 5e6);
+}
+
+TEST(RateControllerTest, AStepDownIsFollowedWithinASecondAndAStepUpIsTaken) {
+  // 10 Mbit/s, 3 from 5 s, 10 again from 10 s.
+  LinkSimulation sim([](double t) { return t >= 5000 && t < 10000 ? 3e6 : 10e6; }, 20);
+  const std::vector<Sample> s = sim.Run(20);
+  // Within 500 ms of the step down the target is under the new rate. Later it probes a little
+  // above it now and then (that is how it would learn that the rate is back), so over the step
+  // its median stays within the probe's margin (max_over_delivered, 25 %) of the link's rate.
+  const std::vector<Sample> after_step = Between(s, 5500, 10000, Any);
+  ASSERT_FALSE(after_step.empty());
+  EXPECT_LT(after_step.front().target_bps, 3e6) << after_step.front().t_ms;
+  std::vector<double> targets;
+  for (const Sample& x : Between(s, 5500, 10000, Any)) targets.push_back(x.target_bps);
+  std::nth_element(targets.begin(), targets.begin() + targets.size() / 2, targets.end());
+  EXPECT_LE(targets[targets.size() / 2], 3.75e6);
+  // ...and within a second the queue is back under 100 ms, and stays there.
+  for (const Sample& x : Between(s, 6000, 10000, Any)) EXPECT_LT(x.queue_ms, 100) << x.t_ms;
+  // No frame answered more than 300 ms after capture after the first second of the step.
+  for (const Sample& x : Between(s, 6000, 20000, Any)) EXPECT_LT(x.latency_ms, 300) << x.t_ms;
+  // The step up is taken: the target is back above 6 Mbit/s within 5 s.
+  EXPECT_FALSE(Between(s, 10000, 15000, [](const Sample& x) { return x.target_bps > 6e6; }).empty());
+}
+
+TEST(RateControllerTest, AnOutageHoldsFramesInTheSenderAndTheStreamResumes) {
+  // A 300 ms outage at 5 s.
+  LinkSimulation sim([](double t) { return t >= 5000 && t < 5300 ? 0 : 10e6; }, 20);
+  const std::vector<Sample> s = sim.Run(12);
+  // The window bounds what waits in the link: never more than its frames' worth.
+  for (const Sample& x : s) EXPECT_LE(x.window, 8);
+  // Replies resume after it, and two seconds on, latency is low again.
+  const std::vector<Sample> after = Between(s, 7000, 12000, Any);
+  ASSERT_GT(after.size(), 100u);
+  for (const Sample& x : after) EXPECT_LT(x.latency_ms, 300) << x.t_ms;
+}
+
+TEST(RateControllerTest, WithoutTheServersByteCountOveruseHalvesTheTarget) {
+  RateController c;
+  const Clock::time_point t0{};
+  c.OnFrameWritten(20'000);
+  // A steady 50 ms round trip, then 400 ms: overuse, and no delivered rate to cut to.
+  c.OnReply(t0, t0 + milliseconds(50), 20'000, 0, 0);
+  const double before = c.estimate().target_bps;
+  c.OnReply(t0 + milliseconds(100), t0 + milliseconds(500), 20'000, 0, 0);
+  EXPECT_TRUE(c.estimate().overuse);
+  EXPECT_EQ(c.estimate().delivered_bps, 0);
+  EXPECT_NEAR(c.estimate().target_bps, before / 2, 1);
+  EXPECT_GE(c.frames_in_flight(), 2);
+}
+
+}  // namespace
+}  // namespace cloudcast::client
