@@ -226,7 +226,8 @@ absl::StatusOr<ServerOptions> ServerFlags::Options() const {
   o.reflection = !no_reflection_;
   o.max_connection_age = ToMillis(max_connection_age_seconds_);
   o.max_connection_age_grace = ToMillis(max_connection_age_grace_seconds_);
-  o.ping_after = ping_after_seconds_ < 0 ? std::chrono::milliseconds(-1) : ToMillis(ping_after_seconds_);
+  o.ping_after =
+      ping_after_seconds_ < 0 ? std::chrono::milliseconds(-1) : ToMillis(ping_after_seconds_);
   o.ping_timeout = ToMillis(ping_timeout_seconds_);
   auto frame = stages_->Apply(o.defaults.frame);
   if (!frame.ok()) return frame.status();
