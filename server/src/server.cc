@@ -133,7 +133,7 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& optio
   // A peer that has stopped reading its connection (a proxy whose client is stuck or gone: issue
   // 30, defect 7) loses it, with its calls: a PING after ping_after of silence, unanswered within
   // ping_timeout. gRPC stops pinging after 2 PINGs with no data sent between them and spaces them
-  // 5 minutes apart without data: a connection stuck that way sends no data, so both go.
+  // 5 minutes apart without data; a connection stuck that way sends no data: both are lifted.
   if (const auto ping_after = options.EffectivePingAfter(); ping_after.count() > 0) {
     builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIME_MS, static_cast<int>(ping_after.count()));
     builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIMEOUT_MS,
