@@ -41,6 +41,7 @@
 #include "cloudcast/proto/convert.h"
 #include "cloudcast/testing/metrics_scrape.h"
 #include "cloudcast/v1/cloudcast.grpc.pb.h"
+#include "raw_h2.h"
 #include "support/proc_status.h"
 #include "support/replica_support.h"
 
@@ -493,6 +494,93 @@ TEST_F(FloodTest, ContinuationFloodLeavesThePacedStreamAndTheServerAlone) {
                                              kFullSpeed}}));
 }
 
+// A memory cgroup of its own (cgroup v1 or v2) holding processes moved into it, at most
+// `limit_bytes` (the kernel's OOM killer ends a process of it that needs more): a flood that grows
+// a server by gigabytes kills the server, not the machine. Needs root and a writable cgroup
+// hierarchy: ok() says whether it is in place. Its processes go back to the parent group before
+// it is removed.
+class MemoryCgroup {
+ public:
+  explicit MemoryCgroup(std::uint64_t limit_bytes) {
+    const std::string name = "cloudcast-attack-" + std::to_string(getpid());
+    std::string limit_file;
+    if (std::filesystem::exists("/sys/fs/cgroup/cgroup.controllers")) {  // v2
+      parent_ = "/sys/fs/cgroup";
+      limit_file = "memory.max";
+    } else if (std::filesystem::exists("/sys/fs/cgroup/memory/cgroup.procs")) {  // v1
+      parent_ = "/sys/fs/cgroup/memory";
+      limit_file = "memory.limit_in_bytes";
+    } else {
+      return;
+    }
+    dir_ = parent_ + "/" + name;
+    std::error_code ec;
+    std::filesystem::create_directory(dir_, ec);
+    if (ec) {
+      dir_.clear();
+      return;
+    }
+    ok_ = Write(dir_ + "/" + limit_file, std::to_string(limit_bytes));
+  }
+  ~MemoryCgroup() {
+    if (dir_.empty()) return;
+    std::istringstream pids(testing::ReadText(dir_ + "/cgroup.procs"));
+    for (std::string pid; pids >> pid;) Write(parent_ + "/cgroup.procs", pid);
+    std::error_code ec;
+    std::filesystem::remove(dir_, ec);
+  }
+  MemoryCgroup(const MemoryCgroup&) = delete;
+  MemoryCgroup& operator=(const MemoryCgroup&) = delete;
+
+  bool ok() const { return ok_; }
+  const std::string& dir() const { return dir_; }
+  bool Add(pid_t pid) const { return ok_ && Write(dir_ + "/cgroup.procs", std::to_string(pid)); }
+
+ private:
+  static bool Write(const std::string& path, const std::string& value) {
+    std::ofstream out(path);
+    out << value;
+    out.flush();
+    return static_cast<bool>(out);
+  }
+  std::string parent_, dir_;
+  bool ok_ = false;
+};
+
+// Whether a child process still runs (not ended, not a zombie waiting to be reaped).
+bool Alive(pid_t pid) {
+  std::istringstream stat(testing::ReadText("/proc/" + std::to_string(pid) + "/stat"));
+  std::string id, name, state;
+  stat >> id >> name >> state;  // the name is in parentheses, without spaces here
+  return !state.empty() && state != "Z" && state != "X";
+}
+
+// Issue 30, defect 5: the CONTINUATION flood at its heaviest here, 4 connections at once each
+// writing 16 MB batches (4,000 frames of a 4 KB header), with the server held to the Kubernetes
+// Pod's memory limit (1 GiB, docker/k8s/deployment.yaml) in a cgroup of its own. gRPC 1.51 keeps
+// every header of a block that never ends, and no flag of the server bounds it
+// (docs/http2-hardening.md): against the server alone (CLOUDCAST_ATTACK_FRONT=none) it grew by
+// gigabytes and the cgroup's OOM killer ended it (the outside tester, without a limit: gRPC's
+// tcp_posix.cc:894 assertion at 2.4 to 4.5 GB), so this test fails there, as it must. Through
+// the shipped proxy the header block must fit one 64 KB buffer: the server must live through the
+// flood, and stay under issue 18's bar.
+TEST_F(FloodTest, AHeavyContinuationFloodLeavesTheServerAliveWithinThePodsMemory) {
+  MemoryCgroup cgroup(std::uint64_t{1} << 30);
+  if (!cgroup.ok()) GTEST_SKIP() << "no writable memory cgroup here (needs root)";
+  ASSERT_TRUE(cgroup.Add(server_->pid())) << cgroup.dir();
+  const Figures f =
+      Run("CONTINUATION flood, 4 connections of 16 MB batches, server in 1 GiB",
+          {{{"continuation-flood", "--source", "127.0.0.2", "--path",
+             "/cloudcast.v1.CloudCast/Stream", "--connections", "4", "--frames-per-write", "4000"},
+            kFullSpeed}});
+  EXPECT_TRUE(Alive(server_->pid()))
+      << "the server died under the flood: " << testing::ReadText(log_).substr(0, 2000);
+  ExpectUnharmed(f);
+  // The server ends before its cgroup goes.
+  proxy_.reset();
+  server_.reset();
+}
+
 // Issue 18, defect 3: big frames from many connections of one address must be shared fairly per
 // client (the address), not per connection, and weighed before they are decoded. Before: 32
 // Process calls of 4096x4096 PNG frames let the paced stream send 5 of 300 frames.
@@ -611,7 +699,6 @@ class ProxyIsolationTest : public AttackTest {
  protected:
   static constexpr double kServedWithinS = 2;
   static constexpr double kStreamsEndWithinS = 2;
-  static constexpr double kProxyTimeoutClientS = 5;  // docker/haproxy/cloudcast.cfg
 
   void SetUp() override {
     StartServer({"--trusted-proxy", "127.0.0.1"});
@@ -757,20 +844,17 @@ TEST_F(ProxyIsolationTest, WindowsReturnedAt4KBPerSecondFreezeNoOtherClient) {
 }
 #endif
 
-// Defect 2, trigger B, and defect 7: a client that sends a new StreamConfig before every frame,
-// as fast as flow control lets it (4 calls on 2 connections; its frames zstd-compressed, a few
-// hundred bytes each that decode to 640x640), reading every reply, then leaves. It locks its own
-// calls up: HAProxy 2.6 reads its connection in order and stops at a stream whose buffer is full,
-// so its WINDOW_UPDATEs wait behind the frames it sent ahead while the server waits for its window.
-// Before: every client behind the proxy frozen (the tester: about 120 s, 3 of 3 runs), and 3 to 4
-// of its streams still open on the server meanwhile. Now its calls alone stall, until the proxy's
-// `timeout client` (5 s) ends them: the attack lasts at least 6 s. A call still sending when the
-// client leaves (its last frames, then its FIN, wait behind the calls it locked up) is ended 5 s
-// after its last progress, which the proxy cannot tell from a slow client: its streams must be
-// gone within that 5 s and 2 more, not 2 s (in the short build, 1 of 4 calls took 4.0 s). The
-// long build only: the client's first second (some 40,000 messages before its calls lock up) once
-// cost the paced stream a hiccup of about 100 ms, which the short build's 171 frames put into the
-// p99 (57 and 64 ms in 2 of 3 short runs; 13 and 17 ms in the long runs).
+// Defect 2, trigger B: a client that sends a new StreamConfig before every frame, as fast as flow
+// control lets it (4 calls on 2 connections; its frames zstd-compressed, a few hundred bytes each
+// that decode to 640x640), reading every reply, then leaves. It locks its own calls up: HAProxy 2.6
+// reads its connection in order and stops at a stream whose buffer is full, so its WINDOW_UPDATEs
+// wait behind the frames it sent ahead while the server waits for its window. Before: every
+// client behind the proxy frozen (the tester: about 120 s, 3 of 3 runs), and 3 to 4 of its streams
+// still open on the server meanwhile. Now its calls alone stall, and the server closes the
+// connection the proxy stopped reading (--ping-after, --ping-timeout: defect 7, below). The long
+// build only: the client's first second (some 40,000 messages before its calls lock up) once cost
+// the paced stream a hiccup of about 100 ms, which the short build's 171 frames put into the p99
+// (57 and 64 ms in 2 of 3 short runs; 13 and 17 ms in the long runs).
 #if CLOUDCAST_ATTACK_SECONDS >= 15
 TEST_F(ProxyIsolationTest, AConfigChurningClientThatLeavesFreezesNoOtherClient) {
   Recovery r;
@@ -779,9 +863,109 @@ TEST_F(ProxyIsolationTest, AConfigChurningClientThatLeavesFreezesNoOtherClient) 
                                    "--connections", "2", "--encoding", "zstd"}}},
                                 &r, std::max(kAttackSeconds, 6.0));
   ExpectUnharmed(f);
-  ExpectRecovered(f, r, /*streams_within=*/kProxyTimeoutClientS + kStreamsEndWithinS);
+  ExpectRecovered(f, r);
 }
 #endif
+
+// Defect 7's mechanism, without the proxy: a peer that stops reading its connection (a raw HTTP/2
+// client that opens a Stream call, sends its StreamConfig, then reads nothing more, so answers no
+// PING) loses it, with its call, within --ping-after + --ping-timeout (1.5 s) when the server is
+// behind a trusted proxy; the server without the PINGs (--ping-after 0, as before) holds the call
+// until its idle timeout (60 s).
+TEST_F(AttackTest, AConnectionWhosePeerStopsReadingIsClosedWithItsCalls) {
+  for (const bool pings : {false, true}) {
+    std::vector<std::string> args = {"--trusted-proxy", "127.0.0.1"};
+    if (!pings) args.insert(args.end(), {"--ping-after", "0"});
+    StartServer(args);
+    if (HasFatalFailure()) return;
+    const std::string address = server_->address();
+    const std::size_t colon = address.rfind(':');
+    // Once more when the first try fails (seen once in 5 runs, on a loaded machine, just after
+    // the server started): the connection is the test's means, not what it checks.
+    auto connect = [&] {
+      return attacks::RawH2Connection::Connect(address.substr(0, colon),
+                                               std::stoi(address.substr(colon + 1)), "");
+    };
+    auto conn = connect();
+    if (!conn.ok()) {
+      std::printf("  connecting failed (%s): once more\n", conn.status().ToString().c_str());
+      Sleep(milliseconds(500));
+      conn = connect();
+    }
+    ASSERT_TRUE(conn.ok()) << conn.status();
+    const auto deadline = Clock::now() + seconds(10);
+    v1::StreamRequest config;
+    config.mutable_config()->set_delivery(v1::DELIVERY_ALL);
+    ASSERT_TRUE((*conn)->OpenStream(
+        1, attacks::GrpcRequestHeaders("/cloudcast.v1.CloudCast/Stream", address), false,
+        deadline));
+    ASSERT_TRUE(
+        (*conn)->SendData(1, attacks::GrpcMessage(config.SerializeAsString()), false, deadline));
+    while (Metric("cloudcast_active_streams") < 1 && Clock::now() < deadline) {
+      Sleep(milliseconds(20));
+    }
+    ASSERT_EQ(Metric("cloudcast_active_streams"), 1) << "the call did not open";
+    (*conn)->StopReading();
+    const auto stopped = Clock::now();
+    // Watched for 4 s: the PINGs' 1.5 s, with room for a loaded machine.
+    double gone_s = -1;
+    while (Clock::now() - stopped < seconds(4)) {
+      if (Metric("cloudcast_active_streams") == 0) {
+        gone_s = std::chrono::duration<double>(Clock::now() - stopped).count();
+        break;
+      }
+      Sleep(milliseconds(50));
+    }
+    std::printf(
+        "| pings %s | the call ended %.2f s after its client stopped reading (-1: not "
+        "within 4 s) |\n",
+        pings ? "on (--trusted-proxy)" : "off (--ping-after 0)", gone_s);
+    std::fflush(stdout);
+    if (pings) {
+      EXPECT_GE(gone_s, 0) << "the call outlived its unread connection by 4 s";
+      EXPECT_LE(gone_s, 2.5);
+    } else {
+      EXPECT_EQ(gone_s, -1) << "without PINGs nothing should end a call whose client is silent "
+                               "for 4 s (the idle timeout is 60 s)";
+    }
+    conn->reset();
+    server_.reset();
+  }
+}
+
+// Issue 30, defect 7: the streams of a client that leaves end on the server within 2 s, however it
+// leaves. The churning client of trigger B locks its calls up within its first second; it leaves
+// 1.5 s in, while its calls are young, either as a program exits (`close`: END_STREAM, then a FIN,
+// or a TCP reset when replies came in after it stopped reading) or with a TCP reset at once
+// (`abort`). HAProxy 2.6 reads neither: it has stopped reading the client's connection (a stream
+// buffer full), and stops reading the server's connection too (the replies have nowhere to go).
+// Before, the streams lasted until the proxy's timeouts: `timeout client` (5 s after their last
+// progress: 2.8 to 3.8 s after the exit in the runs here) for `close`, and for `abort` longer than
+// the 10 s watched (a call with request bytes the server does not read waits out `timeout
+// server`, 2 minutes). Now the server pings a connection that has sent nothing for 0.5 s and
+// closes it, with its calls, when the PING is not answered within 1 s (--ping-after and
+// --ping-timeout, on by default with --trusted-proxy): the proxy has stopped reading it. The
+// paced stream's latency is not judged here: the churning client's first second can cost it one
+// hiccup of about 100 ms, the p99 of a 1.5 s stream (the long test above judges it over 20 s).
+TEST_F(ProxyIsolationTest, TheStreamsOfAClientThatLeavesEndWithin2Seconds) {
+  for (const char* exit : {"abort", "close"}) {
+    Recovery r;
+    const Figures f =
+        RunAndWatch(std::string("config churn, leaving 1.5 s in (--exit ") + exit + ")",
+                    {{{"config-churn", "--source", "127.0.0.2", "--calls", "4", "--connections",
+                       "2", "--encoding", "zstd", "--exit", exit}}},
+                    &r, /*seconds_override=*/1.5);
+    EXPECT_GT(f.sent, 0u);
+    EXPECT_EQ(f.answered, f.sent) << f.attack << ": the paced stream lost frames";
+    EXPECT_EQ(f.errors, 0u) << f.attack;
+    EXPECT_LT(f.rss_peak_mb, kMaxRssMb) << f.attack << ": server RSS during the attack";
+    ASSERT_FALSE(f.attackers.empty());
+    // The attack ran: its calls were opened and sent.
+    EXPECT_EQ(f.attackers[0].value("calls", 0), 4) << f.attackers[0];
+    EXPECT_GT(f.attackers[0].value("frames_sent", 0), 0) << f.attackers[0];
+    ExpectRecovered(f, r);
+  }
+}
 
 // Defect 1 against the server alone (no proxy): gRPC 1.51 cannot bound the streams a rapid reset
 // makes it create (docs/http2-hardening.md: no deployment without the proxy is safe from it), but

@@ -69,6 +69,17 @@ ServerFlags::ServerFlags(CLI::App& app)
                  "cancelled; 0 = no limit")
       ->check(CLI::Range(0.0, 2.0e6))
       ->group("Service");
+  app.add_option("--ping-after", ping_after_seconds_,
+                 "Seconds a peer may send nothing before it gets an HTTP/2 PING, which it must "
+                 "answer within --ping-timeout or its connection is closed with its calls (a "
+                 "proxy that stopped reading one client's connection); -1 = 0.5 with "
+                 "--trusted-proxy, off without; 0 = off")
+      ->check(CLI::Range(-1.0, 2.0e6))
+      ->group("Service");
+  app.add_option("--ping-timeout", ping_timeout_seconds_,
+                 "Seconds a PING of --ping-after may go unanswered")
+      ->check(CLI::Range(0.001, 2.0e6))
+      ->group("Service");
 
   const std::string security = "Security (README, Security)";
   app.add_option("--tls-cert", o.tls_cert_file,
@@ -215,6 +226,9 @@ absl::StatusOr<ServerOptions> ServerFlags::Options() const {
   o.reflection = !no_reflection_;
   o.max_connection_age = ToMillis(max_connection_age_seconds_);
   o.max_connection_age_grace = ToMillis(max_connection_age_grace_seconds_);
+  o.ping_after =
+      ping_after_seconds_ < 0 ? std::chrono::milliseconds(-1) : ToMillis(ping_after_seconds_);
+  o.ping_timeout = ToMillis(ping_timeout_seconds_);
   auto frame = stages_->Apply(o.defaults.frame);
   if (!frame.ok()) return frame.status();
   o.defaults.frame = *std::move(frame);

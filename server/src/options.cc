@@ -90,6 +90,10 @@ absl::Status ServerOptions::Validate() const {
   if (max_connection_age_grace.count() < 0 || max_connection_age_grace.count() > kMaxMs) {
     return Invalid("--max-connection-age-grace must be in [0, 2^31 ms)");
   }
+  if (ping_after.count() > kMaxMs) return Invalid("--ping-after must be under 2^31 ms");
+  if (ping_timeout.count() <= 0 || ping_timeout.count() > kMaxMs) {
+    return Invalid("--ping-timeout must be in (0, 2^31 ms)");
+  }
   if (tls_cert_file.empty() != tls_key_file.empty()) {
     return Invalid(tls_cert_file.empty()
                        ? "--tls-key needs --tls-cert (the certificate it belongs to)"

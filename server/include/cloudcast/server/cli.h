@@ -36,6 +36,8 @@ class ServerFlags {
   double shutdown_grace_seconds_;
   double max_connection_age_seconds_ = 0;
   double max_connection_age_grace_seconds_ = 0;
+  double ping_after_seconds_ = -1;
+  double ping_timeout_seconds_ = 1;
   std::string delivery_;
   bool no_reflection_ = false;
   std::unique_ptr<cli::StageFlags> stages_;  // after the service flags in --help

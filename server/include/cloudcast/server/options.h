@@ -103,6 +103,22 @@ struct ServerOptions {
   // then are cancelled (a resilient client then reopens them elsewhere; 0: no limit).
   std::chrono::milliseconds max_connection_age{0};
   std::chrono::milliseconds max_connection_age_grace{0};
+  // A connection whose peer has sent nothing for `ping_after` gets an HTTP/2 PING, and is closed,
+  // with its calls, when the PING is not answered within `ping_timeout`: its peer has stopped
+  // reading it. A gRPC client's transport reads its connection whatever its calls do, so it
+  // answers at once; HAProxy 2.6 stops reading a server connection whose stream it cannot pass on
+  // (the client's window shut, or the client gone while the proxy never read its FIN or reset:
+  // issue 30, defect 7), and that connection's calls stayed open until the proxy's timeouts (5 s to
+  // 2 minutes). Negative (the default): 500 ms and 1 s with trusted_proxies (the server behind
+  // the shipped proxy), off without (a direct client on a slow link could take longer to answer
+  // a PING queued behind its replies). ping_after 0: off.
+  std::chrono::milliseconds ping_after{-1};
+  std::chrono::milliseconds ping_timeout{1'000};
+  // ping_after as it applies: `ping_after` unless negative (then by trusted_proxies); 0: off.
+  std::chrono::milliseconds EffectivePingAfter() const {
+    if (ping_after.count() >= 0) return ping_after;
+    return trusted_proxies.empty() ? std::chrono::milliseconds(0) : std::chrono::milliseconds(500);
+  }
   // host:port for Prometheus' /metrics; ":port" takes the host of `listen` (metrics are
   // reachable exactly where the service is); empty switches the exporter off.
   std::string metrics_listen = ":9464";
