@@ -13,6 +13,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -444,6 +445,70 @@ TEST_F(Ros2BridgeTest, StereoCameraCloudsEqualTheRos1BridgesPointForPoint) {
         << "cloud of stamp " << got.header.stamp.sec;
   }
   EXPECT_GE(frames_seen.size(), 2u) << "the clouds came from one pair only";
+}
+
+// Each frame carries its CameraInfo's camera (Frame.camera): frames of the same images whose
+// CameraInfo alternates between f = 615 and f = 1230 (a zoom; DisparityImage's f T unchanged, so
+// z stays and x, y halve) come back each with its own camera, in order, on one stream.
+TEST_F(Ros2BridgeTest, EachFrameIsProjectedWithItsOwnCameraInfo) {
+  std::map<std::string, ParamValue> params;
+  params["server"].s = server_->address();
+  for (const char* name : {"passthrough.enabled", "voxel.enabled"}) {
+    params[name].type = ParamValue::kBool;
+    params[name].b = false;
+  }
+  // Sequential Draco coding (point order kept) with fine quantization: the clouds compare
+  // point for point.
+  params["draco.encode_speed"].type = params["draco.decode_speed"].type = ParamValue::kInt;
+  params["draco.encode_speed"].i = params["draco.decode_speed"].i = 10;
+  params["draco.position_bits"].type = ParamValue::kInt;
+  params["draco.position_bits"].i = 20;
+  auto options = ros_bridge::ReadBridgeOptions(Ros2ParamReader(params, {}), "test");
+  ASSERT_TRUE(options.ok()) << options.status();
+  options->config.set_delivery(v1::DELIVERY_ALL);
+  ros_bridge::BridgeStats stats;
+  std::mutex mu;
+  std::map<std::uint32_t, PointCloud> clouds;  // by stamp
+  {
+    ros_bridge::CloudLink link(
+        *options, &stats,
+        [&](client::Result&& r, const ros_bridge::SentFrame& f) {
+          std::lock_guard<std::mutex> lock(mu);
+          clouds[f.header.stamp.sec] = std::move(r.cloud);
+        },
+        [](ros_bridge::LogLevel, const std::string&) {});
+    ASSERT_TRUE(link.Probe().ok());
+    TsukubaSamples& in = *samples_[0];
+    std::vector<float> masked;
+    for (std::int32_t k = 0; k < 4; ++k) {
+      in.Stamp(k, 0);
+      const double f = (k % 2 == 0) ? testing::kF : 2 * testing::kF;
+      in.info.k[0] = in.info.k[4] = in.info.p[0] = in.info.p[5] = f;
+      ros_bridge::OutgoingFrame frame;
+      ASSERT_TRUE(ros_bridge::ToFrame(View(in.disparity), View(in.colour), View(in.info), &masked,
+                                      &frame)
+                      .ok());
+      link.Send(frame);
+    }
+  }
+  ASSERT_EQ(clouds.size(), 4u);
+  const PointCloud& wide = clouds[0];
+  ASSERT_GT(wide.size(), 100000u);
+  for (std::uint32_t k = 1; k < 4; ++k) {
+    const PointCloud& c = clouds[k];
+    ASSERT_EQ(c.size(), wide.size()) << k;
+    const float scale = (k % 2 == 0) ? 1.0f : 0.5f;
+    std::size_t off = 0;
+    for (std::size_t i = 0; i < c.size(); ++i) {
+      const Point& a = wide.points[i];
+      const Point& b = c.points[i];
+      if (std::fabs(b.z - a.z) > 1e-3f || std::fabs(b.x - scale * a.x) > 1e-3f ||
+          std::fabs(b.y - scale * a.y) > 1e-3f) {
+        ++off;
+      }
+    }
+    EXPECT_EQ(off, 0u) << "frame " << k << " (f = " << (k % 2 ? 1230 : 615) << ")";
+  }
 }
 
 // ---- ros_discovery_info: the bridge's entry, read by a plain Cyclone reader as rmw's graph
