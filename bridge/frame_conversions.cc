@@ -20,6 +20,26 @@ bool FinitePositive(double v) { return std::isfinite(v) && v > 0; }
 // Equal up to the rounding of a calibration file's decimal digits.
 bool Same(double a, double b) { return std::fabs(a - b) <= 1e-9 * std::max(1.0, std::fabs(a)); }
 
+// How every input's conversion ends: the image the points take their colour from is checked to
+// be of the size of `geometry` (the disparity, depth or other image of the set) and viewed, then
+// the frame gets the camera, the images `make_images` builds around the colour view, and the
+// header of the set's first message.
+template <typename MakeImages>
+absl::Status FinishFrame(CameraModel camera, const ImageMsg& geometry,
+                         const std::string& geometry_name, const ImageMsg& colour,
+                         const std::string& colour_name, const MessageHeader& header,
+                         MakeImages make_images, OutgoingFrame* frame) {
+  if (absl::Status s = CheckSameSize(geometry, geometry_name, colour, colour_name); !s.ok()) {
+    return s;
+  }
+  auto view = ColourFromImage(colour, colour_name);
+  if (!view.ok()) return view.status();
+  frame->camera = std::move(camera);
+  frame->images = make_images(*view);
+  frame->header = header;
+  return absl::OkStatus();
+}
+
 }  // namespace
 
 // ---- ~input disparity
@@ -97,17 +117,10 @@ absl::Status ToFrame(const DisparityImageMsg& disparity, const ImageMsg& colour,
   if (!camera.ok()) return camera.status();
   auto masked = MaskedDisparity(disparity, buffer);
   if (!masked.ok()) return masked.status();
-  if (absl::Status s =
-          CheckSameSize(disparity.image, "disparity.image", colour, "left/image_rect_color");
-      !s.ok()) {
-    return s;
-  }
-  auto view = ColourFromImage(colour, "left/image_rect_color");
-  if (!view.ok()) return view.status();
-  frame->camera = *std::move(camera);
-  frame->images = client::DisparityFrame{*masked, *view};
-  frame->header = disparity.header;
-  return absl::OkStatus();
+  return FinishFrame(
+      *std::move(camera), disparity.image, "disparity.image", colour, kDisparityColourTopic,
+      disparity.header,
+      [&](const client::ColorInput& c) { return client::DisparityFrame{*masked, c}; }, frame);
 }
 
 // ---- ~input depth
@@ -163,9 +176,6 @@ absl::Status ToDepthFrame(const ImageMsg& depth, const ImageMsg& colour,
   if (!camera.ok()) return camera.status();
   auto view = DepthFromImage(depth);
   if (!view.ok()) return view.status();
-  if (absl::Status s = CheckSameSize(depth, kDepthTopic, colour, kDepthColourTopic); !s.ok()) {
-    return s;
-  }
   // A depth image registered to the colour camera is in that camera's frame; another frame_id
   // means the colours would land on the wrong points.
   if (depth.header.frame_id != colour.header.frame_id) {
@@ -173,12 +183,9 @@ absl::Status ToDepthFrame(const ImageMsg& depth, const ImageMsg& colour,
                                 "' but ", kDepthTopic, "'s is '", depth.header.frame_id,
                                 "'; the depth image must be registered to the colour camera"));
   }
-  auto colour_view = ColourFromImage(colour, kDepthColourTopic);
-  if (!colour_view.ok()) return colour_view.status();
-  frame->camera = *std::move(camera);
-  frame->images = client::DepthFrame{*view, *colour_view};
-  frame->header = depth.header;
-  return absl::OkStatus();
+  return FinishFrame(
+      *std::move(camera), depth, kDepthTopic, colour, kDepthColourTopic, depth.header,
+      [&](const client::ColorInput& c) { return client::DepthFrame{*view, c}; }, frame);
 }
 
 // ---- ~input stereo
@@ -226,17 +233,16 @@ absl::StatusOr<CameraModel> CameraFromStereo(const CameraInfoMsg& left_info,
 absl::Status ToStereoFrame(const ImageMsg& left, const ImageMsg& right,
                            const CameraInfoMsg& left_info,
                            const CameraInfoMsg& right_info, OutgoingFrame* frame) {
+  // Before the camera, whose checks take the left image's size for both CameraInfos.
   if (absl::Status s = CheckSameSize(left, kLeftTopic, right, kRightTopic); !s.ok()) return s;
   auto camera = CameraFromStereo(left_info, right_info, left.width, left.height);
   if (!camera.ok()) return camera.status();
   auto left_view = ColourFromImage(left, kLeftTopic);
   if (!left_view.ok()) return left_view.status();
-  auto right_view = ColourFromImage(right, kRightTopic);
-  if (!right_view.ok()) return right_view.status();
-  frame->camera = *std::move(camera);
-  frame->images = client::StereoFrame{*left_view, *right_view};
-  frame->header = left.header;
-  return absl::OkStatus();
+  // The right image is the one matched against the left: the "colour" here is its grey or colour.
+  return FinishFrame(
+      *std::move(camera), left, kLeftTopic, right, kRightTopic, left.header,
+      [&](const client::ColorInput& r) { return client::StereoFrame{*left_view, r}; }, frame);
 }
 
 }  // namespace cloudcast::ros_bridge

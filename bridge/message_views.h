@@ -4,11 +4,10 @@
 // T; ROS 2 spells them p, k, t), so that the conversions read as the message definitions.
 #pragma once
 
-#include <std_msgs/Header.h>
-
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <string>
 #include <string_view>
 
 namespace cloudcast::ros_bridge {
@@ -21,9 +20,22 @@ struct ByteSpan {
   std::size_t size() const { return length; }
 };
 
-// The frame header: ROS 1's std_msgs/Header, which the cloud link keeps for each frame's reply
-// (cloud_link.h); a ROS 2 header (int32 sec, uint32 nanosec, frame_id) fits it bit for bit.
-using MessageHeader = std_msgs::Header;
+// A message's stamp, as the 64 bits on the wire: ROS 1's time is (uint32 sec, uint32 nsec), ROS
+// 2's builtin_interfaces/Time (int32 sec, uint32 nanosec); `sec` keeps either bit for bit, so
+// that a cloud carries its input's stamp exactly (a negative ROS 2 time included).
+struct MessageStamp {
+  std::uint32_t sec = 0;
+  std::uint32_t nsec = 0;
+};
+
+// The frame header, free of either transport (ROS 1's std_msgs::Header lives in ros/, ROS 2's in
+// the DDS samples): what the cloud link keeps for each frame's reply (cloud_link.h). `seq` is ROS
+// 1's (ROS 2 has none; 0 there).
+struct MessageHeader {
+  std::uint32_t seq = 0;
+  MessageStamp stamp;
+  std::string frame_id;
+};
 
 // sensor_msgs/Image.
 struct ImageMsg {

@@ -10,6 +10,7 @@
 #include "diagnostics_msg.h"
 #include "disparity_input.h"
 #include "point_cloud2.h"
+#include "ros_messages.h"
 #include "ros_params.h"
 #include "stereo_input.h"
 
@@ -106,7 +107,14 @@ Bridge::Bridge(ros::NodeHandle nh, BridgeOptions options) : nh_(nh), options_(st
   status_name_ = absl::StrCat(ros::this_node::getName(), ": cloudcast stream");
   link_ = std::make_unique<CloudLink>(
       options_, &stats_,
-      [this](client::Result&& r, const SentFrame& f) { OnCloud(std::move(r), f); });
+      [this](client::Result&& r, const SentFrame& f) { OnCloud(std::move(r), f); },
+      [](LogLevel level, const std::string& message) {
+        switch (level) {
+          case LogLevel::kInfo: ROS_INFO("cloudcast: %s", message.c_str()); break;
+          case LogLevel::kWarn: ROS_WARN("cloudcast: %s", message.c_str()); break;
+          case LogLevel::kError: ROS_ERROR("cloudcast: %s", message.c_str()); break;
+        }
+      });
   timer_ = nh_.createTimer(ros::Duration(options_.diagnostics_period_s), &Bridge::OnTimer, this);
 }
 
@@ -119,7 +127,7 @@ void Bridge::OnFrame(const OutgoingFrame& frame) {
 void Bridge::OnCloud(client::Result&& result, const SentFrame& frame) {
   if (options_.publish_disparity) PublishDisparity(result, frame);
   sensor_msgs::PointCloud2Ptr msg = boost::make_shared<sensor_msgs::PointCloud2>();
-  ToPointCloud2(result.cloud, frame.header, msg.get());
+  ToPointCloud2(result.cloud, ToRos(frame.header), msg.get());
   points_.publish(msg);
   stats_.Published();
 }
@@ -137,7 +145,7 @@ void Bridge::PublishDisparity(const client::Result& result, const SentFrame& fra
   absl::Status s;
   {
     std::lock_guard<std::mutex> lock(decompressor_mu_);
-    s = ToDisparityImage(result.reply.disparity(), frame.header, frame.camera, disparity_range_,
+    s = ToDisparityImage(result.reply.disparity(), ToRos(frame.header), frame.camera, disparity_range_,
                          &decompressor_, msg.get());
   }
   if (!s.ok()) {

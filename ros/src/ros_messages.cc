@@ -4,9 +4,27 @@
 
 namespace cloudcast::ros_bridge {
 
+MessageHeader FromRos(const std_msgs::Header& header) {
+  MessageHeader out;
+  out.seq = header.seq;
+  out.stamp.sec = header.stamp.sec;
+  out.stamp.nsec = header.stamp.nsec;
+  out.frame_id = header.frame_id;
+  return out;
+}
+
+std_msgs::Header ToRos(const MessageHeader& header) {
+  std_msgs::Header out;
+  out.seq = header.seq;
+  out.stamp.sec = header.stamp.sec;
+  out.stamp.nsec = header.stamp.nsec;
+  out.frame_id = header.frame_id;
+  return out;
+}
+
 ImageMsg View(const sensor_msgs::Image& image) {
   ImageMsg v;
-  v.header = image.header;
+  v.header = FromRos(image.header);
   v.height = image.height;
   v.width = image.width;
   v.encoding = image.encoding;
@@ -31,7 +49,7 @@ CameraInfoMsg View(const sensor_msgs::CameraInfo& info) {
 
 DisparityImageMsg View(const stereo_msgs::DisparityImage& disparity) {
   DisparityImageMsg v;
-  v.header = disparity.header;
+  v.header = FromRos(disparity.header);
   v.image = View(disparity.image);
   v.f = disparity.f;
   v.T = disparity.T;

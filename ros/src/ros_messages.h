@@ -14,6 +14,10 @@
 
 namespace cloudcast::ros_bridge {
 
+// ROS 1's header as the core's (transport-free) one and back, bit for bit.
+MessageHeader FromRos(const std_msgs::Header& header);
+std_msgs::Header ToRos(const MessageHeader& header);
+
 ImageMsg View(const sensor_msgs::Image& image);
 CameraInfoMsg View(const sensor_msgs::CameraInfo& info);
 DisparityImageMsg View(const stereo_msgs::DisparityImage& disparity);

@@ -203,7 +203,7 @@ TEST(ToFrame, KeepsTheDisparitysHeader) {
   OutgoingFrame frame;
   ASSERT_TRUE(ToFrame(d, Colour("rgb8", 3), TsukubaInfo(), &buffer, &frame).ok());
   EXPECT_EQ(frame.header.frame_id, "left_optical");
-  EXPECT_EQ(frame.header.stamp, ros::Time(1234, 5678));
+  EXPECT_EQ(ToRos(frame.header).stamp, ros::Time(1234, 5678));
   const auto* images = std::get_if<client::DisparityFrame>(&frame.images);
   ASSERT_NE(images, nullptr);
   EXPECT_NE(std::get_if<DisparityView>(&images->disparity), nullptr);
@@ -305,7 +305,7 @@ TEST(ToDepthFrame, MakesADepthFrameWithTheDepthsHeader) {
   colour.header.frame_id = "rgb_optical";
   OutgoingFrame frame;
   ASSERT_TRUE(ToDepthFrame(depth, colour, TsukubaInfo(), 1.0, &frame).ok());
-  EXPECT_EQ(frame.header.stamp, ros::Time(12, 34));
+  EXPECT_EQ(ToRos(frame.header).stamp, ros::Time(12, 34));
   EXPECT_EQ(frame.camera.depth_scale, 1.0);
   const auto* images = std::get_if<client::DepthFrame>(&frame.images);
   ASSERT_NE(images, nullptr);
@@ -378,7 +378,7 @@ TEST(ToStereoFrame, TakesAColourLeftAndAMonoRight) {
   OutgoingFrame frame;
   ASSERT_TRUE(ToStereoFrame(left, right, TsukubaInfo(), RightInfo(-61.5), &frame).ok());
   EXPECT_EQ(frame.header.frame_id, "left_optical");
-  EXPECT_EQ(frame.header.stamp, ros::Time(5, 6));
+  EXPECT_EQ(ToRos(frame.header).stamp, ros::Time(5, 6));
   const auto* images = std::get_if<client::StereoFrame>(&frame.images);
   ASSERT_NE(images, nullptr);
   EXPECT_EQ(std::get<ColorView>(images->left).encoding, ColorEncoding::kBGR8);

@@ -36,8 +36,7 @@ int main(int argc, char** argv) {
     std::fputs(ros2_bridge::HelpText().c_str(), stdout);
     return 0;
   }
-  const std::vector<std::string> extra = {"input_qos", "use_sim_time"};
-  ros2_bridge::Ros2ParamReader params(parsed->params, extra);
+  ros2_bridge::Ros2ParamReader params(parsed->params, ros2_bridge::Ros2BridgeParameters());
   auto options = ros_bridge::ReadBridgeOptions(params, kProgram);
   if (!options.ok()) return Fail(std::string(options.status().message()));
   if (options->sync.approximate_sync) {
@@ -59,6 +58,13 @@ int main(int argc, char** argv) {
     auto qos = ros2_bridge::ParseQosProfile(**qos_name, "input_qos");
     if (!qos.ok()) return Fail(std::string(qos.status().message()));
     ros2.input_qos = *qos;
+  }
+  auto discovery = params.String("ros_discovery_info");
+  if (!discovery.ok()) return Fail(std::string(discovery.status().message()));
+  if (*discovery) {
+    auto layout = ros2_bridge::ParseDiscoveryInfo(**discovery, "ros_discovery_info");
+    if (!layout.ok()) return Fail(std::string(layout.status().message()));
+    ros2.discovery_info = *layout;
   }
   if (auto sim = params.Bool("use_sim_time"); !sim.ok()) {
     return Fail(std::string(sim.status().message()));

@@ -42,7 +42,14 @@ absl::StatusOr<std::unique_ptr<Ros2Bridge>> Ros2Bridge::Create(ros_bridge::Bridg
   Ros2Bridge* self = b.get();
   b->link_ = std::make_unique<ros_bridge::CloudLink>(
       b->options_, &b->stats_,
-      [self](client::Result&& r, const ros_bridge::SentFrame& f) { self->OnCloud(std::move(r), f); });
+      [self](client::Result&& r, const ros_bridge::SentFrame& f) { self->OnCloud(std::move(r), f); },
+      [self](ros_bridge::LogLevel level, const std::string& message) {
+        switch (level) {
+          case ros_bridge::LogLevel::kInfo: LogInfo(self->ros2_.node, message); break;
+          case ros_bridge::LogLevel::kWarn: LogWarn(self->ros2_.node, message); break;
+          case ros_bridge::LogLevel::kError: LogError(self->ros2_.node, message); break;
+        }
+      });
   auto info = b->link_->Probe();
   if (info.ok()) {
     LogInfo(names, absl::StrCat("server ", info->version(), " at ", b->options_.server,
@@ -73,9 +80,20 @@ absl::StatusOr<std::unique_ptr<Ros2Bridge>> Ros2Bridge::Create(ros_bridge::Bridg
     return absl::InternalError(absl::StrCat("dds_create_waitset: ", dds_strretcode(b->waitset_)));
   }
   for (dds_entity_t r : b->input_->readers()) dds_waitset_attach(b->waitset_, r, r);
+  if (b->ros2_.discovery_info) {
+    // After every reader and writer of the node exists: the entry lists their GIDs.
+    auto entry = PublishDiscoveryInfo(b->node_->participant(), *b->ros2_.discovery_info, names,
+                                      b->input_->readers(), {b->points_, b->diagnostics_});
+    if (!entry.ok()) return entry.status();
+  }
   LogInfo(names, absl::StrCat("input ", std::string(ros_bridge::Name(b->options_.input)), ": subscribed to ",
                               b->input_->Describe(), "; publishing ", *points, " and ",
-                              *diagnostics, " (DDS domain ", b->ros2_.domain, ")"));
+                              *diagnostics, " (DDS domain ", b->ros2_.domain,
+                              "; ros_discovery_info ",
+                              b->ros2_.discovery_info
+                                  ? std::string(Name(*b->ros2_.discovery_info))
+                                  : std::string("off"),
+                              ")"));
   return b;
 }
 

@@ -1,5 +1,5 @@
 // The ROS 2 node: an input (DDS readers, exact-time sync), the shared link to the server
-// (ros/src/cloud_link.h), and the PointCloud2 and /diagnostics writers, run by one thread that
+// (bridge/cloud_link.h), and the PointCloud2 and /diagnostics writers, run by one thread that
 // waits on the readers; the clouds are written from the stream's receiver thread.
 #pragma once
 
@@ -7,6 +7,7 @@
 
 #include <atomic>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include "absl/status/statusor.h"
@@ -14,6 +15,7 @@
 #include "cloud_link.h"
 #include "dds_node.h"
 #include "diagnostics.h"
+#include "discovery_info.h"
 #include "qos.h"
 #include "ros2_inputs.h"
 #include "ros_names.h"
@@ -26,6 +28,9 @@ struct Ros2Options {
   dds_domainid_t domain = 0;
   QosProfile input_qos = SensorDataQos();  // input_qos: a best-effort reader matches every writer
   QosProfile output_qos = DefaultQos();    // reliable: default subscribers see it
+  // ros_discovery_info: the node's entry in the ROS 2 graph, in this distribution's Gid layout
+  // (discovery_info.h); nullopt: none.
+  std::optional<GidLayout> discovery_info = GidLayout::kIronAndLater;
 };
 
 class Ros2Bridge {

@@ -45,6 +45,14 @@ absl::StatusOr<RosArgs> ParseRosArgs(const std::vector<std::string>& args,
 absl::Status ReadParamsYaml(const std::string& yaml_text, const std::string& source,
                             const NodeNames& node, std::map<std::string, ParamValue>* params);
 
+// The ROS 2 bridge's own parameters, beyond the shared core's (ParamDocs): the `extra` of its
+// Ros2ParamReader.
+inline const std::vector<std::string>& Ros2BridgeParameters() {
+  static const std::vector<std::string> names = {"input_qos", "ros_discovery_info",
+                                                 "use_sim_time"};
+  return names;
+}
+
 // The parameters as the shared core reads them: "voxel.leaf" is ParamDocs' "voxel/leaf".
 // Parameters outside ParamDocs that are ROS 2's own or the ROS 2 bridge's (`extra`, e.g.
 // "input_qos") are not reported by Names().

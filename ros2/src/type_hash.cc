@@ -20,6 +20,8 @@ const std::map<std::string, TypeDescription, std::less<>>& Descriptions() {
     const std::string kHeader = "std_msgs/msg/Header";
     const std::string kRoi = "sensor_msgs/msg/RegionOfInterest";
     const std::string kImage = "sensor_msgs/msg/Image";
+    const std::string kGid = "rmw_dds_common/msg/Gid";
+    const std::string kNodeEntitiesInfo = "rmw_dds_common/msg/NodeEntitiesInfo";
     std::vector<TypeDescription> types = {
         {kTime, {Scalar("sec", kInt32Type), Scalar("nanosec", kUint32Type)}},
         {kHeader, {Nested("stamp", kTime), Scalar("frame_id", kStringType)}},
@@ -60,6 +62,17 @@ const std::map<std::string, TypeDescription, std::less<>>& Descriptions() {
         {"diagnostic_msgs/msg/DiagnosticArray",
          {Nested("header", kHeader),
           Nested("status", "diagnostic_msgs/msg/DiagnosticStatus", kUnboundedSequence)}},
+        // rmw_dds_common's, Iron and later (ros2/idl/ros_discovery_info.idl): the .msg's char is
+        // rosidl's uint8.
+        {kGid, {{"data", kUint8Type + kArray, 16, 0, ""}}},
+        {kNodeEntitiesInfo,
+         {{"node_namespace", kBoundedStringType, 0, 256, ""},
+          {"node_name", kBoundedStringType, 0, 256, ""},
+          Nested("reader_gid_seq", kGid, kUnboundedSequence),
+          Nested("writer_gid_seq", kGid, kUnboundedSequence)}},
+        {"rmw_dds_common/msg/ParticipantEntitiesInfo",
+         {Nested("gid", kGid),
+          Nested("node_entities_info_seq", kNodeEntitiesInfo, kUnboundedSequence)}},
     };
     auto* out = new std::map<std::string, TypeDescription, std::less<>>();
     for (auto& t : types) {

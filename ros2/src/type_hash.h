@@ -23,6 +23,7 @@ enum FieldTypeId : std::uint8_t {
   kBooleanType = 15,
   kByteType = 16,
   kStringType = 17,
+  kBoundedStringType = 21,  // string<=N
 };
 inline constexpr std::uint8_t kArray = 48;
 inline constexpr std::uint8_t kUnboundedSequence = 144;
@@ -31,7 +32,7 @@ struct FieldDescription {
   std::string name;
   std::uint8_t type_id = 0;
   std::uint64_t capacity = 0;         // T[N]: N
-  std::uint64_t string_capacity = 0;  // string<=N: N (none here)
+  std::uint64_t string_capacity = 0;  // string<=N: N
   std::string nested_type_name;       // "std_msgs/msg/Header" for kNestedType (+ array kinds)
 };
 
@@ -43,7 +44,8 @@ struct TypeDescription {
 // The description of one of the bridge's types ("builtin_interfaces/msg/Time",
 // "std_msgs/msg/Header", "sensor_msgs/msg/{RegionOfInterest,PointField,PointCloud2,Image,
 // CameraInfo}", "stereo_msgs/msg/DisparityImage", "diagnostic_msgs/msg/{KeyValue,
-// DiagnosticStatus,DiagnosticArray}"); nullptr for any other name.
+// DiagnosticStatus,DiagnosticArray}", "rmw_dds_common/msg/{Gid,NodeEntitiesInfo,
+// ParticipantEntitiesInfo}" (Iron's and later); nullptr for any other name.
 const TypeDescription* FindTypeDescription(std::string_view type_name);
 
 // The JSON that is hashed: {"type_description": ..., "referenced_type_descriptions": [...]}, in

@@ -1,7 +1,9 @@
 // New Tsukuba frames as the ROS 2 messages a calibrated stereo camera publishes, as the ROS 1
 // tests' publisher makes them (ros/testing/tsukuba_publisher.py): 640x480, f = 615, T = 0.1 m,
 // the ground-truth disparity as a 32FC1 DisparityImage (0, no disparity, as min_disparity - 1),
-// the left colour as bgr8, the left CameraInfo (P = [f 0 cx 0; 0 f cy 0; 0 0 1 0]).
+// the left colour as bgr8, the left CameraInfo (P = [f 0 cx 0; 0 f cy 0; 0 0 1 0]); with AddRight
+// the stereo input's other half, the right image in grey (mono8) and the right CameraInfo (the
+// right P's Tx = -f B).
 #pragma once
 
 #include <cmath>
@@ -10,6 +12,7 @@
 #include <vector>
 
 #include "cloudcast/datasets/tsukuba.h"
+#include "cloudcast/io/image_io.h"
 #include "message_types.h"
 
 namespace cloudcast::ros2_bridge::testing {
@@ -62,6 +65,23 @@ class TsukubaSamples {
     std::copy(p, p + 12, info.p);
     Stamp(0, 0);
   }
+
+  // The right image of the pair (BGR8, rectified with the left one), published in grey as a
+  // stereo camera's right/image_rect is (ITU-R BT.601 weights, rounded: cv::COLOR_BGR2GRAY's to
+  // within one level), and the right CameraInfo.
+  void AddRight(const OwnedColor& bgr) {
+    const std::size_t n = std::size_t{bgr.width} * bgr.height;
+    right_grey_.resize(n);
+    for (std::size_t i = 0; i < n; ++i) {
+      const std::uint8_t* px = &bgr.pixels[3 * i];
+      right_grey_[i] =
+          static_cast<std::uint8_t>((114 * px[0] + 587 * px[1] + 299 * px[2] + 500) / 1000);
+    }
+    right = Image(bgr.width, bgr.height, "mono8", 1, right_grey_.data(), n);
+    right_info = info;
+    right_info.p[3] = -kF * kBaseline;
+    Stamp(info.header.stamp.sec, info.header.stamp.nanosec);
+  }
   TsukubaSamples(const TsukubaSamples&) = delete;
   TsukubaSamples& operator=(const TsukubaSamples&) = delete;
 
@@ -69,7 +89,7 @@ class TsukubaSamples {
   void Stamp(std::int32_t sec, std::uint32_t nanosec) {
     for (std_msgs_msg_dds__Header_* h :
          {&disparity.header, &disparity.image.header, &colour.header, &info.header,
-          &depth.header}) {
+          &depth.header, &right.header, &right_info.header}) {
       h->stamp.sec = sec;
       h->stamp.nanosec = nanosec;
       h->frame_id = const_cast<char*>(kFrameId);
@@ -82,6 +102,9 @@ class TsukubaSamples {
   // The ground truth as a depth camera's 16UC1 image registered to the colour camera (the ROS 1
   // publisher's depth16): z = f B / d in millimetres, rounded; d = 0 gives 0 (no measurement).
   sensor_msgs_msg_dds__Image_ depth{};
+  // After AddRight: the right image (mono8) and CameraInfo of the pair.
+  sensor_msgs_msg_dds__Image_ right{};
+  sensor_msgs_msg_dds__CameraInfo_ right_info{};
 
  private:
   static sensor_msgs_msg_dds__Image_ Image(std::uint32_t w, std::uint32_t h, const char* encoding,
@@ -100,6 +123,7 @@ class TsukubaSamples {
   std::vector<float> disparity_;
   std::vector<std::uint16_t> depth_;
   std::vector<std::uint8_t> colour_;
+  std::vector<std::uint8_t> right_grey_;
   std::vector<double> d_;
 };
 

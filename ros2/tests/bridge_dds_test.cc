@@ -13,12 +13,16 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <functional>
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
+#include <set>
 #include <string>
 #include <thread>
 #include <vector>
@@ -27,8 +31,10 @@
 #include "cloud_link.h"
 #include "cloudcast/datasets/tsukuba.h"
 #include "dds_node.h"
+#include "discovery_info.h"
 #include "frame_conversions.h"
 #include "point_cloud2.h"
+#include "ros_messages.h"
 #include "ros2_inputs.h"
 #include "ros_args.h"
 #include "sample_views.h"
@@ -55,9 +61,13 @@ const auto* const g_netns = ::testing::AddGlobalTestEnvironment(new NetnsEnviron
 
 // ---- The camera and the subscriber, on a DDS participant of the test's own.
 
+// The camera's writers: the disparity (or the depth image, or the left image of a pair), the
+// colour (or the right image), the CameraInfo (the left one) and, for pairs, the right one.
 struct CameraWriters {
-  dds_entity_t disparity = 0, colour = 0, info = 0;
+  dds_entity_t disparity = 0, colour = 0, info = 0, right_info = 0;
 };
+
+enum class Input { kDisparity, kDepth, kStereo };
 
 // A writer as rmw makes it, optionally best effort or XCDR2 (the negative cases).
 dds_entity_t Writer(DdsNode* node, const MessageType& type, const std::string& topic,
@@ -86,6 +96,8 @@ class Ros2BridgeTest : public ::testing::Test {
     for (const char* id : {"00001", "00200", "00400"}) {
       auto f = tsukuba::Load(dir, id);
       if (f.ok()) frames_->push_back(*std::move(f));
+      auto pair = tsukuba::LoadStereo(dir, id);
+      if (pair.ok()) rights_->push_back(std::move(pair->right));
     }
   }
 
@@ -97,7 +109,7 @@ class Ros2BridgeTest : public ::testing::Test {
     std::filesystem::create_directories(scratch_);
     server_ = cloudcast::testing::StartTestServer();
     ASSERT_NE(server_, nullptr);
-    for (const auto& f : *frames_) samples_.push_back(std::make_unique<TsukubaSamples>(f));
+    for (std::size_t i = 0; i < frames_->size(); ++i) samples_.push_back(NewSamples(i));
     auto node = DdsNode::Create(0);
     ASSERT_TRUE(node.ok()) << node.status();
     camera_ = *std::move(node);
@@ -146,15 +158,26 @@ class Ros2BridgeTest : public ::testing::Test {
     TsukubaSamples& s = *samples_[static_cast<std::size_t>(k) % samples_.size()];
     s.Stamp(1000 + k, 0);
     if (spoil) spoil(s);
-    if (depth_input_) {
-      dds_write(w.disparity, &s.depth);
-    } else {
-      dds_write(w.disparity, &s.disparity);
+    switch (input_) {
+      case Input::kDisparity:
+        dds_write(w.disparity, &s.disparity);
+        dds_write(w.colour, &s.colour);
+        break;
+      case Input::kDepth:
+        dds_write(w.disparity, &s.depth);
+        dds_write(w.colour, &s.colour);
+        break;
+      case Input::kStereo:
+        dds_write(w.disparity, &s.colour);
+        dds_write(w.colour, &s.right);
+        dds_write(w.right_info, &s.right_info);
+        break;
     }
-    dds_write(w.colour, &s.colour);
     dds_write(w.info, &s.info);
-    if (spoil) samples_[static_cast<std::size_t>(k) % samples_.size()] =
-        std::make_unique<TsukubaSamples>((*frames_)[static_cast<std::size_t>(k) % frames_->size()]);
+    if (spoil) {
+      const std::size_t i = static_cast<std::size_t>(k) % samples_.size();
+      samples_[i] = NewSamples(i);
+    }
   }
 
   void Take(Received* r) {
@@ -183,6 +206,23 @@ class Ros2BridgeTest : public ::testing::Test {
         r->diagnostics.push_back(text);
       }
     }
+  }
+
+  // Frame i's samples (with its right image, when the pair is there).
+  std::unique_ptr<TsukubaSamples> NewSamples(std::size_t i) {
+    auto s = std::make_unique<TsukubaSamples>((*frames_)[i]);
+    if (i < rights_->size()) s->AddRight((*rights_)[i]);
+    return s;
+  }
+
+  // A stereo camera's four topics under /stereo, as stereo_image_proc takes them.
+  CameraWriters StereoCamera() {
+    CameraWriters w;
+    w.disparity = Writer(camera_.get(), kImageType, "/stereo/left/image_rect_color", true, false);
+    w.colour = Writer(camera_.get(), kImageType, "/stereo/right/image_rect", true, false);
+    w.info = Writer(camera_.get(), kCameraInfoType, "/stereo/left/camera_info", true, false);
+    w.right_info = Writer(camera_.get(), kCameraInfoType, "/stereo/right/camera_info", true, false);
+    return w;
   }
 
   CameraWriters DepthCamera() {
@@ -221,7 +261,9 @@ class Ros2BridgeTest : public ::testing::Test {
 
   // What the ROS 1 bridge publishes for frame i: its link to the server (CloudLink, the same
   // options) and its PointCloud2 conversion.
-  std::vector<sensor_msgs::PointCloud2> Ros1Clouds(bool depth = false) {
+  // `extra`: the bridge's parameters beyond server, passthrough and voxel grid ("name:=value").
+  std::vector<sensor_msgs::PointCloud2> Ros1Clouds(Input input = Input::kDisparity,
+                                                  const std::vector<std::string>& extra = {}) {
     // The bridge's parameters (kUnfiltered): the whole cloud, not what the server's default
     // passthrough and voxel grid leave.
     std::map<std::string, ParamValue> params;
@@ -230,6 +272,11 @@ class Ros2BridgeTest : public ::testing::Test {
       params[name].type = ParamValue::kBool;
       params[name].b = false;
     }
+    std::vector<std::string> args = {"--ros-args"};
+    for (const std::string& p : extra) args.insert(args.end(), {"-p", p});
+    auto parsed = ParseRosArgs(args, "reference");
+    EXPECT_TRUE(parsed.ok()) << parsed.status();
+    if (parsed.ok()) params.insert(parsed->params.begin(), parsed->params.end());
     auto options = ros_bridge::ReadBridgeOptions(Ros2ParamReader(params, {}), "test");
     EXPECT_TRUE(options.ok()) << options.status();
     options->config.set_delivery(v1::DELIVERY_ALL);
@@ -240,20 +287,35 @@ class Ros2BridgeTest : public ::testing::Test {
       ros_bridge::CloudLink link(*options, &stats,
                                  [&](client::Result&& r, const ros_bridge::SentFrame& f) {
                                    sensor_msgs::PointCloud2 msg;
-                                   ros_bridge::ToPointCloud2(r.cloud, f.header, &msg);
+                                   ros_bridge::ToPointCloud2(r.cloud, ros_bridge::ToRos(f.header),
+                                                             &msg);
                                    std::lock_guard<std::mutex> lock(mu);
                                    clouds[f.header.stamp.sec] = std::move(msg);
+                                 },
+                                 [](ros_bridge::LogLevel, const std::string& line) {
+                                   std::fprintf(stderr, "reference link: %s\n", line.c_str());
                                  });
       EXPECT_TRUE(link.Probe().ok());
       std::vector<float> masked;
       for (std::size_t i = 0; i < samples_.size(); ++i) {
         samples_[i]->Stamp(static_cast<std::int32_t>(i), 0);
         ros_bridge::OutgoingFrame frame;
-        const absl::Status s =
-            depth ? ros_bridge::ToDepthFrame(View(samples_[i]->depth), View(samples_[i]->colour),
-                                             View(samples_[i]->info), std::nullopt, &frame)
-                  : ros_bridge::ToFrame(View(samples_[i]->disparity), View(samples_[i]->colour),
-                                        View(samples_[i]->info), &masked, &frame);
+        const TsukubaSamples& in = *samples_[i];
+        absl::Status s;
+        switch (input) {
+          case Input::kDisparity:
+            s = ros_bridge::ToFrame(View(in.disparity), View(in.colour), View(in.info), &masked,
+                                    &frame);
+            break;
+          case Input::kDepth:
+            s = ros_bridge::ToDepthFrame(View(in.depth), View(in.colour), View(in.info),
+                                         std::nullopt, &frame);
+            break;
+          case Input::kStereo:
+            s = ros_bridge::ToStereoFrame(View(in.colour), View(in.right), View(in.info),
+                                          View(in.right_info), &frame);
+            break;
+        }
         EXPECT_TRUE(s.ok()) << s;
         link.Send(frame);
       }
@@ -268,6 +330,7 @@ class Ros2BridgeTest : public ::testing::Test {
   }
 
   static inline std::vector<tsukuba::Frame>* frames_ = new std::vector<tsukuba::Frame>();
+  static inline std::vector<OwnedColor>* rights_ = new std::vector<OwnedColor>();
   std::filesystem::path scratch_;
   std::unique_ptr<server::Server> server_;
   std::vector<std::unique_ptr<TsukubaSamples>> samples_;
@@ -275,7 +338,7 @@ class Ros2BridgeTest : public ::testing::Test {
   dds_entity_t points_ = 0, diagnostics_ = 0;
   std::unique_ptr<testing::ChildProcess> bridge_;
   int next_frame_ = 0;
-  bool depth_input_ = false;  // Publish writes the depth image in place of the disparity
+  Input input_ = Input::kDisparity;  // what Publish writes
 };
 
 TEST_F(Ros2BridgeTest, CycloneCameraCloudsEqualTheRos1BridgesPointForPoint) {
@@ -321,7 +384,7 @@ TEST_F(Ros2BridgeTest, CycloneCameraCloudsEqualTheRos1BridgesPointForPoint) {
 // input depth: a depth camera's 16UC1 image, colour and CameraInfo (depth_image_proc's names
 // under /camera), the same equality with the ROS 1 bridge's clouds.
 TEST_F(Ros2BridgeTest, DepthCameraCloudsEqualTheRos1BridgesPointForPoint) {
-  const std::vector<sensor_msgs::PointCloud2> expected = Ros1Clouds(/*depth=*/true);
+  const std::vector<sensor_msgs::PointCloud2> expected = Ros1Clouds(Input::kDepth);
   for (const auto& e : expected) ASSERT_GT(e.width, 100000u);
   // The reader of the clouds, under /camera.
   auto points = camera_->CreateReader(kPointCloud2Type, "/camera/points2", DefaultQos());
@@ -330,7 +393,7 @@ TEST_F(Ros2BridgeTest, DepthCameraCloudsEqualTheRos1BridgesPointForPoint) {
   StartBridge({"input:=depth", "passthrough.enabled:=false", "voxel.enabled:=false",
                "input_qos:=default"},
               "/camera");
-  depth_input_ = true;
+  input_ = Input::kDepth;
   const CameraWriters w = DepthCamera();
   Received r;
   ASSERT_TRUE(PublishUntil(w, &r, [&] { return r.clouds.size() >= samples_.size() + 1; }, 40))
@@ -345,6 +408,202 @@ TEST_F(Ros2BridgeTest, DepthCameraCloudsEqualTheRos1BridgesPointForPoint) {
     EXPECT_EQ(std::memcmp(got.data._buffer, want.data.data(), want.data.size()), 0)
         << "cloud of stamp " << got.header.stamp.sec;
   }
+}
+
+// input stereo: a stereo camera's rectified left (bgr8) and right (mono8) images with both
+// CameraInfos, exact-time synchronised, matched on the server (sgm, 160 disparities: New
+// Tsukuba's reach 146); the clouds equal the ROS 1 bridge's for the same pairs, point for point.
+TEST_F(Ros2BridgeTest, StereoCameraCloudsEqualTheRos1BridgesPointForPoint) {
+  if (rights_->size() != frames_->size()) {
+    GTEST_SKIP() << "the New Tsukuba right images are not in " << tsukuba::DefaultDir();
+  }
+  const std::vector<std::string> stereo = {"input:=stereo", "stereo.matcher:=sgm",
+                                           "stereo.num_disparities:=160"};
+  const std::vector<sensor_msgs::PointCloud2> expected = Ros1Clouds(Input::kStereo, stereo);
+  ASSERT_EQ(expected.size(), samples_.size());
+  for (const auto& e : expected) ASSERT_GT(e.width, 50000u);
+  std::vector<std::string> params = {"passthrough.enabled:=false", "voxel.enabled:=false",
+                                     "input_qos:=default"};
+  params.insert(params.end(), stereo.begin(), stereo.end());
+  StartBridge(params);
+  input_ = Input::kStereo;
+  const CameraWriters w = StereoCamera();
+  Received r;
+  ASSERT_TRUE(PublishUntil(w, &r, [&] { return r.clouds.size() >= samples_.size() + 1; }, 50))
+      << r.clouds.size() << " clouds\n" << bridge_->Log();
+  std::set<int> frames_seen;
+  for (std::size_t c = 1; c < r.clouds.size(); ++c) {
+    const auto& got = r.clouds[c]->as<sensor_msgs_msg_dds__PointCloud2_>();
+    const int k = got.header.stamp.sec - 1000;
+    ASSERT_GE(k, 0);
+    frames_seen.insert(k % static_cast<int>(expected.size()));
+    const sensor_msgs::PointCloud2& want = expected[static_cast<std::size_t>(k) % expected.size()];
+    EXPECT_STREQ(got.header.frame_id, testing::kFrameId);
+    EXPECT_EQ(got.width, want.width);
+    ASSERT_EQ(got.data._length, want.data.size());
+    EXPECT_EQ(std::memcmp(got.data._buffer, want.data.data(), want.data.size()), 0)
+        << "cloud of stamp " << got.header.stamp.sec;
+  }
+  EXPECT_GE(frames_seen.size(), 2u) << "the clouds came from one pair only";
+}
+
+// Each frame carries its CameraInfo's camera (Frame.camera): frames of the same images whose
+// CameraInfo alternates between f = 615 and f = 1230 (a zoom; DisparityImage's f T unchanged, so
+// z stays and x, y halve) come back each with its own camera, in order, on one stream.
+TEST_F(Ros2BridgeTest, EachFrameIsProjectedWithItsOwnCameraInfo) {
+  std::map<std::string, ParamValue> params;
+  params["server"].s = server_->address();
+  for (const char* name : {"passthrough.enabled", "voxel.enabled"}) {
+    params[name].type = ParamValue::kBool;
+    params[name].b = false;
+  }
+  // Sequential Draco coding (point order kept) with fine quantization: the clouds compare
+  // point for point.
+  params["draco.encode_speed"].type = params["draco.decode_speed"].type = ParamValue::kInt;
+  params["draco.encode_speed"].i = params["draco.decode_speed"].i = 10;
+  params["draco.position_bits"].type = ParamValue::kInt;
+  params["draco.position_bits"].i = 20;
+  auto options = ros_bridge::ReadBridgeOptions(Ros2ParamReader(params, {}), "test");
+  ASSERT_TRUE(options.ok()) << options.status();
+  options->config.set_delivery(v1::DELIVERY_ALL);
+  ros_bridge::BridgeStats stats;
+  std::mutex mu;
+  std::map<std::uint32_t, PointCloud> clouds;  // by stamp
+  {
+    ros_bridge::CloudLink link(
+        *options, &stats,
+        [&](client::Result&& r, const ros_bridge::SentFrame& f) {
+          std::lock_guard<std::mutex> lock(mu);
+          clouds[f.header.stamp.sec] = std::move(r.cloud);
+        },
+        [](ros_bridge::LogLevel, const std::string&) {});
+    ASSERT_TRUE(link.Probe().ok());
+    TsukubaSamples& in = *samples_[0];
+    std::vector<float> masked;
+    for (std::int32_t k = 0; k < 4; ++k) {
+      in.Stamp(k, 0);
+      const double f = (k % 2 == 0) ? testing::kF : 2 * testing::kF;
+      in.info.k[0] = in.info.k[4] = in.info.p[0] = in.info.p[5] = f;
+      ros_bridge::OutgoingFrame frame;
+      ASSERT_TRUE(ros_bridge::ToFrame(View(in.disparity), View(in.colour), View(in.info), &masked,
+                                      &frame)
+                      .ok());
+      link.Send(frame);
+    }
+  }
+  ASSERT_EQ(clouds.size(), 4u);
+  const PointCloud& wide = clouds[0];
+  ASSERT_GT(wide.size(), 100000u);
+  for (std::uint32_t k = 1; k < 4; ++k) {
+    const PointCloud& c = clouds[k];
+    ASSERT_EQ(c.size(), wide.size()) << k;
+    const float scale = (k % 2 == 0) ? 1.0f : 0.5f;
+    std::size_t off = 0;
+    for (std::size_t i = 0; i < c.size(); ++i) {
+      const Point& a = wide.points[i];
+      const Point& b = c.points[i];
+      if (std::fabs(b.z - a.z) > 1e-3f || std::fabs(b.x - scale * a.x) > 1e-3f ||
+          std::fabs(b.y - scale * a.y) > 1e-3f) {
+        ++off;
+      }
+    }
+    EXPECT_EQ(off, 0u) << "frame " << k << " (f = " << (k % 2 ? 1230 : 615) << ")";
+  }
+}
+
+// ---- ros_discovery_info: the bridge's entry, read by a plain Cyclone reader as rmw's graph
+// cache reads it, against what DDS's own discovery (the built-in topics) says of the bridge's
+// participant, writers and readers.
+
+// The GUIDs DDS discovery reports on `builtin` (DCPSPublication or DCPSSubscription) for
+// endpoints of the participant `participant_guid` whose topic starts with "rt/" (the node's, not
+// the ros_discovery_info writer itself).
+std::set<std::vector<std::uint8_t>> DiscoveredEndpoints(dds_entity_t reader,
+                                                        const std::vector<std::uint8_t>& participant,
+                                                        std::size_t gid_size) {
+  std::set<std::vector<std::uint8_t>> out;
+  void* samples[64] = {nullptr};
+  dds_sample_info_t infos[64];
+  const dds_return_t n = dds_read(reader, samples, infos, 64, 64);
+  for (dds_return_t i = 0; i < n; ++i) {
+    if (!infos[i].valid_data) continue;
+    const auto* e = static_cast<const dds_builtintopic_endpoint_t*>(samples[i]);
+    if (std::memcmp(e->participant_key.v, participant.data(), 16) != 0) continue;
+    if (std::string(e->topic_name).rfind("rt/", 0) != 0) continue;
+    std::vector<std::uint8_t> gid(gid_size, 0);
+    std::memcpy(gid.data(), e->key.v, 16);
+    out.insert(gid);
+  }
+  if (n > 0) dds_return_loan(reader, samples, n);
+  return out;
+}
+
+void ExpectDiscoveryEntry(GidLayout layout, DdsNode* camera,
+                          const std::function<void(std::vector<std::string>)>& start,
+                          const std::function<std::string()>& log) {
+  const MessageType& type = ParticipantEntitiesInfoType(layout);
+  const dds_entity_t topic = dds_create_topic(camera->participant(), type.descriptor,
+                                              kDiscoveryInfoTopic, nullptr, nullptr);
+  ASSERT_GT(topic, 0);
+  DdsQos qos = DiscoveryInfoQos(layout);
+  const dds_entity_t reader = dds_create_reader(camera->participant(), topic, qos.get(), nullptr);
+  ASSERT_GT(reader, 0);
+  const dds_entity_t pubs =
+      dds_create_reader(camera->participant(), DDS_BUILTIN_TOPIC_DCPSPUBLICATION, nullptr, nullptr);
+  const dds_entity_t subs = dds_create_reader(camera->participant(),
+                                              DDS_BUILTIN_TOPIC_DCPSSUBSCRIPTION, nullptr, nullptr);
+  ASSERT_GT(pubs, 0);
+  ASSERT_GT(subs, 0);
+  start({std::string("ros_discovery_info:=") + std::string(Name(layout))});
+  // The entry, and DDS discovery's view of the same participant (3 readers, 2 writers).
+  std::optional<ParticipantEntities> entry;
+  std::set<std::vector<std::uint8_t>> writers, readers;
+  const auto end = Clock::now() + std::chrono::seconds(20);
+  while (Clock::now() < end) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    for (;;) {
+      TakenSample sample(type);
+      void* buf[1] = {sample.get()};
+      dds_sample_info_t info;
+      if (dds_take(reader, buf, &info, 1, 1) <= 0) break;
+      if (!info.valid_data) continue;
+      ParticipantEntities e = FromSample(layout, sample.get());
+      if (e.nodes.size() == 1 && e.nodes[0].node_name == "cloudcast_bridge") entry = e;
+    }
+    if (!entry) continue;
+    writers = DiscoveredEndpoints(pubs, entry->gid, GidSize(layout));
+    readers = DiscoveredEndpoints(subs, entry->gid, GidSize(layout));
+    if (writers.size() >= 2 && readers.size() >= 3) break;
+  }
+  ASSERT_TRUE(entry.has_value()) << "no ros_discovery_info entry of the bridge\n" << log();
+  // The participant's GID: its GUID (known to DDS discovery), zero-padded.
+  ASSERT_EQ(entry->gid.size(), GidSize(layout));
+  for (std::size_t i = 16; i < entry->gid.size(); ++i) EXPECT_EQ(entry->gid[i], 0) << i;
+  const NodeEntities& node = entry->nodes[0];
+  EXPECT_EQ(node.node_namespace, "/stereo");
+  EXPECT_EQ(node.node_name, "cloudcast_bridge");
+  // Its writers (rt/stereo/points2, rt/diagnostics) and readers (the disparity input's three),
+  // GID for GID as DDS discovery reports them.
+  const std::set<std::vector<std::uint8_t>> listed_writers(node.writer_gids.begin(),
+                                                           node.writer_gids.end());
+  const std::set<std::vector<std::uint8_t>> listed_readers(node.reader_gids.begin(),
+                                                           node.reader_gids.end());
+  EXPECT_EQ(node.writer_gids.size(), 2u);
+  EXPECT_EQ(node.reader_gids.size(), 3u);
+  EXPECT_EQ(listed_writers, writers);
+  EXPECT_EQ(listed_readers, readers);
+}
+
+TEST_F(Ros2BridgeTest, RosDiscoveryInfoListsTheNodeAndItsEndpointsJazzy) {
+  ExpectDiscoveryEntry(
+      GidLayout::kIronAndLater, camera_.get(),
+      [&](std::vector<std::string> p) { StartBridge(std::move(p)); }, [&] { return bridge_->Log(); });
+}
+
+TEST_F(Ros2BridgeTest, RosDiscoveryInfoListsTheNodeAndItsEndpointsHumble) {
+  ExpectDiscoveryEntry(
+      GidLayout::kHumble, camera_.get(),
+      [&](std::vector<std::string> p) { StartBridge(std::move(p)); }, [&] { return bridge_->Log(); });
 }
 
 #ifdef CLOUDCAST_ROS2_FASTDDS_PEER

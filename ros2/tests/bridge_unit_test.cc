@@ -131,7 +131,8 @@ TEST(Ros2Args, TheExampleParamsFileIsValid) {
                   "__ns:=/stereo"});
   ASSERT_TRUE(a.ok()) << a.status();
   EXPECT_EQ(a->params.at("input_qos").s, "sensor_data");
-  auto o = ros_bridge::ReadBridgeOptions(Ros2ParamReader(a->params, {"input_qos"}), "x");
+  EXPECT_EQ(a->params.at("ros_discovery_info").s, "jazzy");
+  auto o = ros_bridge::ReadBridgeOptions(Ros2ParamReader(a->params, Ros2BridgeParameters()), "x");
   ASSERT_TRUE(o.ok()) << o.status();
   EXPECT_TRUE(o->config.voxel_grid().enabled());
   EXPECT_FLOAT_EQ(o->config.passthrough().max(), 8.0f);

@@ -3,9 +3,11 @@
 #include <gtest/gtest.h>
 
 #include <cstring>
+#include <optional>
 #include <string>
 #include <vector>
 
+#include "discovery_info.h"
 #include "message_types.h"
 #include "qos.h"
 #include "ros_names.h"
@@ -176,6 +178,104 @@ TEST(Ros2Cdr, CameraInfoRoundTripAndTruncationRefused) {
   std::vector<std::uint8_t> bad_bool = bytes;
   bad_bool[bytes.size() - 1] = 2;  // roi.do_rectify, the last byte
   EXPECT_FALSE(DeserializeCdr(kCameraInfoType, bad_bool, &other).ok());
+}
+
+// ---- ros_discovery_info (rmw_dds_common/msg/ParticipantEntitiesInfo)
+
+// The hashes rosidl_generator_c writes into rmw_dds_common's generated
+// participant_entities_info__description.c (Iron and later: the 16-byte Gid), as a built
+// ROS 2 workspace carries them.
+TEST(Ros2DiscoveryInfo, TypeHashesMatchRosidlsForIronAndLater) {
+  EXPECT_EQ(TypeHash("rmw_dds_common/msg/Gid"),
+            "RIHS01_ab6f21cfbb0a6dbb837161e1110c2051a2850ed9f9c53944d7115d9bcebedf71");
+  EXPECT_EQ(TypeHash("rmw_dds_common/msg/NodeEntitiesInfo"),
+            "RIHS01_8ffef65ee2d088c63b1e8fcd31e800ba9fc8dbe0ee15ca60d1676de5218087a7");
+  EXPECT_EQ(TypeHash("rmw_dds_common/msg/ParticipantEntitiesInfo"),
+            "RIHS01_91a0593bacdcc50ea9bdcf849a938b128412cc1ea821245c663bcd26f83c295e");
+  EXPECT_EQ(kParticipantEntitiesInfoType.type_hash(),
+            TypeHash("rmw_dds_common/msg/ParticipantEntitiesInfo"));
+}
+
+TEST(Ros2DiscoveryInfo, BothLayoutsGoOnTheWireUnderRmwsTypeName) {
+  EXPECT_STREQ(kParticipantEntitiesInfoType.descriptor->m_typename,
+               "rmw_dds_common::msg::dds_::ParticipantEntitiesInfo_");
+  EXPECT_STREQ(kParticipantEntitiesInfoHumbleType.descriptor->m_typename,
+               "rmw_dds_common::msg::dds_::ParticipantEntitiesInfo_");
+  EXPECT_EQ(GidSize(GidLayout::kHumble), 24u);
+  EXPECT_EQ(GidSize(GidLayout::kIronAndLater), 16u);
+}
+
+TEST(Ros2DiscoveryInfo, TheParameterNamesTheDistribution) {
+  EXPECT_EQ(*ParseDiscoveryInfo("jazzy", "ros_discovery_info"), GidLayout::kIronAndLater);
+  EXPECT_EQ(*ParseDiscoveryInfo("iron", "ros_discovery_info"), GidLayout::kIronAndLater);
+  EXPECT_EQ(*ParseDiscoveryInfo("humble", "ros_discovery_info"), GidLayout::kHumble);
+  EXPECT_EQ(*ParseDiscoveryInfo("off", "ros_discovery_info"), std::nullopt);
+  auto bad = ParseDiscoveryInfo("foxy", "ros_discovery_info");
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.status().message().find("ros_discovery_info is 'foxy'"), std::string::npos)
+      << bad.status();
+}
+
+// rmw's QoS for the topic: reliable, transient local, keep last 1, XCDR1; the type hash only
+// where ROS 2 sends them (Iron and later).
+TEST(Ros2DiscoveryInfo, QosIsRmwsReliableTransientLocalKeepLast1) {
+  for (GidLayout layout : {GidLayout::kHumble, GidLayout::kIronAndLater}) {
+    DdsQos q = DiscoveryInfoQos(layout);
+    dds_reliability_kind_t rel;
+    dds_duration_t block;
+    ASSERT_TRUE(dds_qget_reliability(q.get(), &rel, &block));
+    EXPECT_EQ(rel, DDS_RELIABILITY_RELIABLE);
+    dds_durability_kind_t dur;
+    ASSERT_TRUE(dds_qget_durability(q.get(), &dur));
+    EXPECT_EQ(dur, DDS_DURABILITY_TRANSIENT_LOCAL);
+    dds_history_kind_t hist;
+    int32_t depth = 0;
+    ASSERT_TRUE(dds_qget_history(q.get(), &hist, &depth));
+    EXPECT_EQ(hist, DDS_HISTORY_KEEP_LAST);
+    EXPECT_EQ(depth, 1);
+    void* ud = nullptr;
+    size_t size = 0;
+    ASSERT_TRUE(dds_qget_userdata(q.get(), &ud, &size));
+    EXPECT_EQ(std::string(static_cast<char*>(ud), size),
+              layout == GidLayout::kHumble
+                  ? ""
+                  : TypeHashUserData(kParticipantEntitiesInfoType.type_hash()));
+    dds_free(ud);
+  }
+}
+
+// A sample of each layout through Cyclone's CDR and back; the bytes have the layout's Gid size.
+TEST(Ros2DiscoveryInfo, EntriesRoundTripInBothLayouts) {
+  ParticipantEntities e;
+  e.gid = {1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16};
+  NodeEntities node;
+  node.node_namespace = "/stereo";
+  node.node_name = "cloudcast_bridge";
+  node.reader_gids = {std::vector<std::uint8_t>(16, 0xa1), std::vector<std::uint8_t>(16, 0xa2)};
+  node.writer_gids = {std::vector<std::uint8_t>(16, 0xb1)};
+  e.nodes.push_back(node);
+  std::size_t sizes[2] = {};
+  for (GidLayout layout : {GidLayout::kHumble, GidLayout::kIronAndLater}) {
+    ParticipantEntitiesInfoSample sample(layout, e);
+    const std::vector<std::uint8_t> bytes = SerializeCdr(sample.type(), sample.sample());
+    sizes[layout == GidLayout::kHumble] = bytes.size();
+    std::vector<std::uint8_t> storage(sample.type().descriptor->m_size + 16, 0);
+    ASSERT_TRUE(DeserializeCdr(sample.type(), bytes, storage.data()).ok());
+    const ParticipantEntities back = FromSample(layout, storage.data());
+    FreeSample(sample.type(), storage.data());
+    std::vector<std::uint8_t> gid = e.gid;
+    gid.resize(GidSize(layout), 0);
+    EXPECT_EQ(back.gid, gid);
+    ASSERT_EQ(back.nodes.size(), 1u);
+    EXPECT_EQ(back.nodes[0].node_namespace, "/stereo");
+    EXPECT_EQ(back.nodes[0].node_name, "cloudcast_bridge");
+    ASSERT_EQ(back.nodes[0].reader_gids.size(), 2u);
+    ASSERT_EQ(back.nodes[0].writer_gids.size(), 1u);
+    EXPECT_EQ(back.nodes[0].writer_gids[0].size(), GidSize(layout));
+    EXPECT_EQ(back.nodes[0].writer_gids[0][15], 0xb1);
+  }
+  // Four Gids of 8 more bytes each in Humble's.
+  EXPECT_EQ(sizes[1] - sizes[0], 4u * 8u);
 }
 
 }  // namespace

@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "discovery_info.h"
 #include "message_types.h"
 #include "nlohmann/json.hpp"
 
@@ -216,6 +217,63 @@ TEST(Ros2Serializer, EveryTypeEqualsFoxglovesBytes) {
       const std::string ours = Hex(SerializeCdr(type, s.c[i].second));
       EXPECT_EQ(ours, reply[i]["hex"].get<std::string>()) << distro << " " << type.ros_name;
     }
+  }
+}
+
+// ros_discovery_info's entry in both Gid layouts, against foxglove's writer over rmw_dds_common's
+// .msg definitions (humble branch: char[24], jazzy: char[16]), given as text: two nodes, odd name
+// lengths, an empty and non-empty GID sequence, GID bytes above 127 (char is one byte).
+TEST(Ros2Serializer, DiscoveryInfoEqualsFoxglovesBytesInBothLayouts) {
+  for (GidLayout layout : {GidLayout::kHumble, GidLayout::kIronAndLater}) {
+    const std::size_t n = GidSize(layout);
+    auto gid = [&](std::uint8_t first) {
+      std::vector<std::uint8_t> g(n);
+      for (std::size_t i = 0; i < n; ++i) g[i] = static_cast<std::uint8_t>(first + 17 * i);
+      return g;
+    };
+    ParticipantEntities e;
+    e.gid = gid(200);
+    NodeEntities a;
+    a.node_namespace = "/stereo";
+    a.node_name = "cloudcast_bridge";
+    a.reader_gids = {gid(1), gid(2), gid(3)};
+    a.writer_gids = {gid(250)};
+    NodeEntities b;
+    b.node_namespace = "/";
+    b.node_name = "x";
+    b.writer_gids = {gid(7), gid(9)};
+    e.nodes = {a, b};
+    auto jgid = [](const std::vector<std::uint8_t>& g) {
+      return json{{"data", Samples::Hexed(g)}};
+    };
+    auto jnode = [&](const NodeEntities& node) {
+      json readers = json::array(), writers = json::array();
+      for (const auto& g : node.reader_gids) readers.push_back(jgid(g));
+      for (const auto& g : node.writer_gids) writers.push_back(jgid(g));
+      return json{{"node_namespace", node.node_namespace},
+                  {"node_name", node.node_name},
+                  {"reader_gid_seq", readers},
+                  {"writer_gid_seq", writers}};
+    };
+    const json jentry = {{"gid", jgid(e.gid)},
+                         {"node_entities_info_seq", json::array({jnode(a), jnode(b)})}};
+    const json request = {
+        {"distro", layout == GidLayout::kHumble ? "ros2humble" : "ros2jazzy"},
+        {"definitions",
+         {{"rmw_dds_common/ParticipantEntitiesInfo",
+           "Gid gid\nNodeEntitiesInfo[] node_entities_info_seq\n"},
+          {"rmw_dds_common/NodeEntitiesInfo",
+           "string<=256 node_namespace\nstring<=256 node_name\nGid[] reader_gid_seq\n"
+           "Gid[] writer_gid_seq\n"},
+          {"rmw_dds_common/Gid", layout == GidLayout::kHumble ? "char[24] data\n"
+                                                              : "char[16] data\n"}}},
+        {"messages", json::array({{{"type", "rmw_dds_common/ParticipantEntitiesInfo"},
+                                   {"message", jentry}}})}};
+    const json reply = RunFoxglove(request);
+    ASSERT_TRUE(reply.is_array() && reply.size() == 1) << Name(layout);
+    ParticipantEntitiesInfoSample sample(layout, e);
+    EXPECT_EQ(Hex(SerializeCdr(sample.type(), sample.sample())), reply[0]["hex"].get<std::string>())
+        << Name(layout);
   }
 }
 

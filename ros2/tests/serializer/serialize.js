@@ -3,9 +3,21 @@
 // bridge's bytes with). Reads JSON from stdin: {"distro": "ros2jazzy", "messages": [{"type":
 // "sensor_msgs/PointCloud2", "message": {...}}, ...]}; a field "data" given as {"hex": "..."} is a
 // uint8[]. Writes JSON: [{"type": ..., "hex": "<the CDR bytes, encapsulation header first>"}].
+// Types that rosmsg-msgs-common lacks (rmw_dds_common's) come with the request as .msg text:
+// "definitions": {"rmw_dds_common/Gid": "char[16] data", ...}, parsed by @foxglove/rosmsg.
 "use strict";
 const { MessageWriter } = require("@foxglove/rosmsg2-serialization");
 const common = require("@foxglove/rosmsg-msgs-common");
+const { parse } = require("@foxglove/rosmsg");
+
+// The request's .msg texts, root first, in the layout of a concatenated message definition.
+function definitionsFromText(texts, root) {
+  let full = texts[root];
+  for (const [name, text] of Object.entries(texts)) {
+    if (name !== root) full += `\n${"=".repeat(80)}\nMSG: ${name}\n${text}`;
+  }
+  return parse(full, { ros2: true });
+}
 
 // The root definition first, then every type it uses (MessageWriter's input).
 function definitionsOf(defs, root) {
@@ -45,8 +57,11 @@ process.stdin.on("end", () => {
   const request = JSON.parse(input);
   const defs = common[request.distro];
   if (defs === undefined) throw new Error(`@foxglove/rosmsg-msgs-common has no ${request.distro}`);
+  const texts = request.definitions || {};
   const out = request.messages.map(({ type, message }) => {
-    const writer = new MessageWriter(definitionsOf(defs, type));
+    const definitions =
+      texts[type] !== undefined ? definitionsFromText(texts, type) : definitionsOf(defs, type);
+    const writer = new MessageWriter(definitions);
     return { type, hex: Buffer.from(writer.writeMessage(revive(message))).toString("hex") };
   });
   process.stdout.write(JSON.stringify(out));

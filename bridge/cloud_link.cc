@@ -1,7 +1,5 @@
 #include "cloud_link.h"
 
-#include <ros/console.h>
-
 #include <condition_variable>
 #include <thread>
 #include <utility>
@@ -16,14 +14,34 @@ client::StreamConfig ConfigFor(const client::StreamConfig& base, const CameraMod
   return config;
 }
 
+v1::CameraModel CameraProto(const CameraModel& camera) {
+  v1::StreamConfig config;
+  client::SetCamera(camera, &config);
+  return std::move(*config.mutable_camera());
+}
+
 bool SameCamera(const CameraModel& a, const CameraModel& b) {
   return a.fx == b.fx && a.fy == b.fy && a.cx == b.cx && a.cy == b.cy && a.baseline == b.baseline &&
          a.disparity_scale == b.disparity_scale && a.disparity_offset == b.disparity_offset &&
          a.invalid_disparities == b.invalid_disparities && a.depth_scale == b.depth_scale;
 }
 
-CloudLink::CloudLink(const BridgeOptions& options, BridgeStats* stats, CloudSink on_cloud)
-    : options_(options), stats_(stats), on_cloud_(std::move(on_cloud)) {}
+CloudLink::CloudLink(const BridgeOptions& options, BridgeStats* stats, CloudSink on_cloud,
+                     LogSink log)
+    : options_(options), stats_(stats), on_cloud_(std::move(on_cloud)), log_(std::move(log)) {}
+
+void CloudLink::LogThrottled(Throttled kind, LogLevel level, const std::string& message) {
+  const auto now = std::chrono::steady_clock::now();
+  {
+    std::lock_guard<std::mutex> lock(log_mu_);
+    auto& last = last_logged_[kind];
+    if (last != std::chrono::steady_clock::time_point{} && now - last < std::chrono::seconds(5)) {
+      return;
+    }
+    last = now;
+  }
+  log_(level, message);
+}
 
 CloudLink::~CloudLink() { CloseStream(absl::OkStatus()); }
 
@@ -59,12 +77,13 @@ client::StreamConfig CloudLink::StreamConfigFor(const CameraModel& camera) const
 absl::Status CloudLink::EnsureStream(const CameraModel& camera) {
   if (client_ == nullptr) return absl::FailedPreconditionError("no client (Probe not called)");
   if (stream_ != nullptr) {
-    if (camera_ && SameCamera(*camera_, camera)) return absl::OkStatus();
-    if (absl::Status s = stream_->Reconfigure(StreamConfigFor(camera)); !s.ok()) {
-      return s;
+    // Each frame carries its own camera (Frame.camera, see Send): a camera that changes needs
+    // no Reconfigure, only a log line.
+    if (camera_ && !SameCamera(*camera_, camera)) {
+      camera_ = camera;
+      log_(LogLevel::kInfo, absl::StrCat("camera changed (", camera.ToString(),
+                                         "); each frame carries its own"));
     }
-    camera_ = camera;
-    ROS_INFO("cloudcast: camera changed; stream reconfigured (%s)", camera.ToString().c_str());
     return absl::OkStatus();
   }
   const auto now = std::chrono::steady_clock::now();
@@ -78,26 +97,24 @@ absl::Status CloudLink::EnsureStream(const CameraModel& camera) {
   so.on_result = [this](client::Result&& r) { OnResult(std::move(r)); };
   so.on_reconnect = [this](const client::Reconnect& r) {
     stats_->Reconnected();
-    ROS_WARN(
-        "cloudcast: stream reconnected (attempt %d after %s, %lld ms; %llu frames resent, "
-        "%llu dropped)",
-        r.attempt, std::string(r.cause.message()).c_str(), static_cast<long long>(r.took.count()),
-        static_cast<unsigned long long>(r.frames_resent),
-        static_cast<unsigned long long>(r.frames_dropped));
+    log_(LogLevel::kWarn,
+         absl::StrCat("stream reconnected (attempt ", r.attempt, " after ", r.cause.message(), ", ",
+                      r.took.count(), " ms; ", r.frames_resent, " frames resent, ",
+                      r.frames_dropped, " dropped)"));
   };
   auto opened = client_->OpenStream(StreamConfigFor(camera), std::move(so));
   if (!opened.ok()) return opened.status();
   stream_ = *std::move(opened);
   camera_ = camera;
-  ROS_INFO("cloudcast: stream open to %s (%s)", options_.server.c_str(), camera.ToString().c_str());
+  log_(LogLevel::kInfo,
+       absl::StrCat("stream open to ", options_.server, " (", camera.ToString(), ")"));
   return absl::OkStatus();
 }
 
 void CloudLink::CloseStream(const absl::Status& why) {
   if (stream_ == nullptr) return;
   if (!why.ok()) {
-    ROS_ERROR("cloudcast: stream to %s lost: %s", options_.server.c_str(),
-              std::string(why.message()).c_str());
+    log_(LogLevel::kError, absl::StrCat("stream to ", options_.server, " lost: ", why.message()));
   }
   (void)stream_->CloseSend();
   // Finish waits for the replies still due; a server that is gone could hold it for the whole
@@ -117,7 +134,7 @@ void CloudLink::CloseStream(const absl::Status& why) {
   cv.notify_one();
   watchdog.join();
   if (!finished.ok() && why.ok()) {
-    ROS_WARN("cloudcast: stream ended with %s", finished.ToString().c_str());
+    log_(LogLevel::kWarn, absl::StrCat("stream ended with ", finished.ToString()));
   }
   stats_->StreamClosed();
   stream_.reset();
@@ -127,12 +144,16 @@ void CloudLink::CloseStream(const absl::Status& why) {
 void CloudLink::Send(const OutgoingFrame& frame) {
   if (absl::Status s = EnsureStream(frame.camera); !s.ok()) {
     stats_->NotSent(s);
-    ROS_WARN_THROTTLE(5, "cloudcast: frame not sent: %s", std::string(s.message()).c_str());
+    LogThrottled(kNotSent, LogLevel::kWarn, absl::StrCat("frame not sent: ", s.message()));
     return;
   }
   client::FrameMeta meta;
   meta.sequence = next_sequence_++;
   meta.frame_id = frame.header.frame_id;
+  // The camera of this frame's CameraInfo (Frame.camera): a few dozen bytes, and the server
+  // applies it to this frame alone, so a frame resent after a reconnect, or one queued while the
+  // camera changed, is never reprojected with another frame's camera.
+  meta.camera = CameraProto(frame.camera);
   {
     std::lock_guard<std::mutex> lock(sent_mu_);
     sent_[*meta.sequence] = {frame.header, frame.camera};  // before Send: the reply may come first
@@ -149,8 +170,8 @@ void CloudLink::Send(const OutgoingFrame& frame) {
   }
   stats_->NotSent(s);
   if (s.code() == absl::StatusCode::kInvalidArgument) {
-    ROS_ERROR_THROTTLE(5, "cloudcast: frame refused by the client library: %s",
-                       std::string(s.message()).c_str());
+    LogThrottled(kRefused, LogLevel::kError,
+                 absl::StrCat("frame refused by the client library: ", s.message()));
     return;
   }
   // The call has ended (a non-resilient stream lost its connection, or a resilient one gave up).
@@ -160,8 +181,8 @@ void CloudLink::Send(const OutgoingFrame& frame) {
 void CloudLink::OnResult(client::Result&& result) {
   if (result.config_rejected) {
     stats_->Reply(result);
-    ROS_ERROR("cloudcast: the server refused the stream config: %s",
-              std::string(result.status.message()).c_str());
+    log_(LogLevel::kError,
+         absl::StrCat("the server refused the stream config: ", result.status.message()));
     return;
   }
   if (result.fate == client::FrameFate::kReplaced || result.fate == client::FrameFate::kDropped) {
@@ -189,14 +210,14 @@ void CloudLink::OnResult(client::Result&& result) {
   stats_->StreamDropped(result.frames_dropped + result.frames_replaced);
   stats_->Reply(result);
   if (!result.ok()) {
-    ROS_WARN_THROTTLE(5, "cloudcast: frame %llu: %s",
-                      static_cast<unsigned long long>(result.sequence),
-                      std::string(result.status.message()).c_str());
+    LogThrottled(kFrameFailed, LogLevel::kWarn,
+                 absl::StrCat("frame ", result.sequence, ": ", result.status.message()));
     return;
   }
   if (!known) {
-    ROS_WARN_THROTTLE(5, "cloudcast: a reply for frame %llu, which this bridge did not send",
-                      static_cast<unsigned long long>(result.sequence));
+    LogThrottled(kUnknownReply, LogLevel::kWarn,
+                 absl::StrCat("a reply for frame ", result.sequence,
+                              ", which this bridge did not send"));
     return;
   }
   on_cloud_(std::move(result), sent);
