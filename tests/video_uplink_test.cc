@@ -408,6 +408,17 @@ TEST_F(VideoUplinkTest, FrameEncoderAnswersAKeyframeRequestWithAnIdr) {
                                  absl::StatusCode::kOk));
   EXPECT_EQ(encoder.keyframes_sent(), 2u);
   EXPECT_EQ(encoder.keyframes_requested(), 1u);
+  // A frame the server skipped under DELIVERY_LATEST decoded all the same: no IDR for it. One
+  // replaced before it was sent left a gap: an IDR.
+  client::Result skipped;
+  skipped.sequence = 5;
+  skipped.status = absl::AbortedError("skipped");
+  skipped.fate = client::FrameFate::kDropped;
+  encoder.OnResult(skipped);
+  EXPECT_EQ(encoder.keyframes_requested(), 1u);
+  skipped.fate = client::FrameFate::kReplaced;
+  encoder.OnResult(skipped);
+  EXPECT_EQ(encoder.keyframes_requested(), 2u);
 }
 
 // An IDR whose sequence header claims 16384 x 16384: RESOURCE_EXHAUSTED naming the SPS field, from

@@ -99,6 +99,7 @@ absl::Status FrameEncoder::EncodePicture(const ColorView& view, const char* fiel
 
 absl::StatusOr<client::FrameInput> FrameEncoder::Encode(const client::FrameInput& input,
                                                         std::uint64_t sequence) {
+  std::lock_guard<std::mutex> lock(mu_);
   last_bytes_ = 0;
   const auto encode = [&](const client::ColorInput& image, const char* field, bool stereo,
                           std::unique_ptr<Bitstream>* b,
@@ -137,6 +138,7 @@ absl::StatusOr<client::FrameInput> FrameEncoder::Encode(const client::FrameInput
 }
 
 void FrameEncoder::OnResult(const client::Result& result) {
+  std::lock_guard<std::mutex> lock(mu_);
   const auto request = [&](std::unique_ptr<Bitstream>& b) {
     if (b != nullptr && b->Request(result.sequence)) ++keyframes_requested_;
   };
@@ -151,15 +153,38 @@ void FrameEncoder::OnResult(const client::Result& result) {
   // (FrameError.keyframe_needed does not reach a Result): an IDR costs bytes, a missing one
   // costs every frame until the next periodic IDR.
   if (result.config_rejected) return;
+  // Skipped by the server under DELIVERY_LATEST: its pictures were decoded all the same (the
+  // server decodes every picture it receives). Lost with a call the resilient stream replaced:
+  // the new call's decoders ask for an IDR themselves.
+  if (result.fate == client::FrameFate::kDropped) return;
   request(colour_);
   request(right_);
 }
 
 void FrameEncoder::RequestKeyframe() {
+  std::lock_guard<std::mutex> lock(mu_);
   if (colour_ != nullptr) colour_->force_idr = true;
   if (right_ != nullptr) right_->force_idr = true;
 }
 
-void FrameEncoder::SetBitrate(std::int64_t bits_per_second) { bitrate_bps_ = bits_per_second; }
+void FrameEncoder::SetBitrate(std::int64_t bits_per_second) {
+  std::lock_guard<std::mutex> lock(mu_);
+  bitrate_bps_ = bits_per_second;
+}
+
+std::uint64_t FrameEncoder::keyframes_sent() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return keyframes_sent_;
+}
+
+std::uint64_t FrameEncoder::keyframes_requested() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return keyframes_requested_;
+}
+
+std::uint64_t FrameEncoder::last_bytes() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return last_bytes_;
+}
 
 }  // namespace cloudcast::video

@@ -15,6 +15,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <string_view>
 
@@ -43,6 +44,8 @@ struct FrameEncoderOptions {
 // "h264" (the --encoding flags' name for this).
 inline constexpr std::string_view kH264 = "h264";
 
+// Encode on one thread; OnResult, RequestKeyframe and SetBitrate from any (a receiving thread):
+// they wait for an Encode in progress.
 class FrameEncoder {
  public:
   explicit FrameEncoder(FrameEncoderOptions options);
@@ -61,19 +64,20 @@ class FrameEncoder {
 
   // A reply: its keyframe_needed makes the next picture of each bitstream named an IDR, unless one
   // was sent since the frame it answers. A frame the server refused (a FrameError, whose own
-  // keyframe_needed a Result does not carry), or that never got an answer (lost, or replaced
-  // unsent) gets an IDR on every bitstream, under the same rule: its picture may never have
-  // reached a decoder.
+  // keyframe_needed a Result does not carry), or that never reached the server (replaced before
+  // it was sent, or lost or unsent when its stream ended) gets an IDR on every bitstream, under
+  // the same rule. A frame the server skipped (kDropped) asks for nothing: it decoded its
+  // pictures all the same.
   void OnResult(const client::Result& result);
   // The next frame's pictures are IDRs (a late joiner, a new stream after a reconnect).
   void RequestKeyframe();
   // The bitrate from the next frame on, for both views together (a rate controller's).
   void SetBitrate(std::int64_t bits_per_second);
 
-  std::uint64_t keyframes_sent() const { return keyframes_sent_; }
-  std::uint64_t keyframes_requested() const { return keyframes_requested_; }  // honoured ones
+  std::uint64_t keyframes_sent() const;
+  std::uint64_t keyframes_requested() const;  // honoured ones
   // The access unit bytes of the last frame (both views).
-  std::uint64_t last_bytes() const { return last_bytes_; }
+  std::uint64_t last_bytes() const;
 
  private:
   struct Bitstream;
@@ -81,6 +85,7 @@ class FrameEncoder {
                              Bitstream* b, v1::VideoPicture* out);
 
   const FrameEncoderOptions options_;
+  mutable std::mutex mu_;  // everything below
   std::unique_ptr<Bitstream> colour_, right_;
   v1::VideoPicture colour_picture_, right_picture_;
   std::int64_t bitrate_bps_ = 0;  // a pending SetBitrate, 0: none
