@@ -568,6 +568,7 @@ TEST_F(ClientProgramTest, HelpDocumentsEveryFlagWithDefaults) {
                            "--h264-keyframe-interval",
                            "--h264-threads",
                            "--h264-444",
+                           "--h264-grey",
                            "--h264-separate-stereo",
                            "--focal",
                            "--baseline",

@@ -4,6 +4,7 @@
 #include <variant>
 
 #include "absl/strings/str_cat.h"
+#include "cloudcast/stereo/grey.h"
 
 namespace cloudcast::video {
 
@@ -106,6 +107,11 @@ absl::StatusOr<client::FrameInput> FrameEncoder::Encode(const client::FrameInput
                           v1::VideoPicture* out) -> absl::StatusOr<client::ColorInput> {
     auto view = RawColour(image, field);
     if (!view.ok()) return view.status();
+    if (options_.grey && view->encoding != ColorEncoding::kMono8) {
+      OwnedColor* grey = out == &right_picture_ ? &grey_right_ : &grey_colour_;
+      if (absl::Status s = stereo::ToGrey(*view, grey, field); !s.ok()) return s;
+      *view = grey->view();
+    }
     if (*b == nullptr) *b = std::make_unique<Bitstream>();
     if (absl::Status s = EncodePicture(*view, field, stereo, b->get(), out); !s.ok()) return s;
     if (out->keyframe()) {

@@ -102,6 +102,7 @@ struct Flags {
   int h264_threads = 1;
   bool h264_444 = false;
   bool h264_separate_stereo = false;
+  bool h264_grey = false;
 
   // TLS and the bearer token (cli::ConnectionFlags), read after parsing.
   client::ChannelSecurity security;
@@ -268,6 +269,10 @@ std::unique_ptr<cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
   app.add_flag("--h264-444", f.h264_444,
                "Colour as 4:4:4 with --encoding h264 (4:2:0 alone caps colour near 28-39 dB "
                "PSNR; docs/video.md)")
+      ->group(streaming);
+  app.add_flag("--h264-grey", f.h264_grey,
+               "Images coded grey with --encoding h264 (4:0:0: what stereo matching reads, in "
+               "fewer bits; the points are grey)")
       ->group(streaming);
   app.add_flag("--h264-separate-stereo", f.h264_separate_stereo,
                "A bitstream per view of a stereo pair with --encoding h264, instead of the right "
@@ -581,6 +586,7 @@ int Run(const Flags& f, const cli::StageFlags& stages) {
     v.encoder.threads = f.h264_threads;
     v.colour_kind = f.h264_444 ? video::PictureKind::kColour444 : video::PictureKind::kColour;
     v.interleave_stereo = !f.h264_separate_stereo;
+    v.grey = f.h264_grey;
     options.video = v;
   }
 

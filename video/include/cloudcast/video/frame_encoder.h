@@ -23,6 +23,7 @@
 #include "absl/status/statusor.h"
 #include "cloudcast/client/frame.h"
 #include "cloudcast/client/result.h"
+#include "cloudcast/io/image_io.h"
 #include "cloudcast/v1/cloudcast.pb.h"
 #include "cloudcast/video/encoder.h"
 
@@ -39,6 +40,10 @@ struct FrameEncoderOptions {
   // (VIDEO_LAYOUT_INTERLEAVED, with two reference frames), the layout docs/video.md measured
   // best; false: a bitstream per view.
   bool interleave_stereo = true;
+  // Every image coded grey (4:0:0, luma as the server's matchers compute it): what a stereo
+  // pair's matching reads, in fewer bits than colour (docs/video.md measures pairs so); the
+  // points' colours are then grey.
+  bool grey = false;
 };
 
 // "h264" (the --encoding flags' name for this).
@@ -88,6 +93,7 @@ class FrameEncoder {
   mutable std::mutex mu_;  // everything below
   std::unique_ptr<Bitstream> colour_, right_;
   v1::VideoPicture colour_picture_, right_picture_;
+  OwnedColor grey_colour_, grey_right_;  // options.grey: the images converted
   std::int64_t bitrate_bps_ = 0;  // a pending SetBitrate, 0: none
   std::uint64_t keyframes_sent_ = 0;
   std::uint64_t keyframes_requested_ = 0;
