@@ -246,6 +246,29 @@ TEST_F(VideoUplinkTest, StereoPairsOverH264MatchCloseToLossless) {
   EXPECT_GT(video_score.Density(), lossless_score.Density() - 0.02);
 }
 
+// A Process call is a stream of one frame: an IDR decodes, a P picture has no reference.
+TEST_F(VideoUplinkTest, ProcessCallsDecodeAnIdrAndRefuseAPicture) {
+  const std::uint32_t w = 160, h = 120;
+  const v1::StreamConfig config = client::MakeStreamConfig(DisparityOptions());
+  video::FrameEncoderOptions eo;
+  eo.encoder = EncoderFor(video::PictureKind::kColour, w, h);
+  video::FrameEncoder encoder(eo);
+  for (int t = 0; t < 2; ++t) {
+    const SyntheticFrame f = MakeFrame(w, h, t);
+    auto coded = encoder.Encode(client::DisparityFrame{f.disparity.view(), f.colour.view()}, t);
+    ASSERT_TRUE(coded.ok()) << coded.status();
+    absl::StatusOr<client::Result> r = client_->Process(*coded, config);
+    if (t == 0) {
+      ASSERT_TRUE(r.ok()) << r.status();
+      EXPECT_GT(r->cloud.size(), 100u);
+    } else {
+      ASSERT_FALSE(r.ok());
+      EXPECT_EQ(r.status().code(), absl::StatusCode::kFailedPrecondition);
+      EXPECT_THAT(std::string(r.status().message()), HasSubstr("frame.color.video.access_unit"));
+    }
+  }
+}
+
 // The proto level, to see FrameError.keyframe_needed: frames of raw disparity and H.264 colour
 // written on a Stream call by hand.
 class VideoStreamCall {
