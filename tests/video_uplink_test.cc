@@ -8,8 +8,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
-#include <cstdio>
 #include <cstdint>
+#include <cstdio>
 #include <memory>
 #include <string>
 #include <vector>
@@ -162,10 +162,11 @@ TEST_F(VideoUplinkTest, ColourOverH264IsWithinABoundOfTheLosslessPath) {
   EXPECT_TRUE((*video)->Finish().ok());
   EXPECT_EQ(encoder.keyframes_sent(), 1u);  // the first picture only: nothing was lost
   const double mean = abs_error / static_cast<double>(samples);
-  std::printf("colour over H.264: %.3f mean, %d worst channel error; %llu video bytes for %llu "
-              "raw colour bytes\n",
-              mean, worst, static_cast<unsigned long long>(video_bytes),
-              static_cast<unsigned long long>(raw_bytes));
+  std::printf(
+      "colour over H.264: %.3f mean, %d worst channel error; %llu video bytes for %llu "
+      "raw colour bytes\n",
+      mean, worst, static_cast<unsigned long long>(video_bytes),
+      static_cast<unsigned long long>(raw_bytes));
   EXPECT_LT(mean, 4.0);
   EXPECT_LT(worst, 48);
   EXPECT_LT(video_bytes * 10, raw_bytes);
@@ -193,7 +194,7 @@ TEST_F(VideoUplinkTest, StereoPairsOverH264MatchCloseToLossless) {
   eo.encoder.preset = "superfast";
   eo.encoder.crf = 2;
   eo.encoder.bitrate_bps = 8'000'000;  // docs/video.md: +0.18 points at 6.8 Mbit/s
-  eo.grey = true;  // the colour pairs coded as the matcher reads them
+  eo.grey = true;                      // the colour pairs coded as the matcher reads them
   video::FrameEncoder encoder(eo);
   std::uint64_t video_bytes = 0;
   stereo::DisparityScore lossless_score, video_score;
@@ -208,9 +209,8 @@ TEST_F(VideoUplinkTest, StereoPairsOverH264MatchCloseToLossless) {
     auto coded = encoder.Encode(raw, sequence);
     ASSERT_TRUE(coded.ok()) << coded.status();
     video_bytes += encoder.last_bytes();
-    const auto& picture = *std::get<client::PrecodedVideo>(
-                               std::get<client::StereoFrame>(*coded).right)
-                               .message;
+    const auto& picture =
+        *std::get<client::PrecodedVideo>(std::get<client::StereoFrame>(*coded).right).message;
     EXPECT_EQ(picture.layout(), v1::VIDEO_LAYOUT_INTERLEAVED);
     ASSERT_TRUE((*lossless)->Send(raw, meta).ok());
     ASSERT_TRUE((*video)->Send(*coded, meta).ok());
@@ -231,8 +231,9 @@ TEST_F(VideoUplinkTest, StereoPairsOverH264MatchCloseToLossless) {
       stereo::DisparityMap16 map;
       map.width = d.width;
       map.height = d.height;
-      map.values.assign(static_cast<const std::uint16_t*>(d.data),
-                        static_cast<const std::uint16_t*>(d.data) + std::size_t{d.width} * d.height);
+      map.values.assign(
+          static_cast<const std::uint16_t*>(d.data),
+          static_cast<const std::uint16_t*>(d.data) + std::size_t{d.width} * d.height);
       auto& score = s == &*lossless ? lossless_score : video_score;
       ASSERT_TRUE(score.Add(map, pair.truth.view()).ok());
     }
@@ -322,9 +323,9 @@ class ColourVideo {
     EXPECT_TRUE(encoder_->Encode(f.colour.view(), control, "colour", &picture).ok());
     v1::Frame frame;
     frame.set_sequence(static_cast<std::uint64_t>(t));
-    EXPECT_TRUE(convert::ToProto(f.disparity.view(), "disparity",
-                                 frame.mutable_disparity()->mutable_raw())
-                    .ok());
+    EXPECT_TRUE(
+        convert::ToProto(f.disparity.view(), "disparity", frame.mutable_disparity()->mutable_raw())
+            .ok());
     v1::VideoPicture* v = frame.mutable_color()->mutable_video();
     v->set_codec(v1::VIDEO_CODEC_H264);
     v->set_width(w_);
@@ -429,9 +430,9 @@ TEST_F(VideoUplinkTest, FrameEncoderAnswersAKeyframeRequestWithAnIdr) {
   }
   EXPECT_TRUE((*stream)->Finish().ok());
   // t = 0 decodes, t = 2 is refused (a gap), t = 3 is the IDR the refusal asked for.
-  EXPECT_THAT(codes, ElementsAre(absl::StatusCode::kOk, absl::StatusCode::kFailedPrecondition,
-                                 absl::StatusCode::kOk, absl::StatusCode::kOk,
-                                 absl::StatusCode::kOk));
+  EXPECT_THAT(codes,
+              ElementsAre(absl::StatusCode::kOk, absl::StatusCode::kFailedPrecondition,
+                          absl::StatusCode::kOk, absl::StatusCode::kOk, absl::StatusCode::kOk));
   EXPECT_EQ(encoder.keyframes_sent(), 2u);
   EXPECT_EQ(encoder.keyframes_requested(), 1u);
   // A frame the server skipped under DELIVERY_LATEST decoded all the same: no IDR for it. One
@@ -458,7 +459,8 @@ TEST_F(VideoUplinkTest, HostileSequenceHeaderIsRefusedBeforeAllocation) {
   ASSERT_TRUE(info.ok()) << info.status();
   std::string forged = testing::Sps(1024, 1024);
   for (const video::NalUnit& n : info->nals) {
-    if (n.type != video::kNalSps) forged += std::string("\x00\x00\x00\x01", 4) + std::string(n.bytes);
+    if (n.type != video::kNalSps)
+      forged += std::string("\x00\x00\x00\x01", 4) + std::string(n.bytes);
   }
   hostile.mutable_color()->mutable_video()->set_access_unit(forged);
   v1::StreamReply r = call.Exchange(hostile);

@@ -11,6 +11,13 @@
 namespace cloudcast::server {
 namespace {
 
+// The bitstreams that need an IDR, as they stood after this frame's pictures, on its reply.
+template <typename Reply>
+void SetKeyframeNeeded(const DecodedVideo& video, Reply* reply) {
+  reply->clear_keyframe_needed();
+  for (v1::VideoBitstream b : video.keyframe_needed) reply->add_keyframe_needed(b);
+}
+
 grpc::Status Draining() {
   return grpc::Status(grpc::StatusCode::UNAVAILABLE,
                       "the server is shutting down; frames received before were answered");
@@ -285,13 +292,6 @@ void StreamReactor::DecodeVideo(Job* job) {
   job->video_status = video_->Decode(job->request.frame(), &job->video);
 }
 
-// The bitstreams that need an IDR, as they stood after this frame's pictures, on its reply.
-template <typename Reply>
-void SetKeyframeNeeded(const DecodedVideo& video, Reply* reply) {
-  reply->clear_keyframe_needed();
-  for (v1::VideoBitstream b : video.keyframe_needed) reply->add_keyframe_needed(b);
-}
-
 // Frees the request's pixels now (so a free slot costs no memory) and keeps the reply's cloud
 // buffer for the next frame.
 void StreamReactor::Release(Job* job) {
@@ -351,6 +351,7 @@ void StreamReactor::AcceptFrame(Job* job, std::size_t bytes) {
     FillError(charge.status(), v1::ERROR_KIND_FRAME, sequence, frame_id,
               job->reply.mutable_error());
     SetKeyframeNeeded(job->video, job->reply.mutable_error());
+    job->video = DecodedVideo{};  // its pictures are not needed while the error waits
     queue_.PushReply(job);
     services_.streams->NoteQueued(queue_.held());
     return;

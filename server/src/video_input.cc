@@ -51,9 +51,9 @@ namespace {
 absl::Status CheckPicture(const v1::VideoPicture& p, const std::string& field,
                           const Limits& limits) {
   if (p.codec() != v1::VIDEO_CODEC_H264) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        field, ".codec is ", v1::VideoCodec_Name(p.codec()),
-        ": this server decodes VIDEO_CODEC_H264 (ServerInfo.video_codecs)"));
+    return absl::InvalidArgumentError(
+        absl::StrCat(field, ".codec is ", v1::VideoCodec_Name(p.codec()),
+                     ": this server decodes VIDEO_CODEC_H264 (ServerInfo.video_codecs)"));
   }
   if (absl::Status s = check::ImageSize(field, p.width(), p.height(), limits); !s.ok()) return s;
   if (p.access_unit().empty()) {
@@ -77,9 +77,8 @@ void CopyPicture(const ColorView& view, OwnedColor* out) {
 
 }  // namespace
 
-absl::Status VideoDecoders::DecodePicture(const v1::VideoPicture& picture,
-                                          const std::string& field, Bitstream* b,
-                                          OwnedColor* out) {
+absl::Status VideoDecoders::DecodePicture(const v1::VideoPicture& picture, const std::string& field,
+                                          Bitstream* b, OwnedColor* out) {
   // A jump in the numbering: pictures were lost before this one, and it may reference them.
   const bool gap = b->next_index.has_value() && picture.picture_index() != *b->next_index;
   b->next_index = picture.picture_index() + 1;
@@ -98,9 +97,9 @@ absl::Status VideoDecoders::DecodePicture(const v1::VideoPicture& picture,
   }
   if (info->idr != picture.keyframe()) {
     b->Lost();
-    return absl::InvalidArgumentError(absl::StrCat(
-        field, ".keyframe is ", picture.keyframe() ? "true" : "false", " but the access unit ",
-        info->idr ? "is" : "is not", " an IDR picture"));
+    return absl::InvalidArgumentError(
+        absl::StrCat(field, ".keyframe is ", picture.keyframe() ? "true" : "false",
+                     " but the access unit ", info->idr ? "is" : "is not", " an IDR picture"));
   }
   if (b->decoder == nullptr) {
     if (!info->idr) {

@@ -34,9 +34,10 @@ namespace {
 
 absl::StatusOr<ColorView> RawColour(const client::ColorInput& input, const char* field) {
   if (const auto* view = std::get_if<ColorView>(&input)) return *view;
-  return absl::InvalidArgumentError(absl::StrCat(
-      field, ": video encoding takes raw pixels (a ColorView of BGR8, RGB8, RGBA8 or MONO8), "
-             "not a file, a compressed or a BGRA image"));
+  return absl::InvalidArgumentError(
+      absl::StrCat(field,
+                   ": video encoding takes raw pixels (a ColorView of BGR8, RGB8, RGBA8 or MONO8), "
+                   "not a file, a compressed or a BGRA image"));
 }
 
 }  // namespace
@@ -134,8 +135,8 @@ absl::StatusOr<client::FrameInput> FrameEncoder::Encode(const client::FrameInput
     auto left = encode(pair.left, "left", true, &colour_, &colour_picture_);
     if (!left.ok()) return left.status();
     // Interleaved, the right view is the next picture of the left's bitstream.
-    auto right = encode(pair.right, "right", true,
-                        options_.interleave_stereo ? &colour_ : &right_, &right_picture_);
+    auto right = encode(pair.right, "right", true, options_.interleave_stereo ? &colour_ : &right_,
+                        &right_picture_);
     if (!right.ok()) return right.status();
     result = client::FrameInput(client::StereoFrame{*std::move(left), *std::move(right)});
   }

@@ -86,15 +86,15 @@ class FrameEncoder {
 
  private:
   struct Bitstream;
-  absl::Status EncodePicture(const ColorView& view, const char* field, bool stereo,
-                             Bitstream* b, v1::VideoPicture* out);
+  absl::Status EncodePicture(const ColorView& view, const char* field, bool stereo, Bitstream* b,
+                             v1::VideoPicture* out);
 
   const FrameEncoderOptions options_;
   mutable std::mutex mu_;  // everything below
   std::unique_ptr<Bitstream> colour_, right_;
   v1::VideoPicture colour_picture_, right_picture_;
   OwnedColor grey_colour_, grey_right_;  // options.grey: the images converted
-  std::int64_t bitrate_bps_ = 0;  // a pending SetBitrate, 0: none
+  std::int64_t bitrate_bps_ = 0;         // a pending SetBitrate, 0: none
   std::uint64_t keyframes_sent_ = 0;
   std::uint64_t keyframes_requested_ = 0;
   std::uint64_t last_bytes_ = 0;
