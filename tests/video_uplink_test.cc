@@ -448,6 +448,87 @@ TEST_F(VideoUplinkTest, FrameEncoderAnswersAKeyframeRequestWithAnIdr) {
   EXPECT_EQ(encoder.keyframes_requested(), 2u);
 }
 
+// A stereo pair as two bitstreams (VIDEO_LAYOUT_OWN for both views): a right picture lost costs
+// the right bitstream alone an IDR (keyframe_needed names it only), the left keeps decoding; and
+// an interleaved right view needs a left view that is video.
+TEST_F(VideoUplinkTest, SeparateStereoBitstreamsRecoverOneByOne) {
+  const std::uint32_t w = 160, h = 120;
+  PipelineOptions options = DisparityOptions();
+  options.camera.fx = options.camera.fy = 200;
+  StereoParams params;
+  params.num_disparities = 32;
+  v1::StreamConfig config = AllFrames(client::MakeStreamConfig(options));
+  convert::SetStereo(params, &config);
+  VideoStreamCall call(shared_target(), config);
+  auto left_encoder = video::Encoder::Make(EncoderFor(video::PictureKind::kGrey, w, h));
+  auto right_encoder = video::Encoder::Make(EncoderFor(video::PictureKind::kGrey, w, h));
+  ASSERT_TRUE(left_encoder.ok() && right_encoder.ok());
+  const auto picture = [&](video::Encoder* e, int t, int shift, bool idr, v1::VideoPicture* out) {
+    OwnedColor grey;
+    grey.width = w;
+    grey.height = h;
+    grey.encoding = ColorEncoding::kMono8;
+    grey.pixels.resize(std::size_t{w} * h);
+    for (std::uint32_t v = 0; v < h; ++v) {
+      for (std::uint32_t u = 0; u < w; ++u) {
+        const double x = u + shift + 2.0 * t;
+        grey.pixels[v * w + u] =
+            static_cast<std::uint8_t>(128 + 60 * std::sin(x * 0.21) * std::cos(v * 0.17) +
+                                      50 * std::sin(x * 0.05 + v * 0.09));
+      }
+    }
+    video::FrameControl control;
+    control.keyframe = idr;
+    video::EncodedPicture p;
+    ASSERT_TRUE(e->Encode(grey.view(), control, "grey", &p).ok());
+    out->set_codec(v1::VIDEO_CODEC_H264);
+    out->set_width(w);
+    out->set_height(h);
+    out->set_access_unit(p.bytes);
+    out->set_keyframe(p.keyframe);
+    out->set_picture_index(static_cast<std::uint64_t>(p.index));
+  };
+  // Frame t: the left view, and the right view (the scene 12 px to the left); `send_right`
+  // false: its picture is made and lost.
+  const auto frame = [&](int t, bool left_idr, bool right_idr) {
+    v1::Frame f;
+    f.set_sequence(static_cast<std::uint64_t>(t));
+    picture(left_encoder->get(), t, 0, left_idr, f.mutable_color()->mutable_video());
+    picture(right_encoder->get(), t, 12, right_idr, f.mutable_right()->mutable_video());
+    return f;
+  };
+  for (int t = 0; t < 2; ++t) {
+    const v1::StreamReply r = call.Exchange(frame(t, t == 0, t == 0));
+    ASSERT_TRUE(r.has_cloud()) << r.error().message();
+    EXPECT_GT(r.cloud().point_count(), 100u);
+  }
+  frame(2, false, false);  // lost on the way, both views
+  // Frame 3: the left view an IDR, the right one not: only the right bitstream is stuck.
+  v1::StreamReply r = call.Exchange(frame(3, true, false));
+  ASSERT_TRUE(r.has_error());
+  EXPECT_EQ(r.error().code(), static_cast<int>(grpc::StatusCode::FAILED_PRECONDITION));
+  EXPECT_EQ(FieldOf(r), "frame.right.video.access_unit");
+  EXPECT_THAT(r.error().keyframe_needed(), ElementsAre(v1::VIDEO_BITSTREAM_RIGHT));
+  // Frame 4: the left a P picture (its bitstream decoded frame 3), the right an IDR.
+  r = call.Exchange(frame(4, false, true));
+  ASSERT_TRUE(r.has_cloud()) << r.error().message();
+  EXPECT_THAT(r.cloud().keyframe_needed(), IsEmpty());
+  EXPECT_GT(r.cloud().point_count(), 100u);
+  // An interleaved right view whose left is raw pixels.
+  v1::Frame odd = frame(5, false, false);
+  odd.mutable_right()->mutable_video()->set_layout(v1::VIDEO_LAYOUT_INTERLEAVED);
+  OwnedColor raw;
+  raw.width = w;
+  raw.height = h;
+  raw.encoding = ColorEncoding::kMono8;
+  raw.pixels.assign(std::size_t{w} * h, 100);
+  ASSERT_TRUE(convert::ToProto(raw.view(), "left", odd.mutable_color()->mutable_raw()).ok());
+  r = call.Exchange(odd);
+  ASSERT_TRUE(r.has_error());
+  EXPECT_EQ(FieldOf(r), "frame.right.video.layout");
+  EXPECT_TRUE(call.Finish().ok());
+}
+
 // An IDR whose sequence header claims 16384 x 16384: RESOURCE_EXHAUSTED naming the SPS field, from
 // our parser, before any decoder exists or is charged for (video_codec_test checks the charge), and
 // the stream goes on with a real IDR.
