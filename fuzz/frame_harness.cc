@@ -82,7 +82,29 @@ void FrameHarness::RunFrame(const v1::Frame& frame, const server::InPlacePixels*
   const server::Arrival arrival{std::chrono::steady_clock::now(), 0};
   reply_.Clear();
   v1::CloudReply* cloud = reply_.mutable_cloud();
-  const absl::Status status = runner_.Run(0, frame, in_place, settings, arrival, cloud);
+  absl::Status status;
+  const bool video = server::VideoDecoders::HasVideo(frame);
+  if (video) {
+    std::int64_t charged = 0;
+    {
+      server::VideoDecoders decoders(
+          settings.pipeline.limits,
+          [&charged](std::uint64_t bytes) {
+            charged += static_cast<std::int64_t>(bytes);
+            return absl::OkStatus();
+          },
+          [&charged](std::uint64_t bytes) { charged -= static_cast<std::int64_t>(bytes); });
+      status = decoders.Decode(frame, &video_);
+    }
+    if (charged != 0) {
+      std::fprintf(stderr, "the video decoders gave back %lld bytes fewer than they took\n",
+                   static_cast<long long>(charged));
+      std::abort();
+    }
+  }
+  if (status.ok()) {
+    status = runner_.Run(0, frame, in_place, settings, arrival, cloud, video ? &video_ : nullptr);
+  }
   if (status.ok()) {
     if (absl::Status d = DecodeDraco(cloud->draco(), &decoded_); !d.ok()) {
       std::fprintf(stderr, "the server's own cloud does not decode: %s\n",

@@ -15,6 +15,7 @@
 #include "frame_processor.h"
 #include "metrics.h"
 #include "request_reader.h"
+#include "video_input.h"
 
 namespace cloudcast::fuzz {
 
@@ -38,7 +39,10 @@ class FrameHarness {
   const convert::StreamSettings& defaults() const { return defaults_; }
 
   // What a worker does with a frame (StreamReactor::Work, Process): FrameRunner::Run into a
-  // CloudReply, a FrameError on failure, then the reply serialized. A cloud that was produced
+  // CloudReply, a FrameError on failure, then the reply serialized. A frame with video pictures
+  // has them decoded first, as a stream's reading path does (VideoDecoders, fresh for each
+  // frame: a one-picture stream, so that an input replays alike), charged to a budget that must
+  // be whole again once the decoders are gone. A cloud that was produced
   // must decode with libdraco to point_count points (the server's own output: anything else
   // aborts, so the fuzzer reports it).
   void RunFrame(const v1::Frame& frame, const server::InPlacePixels* in_place,
@@ -49,6 +53,7 @@ class FrameHarness {
   server::FrameRunner runner_;
   convert::StreamSettings defaults_;
   v1::StreamReply reply_;  // kept, as a stream keeps its reply buffers
+  server::DecodedVideo video_;
   PointCloud decoded_;
 };
 

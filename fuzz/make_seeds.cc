@@ -254,6 +254,46 @@ v1::StreamConfig FullConfig() {
   return c;
 }
 
+// A short real H.264 stream (x264, 64x48) in fuzz-video-decode's framing: a flag byte, then each
+// access unit after its 2-byte big-endian length.
+std::string SeedStream(video::PictureKind kind, int frames, int idr_at, int skip_first,
+                       std::uint8_t flags) {
+  video::EncoderOptions o;
+  o.kind = kind;
+  o.width = 64;
+  o.height = 48;
+  o.crf = 30;
+  o.bitrate_bps = 0;
+  auto enc = video::Encoder::Make(o);
+  Check(enc.status());
+  std::string out(1, static_cast<char>(flags));
+  for (int f = 0; f < frames; ++f) {
+    cv::Mat img =
+        kind == video::PictureKind::kGrey ? cv::Mat(48, 64, CV_8UC1) : cv::Mat(48, 64, CV_8UC3);
+    for (int v = 0; v < 48; ++v) {
+      for (int u = 0; u < 64 * img.channels(); ++u) {
+        img.ptr<std::uint8_t>(v)[u] = static_cast<std::uint8_t>((u * 7 + v * 5 + f * 3) ^ (u * v));
+      }
+    }
+    ColorView view;
+    view.data = img.data;
+    view.size_bytes = img.total() * img.elemSize();
+    view.width = 64;
+    view.height = 48;
+    view.stride_bytes = img.step;
+    view.encoding = img.channels() == 1 ? ColorEncoding::kMono8 : ColorEncoding::kBGR8;
+    video::FrameControl control;
+    control.keyframe = f == idr_at;
+    video::EncodedPicture pic;
+    Check((*enc)->Encode(view, control, "seed", &pic));
+    if (f < skip_first) continue;
+    out.push_back(static_cast<char>(pic.bytes.size() >> 8));
+    out.push_back(static_cast<char>(pic.bytes.size() & 0xFF));
+    out += pic.bytes;
+  }
+  return out;
+}
+
 void StreamSeeds() {
   const std::string h = "stream_request";
   v1::StreamRequest r;
@@ -276,6 +316,27 @@ void StreamSeeds() {
   r.Clear();
   *r.mutable_config() = StereoConfig(v1::STEREO_MATCHER_SGM);
   Write(h, "config_stereo", r.SerializeAsString());
+  // A disparity map with its colour as a video IDR (64x48, 4:2:0): the reading path's decoder.
+  r.Clear();
+  v1::Frame* f = r.mutable_frame();
+  f->set_sequence(1);
+  cv::Mat d(48, 64, CV_8UC1);
+  for (int v = 0; v < 48; ++v) {
+    for (int u = 0; u < 64; ++u)
+      d.at<std::uint8_t>(v, u) = static_cast<std::uint8_t>(20 + (v * 64 + u) % 40);
+  }
+  Check(convert::ToProto(View(d, DisparityEncoding::kU8), "d",
+                         f->mutable_disparity()->mutable_raw()));
+  const std::string idr_stream = SeedStream(video::PictureKind::kColour, 1, -1, 0, 1);
+  const std::size_t length =
+      static_cast<std::uint8_t>(idr_stream[1]) << 8 | static_cast<std::uint8_t>(idr_stream[2]);
+  v1::VideoPicture* picture = f->mutable_color()->mutable_video();
+  picture->set_codec(v1::VIDEO_CODEC_H264);
+  picture->set_width(64);
+  picture->set_height(48);
+  picture->set_access_unit(idr_stream.substr(3, length));
+  picture->set_keyframe(true);
+  Write(h, "frame_video_colour_idr", r.SerializeAsString());
 }
 
 void ProcessSeeds() {
@@ -545,48 +606,13 @@ void CloudFileSeeds() {
 // then each access unit after its 2-byte big-endian length. Grey, colour 4:2:0 and 4:4:4, an IDR
 // asked for mid-stream, one starting without its IDR, and one with a gap.
 void VideoSeeds() {
-  auto stream = [](video::PictureKind kind, int frames, int idr_at, int skip_first,
-                   std::uint8_t flags) {
-    video::EncoderOptions o;
-    o.kind = kind;
-    o.width = 64;
-    o.height = 48;
-    o.crf = 30;
-    o.bitrate_bps = 0;
-    auto enc = video::Encoder::Make(o);
-    Check(enc.status());
-    std::string out(1, static_cast<char>(flags));
-    for (int f = 0; f < frames; ++f) {
-      cv::Mat img = kind == video::PictureKind::kGrey ? cv::Mat(48, 64, CV_8UC1)
-                                                      : cv::Mat(48, 64, CV_8UC3);
-      for (int v = 0; v < 48; ++v) {
-        for (int u = 0; u < 64 * img.channels(); ++u) {
-          img.ptr<std::uint8_t>(v)[u] = static_cast<std::uint8_t>((u * 7 + v * 5 + f * 3) ^ (u * v));
-        }
-      }
-      ColorView view;
-      view.data = img.data;
-      view.size_bytes = img.total() * img.elemSize();
-      view.width = 64;
-      view.height = 48;
-      view.stride_bytes = img.step;
-      view.encoding = img.channels() == 1 ? ColorEncoding::kMono8 : ColorEncoding::kBGR8;
-      video::FrameControl control;
-      control.keyframe = f == idr_at;
-      video::EncodedPicture pic;
-      Check((*enc)->Encode(view, control, "seed", &pic));
-      if (f < skip_first) continue;
-      out.push_back(static_cast<char>(pic.bytes.size() >> 8));
-      out.push_back(static_cast<char>(pic.bytes.size() & 0xFF));
-      out += pic.bytes;
-    }
-    return out;
-  };
-  Write("video_decode", "grey_4_frames", stream(video::PictureKind::kGrey, 4, -1, 0, 0));
-  Write("video_decode", "colour420_bgr_idr_at_2", stream(video::PictureKind::kColour, 4, 2, 0, 1));
-  Write("video_decode", "colour444_bgr", stream(video::PictureKind::kColour444, 3, -1, 0, 1));
-  Write("video_decode", "grey_starts_without_idr", stream(video::PictureKind::kGrey, 4, 2, 1, 0));
-  Write("video_decode", "grey_gap_then_idr", stream(video::PictureKind::kGrey, 5, 3, 0, 2));
+  Write("video_decode", "grey_4_frames", SeedStream(video::PictureKind::kGrey, 4, -1, 0, 0));
+  Write("video_decode", "colour420_bgr_idr_at_2",
+        SeedStream(video::PictureKind::kColour, 4, 2, 0, 1));
+  Write("video_decode", "colour444_bgr", SeedStream(video::PictureKind::kColour444, 3, -1, 0, 1));
+  Write("video_decode", "grey_starts_without_idr",
+        SeedStream(video::PictureKind::kGrey, 4, 2, 1, 0));
+  Write("video_decode", "grey_gap_then_idr", SeedStream(video::PictureKind::kGrey, 5, 3, 0, 2));
   // RVL images (flag 4; 12: 8-bit): the 16 x 12 disparity maps the other seeds use.
   std::string rvl;
   const cv::Mat u8 = DisparityU8(), u16 = DisparityU16();

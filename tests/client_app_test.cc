@@ -245,6 +245,33 @@ TEST_F(ClientSessionTest, SessionSendsEncodedImages) {
   }
 }
 
+// --encoding h264: the colour images go as H.264 pictures (the first an IDR), in a fraction of
+// the raw bytes, and every frame is answered with a cloud.
+TEST_F(ClientSessionTest, SessionSendsH264Colour) {
+  auto source = LimitFrames(*OpenSynthetic(160, 120), 5);
+  SessionOptions options;
+  options.server = shared_target();
+  options.uplink.encoding = Uplink::kRaw;
+  video::FrameEncoderOptions video;
+  video.encoder.crf = 20;
+  options.video = video;
+  options.config.set_delivery(v1::DELIVERY_ALL);
+  StreamStats stats;
+  std::vector<std::uint64_t> keyframe_requests;
+  auto session = Session::Start(options, source.get(), &stats, [&](client::Result& r) {
+    keyframe_requests.push_back(static_cast<std::uint64_t>(r.reply.keyframe_needed_size()));
+  });
+  ASSERT_TRUE(session.ok()) << session.status();
+  EXPECT_TRUE((*session)->Wait().ok());
+  const StatsSnapshot s = stats.Snapshot();
+  EXPECT_EQ(s.received, 5u);
+  EXPECT_EQ(s.errors, 0u);
+  EXPECT_GT(s.points, 0u);
+  EXPECT_EQ(keyframe_requests, std::vector<std::uint64_t>(5, 0));
+  // The disparity stays raw (float: 4 bytes a pixel); the colour (3 bytes a pixel) shrinks.
+  EXPECT_LT(s.uplink_bytes / 5, 160u * 120u * 5u);
+}
+
 TEST_F(ClientSessionTest, SessionReportsAnUnreachableServer) {
   auto source = OpenSynthetic(16, 16);
   SessionOptions options;
@@ -553,6 +580,14 @@ TEST_F(ClientProgramTest, HelpDocumentsEveryFlagWithDefaults) {
                            "--lossless",
                            "--encoding",
                            "--jpeg-quality",
+                           "--h264-preset",
+                           "--h264-crf",
+                           "--h264-mbps",
+                           "--h264-keyframe-interval",
+                           "--h264-threads",
+                           "--h264-444",
+                           "--h264-grey",
+                           "--h264-separate-stereo",
                            "--focal",
                            "--baseline",
                            "--disparity-scale",
@@ -628,6 +663,7 @@ TEST_F(ClientProgramTest, BadFlagsAndFilesGiveClearErrors) {
       {{"--fps", "nan"}, 2, "--fps"},
       {{"--synthetic", "0x5"}, 2, "--synthetic"},
       {{"--encoding", "webp"}, 2, "--encoding"},
+      {{"--encoding", "h264", "--h264-preset", "placebo"}, 2, "--h264-preset"},
       {{"--record-format", "xyz"}, 2, "--record-format"},
       {{"--min", "5", "--max", "1"}, 2, "--min (5) must not exceed --max (1)"},
       {{"--synthetic", "64x48", "--tsukuba", "x"}, 2, "choose one source"},

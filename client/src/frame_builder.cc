@@ -105,6 +105,13 @@ absl::Status FillColour(const ColorInput& colour, v1::ColorImage* c, const char*
     *c->mutable_compressed() = *p->message;
     return absl::OkStatus();
   }
+  if (const auto* v = std::get_if<PrecodedVideo>(&colour)) {
+    if (v->message == nullptr) {
+      return absl::InvalidArgumentError(absl::StrCat(field, " video picture is null"));
+    }
+    *c->mutable_video() = *v->message;
+    return absl::OkStatus();
+  }
   if (const auto* view = std::get_if<BgraView>(&colour)) {
     return convert::BgraToProto(view->data, view->size_bytes, view->width, view->height,
                                 view->stride_bytes, field, c->mutable_raw());
@@ -142,7 +149,8 @@ std::uint64_t BytesOf(const Image& image) {
 
 std::uint64_t ImageBytes(const v1::Frame& frame) {
   return BytesOf(frame.disparity()) + BytesOf(frame.depth()) + BytesOf(frame.color()) +
-         BytesOf(frame.right());
+         BytesOf(frame.right()) + frame.color().video().access_unit().size() +
+         frame.right().video().access_unit().size();
 }
 
 void FillMeta(const FrameMeta& meta, std::uint64_t sequence, v1::Frame* frame) {

@@ -100,6 +100,15 @@ absl::StatusOr<FrameCharge> CallAdmitter::AdmitFrame(const Caller& caller, const
   return charge;
 }
 
+absl::Status CallAdmitter::ChargeVideoDecoder(std::uint64_t bytes) {
+  if (memory_.TryTake(bytes)) return absl::OkStatus();
+  metrics_->frames_refused_memory_budget.Increment();
+  return absl::ResourceExhaustedError(absl::StrCat(
+      "the server's memory budget (", memory_.held() >> 20, " of ", memory_.limit() >> 20,
+      " MB in use, --memory-budget-mb) cannot hold this video bitstream's decoder: ", bytes,
+      " bytes for the picture size its sequence header states; not decoded, send an IDR later"));
+}
+
 absl::Status CallAdmitter::MemoryExhausted(std::uint64_t bytes) const {
   return absl::ResourceExhaustedError(absl::StrCat(
       "the server's memory budget for frames in flight is in use (", memory_.held() >> 20, " of ",

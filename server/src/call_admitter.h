@@ -83,6 +83,12 @@ class CallAdmitter {
                                          std::size_t request_bytes, const StereoParams& stereo,
                                          bool* for_memory = nullptr);
 
+  // A video decoder's memory (video_input.h), charged from its sequence header before it is
+  // opened and held while its stream lives, in the same budget as the frames in flight:
+  // RESOURCE_EXHAUSTED naming the budget when it does not fit. Release gives it back.
+  absl::Status ChargeVideoDecoder(std::uint64_t bytes);
+  void ReleaseVideoDecoder(std::uint64_t bytes) { memory_.Give(bytes); }
+
   // Identification alone, for calls that hold no place (GetInfo).
   absl::StatusOr<Caller> Identify(grpc::CallbackServerContext* context) {
     return callers_.Identify(context);

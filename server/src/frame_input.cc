@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cstring>
 #include <string_view>
+#include <type_traits>
 
 #include "absl/strings/str_cat.h"
 #include "cloudcast/proto/convert.h"
@@ -124,9 +125,21 @@ absl::Status PrepareImage(const Image& image, const char* field, const Limits& l
 
 absl::Status PrepareFrameImages(const v1::Frame& frame, const Limits& limits,
                                 DecodeScratch* scratch, FrameImages* out,
-                                const InPlacePixels* in_place) {
+                                const InPlacePixels* in_place, const DecodedVideo* video) {
   out->decoded = false;
   const auto decode_colour = [](std::string_view b, const char* f) { return DecodeColor(b, f); };
+  // A video picture was decoded when its frame was read (video_input.h): viewed here.
+  const auto prepare_colour = [&](const v1::ColorImage& image, const char* field,
+                                  const OwnedColor* picture, ColorView* view, auto prepare) {
+    if (!image.has_video()) return prepare();
+    if (picture == nullptr) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          field, ".video: video pictures are decoded on Stream calls and Process calls only"));
+    }
+    out->decoded = true;
+    *view = picture->view();
+    return ValidateView(*view, limits, field);
+  };
   absl::Status s;
   const char* geometry_field = "frame.disparity";
   switch (frame.geometry_case()) {
@@ -150,9 +163,14 @@ absl::Status PrepareFrameImages(const v1::Frame& frame, const Limits& limits,
     case v1::Frame::kRight:
       out->kind = FrameKind::kStereo;
       geometry_field = "frame.right";
-      s = PrepareImage(frame.right(), "frame.right", limits, Plane(in_place, &InPlacePixels::right),
-                       /*lossless=*/false, decode_colour, &scratch->right_rows, &scratch->right,
-                       &scratch->right_codec, &out->right, &out->decoded);
+      s = prepare_colour(frame.right(), "frame.right",
+                         video != nullptr ? video->right_picture() : nullptr, &out->right, [&] {
+                           return PrepareImage(frame.right(), "frame.right", limits,
+                                               Plane(in_place, &InPlacePixels::right),
+                                               /*lossless=*/false, decode_colour,
+                                               &scratch->right_rows, &scratch->right,
+                                               &scratch->right_codec, &out->right, &out->decoded);
+                         });
       break;
     default:
       return absl::InvalidArgumentError(
@@ -161,9 +179,15 @@ absl::Status PrepareFrameImages(const v1::Frame& frame, const Limits& limits,
           "frame.color)");
   }
   if (!s.ok()) return s;
-  s = PrepareImage(frame.color(), "frame.color", limits, Plane(in_place, &InPlacePixels::colour),
-                   /*lossless=*/false, decode_colour, &scratch->colour_rows, &scratch->colour,
-                   &scratch->colour_codec, &out->colour, &out->decoded);
+  s = prepare_colour(frame.color(), "frame.color",
+                     video != nullptr ? video->colour_picture() : nullptr, &out->colour,
+                     [&] {
+                       return PrepareImage(frame.color(), "frame.color", limits,
+                                           Plane(in_place, &InPlacePixels::colour),
+                                           /*lossless=*/false, decode_colour, &scratch->colour_rows,
+                                           &scratch->colour, &scratch->colour_codec, &out->colour,
+                                           &out->decoded);
+                     });
   if (!s.ok()) return s;
   switch (out->kind) {
     case FrameKind::kDisparity:
@@ -189,6 +213,9 @@ std::uint64_t StatedPixels(const Image& image) {
     std::uint32_t w = 0, h = 0;
     const char* format = nullptr;
     if (SniffImageSize(image.encoded(), &w, &h, &format)) return std::uint64_t{w} * h;
+  }
+  if constexpr (std::is_same_v<Image, v1::ColorImage>) {
+    if (image.has_video()) return std::uint64_t{image.video().width()} * image.video().height();
   }
   return 0;
 }
@@ -234,6 +261,14 @@ ImageCost CostOf(const Image& image) {
     const char* format = nullptr;
     if (!SniffImageSize(image.encoded(), &c.width, &c.height, &format)) c.width = c.height = 0;
   }
+  bool video = false;
+  if constexpr (std::is_same_v<Image, v1::ColorImage>) {
+    if (image.has_video()) {
+      video = true;
+      c.width = image.video().width();
+      c.height = image.video().height();
+    }
+  }
   c.pixels = std::uint64_t{c.width} * c.height;
   c.max_side = std::max(c.width, c.height);
   if (image.has_compressed()) {
@@ -242,6 +277,8 @@ ImageCost CostOf(const Image& image) {
     c.decoded_bytes = c.pixels * (known ? BytesPerPixel(e) : 4);
   } else if (image.has_encoded()) {
     c.decoded_bytes = c.pixels * kEncodedImageBytesPerPixel / 2;
+  } else if (video) {
+    c.decoded_bytes = c.pixels * 3;  // the decoded picture the frame keeps: BGR8 at most
   }
   return c;
 }

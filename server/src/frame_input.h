@@ -11,6 +11,7 @@
 #include "cloudcast/io/image_io.h"
 #include "cloudcast/v1/cloudcast.pb.h"
 #include "request_reader.h"
+#include "video_input.h"
 
 namespace cloudcast::server {
 
@@ -60,9 +61,13 @@ struct DecodeScratch {
 //
 // `in_place`: the pixels RequestReader left in gRPC's slices, for a frame it parsed. A raw image
 // whose pixels are there is viewed through a row table in `scratch` (ImageView::rows).
+//
+// `video`: the frame's video pictures, decoded when it was read (video_input.h); a frame with a
+// VideoPicture and no `video` is refused.
 absl::Status PrepareFrameImages(const v1::Frame& frame, const Limits& limits,
                                 DecodeScratch* scratch, FrameImages* out,
-                                const InPlacePixels* in_place = nullptr);
+                                const InPlacePixels* in_place = nullptr,
+                                const DecodedVideo* video = nullptr);
 
 // The frame's size in pixels as its message states it (raw sizes, or an encoded image's header),
 // without decoding anything: the cost the worker pool weighs it by. 1 when it cannot tell (such

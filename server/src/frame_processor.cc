@@ -102,7 +102,7 @@ double ThreadCpuSeconds() {
 
 absl::Status FrameProcessor::Process(const v1::Frame& frame, const InPlacePixels* in_place,
                                      const FrameSettings& settings, v1::CloudReply* reply,
-                                     FrameCosts* costs) {
+                                     FrameCosts* costs, const DecodedVideo* video) {
   *costs = FrameCosts{};
   reply->set_sequence(frame.sequence());
   reply->set_frame_id(frame.frame_id());
@@ -124,22 +124,24 @@ absl::Status FrameProcessor::Process(const v1::Frame& frame, const InPlacePixels
       return s;
     }
   }
-  return ProcessWith(frame, in_place, *effective, reply, costs);
+  return ProcessWith(frame, in_place, *effective, reply, costs, video);
 }
 
 absl::Status FrameProcessor::ProcessWith(const v1::Frame& frame, const InPlacePixels* in_place,
                                          const FrameSettings& settings, v1::CloudReply* reply,
-                                         FrameCosts* costs) {
+                                         FrameCosts* costs, const DecodedVideo* video) {
   const Clock::time_point t0 = Clock::now();
   FrameImages images;
   if (absl::Status s =
-          PrepareFrameImages(frame, settings.pipeline.limits, &decode_, &images, in_place);
+          PrepareFrameImages(frame, settings.pipeline.limits, &decode_, &images, in_place, video);
       !s.ok()) {
     return s;
   }
   const Clock::time_point t1 = Clock::now();
   costs->decoded = images.decoded;
   costs->decode_seconds = images.decoded ? Seconds(t1 - t0) : 0.0;
+  // Video pictures were decoded when the frame was read (video_input.h): their time counts here.
+  if (video != nullptr) costs->decode_seconds += video->decode_seconds;
 
   const PipelineOptions options = settings.PipelineFor(images.colour.width, images.colour.height);
   StageCounts counts;
@@ -245,7 +247,8 @@ int FrameRunner::ReleaseIdleScratch() {
 
 absl::Status FrameRunner::Run(std::size_t worker, const v1::Frame& frame,
                               const InPlacePixels* in_place, const FrameSettings& settings,
-                              const Arrival& arrival, v1::CloudReply* reply) {
+                              const Arrival& arrival, v1::CloudReply* reply,
+                              const DecodedVideo* video) {
   const Clock::time_point start = Clock::now();
   Metrics& m = *metrics_;
   m.queue_seconds.Observe(Seconds(start - arrival.time));
@@ -257,7 +260,7 @@ absl::Status FrameRunner::Run(std::size_t worker, const v1::Frame& frame,
   // The inputs of every library call are bounded before it (OpenCV's matchers: budget.h), so
   // this is the last line, not the first.
   try {
-    status = processors_[worker]->Process(frame, in_place, settings, reply, &costs);
+    status = processors_[worker]->Process(frame, in_place, settings, reply, &costs, video);
   } catch (const std::exception& e) {
     status = absl::InternalError(
         absl::StrCat("frame ", frame.sequence(), ": the server failed processing it: ", e.what()));

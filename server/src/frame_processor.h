@@ -45,13 +45,16 @@ class FrameProcessor {
   // and encode times. Errors: see PrepareFrameImages; pipeline and Draco errors keep the core's
   // code.
   // `in_place`: the frame's pixels RequestReader left in gRPC's slices (see PrepareFrameImages).
+  // `video`: the frame's video pictures, decoded when it was read (see PrepareFrameImages).
   absl::Status Process(const v1::Frame& frame, const InPlacePixels* in_place,
-                       const FrameSettings& settings, v1::CloudReply* reply, FrameCosts* costs);
+                       const FrameSettings& settings, v1::CloudReply* reply, FrameCosts* costs,
+                       const DecodedVideo* video = nullptr);
 
  private:
   // Process with the frame's camera applied and checked.
   absl::Status ProcessWith(const v1::Frame& frame, const InPlacePixels* in_place,
-                           const FrameSettings& settings, v1::CloudReply* reply, FrameCosts* costs);
+                           const FrameSettings& settings, v1::CloudReply* reply, FrameCosts* costs,
+                           const DecodedVideo* video);
   // A frame with pixels whose cloud came out empty: reply.empty says which stage took the last
   // points and why; for the passthrough, `rerun` runs the pipeline again without it to measure
   // the range the points spanned.
@@ -86,7 +89,8 @@ class FrameRunner {
   // and frames_dropped (the writer's). Counts the frame, its stage times and CPU, or its error.
   // `in_place`: as for FrameProcessor::Process (nullptr: the pixels are in `frame`).
   absl::Status Run(std::size_t worker, const v1::Frame& frame, const InPlacePixels* in_place,
-                   const FrameSettings& settings, const Arrival& arrival, v1::CloudReply* reply);
+                   const FrameSettings& settings, const Arrival& arrival, v1::CloudReply* reply,
+                   const DecodedVideo* video = nullptr);
 
   const std::string& instance() const { return instance_; }
 

@@ -8,6 +8,7 @@
 #include "draco/core/draco_version.h"
 #include "memory_housekeeping.h"
 #include "request_reader.h"
+#include "video_input.h"
 #include "spdlog/spdlog.h"
 
 #ifndef CLOUDCAST_VERSION
@@ -70,6 +71,7 @@ void CloudCastService::ServeProcess(ProcessCall* process, AdmittedCall admitted,
     std::shared_ptr<const StreamSettings> settings;
     Admission::Ticket ticket;
     FrameCharge charge;
+    DecodedVideo video;  // a frame of video pictures: one IDR each (a stream of one frame)
   };
   auto call = std::make_shared<Call>();
   call->ticket = std::move(admitted.ticket);
@@ -107,9 +109,24 @@ void CloudCastService::ServeProcess(ProcessCall* process, AdmittedCall admitted,
   ProcessStarted();
   const bool submitted = pool_.Submit(
       [this, process, arrival, call](std::size_t worker) {
-        const absl::Status status =
-            runner_.Run(worker, call->request.frame(), &call->reader.pixels(),
-                        call->settings->frame, arrival, &call->reply);
+        const v1::Frame& frame = call->request.frame();
+        absl::Status status;
+        const bool video = VideoDecoders::HasVideo(frame);
+        if (video) {
+          // Decoders for this call alone, their memory charged as a stream's and given back
+          // when they go (at the end of this block).
+          VideoDecoders decoders(
+              call->settings->frame.pipeline.limits,
+              [this](std::uint64_t bytes) { return admitter_.ChargeVideoDecoder(bytes); },
+              [this](std::uint64_t bytes) { admitter_.ReleaseVideoDecoder(bytes); });
+          status = decoders.Decode(frame, &call->video);
+          if (!status.ok()) metrics_->FrameErrors(status.code()).Increment();
+        }
+        if (status.ok()) {
+          status = runner_.Run(worker, frame, &call->reader.pixels(), call->settings->frame,
+                               arrival, &call->reply, video ? &call->video : nullptr);
+        }
+        call->video = DecodedVideo{};
         call->reader.Clear();
         call->charge.Release();
         call->ticket.Release();
@@ -170,6 +187,7 @@ grpc::ServerUnaryReactor* CloudCastService::GetInfo(grpc::CallbackServerContext*
     info->add_depth_encodings(convert::ToProto(e));
   }
   for (StereoMatcher m : AllStereoMatchers()) info->add_stereo_matchers(convert::ToProto(m));
+  for (v1::VideoCodec c : DecodedVideoCodecs()) info->add_video_codecs(c);
   info->set_worker_threads(static_cast<std::uint32_t>(pool_.size()));
   info->set_draco_version(draco::kDracoVersion);
   info->set_instance(runner_.instance());

@@ -11,6 +11,13 @@
 namespace cloudcast::server {
 namespace {
 
+// The bitstreams that need an IDR, as they stood after this frame's pictures, on its reply.
+template <typename Reply>
+void SetKeyframeNeeded(const DecodedVideo& video, Reply* reply) {
+  reply->clear_keyframe_needed();
+  for (v1::VideoBitstream b : video.keyframe_needed) reply->add_keyframe_needed(b);
+}
+
 grpc::Status Draining() {
   return grpc::Status(grpc::StatusCode::UNAVAILABLE,
                       "the server is shutting down; frames received before were answered");
@@ -31,6 +38,9 @@ struct StreamReactor::Job : StreamSlot {
   std::shared_ptr<const StreamSettings> settings;
   Arrival arrival;
   FrameCharge charge;  // its memory in the server's budget, and its cost to the worker pool
+  // Its video pictures, decoded when it was read (video_input.h), and how that went.
+  DecodedVideo video;
+  absl::Status video_status;
 };
 
 // The calls decided under mu_, made by Pump after it is released.
@@ -78,6 +88,7 @@ void StreamReactor::OnReadDone(bool ok) {
     bytes = job->in.Length();
     parsed = job->reader.Parse(&job->in, &job->request);
     job->in.Clear();  // the reader keeps the slices that hold the pixels
+    if (parsed) DecodeVideo(job);
   }
   std::unique_lock<std::mutex> lock(mu_);
   reading_ = nullptr;
@@ -265,6 +276,23 @@ StreamReactor::Job* StreamReactor::Acquire() {
   return job;
 }
 
+// A frame's video pictures are decoded as it is read, in the order they were sent, whatever
+// becomes of the frame (replaced in DELIVERY_LATEST, refused for memory): the pictures after it
+// reference them. Outside mu_: reads are one at a time, and only they touch video_.
+void StreamReactor::DecodeVideo(Job* job) {
+  job->video_status = absl::OkStatus();
+  if (!job->request.has_frame() || !VideoDecoders::HasVideo(job->request.frame())) return;
+  if (video_ == nullptr) {
+    CallAdmitter* admitter = services_.admitter;
+    video_ = std::make_unique<VideoDecoders>(
+        caller_.defaults->frame.pipeline.limits,
+        [admitter](std::uint64_t bytes) { return admitter->ChargeVideoDecoder(bytes); },
+        [admitter](std::uint64_t bytes) { admitter->ReleaseVideoDecoder(bytes); });
+  }
+  // Its time counts in the frame's decode time (FrameRunner::Run), if the frame is processed.
+  job->video_status = video_->Decode(job->request.frame(), &job->video);
+}
+
 // Frees the request's pixels now (so a free slot costs no memory) and keeps the reply's cloud
 // buffer for the next frame.
 void StreamReactor::Release(Job* job) {
@@ -276,6 +304,8 @@ void StreamReactor::Release(Job* job) {
   if (job->reply.has_cloud()) job->spare_cloud.reset(job->reply.release_cloud());
   job->reply.Clear();
   job->settings.reset();
+  job->video = DecodedVideo{};
+  job->video_status = absl::OkStatus();
   free_.push_back(job);
 }
 
@@ -309,7 +339,11 @@ void StreamReactor::Accept(Job* job, std::size_t bytes) {
 void StreamReactor::AcceptFrame(Job* job, std::size_t bytes) {
   last_frame_ = last_activity_;
   const v1::Frame& frame = job->request.frame();
-  auto charge = services_.admitter->AdmitFrame(caller_, frame, bytes, settings_->frame.stereo);
+  // A picture that did not decode answers its frame; its decoding was all the work it needed.
+  absl::StatusOr<FrameCharge> charge =
+      job->video_status.ok()
+          ? services_.admitter->AdmitFrame(caller_, frame, bytes, settings_->frame.stereo)
+          : absl::StatusOr<FrameCharge>(job->video_status);
   if (!charge.ok()) {
     // Answered in order with the stream's other frames; the stream goes on.
     const std::uint64_t sequence = frame.sequence();
@@ -317,6 +351,8 @@ void StreamReactor::AcceptFrame(Job* job, std::size_t bytes) {
     job->request.Clear();
     FillError(charge.status(), v1::ERROR_KIND_FRAME, sequence, frame_id,
               job->reply.mutable_error());
+    SetKeyframeNeeded(job->video, job->reply.mutable_error());
+    job->video = DecodedVideo{};  // its pictures are not needed while the error waits
     queue_.PushReply(job);
     services_.streams->NoteQueued(queue_.held());
     return;
@@ -405,8 +441,10 @@ void StreamReactor::Work(Job* job, std::size_t worker) {
     cloud->Clear();  // keeps the draco buffer's capacity
     job->reply.set_allocated_cloud(cloud);
     const v1::Frame& frame = job->request.frame();
-    const absl::Status status = services_.runner->Run(
-        worker, frame, &job->reader.pixels(), job->settings->frame, job->arrival, cloud);
+    const bool video = VideoDecoders::HasVideo(frame);
+    const absl::Status status =
+        services_.runner->Run(worker, frame, &job->reader.pixels(), job->settings->frame,
+                              job->arrival, cloud, video ? &job->video : nullptr);
     if (!status.ok()) {
       const std::uint64_t sequence = frame.sequence();
       const std::string frame_id = frame.frame_id();
@@ -415,10 +453,14 @@ void StreamReactor::Work(Job* job, std::size_t worker) {
       convert::FillError(status, v1::ERROR_KIND_FRAME, sequence, frame_id,
                          job->reply.mutable_error());
       job->reply.mutable_error()->set_server_instance(services_.runner->instance());
+      if (video) SetKeyframeNeeded(job->video, job->reply.mutable_error());
+    } else if (video) {
+      SetKeyframeNeeded(job->video, cloud);
     }
     // The pixels are no longer needed; free them before the reply waits for the writer.
     job->request.Clear();
     job->reader.Clear();
+    job->video = DecodedVideo{};
   }
   job->charge.Release();  // atomic: no lock needed
   {

@@ -34,6 +34,7 @@
 #include "open_streams.h"
 #include "stream_lifecycle.h"
 #include "stream_queue.h"
+#include "video_input.h"
 #include "worker_pool.h"
 
 namespace cloudcast::server {
@@ -119,6 +120,7 @@ class StreamReactor final : public grpc::ServerBidiReactor<grpc::ByteBuffer, grp
   void Abandon();  // without mu_
   Job* Acquire();
   void Release(Job* job);
+  void DecodeVideo(Job* job);  // outside mu_
   void Accept(Job* job, std::size_t bytes);
   void AcceptFrame(Job* job, std::size_t bytes);
   void QueueError(Job* job, v1::ErrorKind kind, const absl::Status& status);
@@ -149,6 +151,9 @@ class StreamReactor final : public grpc::ServerBidiReactor<grpc::ByteBuffer, grp
   std::uint64_t bytes_received_ = 0;  // request bytes read (CloudReply.stream_bytes_received)
   std::chrono::steady_clock::time_point last_activity_;
   std::chrono::steady_clock::time_point last_frame_;  // the last frame read, or the opening
+  // The stream's video decoders, made at its first video picture; used by the reading path
+  // only (OnReadDone, one read at a time), outside mu_.
+  std::unique_ptr<VideoDecoders> video_;
 };
 
 }  // namespace cloudcast::server

@@ -62,6 +62,10 @@ absl::Status ColourToProto(const client::ColorInput& input, const char* what,
     image->set_encoded(std::string(file->bytes));
     return absl::OkStatus();
   }
+  if (const auto* video = std::get_if<client::PrecodedVideo>(&input)) {
+    if (video->message != nullptr) *image->mutable_video() = *video->message;
+    return absl::OkStatus();
+  }
   return absl::InternalError(absl::StrCat(what, ": an input kind the uplink does not make"));
 }
 

@@ -28,6 +28,7 @@ absl::StatusOr<std::unique_ptr<Session>> Session::Start(const SessionOptions& op
   s->source_ = source;
   s->stats_ = stats;
   s->on_result_ = std::move(on_result);
+  if (options.video) s->video_ = std::make_unique<video::FrameEncoder>(*options.video);
 
   ClientOptions client_options;
   client_options.security = options.security;
@@ -98,6 +99,7 @@ void Session::ReceiveLoop() {
   Result result;
   std::uint64_t errors = 0;
   while (stream_->Read(&result)) {
+    if (video_ != nullptr) video_->OnResult(result);  // a keyframe request, or a lost picture
     if (result.fate == client::FrameFate::kReplaced ||
         result.fate == client::FrameFate::kDropped) {
       // Delivery latest: a newer frame took its place (in the client before it was sent, or on
@@ -157,6 +159,7 @@ void Session::SendLoop() {
   sources::UplinkOptions uplink_options = options_.uplink;
   const bool follow = options_.rate_control && uplink_options.encoding == sources::Uplink::kJpeg;
   QualityFollower quality(uplink_options.jpeg_quality, 10, 95);
+  std::uint64_t next_sequence = 0;
 
   for (;;) {
     // The next frame is read (decoded) before waiting, so its decoding overlaps the wait.
@@ -198,8 +201,21 @@ void Session::SendLoop() {
       tiff_noted = true;
       spdlog::info("float disparities and depths are sent as TIFF (PNG has no float samples)");
     }
+    client::FrameInput input = uplink.input();
+    if (video_ != nullptr) {
+      // Numbered here, so that the encoder knows which frame a reply's keyframe request
+      // answers (the stream would number them the same way).
+      meta.sequence = next_sequence++;
+      auto coded = video_->Encode(input, *meta.sequence);
+      if (!coded.ok()) {
+        SetError(absl::Status(coded.status().code(), absl::StrCat("frame ", frame.name, ": ",
+                                                                  coded.status().message())));
+        break;
+      }
+      input = *std::move(coded);
+    }
     const std::uint64_t bytes_before = stream_->image_bytes_sent();
-    const absl::Status status = stream_->Send(uplink.input(), meta);
+    const absl::Status status = stream_->Send(input, meta);
     if (!status.ok()) {
       // A failed write means the call ended; Finish below says why. Bad inputs are ours.
       if (status.code() != absl::StatusCode::kUnavailable) {

@@ -11,6 +11,7 @@
 #include <functional>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <thread>
 
@@ -20,6 +21,7 @@
 #include "cloudcast/client/client.h"
 #include "cloudcast/sources/frame_source.h"
 #include "cloudcast/sources/uplink.h"
+#include "cloudcast/video/frame_encoder.h"
 
 namespace cloudcast::client::app {
 
@@ -35,6 +37,9 @@ struct SessionOptions {
   int max_in_flight = 2;
   // How frames travel (raw, zstd, png, jpeg).
   sources::UplinkOptions uplink;
+  // Set: the colour image (a stereo pair's views) goes as H.264 pictures, coded from the raw
+  // images `uplink` gives (--encoding h264), IDRs sent when the server's replies ask.
+  std::optional<video::FrameEncoderOptions> video;
   // Decode the Draco replies (off for pure load measurements).
   bool decode_clouds = true;
   // The adaptive sender (--rate-control): the stream's rate controller holds frames past its
@@ -84,6 +89,7 @@ class Session {
   std::unique_ptr<Client> client_;
   std::unique_ptr<Stream> stream_;
   v1::ServerInfo server_info_;
+  std::unique_ptr<video::FrameEncoder> video_;  // options.video; Encode by the sender only
 
   std::mutex mu_;
   std::condition_variable cv_;  // in-flight count changed, stop, receiver ended, done

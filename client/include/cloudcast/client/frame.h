@@ -82,13 +82,19 @@ struct PrecompressedDepth {
 struct PrecompressedColor {
   const v1::CompressedColor* message = nullptr;
 };
+// A picture of a video bitstream, encoded already (the message must outlive Send): what
+// cloudcast::video::FrameEncoder (cloudcast/video/frame_encoder.h) makes of raw colour and stereo
+// images. The server decodes its bitstreams in the order the pictures were sent (docs/video.md).
+struct PrecodedVideo {
+  const v1::VideoPicture* message = nullptr;
+};
 
 using DisparityInput =
     std::variant<DisparityView, EncodedImage, CompressedDisparityView, PrecompressedDisparity>;
 // Depth files: PNG 16-bit (millimetres, as depth cameras record them), TIFF, PFM.
 using DepthInput = std::variant<DepthView, EncodedImage, CompressedDepthView, PrecompressedDepth>;
-using ColorInput =
-    std::variant<ColorView, BgraView, EncodedImage, CompressedColorView, PrecompressedColor>;
+using ColorInput = std::variant<ColorView, BgraView, EncodedImage, CompressedColorView,
+                                PrecompressedColor, PrecodedVideo>;
 
 // The images of one frame, by what gives its points their depth.
 struct DisparityFrame {
