@@ -59,8 +59,10 @@ class LinkSimulation {
         const Reply r = replies_.front();
         replies_.pop_front();
         --in_flight_;
-        controller_.OnReply(At(r.written_ms), At(t), static_cast<std::size_t>(r.bytes),
-                            static_cast<std::int64_t>(r.server_ms * 1e6), r.server_bytes);
+        // The server holds each frame 5 ms, and says so.
+        controller_.OnReply({At(r.written_ms), At(t), static_cast<std::size_t>(r.bytes),
+                             static_cast<std::int64_t>(r.server_ms * 1e6),
+                             static_cast<std::int64_t>((r.server_ms + 5) * 1e6), r.server_bytes});
         samples.push_back({t, controller_.estimate().target_bps, QueueMs(t), t - r.captured_ms,
                            controller_.frames_in_flight()});
       }
@@ -174,9 +176,9 @@ TEST(RateControllerTest, WithoutTheServersByteCountOveruseHalvesTheTarget) {
   const Clock::time_point t0{};
   c.OnFrameWritten(20'000);
   // A steady 50 ms round trip, then 400 ms: overuse, and no delivered rate to cut to.
-  c.OnReply(t0, t0 + milliseconds(50), 20'000, 0, 0);
+  c.OnReply({t0, t0 + milliseconds(50), 20'000});
   const double before = c.estimate().target_bps;
-  c.OnReply(t0 + milliseconds(100), t0 + milliseconds(500), 20'000, 0, 0);
+  c.OnReply({t0 + milliseconds(100), t0 + milliseconds(500), 20'000});
   EXPECT_TRUE(c.estimate().overuse);
   EXPECT_EQ(c.estimate().delivered_bps, 0);
   EXPECT_NEAR(c.estimate().target_bps, before / 2, 1);

@@ -30,9 +30,10 @@ void RateController::OnFrameWritten(std::size_t bytes) {
 
 void RateController::OnCallOpened() { delivered_.clear(); }
 
-void RateController::OnReply(Clock::time_point written, Clock::time_point received,
-                             std::size_t frame_bytes, std::int64_t server_receive_unix_ns,
-                             std::uint64_t stream_bytes_received) {
+void RateController::OnReply(const Reply& reply) {
+  const Clock::time_point received = reply.received;
+  const std::int64_t server_receive_unix_ns = reply.server_receive_unix_ns;
+  const std::uint64_t stream_bytes_received = reply.stream_bytes_received;
   if (server_receive_unix_ns > 0 && stream_bytes_received > 0) {
     delivered_.emplace_back(server_receive_unix_ns, stream_bytes_received);
     while (delivered_.size() > 2 &&
@@ -49,16 +50,23 @@ void RateController::OnReply(Clock::time_point written, Clock::time_point receiv
 
   // The round trip less the frame's own serialization at the delivered rate: what is left grows
   // only with queueing (behind earlier frames, in the link's queue, on the server).
-  const double rtt = std::max(0.0, Ms(received - written));
+  const double rtt = std::max(0.0, Ms(received - reply.written));
   const double serialization =
       estimate_.delivered_bps > 0
-          ? static_cast<double>(frame_bytes) * 8 / estimate_.delivered_bps * 1000
+          ? static_cast<double>(reply.frame_bytes) * 8 / estimate_.delivered_bps * 1000
           : 0;
-  const double base = std::max(0.0, rtt - serialization);
-  // The windowed minimum: a deque ascending in base delay, oldest first.
-  while (!rtts_.empty() && rtts_.back().second >= base) rtts_.pop_back();
-  rtts_.emplace_back(received, base);
-  while (received - rtts_.front().first > options_.min_rtt_window) rtts_.pop_front();
+  const double in_server =
+      reply.server_receive_unix_ns > 0 && reply.server_send_unix_ns > reply.server_receive_unix_ns
+          ? static_cast<double>(reply.server_send_unix_ns - reply.server_receive_unix_ns) / 1e6
+          : 0;
+  const double base = std::max(0.0, rtt - serialization - in_server);
+  auto windowed_min = [&](std::deque<std::pair<Clock::time_point, double>>& d, double v) {
+    while (!d.empty() && d.back().second >= v) d.pop_back();
+    d.emplace_back(received, v);
+    while (received - d.front().first > options_.min_rtt_window) d.pop_front();
+  };
+  windowed_min(rtts_, base);
+  windowed_min(round_trips_, rtt);
   estimate_.min_rtt_ms = rtts_.front().second;
   estimate_.rtt_ms = estimate_.rtt_ms == 0 ? rtt : 0.875 * estimate_.rtt_ms + 0.125 * rtt;
   const double queue_sample = base - estimate_.min_rtt_ms;
@@ -84,7 +92,7 @@ void RateController::OnReply(Clock::time_point written, Clock::time_point receiv
       last_decrease_ = received;
       capacity_bps_ = estimate_.delivered_bps;
     }
-  } else if (estimate_.queue_delay_ms < target_delay / 2) {
+  } else if (estimate_.queue_delay_ms < options_.grow_below * target_delay) {
     const bool near_capacity =
         capacity_bps_ > 0 && target >= 0.95 * capacity_bps_ && target <= 1.3 * capacity_bps_;
     const double growth = !seen_overuse_ ? options_.startup_growth_per_second
@@ -104,12 +112,12 @@ void RateController::OnReply(Clock::time_point written, Clock::time_point receiv
 }
 
 void RateController::UpdateWindow() {
-  if (mean_frame_bytes_ <= 0 || rtts_.empty()) {
+  if (mean_frame_bytes_ <= 0 || round_trips_.empty()) {
     estimate_.frames_in_flight = options_.min_frames_in_flight;
     return;
   }
   const double seconds =
-      (estimate_.min_rtt_ms + static_cast<double>(options_.target_delay.count())) / 1000;
+      (round_trips_.front().second + static_cast<double>(options_.target_delay.count())) / 1000;
   const double frames = estimate_.target_bps / 8 * seconds / mean_frame_bytes_;
   estimate_.frames_in_flight = std::clamp(static_cast<int>(std::floor(frames)),
                                           options_.min_frames_in_flight,

@@ -442,8 +442,8 @@ void StreamCore::OnReadDone(Call* call, bool ok) {
         written_bytes_.pop_front();
       }
       const v1::CloudReply& cloud = ev.reply.cloud();  // the default instance for an error
-      rate_->OnReply(answer.frame->frame.written, now, frame_bytes, cloud.receive_time_unix_ns(),
-                     cloud.stream_bytes_received());
+      rate_->OnReply({answer.frame->frame.written, now, frame_bytes, cloud.receive_time_unix_ns(),
+                      cloud.send_time_unix_ns(), cloud.stream_bytes_received()});
       machine_.SetMaxUnanswered(static_cast<std::size_t>(rate_->frames_in_flight()), now);
       ev.rate = rate_->estimate();
     }

@@ -7,15 +7,17 @@
 // Delay-based, in the spirit of WebRTC's GCC (Carlucci et al., 2016): the queueing delay is the
 // round trip's growth over its windowed minimum, less the frame's own serialization at the
 // delivered rate (a frame three times larger, or a link three times slower, takes longer to
-// cross without anything queueing). While it stays under half the target delay the
-// bitrate grows multiplicatively; above the target it falls to a fraction of the rate the server
-// saw delivered (CloudReply.stream_bytes_received over receive_time_unix_ns), at most once a
-// round trip. Loss does not steer it: TCP hides loss as delay, which this sees.
+// cross without anything queueing) and less the time the frame spent in the server (its
+// processing varies from frame to frame and says nothing about the link). While it stays under
+// most of the target delay the bitrate grows multiplicatively (never past a margin over the
+// delivered rate); above the target it falls to a fraction of the rate the server saw delivered
+// (CloudReply.stream_bytes_received over receive_time_unix_ns), at most once a round trip. Loss does not steer it: TCP hides loss as delay, which this sees.
 //
 // The in-flight window is what keeps latency bounded while the encoder catches up (a step down,
 // an outage): a frame past the window waits in the sender, where DELIVERY_LATEST replaces it with
 // a newer one, instead of queueing behind the link in TCP's buffers. It holds the target's bytes
-// for one minimum round trip plus the target delay, at least `min_frames_in_flight`.
+// for one minimum round trip (all of it: serialization and the server's time included) plus the
+// target delay, at least `min_frames_in_flight`.
 #pragma once
 
 #include <chrono>
@@ -33,6 +35,11 @@ struct RateControlOptions {
   double max_bps = 100e6;
   // Queueing delay over which the link counts as overused.
   std::chrono::milliseconds target_delay{50};
+  // The bitrate grows while the queueing delay is under this fraction of target_delay, and holds
+  // between it and target_delay. Frames in flight queue behind one another by design (a 23 KB
+  // frame is 18 ms at 10 Mbit/s, its reply takes the downlink's time): a narrow band would hold
+  // the bitrate far under the link.
+  double grow_below = 0.8;
   // After overuse: this fraction of the delivered rate.
   double backoff = 0.85;
   // Growth while the delay is low, per second: faster until the first overuse (a start-up
@@ -68,12 +75,19 @@ class RateController {
 
   // A frame's bytes went out (for the mean frame size the window is counted in).
   void OnFrameWritten(std::size_t bytes);
-  // A reply to a frame of `frame_bytes` whose write started at `written`. `server_receive_unix_ns`
-  // and
-  // `stream_bytes_received` are the reply's (0 when the server sends none: older servers; the
-  // delivered rate then stays unknown and overuse halves the target instead).
-  void OnReply(Clock::time_point written, Clock::time_point received, std::size_t frame_bytes,
-               std::int64_t server_receive_unix_ns, std::uint64_t stream_bytes_received);
+  // What a reply tells about its frame.
+  struct Reply {
+    Clock::time_point written;   // the frame's write started
+    Clock::time_point received;  // its reply arrived
+    std::size_t frame_bytes = 0;
+    // The server's (CloudReply receive_time_unix_ns, send_time_unix_ns, stream_bytes_received);
+    // 0 when the server sends none (an error reply, an older server): the delivered rate then
+    // stays unknown and overuse halves the target instead.
+    std::int64_t server_receive_unix_ns = 0;
+    std::int64_t server_send_unix_ns = 0;
+    std::uint64_t stream_bytes_received = 0;
+  };
+  void OnReply(const Reply& reply);
   // A new call: the server's byte count starts again.
   void OnCallOpened();
 
@@ -88,7 +102,11 @@ class RateController {
   const RateControlOptions options_;
   RateEstimate estimate_;
   double mean_frame_bytes_ = 0;
-  std::deque<std::pair<Clock::time_point, double>> rtts_;  // ascending rtt: a windowed minimum
+  // Windowed minima (deques ascending in value, oldest first): of the base delay (the round trip
+  // less serialization and the server's time), which measures queueing, and of the whole round
+  // trip, which sizes the window (a frame in flight spends all of it).
+  std::deque<std::pair<Clock::time_point, double>> rtts_;
+  std::deque<std::pair<Clock::time_point, double>> round_trips_;
   std::deque<std::pair<std::int64_t, std::uint64_t>> delivered_;  // server time, bytes
   std::optional<Clock::time_point> last_update_;
   std::optional<Clock::time_point> last_decrease_;
