@@ -35,6 +35,10 @@ const std::vector<ParamDoc>& Docs() {
        "seconds a resilient stream keeps reconnecting before it gives up (the bridge then "
        "opens a new one on the next frame)"},
       {"connect_timeout", "double", "5", "seconds to wait for the server when opening a stream"},
+      {"rate_control", "bool", "false",
+       "follow the link instead of queueing behind it (a robot on Wi-Fi or LTE): a rate "
+       "controller keeps a window of frames in flight and a newer frame replaces one waiting "
+       "past it (needs delivery latest, which it sets when delivery is left unset)"},
       {"compress", "bool", "false",
        "send the pixels losslessly compressed (row deltas + zstd, about a third of the bytes) "
        "for a thin uplink"},
@@ -148,6 +152,8 @@ absl::Status ReadConnection(const ParamReader& p, BridgeOptions* o) {
   }
   CLOUDCAST_ASSIGN_OR_RETURN(compress, p.Bool("compress"));
   if (compress) o->compress = *compress;
+  CLOUDCAST_ASSIGN_OR_RETURN(rate_control, p.Bool("rate_control"));
+  if (rate_control) o->rate_control = *rate_control;
 
   // TLS and the token: the same rules as the programs' --tls-* and --token-file flags.
   CLOUDCAST_ASSIGN_OR_RETURN(tls, p.Bool("tls/enabled"));
@@ -306,6 +312,14 @@ absl::Status ReadStages(const ParamReader& p, BridgeOptions* o) {
           absl::StrCat(p.Display("delivery"), " is '", *delivery, "'; must be latest or all"));
     }
     c.set_delivery(convert::ToProto(d));
+  }
+  if (o->rate_control) {
+    // A frame past the rate controller's window must be replaceable.
+    if (c.delivery() == v1::DELIVERY_ALL) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          p.Display("rate_control"), " needs delivery latest; ", p.Display("delivery"), " is all"));
+    }
+    c.set_delivery(v1::DELIVERY_LATEST);
   }
 
   CLOUDCAST_ASSIGN_OR_RETURN(pt_on, p.Bool("passthrough/enabled"));

@@ -33,6 +33,7 @@ struct BridgeOptions {
   // Connection: timeouts, TLS and the bearer token (ClientOptions::security).
   client::ClientOptions client;
   bool resilient = true;  // StreamOptions::resilient
+  bool rate_control = false;  // StreamOptions::rate_control (its defaults), with delivery latest
   std::chrono::milliseconds reconnect_timeout{30000};
   // The stream's passthrough, voxel grid, Draco, delivery and (~input stereo) matcher; the camera
   // is added per frame. Unset fields take the server's defaults.

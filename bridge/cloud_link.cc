@@ -94,6 +94,7 @@ absl::Status CloudLink::EnsureStream(const CameraModel& camera) {
   client::StreamOptions so;
   so.resilient = options_.resilient;
   so.reconnect_timeout = options_.reconnect_timeout;
+  if (options_.rate_control) so.rate_control = client::RateControlOptions{};
   so.on_result = [this](client::Result&& r) { OnResult(std::move(r)); };
   so.on_reconnect = [this](const client::Reconnect& r) {
     stats_->Reconnected();

@@ -83,6 +83,27 @@ TEST(Ros2Args, ErrorsNameTheParameterInRos2Spelling) {
   EXPECT_TRUE(ros_bridge::ReadBridgeOptions(Ros2ParamReader(a->params, {"input_qos"}), "x").ok());
 }
 
+// rate_control (shared with the ROS 1 bridge): the stream follows the link, with delivery latest
+// (set when left unset; refused with delivery all, naming both parameters).
+TEST(Ros2Args, RateControlTakesDeliveryLatest) {
+  auto a = Parse({"--ros-args", "-p", "rate_control:=true"});
+  ASSERT_TRUE(a.ok());
+  auto o = ros_bridge::ReadBridgeOptions(Ros2ParamReader(a->params, {}), "cloudcast-ros2-bridge");
+  ASSERT_TRUE(o.ok()) << o.status();
+  EXPECT_TRUE(o->rate_control);
+  EXPECT_EQ(o->config.delivery(), v1::DELIVERY_LATEST);
+  a = Parse({"--ros-args", "-p", "rate_control:=true", "-p", "delivery:=all"});
+  o = ros_bridge::ReadBridgeOptions(Ros2ParamReader(a->params, {}), "cloudcast-ros2-bridge");
+  ASSERT_FALSE(o.ok());
+  EXPECT_NE(o.status().message().find("rate_control needs delivery latest; delivery is all"),
+            std::string::npos)
+      << o.status();
+  a = Parse({"--ros-args", "-p", "compress:=true"});
+  o = ros_bridge::ReadBridgeOptions(Ros2ParamReader(a->params, {}), "cloudcast-ros2-bridge");
+  ASSERT_TRUE(o.ok()) << o.status();
+  EXPECT_FALSE(o->rate_control);
+}
+
 TEST(Ros2Args, MalformedArgumentsAreRefused) {
   for (std::vector<std::string> bad :
        {std::vector<std::string>{"server:=x"}, {"--ros-args", "-p"}, {"--ros-args", "-p", "x"},
