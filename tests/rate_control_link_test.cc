@@ -37,8 +37,8 @@ TEST(RateControlLinkTest, TheSenderFollowsAStepDownAndOutlivesAnOutage) {
   // Tsukuba's 22 KB) would otherwise make it the bottleneck, and this test is about the uplink.
   linkemu::EmulatedLink::Options options;
   options.binary = testing::BinDir() + "/cloudcast-linkemu";
-  options.flags = {"--up-rate", "10mbit", "--down-rate", "100mbit", "--delay", "20ms",
-                   "--up-schedule", "7s=3mbit", "--outage", "11s:300ms"};
+  options.flags = {"--up-rate", "10mbit",        "--down-rate", "100mbit",  "--delay",
+                   "20ms",      "--up-schedule", "7s=3mbit",    "--outage", "11s:300ms"};
   options.timeout_s = 60;
   auto link = linkemu::EmulatedLink::Start(options);
   ASSERT_TRUE(link.ok()) << link.status();
@@ -86,7 +86,7 @@ TEST(RateControlLinkTest, TheSenderFollowsAStepDownAndOutlivesAnOutage) {
   // fewer than 10 fit a second after the step; the rest are replaced at the sender.
   EXPECT_GT(f["answered"].get<int>(), 100);
   EXPECT_EQ(f["sent"].get<int>(), f["answered"].get<int>() + f["frameErrors"].get<int>() +
-                                       f["dropped"].get<int>() + f["lost"].get<int>());
+                                      f["dropped"].get<int>() + f["lost"].get<int>());
   EXPECT_EQ(f["lost"].get<int>(), 0);
   EXPECT_EQ(f["frameErrors"].get<int>(), 0);
   EXPECT_EQ(report["callStatusDistribution"].size(), 1u) << report["callStatusDistribution"];

@@ -24,8 +24,8 @@ using std::chrono::milliseconds;
 struct Sample {
   double t_ms;
   double target_bps;
-  double queue_ms;     // the bottleneck's queue, in ms at its rate then
-  double latency_ms;   // of the frame answered then: capture to reply
+  double queue_ms;    // the bottleneck's queue, in ms at its rate then
+  double latency_ms;  // of the frame answered then: capture to reply
   int window;
 };
 
@@ -156,7 +156,8 @@ TEST(RateControllerTest, AStepDownIsFollowedWithinASecondAndAStepUpIsTaken) {
   // No frame answered more than 300 ms after capture after the first second of the step.
   for (const Sample& x : Between(s, 6000, 20000, Any)) EXPECT_LT(x.latency_ms, 300) << x.t_ms;
   // The step up is taken: the target is back above 6 Mbit/s within 5 s.
-  EXPECT_FALSE(Between(s, 10000, 15000, [](const Sample& x) { return x.target_bps > 6e6; }).empty());
+  EXPECT_FALSE(
+      Between(s, 10000, 15000, [](const Sample& x) { return x.target_bps > 6e6; }).empty());
 }
 
 TEST(RateControllerTest, AnOutageHoldsFramesInTheSenderAndTheStreamResumes) {

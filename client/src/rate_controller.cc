@@ -86,8 +86,8 @@ void RateController::OnReply(const Reply& reply) {
     const auto once_a_round_trip = std::chrono::duration_cast<Clock::duration>(
         std::chrono::duration<double, std::milli>(std::max(estimate_.rtt_ms, 100.0)));
     if (since >= once_a_round_trip) {
-      const double cut = estimate_.delivered_bps > 0 ? options_.backoff * estimate_.delivered_bps
-                                                     : 0.5 * target;
+      const double cut =
+          estimate_.delivered_bps > 0 ? options_.backoff * estimate_.delivered_bps : 0.5 * target;
       target = std::min(target, cut);
       last_decrease_ = received;
       capacity_bps_ = estimate_.delivered_bps;
@@ -95,16 +95,15 @@ void RateController::OnReply(const Reply& reply) {
   } else if (estimate_.queue_delay_ms < options_.grow_below * target_delay) {
     const bool near_capacity =
         capacity_bps_ > 0 && target >= 0.95 * capacity_bps_ && target <= 1.3 * capacity_bps_;
-    const double growth = !seen_overuse_ ? options_.startup_growth_per_second
+    const double growth = !seen_overuse_  ? options_.startup_growth_per_second
                           : near_capacity ? options_.near_capacity_growth_per_second
                                           : options_.growth_per_second;
     // Never more than a probe's margin over what the link delivered: a sender held back by its
     // window sees no queueing delay, so the delay alone would let the target drift up (GCC caps
     // its estimate at 1.5 times the received rate for the same reason).
     const double grown = target * (1 + growth * dt);
-    const double cap = estimate_.delivered_bps > 0
-                           ? options_.max_over_delivered * estimate_.delivered_bps
-                           : grown;
+    const double cap =
+        estimate_.delivered_bps > 0 ? options_.max_over_delivered * estimate_.delivered_bps : grown;
     target = std::max(target, std::min(grown, cap));
   }
   target = std::clamp(target, options_.min_bps, options_.max_bps);
@@ -119,9 +118,9 @@ void RateController::UpdateWindow() {
   const double seconds =
       (round_trips_.front().second + static_cast<double>(options_.target_delay.count())) / 1000;
   const double frames = estimate_.target_bps / 8 * seconds / mean_frame_bytes_;
-  estimate_.frames_in_flight = std::clamp(static_cast<int>(std::floor(frames)),
-                                          options_.min_frames_in_flight,
-                                          options_.max_frames_in_flight);
+  estimate_.frames_in_flight =
+      std::clamp(static_cast<int>(std::floor(frames)), options_.min_frames_in_flight,
+                 options_.max_frames_in_flight);
 }
 
 std::size_t RateController::FrameBudgetBytes(double fps) const {
@@ -130,11 +129,14 @@ std::size_t RateController::FrameBudgetBytes(double fps) const {
 }
 
 void QualityFollower::Encoded(std::size_t bytes, std::size_t budget_bytes) {
-  const double ratio = static_cast<double>(bytes) / static_cast<double>(std::max<std::size_t>(1, budget_bytes));
+  const double ratio =
+      static_cast<double>(bytes) / static_cast<double>(std::max<std::size_t>(1, budget_bytes));
   // JPEG's size roughly doubles from quality 50 to 90: steps of 2 to 10 settle in a few frames.
   int step = 0;
-  if (ratio > 1.0) step = -std::clamp(static_cast<int>((ratio - 1.0) * 20), 2, 10);
-  else if (ratio < 0.8) step = std::clamp(static_cast<int>((0.8 - ratio) * 20), 1, 5);
+  if (ratio > 1.0)
+    step = -std::clamp(static_cast<int>((ratio - 1.0) * 20), 2, 10);
+  else if (ratio < 0.8)
+    step = std::clamp(static_cast<int>((0.8 - ratio) * 20), 1, 5);
   quality_ = std::clamp(quality_ + step, min_, max_);
 }
 

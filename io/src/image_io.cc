@@ -11,10 +11,10 @@
 #include <cstring>
 #include <exception>
 #include <filesystem>
-#include <optional>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#include <optional>
 #include <string>
 #include <system_error>
 

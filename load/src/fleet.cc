@@ -602,8 +602,7 @@ FleetResult Fleet::Run(const std::function<void(const SecondStats&)>& on_second)
       o.resilient,
       o.reconnect_timeout.count(),
       Ns(t0),
-      std::chrono::duration_cast<std::chrono::nanoseconds>(result.start.time_since_epoch())
-          .count(),
+      std::chrono::duration_cast<std::chrono::nanoseconds>(result.start.time_since_epoch()).count(),
       o.rate_control,
       o.closed_loop ? 30.0 : o.schedule.start};
   for (int s = 0; s < n; ++s) {

@@ -93,8 +93,8 @@ absl::StatusOr<FrameStore> FrameStore::Prepare(const FrameSourceOptions& o) {
   store.kind_ = o.kind;
   if (o.jpeg_ladder.empty()) {
     store.description_ =
-        fmt::format("{} ({} {} frames, {}x{}), {}, {:.0f} KB per frame", Label(info),
-                    store.size(), sources::Name(o.kind), info.width, info.height,
+        fmt::format("{} ({} {} frames, {}x{}), {}, {:.0f} KB per frame", Label(info), store.size(),
+                    sources::Name(o.kind), info.width, info.height,
                     sources::Name(o.uplink.encoding), store.MeanRequestBytes() / 1024);
   } else {
     store.description_ = fmt::format(

@@ -35,9 +35,9 @@ std::string Rfc3339(std::chrono::system_clock::time_point t) {
 }
 
 nlohmann::json RateJson(const RateSummary& r) {
-  return {{"samples", r.samples},     {"targetBps", r.target_bps},
-          {"rttMs", r.rtt_ms},        {"queueDelayMs", r.queue_delay_ms},
-          {"window", r.window},       {"frameBytes", r.frame_bytes}};
+  return {{"samples", r.samples}, {"targetBps", r.target_bps},
+          {"rttMs", r.rtt_ms},    {"queueDelayMs", r.queue_delay_ms},
+          {"window", r.window},   {"frameBytes", r.frame_bytes}};
 }
 
 nlohmann::json Percentiles(const Histogram& h) {
@@ -369,9 +369,9 @@ std::string ProgressLine(const SecondStats& s, std::uint64_t errors, std::uint64
     line += fmt::format("  reconnects {}  resent {}", s.reconnects, s.resent);
   }
   if (s.rate.samples > 0) {
-    line += fmt::format("  target {:.1f} Mbit/s  rtt {:.0f} ms  queueing {:.0f} ms  {:.0f} KB/frame",
-                        s.rate.target_bps / 1e6, s.rate.rtt_ms, s.rate.queue_delay_ms,
-                        s.rate.frame_bytes / 1024);
+    line += fmt::format(
+        "  target {:.1f} Mbit/s  rtt {:.0f} ms  queueing {:.0f} ms  {:.0f} KB/frame",
+        s.rate.target_bps / 1e6, s.rate.rtt_ms, s.rate.queue_delay_ms, s.rate.frame_bytes / 1024);
   }
   return line;
 }

@@ -11,7 +11,8 @@
 // processing varies from frame to frame and says nothing about the link). While it stays under
 // most of the target delay the bitrate grows multiplicatively (never past a margin over the
 // delivered rate); above the target it falls to a fraction of the rate the server saw delivered
-// (CloudReply.stream_bytes_received over receive_time_unix_ns), at most once a round trip. Loss does not steer it: TCP hides loss as delay, which this sees.
+// (CloudReply.stream_bytes_received over receive_time_unix_ns), at most once a round trip. Loss
+// does not steer it: TCP hides loss as delay, which this sees.
 //
 // The in-flight window is what keeps latency bounded while the encoder catches up (a step down,
 // an outage): a frame past the window waits in the sender, where DELIVERY_LATEST replaces it with
