@@ -42,6 +42,7 @@
 #include "cloudcast/datasets/synthetic.h"
 #include "cloudcast/io/image_io.h"
 #include "gtest/gtest.h"
+#include "support/client_fixture.h"
 #include "support/server_fixture.h"
 #include "support/test_support.h"
 #include "support/waiting.h"
@@ -148,22 +149,13 @@ int DeadPort() {
 // ---------------------------------------------------------------------------------------------
 // The fixture: one server for the whole suite, a client of its own per test.
 
-class ClientTest : public testing::SharedServerTest {
+class ClientTest : public testing::SharedServerClientTest {
  protected:
-  void SetUp() override {
-    testing::SharedServerTest::SetUp();
-    absl::StatusOr<std::unique_ptr<Client>> c = Client::Connect(shared_target());
-    ASSERT_TRUE(c.ok()) << c.status();
-    client_ = std::move(c).value();
-  }
-
   std::unique_ptr<Stream> Open(const StreamConfig& config, StreamOptions options = {}) {
     absl::StatusOr<std::unique_ptr<Stream>> s = client_->OpenStream(config, std::move(options));
     EXPECT_TRUE(s.ok()) << s.status();
     return s.ok() ? std::move(s).value() : nullptr;
   }
-
-  std::unique_ptr<Client> client_;
 };
 
 // ---------------------------------------------------------------------------------------------

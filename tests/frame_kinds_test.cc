@@ -21,6 +21,7 @@
 #include "cloudcast/stereo/grey.h"
 #include "cloudcast/stereo/matcher.h"
 #include "stereo_stage.h"  // server/src
+#include "support/client_fixture.h"
 #include "support/server_fixture.h"
 #include "support/stereo_support.h"
 #include "support/test_support.h"
@@ -85,16 +86,7 @@ PointCloud Reference(const PipelineOptions& o, const DepthView& depth, const Col
   return cloud;
 }
 
-class FrameKindsTest : public testing::SharedServerTest {
- protected:
-  void SetUp() override {
-    testing::SharedServerTest::SetUp();
-    auto c = client::Client::Connect(shared_target());
-    ASSERT_TRUE(c.ok()) << c.status();
-    client_ = *std::move(c);
-  }
-  std::unique_ptr<client::Client> client_;
-};
+using FrameKindsTest = testing::SharedServerClientTest;
 
 TEST_F(FrameKindsTest, GetInfoListsDepthEncodingsAndStereoMatchers) {
   absl::StatusOr<v1::ServerInfo> info = client_->GetInfo();

@@ -23,6 +23,7 @@
 #include "cloudcast/video/encoder.h"
 #include "cloudcast/video/frame_encoder.h"
 #include "cloudcast/video/h264_bitstream.h"
+#include "support/client_fixture.h"
 #include "support/h264_sps.h"
 #include "support/server_fixture.h"
 
@@ -89,16 +90,7 @@ video::EncoderOptions EncoderFor(video::PictureKind kind, std::uint32_t w, std::
 // The colour channels of a packed point, 0xAARRGGBB.
 int Channel(std::uint32_t rgba, int shift) { return static_cast<int>((rgba >> shift) & 0xff); }
 
-class VideoUplinkTest : public testing::SharedServerTest {
- protected:
-  void SetUp() override {
-    testing::SharedServerTest::SetUp();
-    auto c = client::Client::Connect(shared_target());
-    ASSERT_TRUE(c.ok()) << c.status();
-    client_ = *std::move(c);
-  }
-  std::unique_ptr<client::Client> client_;
-};
+using VideoUplinkTest = testing::SharedServerClientTest;
 
 TEST_F(VideoUplinkTest, GetInfoListsH264) {
   absl::StatusOr<v1::ServerInfo> info = client_->GetInfo();
