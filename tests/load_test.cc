@@ -7,7 +7,11 @@
 #include <random>
 #include <thread>
 
+#include <grpcpp/grpcpp.h>
+
+#include "cloudcast/core/draco_codec.h"
 #include "cloudcast/load/fleet.h"
+#include "cloudcast/proto/convert.h"
 #include "cloudcast/load/frame_store.h"
 #include "cloudcast/load/histogram.h"
 #include "cloudcast/load/memory_watch.h"
@@ -15,6 +19,7 @@
 #include "cloudcast/load/report.h"
 #include "cloudcast/load/schedule.h"
 #include "cloudcast/server/server.h"
+#include "cloudcast/v1/cloudcast.grpc.pb.h"
 #include "support/waiting.h"
 
 namespace cloudcast::load {
@@ -205,6 +210,78 @@ class FleetTest : public ::testing::Test {
     return r;
   }
 };
+
+// The adaptive ladder's half-resolution levels carry their own camera (Frame.camera), so the
+// server makes the same surface from a quarter of the pixels: each point keeps its depth and its
+// place. Without the camera the cloud would be half as far (focal halved, disparity not) or
+// squeezed to one side (principal point).
+TEST_F(FleetTest, HalfResolutionLevelsMakeTheSameSurface) {
+  auto server = StartServer(1);
+  FrameSourceOptions o;
+  o.source.synthetic_width = 320;
+  o.source.synthetic_height = 240;
+  o.synthetic_frames = 1;
+  o.jpeg_ladder = {90};
+  o.half_resolution_ladder = {90};
+  FrameStore store = FrameStore::Prepare(o).value();
+  ASSERT_EQ(store.levels(), 2u);
+  v1::StreamConfig config;  // the frames' camera, as cloudcast-load sends it
+  convert::SetCamera(store.camera(), &config);
+  config.mutable_camera()->clear_cx();  // the image's centre, at either resolution
+  config.mutable_camera()->clear_cy();
+  config.mutable_passthrough()->set_enabled(false);  // the whole scene
+  store.SetStreamCamera(config.camera());
+  EXPECT_LT(store.MeanRequestBytes(1), store.MeanRequestBytes(0) / 2);
+  auto stub = v1::CloudCast::NewStub(
+      grpc::CreateChannel(server->address(), grpc::InsecureChannelCredentials()));
+  struct Summary {
+    std::size_t pixels = 0, points = 0;
+    double lo[3] = {1e9, 1e9, 1e9}, hi[3] = {-1e9, -1e9, -1e9};
+  };
+  auto process = [&](std::size_t level) {
+    grpc::ByteBuffer buffer = store.Request(0, 1, 1, level);
+    std::vector<grpc::Slice> slices;
+    EXPECT_TRUE(buffer.Dump(&slices).ok());
+    std::string bytes;
+    for (auto& s : slices) bytes.append(reinterpret_cast<const char*>(s.begin()), s.size());
+    v1::StreamRequest request;
+    EXPECT_TRUE(request.ParseFromString(bytes));
+    v1::ProcessRequest process;
+    *process.mutable_frame() = request.frame();
+    *process.mutable_config() = config;
+    v1::CloudReply reply;
+    grpc::ClientContext context;
+    const grpc::Status status = stub->Process(&context, process, &reply);
+    EXPECT_TRUE(status.ok()) << status.error_message();
+    PointCloud cloud;
+    EXPECT_TRUE(DecodeDraco(reply.draco(), &cloud).ok());
+    Summary s;
+    s.pixels = reply.counts().pixels();
+    s.points = cloud.size();
+    for (const Point& p : cloud.points) {
+      const double v[3] = {p.x, p.y, p.z};
+      for (int i = 0; i < 3; ++i) {
+        s.lo[i] = std::min(s.lo[i], v[i]);
+        s.hi[i] = std::max(s.hi[i], v[i]);
+      }
+    }
+    return s;
+  };
+  const Summary full = process(0), half = process(1);
+  EXPECT_EQ(full.pixels, 320u * 240);
+  EXPECT_EQ(half.pixels, 160u * 120);
+  ASSERT_GT(full.points, 100u);
+  ASSERT_GT(half.points, 100u);
+  // Fewer points where a half-resolution pixel is wider than the voxel grid's leaf (far away),
+  // the same surface's extent on every axis.
+  std::printf("points after the voxel grid: full %zu, half %zu\n", full.points, half.points);
+  for (int i = 0; i < 3; ++i) {
+    const double extent = full.hi[i] - full.lo[i];
+    ASSERT_GT(extent, 0) << i;
+    EXPECT_NEAR(half.lo[i], full.lo[i], 0.05 * extent) << "axis " << i;
+    EXPECT_NEAR(half.hi[i], full.hi[i], 0.05 * extent) << "axis " << i;
+  }
+}
 
 TEST_F(FleetTest, LosslessRunAgainstTheServerAnswersEveryFrame) {
   auto server = StartServer(2);

@@ -29,11 +29,20 @@ struct Sample {
   int window;
 };
 
+// What a real link and server add to the ideal one (defaults: nothing).
+struct Realism {
+  int lossy_every = 0;       // every Nth frame loses a packet: it and those behind it arrive a
+                             // round trip late (TCP's fast retransmit; head-of-line blocking)
+  bool vary_sizes = false;   // frames 0.8 to 1.2 times their budget (JPEG content), replies of
+                             // 15 to 30 KB over a 10 Mbit/s downlink, 1 to 10 ms in the server
+  double floor_bytes = 8'000;  // the encoder's smallest frame
+};
+
 // One millisecond a step. `rate_bps(t_ms)` is the bottleneck's rate (0: an outage).
 class LinkSimulation {
  public:
-  LinkSimulation(std::function<double(double)> rate_bps, double one_way_ms)
-      : rate_bps_(std::move(rate_bps)), one_way_ms_(one_way_ms) {}
+  LinkSimulation(std::function<double(double)> rate_bps, double one_way_ms, Realism realism = {})
+      : rate_bps_(std::move(rate_bps)), one_way_ms_(one_way_ms), realism_(realism) {}
 
   std::vector<Sample> Run(double seconds) {
     std::vector<Sample> samples;
@@ -49,8 +58,24 @@ class LinkSimulation {
         budget -= served;
         if (f.bytes_left <= 0) {
           server_bytes_ += f.bytes;
-          replies_.push_back({t + one_way_ms_ + 5 + one_way_ms_, f.written_ms, f.captured_ms,
-                              t + one_way_ms_, f.bytes, server_bytes_});
+          ++completed_;
+          double arrival = t + one_way_ms_;
+          if (realism_.lossy_every > 0 && completed_ % realism_.lossy_every == 0) {
+            arrival += 2 * one_way_ms_ + 10;  // the lost packet comes again a round trip later
+          }
+          arrival = std::max(arrival, hol_until_ms_);  // TCP delivers in order
+          hol_until_ms_ = arrival;
+          double in_server = 5, reply_ms = 0;
+          if (realism_.vary_sizes) {
+            in_server = 1 + static_cast<double>(completed_ * 7 % 10);
+            const double reply_bytes = 15'000 + 1'500 * static_cast<double>(completed_ * 3 % 11);
+            reply_ms = reply_bytes * 8 / 10e6 * 1000;
+          }
+          const double sent = std::max(arrival + in_server, server_sent_ms_);
+          server_sent_ms_ = sent;
+          downlink_free_ms_ = std::max(downlink_free_ms_, sent) + reply_ms;
+          replies_.push_back({downlink_free_ms_ + one_way_ms_, f.written_ms, f.captured_ms,
+                              arrival, f.bytes, server_bytes_, sent});
           link_.pop_front();
         }
       }
@@ -62,7 +87,7 @@ class LinkSimulation {
         // The server holds each frame 5 ms, and says so.
         controller_.OnReply({At(r.written_ms), At(t), static_cast<std::size_t>(r.bytes),
                              static_cast<std::int64_t>(r.server_ms * 1e6),
-                             static_cast<std::int64_t>((r.server_ms + 5) * 1e6), r.server_bytes});
+                             static_cast<std::int64_t>(r.server_sent_ms * 1e6), r.server_bytes});
         samples.push_back({t, controller_.estimate().target_bps, QueueMs(t), t - r.captured_ms,
                            controller_.frames_in_flight()});
       }
@@ -72,8 +97,12 @@ class LinkSimulation {
         next_capture += 1000 / fps;
       }
       if (waiting_ && in_flight_ < controller_.frames_in_flight()) {
+        ++captured_;
+        const double content =
+            realism_.vary_sizes ? 0.8 + 0.4 * static_cast<double>(captured_ * 13 % 10) / 10 : 1;
         const double bytes = std::clamp<double>(
-            static_cast<double>(controller_.FrameBudgetBytes(fps)), 8'000, 60'000);
+            static_cast<double>(controller_.FrameBudgetBytes(fps)) * content,
+            realism_.floor_bytes, 60'000);
         controller_.OnFrameWritten(static_cast<std::size_t>(bytes));
         link_.push_back({bytes, bytes, t, *waiting_});
         ++in_flight_;
@@ -90,6 +119,7 @@ class LinkSimulation {
   struct Reply {
     double at_ms, written_ms, captured_ms, server_ms, bytes;
     std::uint64_t server_bytes;
+    double server_sent_ms;
   };
   static Clock::time_point At(double ms) {
     return Clock::time_point(std::chrono::microseconds(static_cast<std::int64_t>(ms * 1000)));
@@ -103,6 +133,9 @@ class LinkSimulation {
 
   std::function<double(double)> rate_bps_;
   double one_way_ms_;
+  Realism realism_;
+  std::uint64_t completed_ = 0, captured_ = 0;
+  double hol_until_ms_ = 0, server_sent_ms_ = 0, downlink_free_ms_ = 0;
   RateController controller_;
   std::deque<InLink> link_;
   std::deque<Reply> replies_;
@@ -135,6 +168,26 @@ TEST(RateControllerTest, ItFindsASteadyLinkAndKeepsItsQueueShort) {
   double sum = 0;
   for (const Sample& x : late) sum += x.target_bps;
   EXPECT_GT(sum / static_cast<double>(late.size()), 5e6);
+}
+
+// Profile (a) of the link issue: 10 Mbit/s, 40 ms round trip, 0.1 % loss (a lost packet in about
+// one frame in 40), frames and replies of varying size, a server whose time varies. The sender
+// uses the link and keeps the camera's rate: neither the downlink's nor the server's variation,
+// nor a retransmitted frame, is read as a full uplink.
+TEST(RateControllerTest, ALossyLinkWithVaryingRepliesIsNotTakenForAFullOne) {
+  Realism realism;
+  realism.lossy_every = 40;
+  realism.vary_sizes = true;
+  realism.floor_bytes = 20'000;
+  LinkSimulation sim([](double) { return 10e6; }, 20, realism);
+  const std::vector<Sample> s = sim.Run(20);
+  const std::vector<Sample> late = Between(s, 5000, 20000, Any);
+  // The camera's 30 frames a second come back (at least 28 a second over the last 15 s).
+  EXPECT_GE(late.size(), 28u * 15);
+  double sum = 0;
+  for (const Sample& x : late) sum += x.target_bps;
+  EXPECT_GT(sum / static_cast<double>(late.size()), 6.5e6);
+  for (const Sample& x : late) EXPECT_LT(x.latency_ms, 250) << x.t_ms;
 }
 
 TEST(RateControllerTest, AStepDownIsFollowedWithinASecondAndAStepUpIsTaken) {
@@ -176,10 +229,12 @@ TEST(RateControllerTest, WithoutTheServersByteCountOveruseHalvesTheTarget) {
   RateController c;
   const Clock::time_point t0{};
   c.OnFrameWritten(20'000);
-  // A steady 50 ms round trip, then 400 ms: overuse, and no delivered rate to cut to.
+  // A steady 50 ms round trip, then 400 ms twice: overuse, and no delivered rate to cut to.
   c.OnReply({t0, t0 + milliseconds(50), 20'000});
   const double before = c.estimate().target_bps;
   c.OnReply({t0 + milliseconds(100), t0 + milliseconds(500), 20'000});
+  EXPECT_FALSE(c.estimate().overuse);  // one late reply may be a retransmission
+  c.OnReply({t0 + milliseconds(133), t0 + milliseconds(533), 20'000});
   EXPECT_TRUE(c.estimate().overuse);
   EXPECT_EQ(c.estimate().delivered_bps, 0);
   EXPECT_NEAR(c.estimate().target_bps, before / 2, 1);

@@ -28,7 +28,12 @@ void RateController::OnFrameWritten(std::size_t bytes) {
   UpdateWindow();
 }
 
-void RateController::OnCallOpened() { delivered_.clear(); }
+void RateController::OnCallOpened() {
+  // A new call may reach another replica: another byte count, and another clock.
+  delivered_.clear();
+  delays_.clear();
+  over_streak_ = 0;
+}
 
 void RateController::OnReply(const Reply& reply) {
   const Clock::time_point received = reply.received;
@@ -48,38 +53,61 @@ void RateController::OnReply(const Reply& reply) {
     }
   }
 
-  // The round trip less the frame's own serialization at the delivered rate: what is left grows
-  // only with queueing (behind earlier frames, in the link's queue, on the server).
+  // The queueing delay is read from the frame's one-way delay: the server's clock when the frame
+  // had arrived whole less ours when its write started. The two clocks' offset is unknown but
+  // constant, so only the delay's growth over its windowed minimum is used. One way, because the
+  // uplink is what this sender's bitrate fills: the reply's way back (its size, the downlink's own
+  // queue) and the server's processing time say nothing about it, and in a round trip they made
+  // up most of the variation (replies of 15 to 30 KB, frames processed in 1 to 10 ms).
+  // The frame's own serialization stays in: a frame that takes longer to cross the link than the
+  // target delay is latency the bitrate should answer, whether or not anything queued.
   const double rtt = std::max(0.0, Ms(received - reply.written));
-  const double serialization =
-      estimate_.delivered_bps > 0
-          ? static_cast<double>(reply.frame_bytes) * 8 / estimate_.delivered_bps * 1000
-          : 0;
   const double in_server =
       reply.server_receive_unix_ns > 0 && reply.server_send_unix_ns > reply.server_receive_unix_ns
           ? static_cast<double>(reply.server_send_unix_ns - reply.server_receive_unix_ns) / 1e6
           : 0;
-  const double base = std::max(0.0, rtt - serialization - in_server);
+  const bool server_clock = reply.server_receive_unix_ns > 0;
+  if (server_clock && !server_clock_) {
+    server_clock_ = true;
+    delays_.clear();  // round trips measured before are on another scale
+  }
   auto windowed_min = [&](std::deque<std::pair<Clock::time_point, double>>& d, double v) {
     while (!d.empty() && d.back().second >= v) d.pop_back();
     d.emplace_back(received, v);
     while (received - d.front().first > options_.min_rtt_window) d.pop_front();
   };
-  windowed_min(rtts_, base);
   windowed_min(round_trips_, rtt);
-  estimate_.min_rtt_ms = rtts_.front().second;
   estimate_.rtt_ms = estimate_.rtt_ms == 0 ? rtt : 0.875 * estimate_.rtt_ms + 0.125 * rtt;
-  const double queue_sample = base - estimate_.min_rtt_ms;
-  estimate_.queue_delay_ms = 0.7 * estimate_.queue_delay_ms + 0.3 * queue_sample;
+  // A reply without the server's clock (an error) has no one-way delay to add; an older server
+  // that never sends it leaves the round trip less the server's time as the measure.
+  if (server_clock || !server_clock_) {
+    const double delay =
+        server_clock ? static_cast<double>(reply.server_receive_unix_ns -
+                                           std::chrono::duration_cast<std::chrono::nanoseconds>(
+                                               reply.written.time_since_epoch())
+                                               .count()) /
+                           1e6
+                     : std::max(0.0, rtt - in_server);
+    windowed_min(delays_, delay);
+    const double queue_sample = delay - delays_.front().second;
+    estimate_.queue_delay_ms = 0.7 * estimate_.queue_delay_ms + 0.3 * queue_sample;
+    last_queue_sample_ = queue_sample;
+  }
+  estimate_.min_rtt_ms = round_trips_.front().second;
 
   const double target_delay = static_cast<double>(options_.target_delay.count());
   double dt = last_update_ ? std::chrono::duration<double>(received - *last_update_).count() : 0;
   dt = std::clamp(dt, 0.0, 0.2);  // a long silence is no licence to grow
   last_update_ = received;
   double& target = estimate_.target_bps;
-  // Overuse on the smoothed delay, or at once on a sample four times the target (a step down
-  // to a third of the rate shows there within a frame or two).
-  estimate_.overuse = estimate_.queue_delay_ms > target_delay || queue_sample > 4 * target_delay;
+  // Overuse on the smoothed delay, or on a sample four times the target (a step down to a third
+  // of the rate shows there within a frame or two), seen on two replies in a row: one frame late
+  // by a retransmission (TCP hides a lost packet as a round trip's delay, 0.1 % loss does that to
+  // a frame or two a second) is not a full link.
+  const bool over =
+      estimate_.queue_delay_ms > target_delay || last_queue_sample_ > 4 * target_delay;
+  over_streak_ = over ? over_streak_ + 1 : 0;
+  estimate_.overuse = over_streak_ >= 2;
   if (estimate_.overuse) {
     seen_overuse_ = true;
     const auto since = last_decrease_ ? received - *last_decrease_ : Clock::duration::max();
@@ -115,11 +143,17 @@ void RateController::UpdateWindow() {
     estimate_.frames_in_flight = options_.min_frames_in_flight;
     return;
   }
-  const double seconds =
-      (round_trips_.front().second + static_cast<double>(options_.target_delay.count())) / 1000;
+  // The minimum round trip, plus the delay the controller lets build before it acts, plus as
+  // much again for the round trip its cut takes to show (and TCP's own hiccups: after a lost
+  // packet CUBIC's smaller window makes a frame take a round trip more, 0.1 % loss does that a
+  // few times a second at 10 Mbit/s). Less than that and the camera's 30 frames a second do not
+  // fit in flight on a 40 ms link.
+  const double seconds = (round_trips_.front().second +
+                          2 * static_cast<double>(options_.target_delay.count())) /
+                         1000;
   const double frames = estimate_.target_bps / 8 * seconds / mean_frame_bytes_;
   estimate_.frames_in_flight =
-      std::clamp(static_cast<int>(std::floor(frames)), options_.min_frames_in_flight,
+      std::clamp(static_cast<int>(std::ceil(frames)), options_.min_frames_in_flight,
                  options_.max_frames_in_flight);
 }
 

@@ -447,7 +447,10 @@ int main(int argc, char** argv) {
   source.synthetic_frames = f.synthetic_frames;
   cloudcast::sources::ParseUplink(f.encoding, &source.uplink.encoding);
   source.uplink.jpeg_quality = f.jpeg_quality;
-  if (f.rate_control) source.jpeg_ladder = {95, 90, 80, 70, 60, 50, 40, 30, 20, 10};
+  if (f.rate_control) {
+    source.jpeg_ladder = {95, 90, 80, 70, 60, 50, 40, 30, 20, 10};
+    source.half_resolution_ladder = {90, 70, 50, 30, 10};
+  }
 
   load::FleetOptions o;
   o.security = *security;
@@ -504,6 +507,7 @@ int main(int argc, char** argv) {
   else
     o.config.mutable_camera()->clear_cy();
   o.config.set_delivery(f.lossless ? cloudcast::v1::DELIVERY_ALL : cloudcast::v1::DELIVERY_LATEST);
+  store->SetStreamCamera(o.config.camera());
   if (f.stereo->AnyGiven()) *o.config.mutable_stereo() = f.stereo->GivenStereoConfig();
 
   // Signals: blocked before any thread starts, taken by sigwait on a thread of ours.

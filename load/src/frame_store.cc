@@ -4,6 +4,8 @@
 
 #include <algorithm>
 
+#include <opencv2/imgproc.hpp>
+
 #include "absl/status/status.h"
 
 namespace cloudcast::load {
@@ -40,6 +42,24 @@ std::string Label(const sources::SourceInfo& info) {
   return info.kind;
 }
 
+// `frame` at half its width and height: depth and disparity by taking every second pixel (their
+// values are measurements: averaging them would make points between two surfaces), colour by
+// averaging each 2x2 block.
+sources::SourceFrame HalfResolution(const sources::SourceFrame& frame) {
+  sources::SourceFrame half = frame;
+  const std::vector<sources::ImageRole>& roles = sources::RolesOf(frame.kind);
+  for (std::size_t i = 0; i < half.images.size() && i < roles.size(); ++i) {
+    const cv::Mat& full = frame.images[i];
+    const bool measurement =
+        roles[i] == sources::ImageRole::kDisparity || roles[i] == sources::ImageRole::kDepth;
+    cv::Mat out;
+    cv::resize(full, out, cv::Size(full.cols / 2, full.rows / 2), 0, 0,
+               measurement ? cv::INTER_NEAREST : cv::INTER_AREA);
+    half.images[i] = out;
+  }
+  return half;
+}
+
 }  // namespace
 
 absl::StatusOr<FrameStore> FrameStore::Prepare(const FrameSourceOptions& o) {
@@ -55,14 +75,44 @@ absl::StatusOr<FrameStore> FrameStore::Prepare(const FrameSourceOptions& o) {
   const std::uint64_t frames =
       info.frames_per_pass.value_or(static_cast<std::uint64_t>(std::max(1, o.synthetic_frames)));
   FrameStore store;
-  if (!o.jpeg_ladder.empty()) store.levels_.resize(o.jpeg_ladder.size());
+  const bool halves = !o.jpeg_ladder.empty() && !o.half_resolution_ladder.empty() &&
+                      (o.kind == sources::FrameKind::kDisparity ||
+                       o.kind == sources::FrameKind::kDepth);
+  if (!o.jpeg_ladder.empty()) {
+    store.levels_.resize(o.jpeg_ladder.size() + (halves ? o.half_resolution_ladder.size() : 0));
+  }
   sources::SourceFrame frame;
   sources::UplinkFrame uplink;
-  auto encode = [&](const sources::UplinkOptions& options, v1::Frame* f) {
-    if (absl::Status s = uplink.Encode(frame, options); !s.ok()) return s;
-    f->set_frame_id(frame.name);
+  auto encode_frame = [&](const sources::SourceFrame& from, const sources::UplinkOptions& options,
+                          v1::Frame* f) {
+    if (absl::Status s = uplink.Encode(from, options); !s.ok()) return s;
+    f->set_frame_id(from.name);
     return uplink.ToProto(f);
   };
+  auto encode = [&](const sources::UplinkOptions& options, v1::Frame* f) {
+    return encode_frame(frame, options, f);
+  };
+  // The frame at every quality of `ladder`, from level `first`: the colour as JPEG, the
+  // geometry lossless (encoded once).
+  auto add_ladder = [&](const sources::SourceFrame& from, const std::vector<int>& ladder,
+                        std::size_t first) -> absl::Status {
+    sources::UplinkOptions lossless = o.uplink;
+    lossless.encoding = sources::Uplink::kZstd;
+    v1::Frame geometry;
+    if (absl::Status s = encode_frame(from, lossless, &geometry); !s.ok()) return s;
+    for (std::size_t level = 0; level < ladder.size(); ++level) {
+      sources::UplinkOptions jpeg = o.uplink;
+      jpeg.encoding = sources::Uplink::kJpeg;
+      jpeg.jpeg_quality = ladder[level];
+      v1::Frame f;
+      if (absl::Status s = encode_frame(from, jpeg, &f); !s.ok()) return s;
+      if (geometry.has_disparity()) *f.mutable_disparity() = geometry.disparity();
+      if (geometry.has_depth()) *f.mutable_depth() = geometry.depth();
+      store.AddTail(f, first + level);
+    }
+    return absl::OkStatus();
+  };
+  if (halves) store.first_half_level_ = o.jpeg_ladder.size();
   for (std::uint64_t i = 0; i < frames; ++i) {
     auto got = (*source)->Next(&frame);
     if (!got.ok()) return got.status();
@@ -73,20 +123,13 @@ absl::StatusOr<FrameStore> FrameStore::Prepare(const FrameSourceOptions& o) {
       store.AddTail(f);
       continue;
     }
-    // The ladder: the geometry lossless once, the colour at every quality.
-    sources::UplinkOptions lossless = o.uplink;
-    lossless.encoding = sources::Uplink::kZstd;
-    v1::Frame geometry;
-    if (absl::Status s = encode(lossless, &geometry); !s.ok()) return s;
-    for (std::size_t level = 0; level < o.jpeg_ladder.size(); ++level) {
-      sources::UplinkOptions jpeg = o.uplink;
-      jpeg.encoding = sources::Uplink::kJpeg;
-      jpeg.jpeg_quality = o.jpeg_ladder[level];
-      v1::Frame f;
-      if (absl::Status s = encode(jpeg, &f); !s.ok()) return s;
-      if (geometry.has_disparity()) *f.mutable_disparity() = geometry.disparity();
-      if (geometry.has_depth()) *f.mutable_depth() = geometry.depth();
-      store.AddTail(f, level);
+    if (absl::Status s = add_ladder(frame, o.jpeg_ladder, 0); !s.ok()) return s;
+    if (halves) {
+      if (absl::Status s =
+              add_ladder(HalfResolution(frame), o.half_resolution_ladder, o.jpeg_ladder.size());
+          !s.ok()) {
+        return s;
+      }
     }
   }
   store.camera_ = info.camera;
@@ -98,11 +141,14 @@ absl::StatusOr<FrameStore> FrameStore::Prepare(const FrameSourceOptions& o) {
                     sources::Name(o.uplink.encoding), store.MeanRequestBytes() / 1024);
   } else {
     store.description_ = fmt::format(
-        "{} ({} {} frames, {}x{}), adaptive: lossless geometry, JPEG colour at quality {} to {}, "
+        "{} ({} {} frames, {}x{}), adaptive: lossless geometry, JPEG colour at quality {} to {}{}, "
         "{:.0f} to {:.0f} KB per frame",
         Label(info), store.size(), sources::Name(o.kind), info.width, info.height,
-        o.jpeg_ladder.front(), o.jpeg_ladder.back(), store.MeanRequestBytes(0) / 1024,
-        store.MeanRequestBytes(store.levels() - 1) / 1024);
+        o.jpeg_ladder.front(), o.jpeg_ladder.back(),
+        halves ? fmt::format(", then at half resolution, {} to {}",
+                             o.half_resolution_ladder.front(), o.half_resolution_ladder.back())
+               : "",
+        store.MeanRequestBytes(0) / 1024, store.MeanRequestBytes(store.levels() - 1) / 1024);
   }
   return store;
 }
@@ -114,6 +160,30 @@ FrameStore FrameStore::FromFrames(const std::vector<v1::Frame>& frames, const Ca
   store.camera_ = camera;
   store.description_ = description;
   return store;
+}
+
+void FrameStore::SetStreamCamera(const v1::CameraModel& stream) {
+  if (first_half_level_ == 0) return;
+  // Pixel (u, v) of a half-resolution frame is pixel (2u, 2v) of the full one: the focal lengths
+  // and a principal point that is set halve (unset, it is the image's centre either way), and
+  // so does a disparity in pixels: d' = d * scale + offset.
+  v1::CameraModel half;
+  half.set_fx(stream.fx() / 2);
+  if (stream.has_fy()) half.set_fy(stream.fy() / 2);
+  if (stream.has_cx()) half.set_cx(stream.cx() / 2);
+  if (stream.has_cy()) half.set_cy(stream.cy() / 2);
+  if (kind_ == sources::FrameKind::kDisparity) {
+    half.set_disparity_scale((stream.has_disparity_scale() ? stream.disparity_scale() : 1.0) / 2);
+    if (stream.has_disparity_offset()) half.set_disparity_offset(stream.disparity_offset() / 2);
+  }
+  for (std::size_t level = first_half_level_; level < levels_.size(); ++level) {
+    for (std::shared_ptr<const std::string>& tail : levels_[level]) {
+      v1::Frame frame;
+      frame.ParseFromString(*tail);
+      *frame.mutable_camera() = half;
+      tail = std::make_shared<const std::string>(frame.SerializeAsString());
+    }
+  }
 }
 
 void FrameStore::AddTail(const v1::Frame& frame, std::size_t level) {

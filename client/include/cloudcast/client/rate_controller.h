@@ -5,10 +5,9 @@
 // rate_controller_test drives it through steps and outages.
 //
 // Delay-based, in the spirit of WebRTC's GCC (Carlucci et al., 2016): the queueing delay is the
-// round trip's growth over its windowed minimum, less the frame's own serialization at the
-// delivered rate (a frame three times larger, or a link three times slower, takes longer to
-// cross without anything queueing) and less the time the frame spent in the server (its
-// processing varies from frame to frame and says nothing about the link). While it stays under
+// growth of each frame's one-way delay (our write to the server's receive time, two clocks
+// whose constant offset cancels) over its windowed minimum; the reply's way back and the
+// server's processing stay out of it. While it stays under
 // most of the target delay the bitrate grows multiplicatively (never past a margin over the
 // delivered rate); above the target it falls to a fraction of the rate the server saw delivered
 // (CloudReply.stream_bytes_received over receive_time_unix_ns), at most once a round trip. Loss
@@ -17,8 +16,8 @@
 // The in-flight window is what keeps latency bounded while the encoder catches up (a step down,
 // an outage): a frame past the window waits in the sender, where DELIVERY_LATEST replaces it with
 // a newer one, instead of queueing behind the link in TCP's buffers. It holds the target's bytes
-// for one minimum round trip (all of it: serialization and the server's time included) plus the
-// target delay, at least `min_frames_in_flight`.
+// for one minimum round trip (all of it: serialization and the server's time included) plus
+// twice the target delay, rounded up, at least `min_frames_in_flight`.
 #pragma once
 
 #include <chrono>
@@ -35,7 +34,7 @@ struct RateControlOptions {
   double min_bps = 0.25e6;
   double max_bps = 100e6;
   // Queueing delay over which the link counts as overused.
-  std::chrono::milliseconds target_delay{50};
+  std::chrono::milliseconds target_delay{30};
   // The bitrate grows while the queueing delay is under this fraction of target_delay, and holds
   // between it and target_delay. Frames in flight queue behind one another by design (a 23 KB
   // frame is 18 ms at 10 Mbit/s, its reply takes the downlink's time): a narrow band would hold
@@ -51,7 +50,7 @@ struct RateControlOptions {
   // as GCC does near its last maximum: the link's rate is probably there.
   double near_capacity_growth_per_second = 0.1;
   // Growth stops at this multiple of the delivered rate (the probe's margin).
-  double max_over_delivered = 1.25;
+  double max_over_delivered = 1.6;
   int min_frames_in_flight = 2;
   int max_frames_in_flight = 8;
   std::chrono::seconds min_rtt_window{10};
@@ -62,7 +61,7 @@ struct RateEstimate {
   double target_bps = 0;
   double delivered_bps = 0;   // uplink, as the server counted it (0: not known yet)
   double rtt_ms = 0;          // smoothed: a frame's write to its reply
-  double min_rtt_ms = 0;      // over min_rtt_window, less each frame's serialization
+  double min_rtt_ms = 0;      // the round trip's minimum over min_rtt_window
   double queue_delay_ms = 0;  // smoothed rtt growth over the minimum
   int frames_in_flight = 0;   // the window
   bool overuse = false;       // the last reply saw the delay over its target
@@ -103,11 +102,15 @@ class RateController {
   const RateControlOptions options_;
   RateEstimate estimate_;
   double mean_frame_bytes_ = 0;
-  // Windowed minima (deques ascending in value, oldest first): of the base delay (the round trip
-  // less serialization and the server's time), which measures queueing, and of the whole round
-  // trip, which sizes the window (a frame in flight spends all of it).
-  std::deque<std::pair<Clock::time_point, double>> rtts_;
+  // Windowed minima (deques ascending in value, oldest first): of the frames' one-way delay
+  // (server receive time less write time, plus the clocks' constant offset), which measures
+  // queueing, and of the whole round trip, which sizes the window (a frame in flight spends all
+  // of it).
+  std::deque<std::pair<Clock::time_point, double>> delays_;
   std::deque<std::pair<Clock::time_point, double>> round_trips_;
+  bool server_clock_ = false;     // replies carry the server's receive time
+  double last_queue_sample_ = 0;  // the last reply's delay over the minimum, ms
+  int over_streak_ = 0;           // replies in a row that saw overuse
   std::deque<std::pair<std::int64_t, std::uint64_t>> delivered_;  // server time, bytes
   std::optional<Clock::time_point> last_update_;
   std::optional<Clock::time_point> last_decrease_;

@@ -39,6 +39,13 @@ struct FrameSourceOptions {
   // qualities for its colour images (best first), its disparity or depth lossless (zstd with
   // row deltas). The stream picks a level per frame from its rate controller's target.
   std::vector<int> jpeg_ladder;
+  // Below it, the same at half resolution (disparity and depth frames; with jpeg_ladder only):
+  // every second pixel of the disparity or depth, its values unchanged, the colour averaged over
+  // 2x2 pixels, and the frame's own camera (Frame.camera) halved to match once the stream's is
+  // known (FrameStore::SetStreamCamera), so each point keeps its place and depth. A quarter of
+  // the pixels, much the same cloud after the voxel grid. The floor when the link cannot carry
+  // even the last full-resolution level (whose lossless disparity alone is about 14 KB).
+  std::vector<int> half_resolution_ladder;
 };
 
 class FrameStore {
@@ -67,6 +74,9 @@ class FrameStore {
 
   // The camera the frames were made with (the StreamConfig's camera section).
   const CameraModel& camera() const { return camera_; }
+  // The stream's camera as the config sends it: the half-resolution levels (if any) get it
+  // halved as their frames' own camera. Call before the first Request.
+  void SetStreamCamera(const v1::CameraModel& stream);
   // What the frames hold.
   sources::FrameKind kind() const { return kind_; }
   // e.g. "New Tsukuba (10 stereo frames, 640x480), raw, 1200 KB per frame".
@@ -79,6 +89,7 @@ class FrameStore {
   // Per level, owned strings, so their slices can be static (no refcount, no copy) for the
   // store's life.
   std::vector<std::vector<std::shared_ptr<const std::string>>> levels_{1};
+  std::size_t first_half_level_ = 0;  // 0: no half-resolution levels
   CameraModel camera_;
   sources::FrameKind kind_ = sources::FrameKind::kDisparity;
   std::string description_;
