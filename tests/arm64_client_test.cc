@@ -3,8 +3,8 @@
 // builds a robot project against the install tree with find_package(cloudcast); this test then
 // streams a frame from that arm64 robot to this machine's amd64 cloudcast-server on loopback, raw
 // and through the lossless uplink codec, and decodes the reply's Draco bytes here too: the arm64
-// client's cloud must equal amd64's bit for bit. Skips, saying what is missing, without the cross toolchain, qemu-user or the arm64
-// packages (scripts/setup --arm64 installs them).
+// client's cloud must equal amd64's bit for bit. Skips, saying what is missing, without the cross
+// toolchain, qemu-user or the arm64 packages (scripts/setup --arm64 installs them).
 #include <gtest/gtest.h>
 
 #include <cstring>
@@ -34,8 +34,8 @@ class Arm64Client : public ::testing::Test {
   // Runs the cross build (idempotent); skips when the tools are missing (exit 77).
   void SetUp() override {
     std::filesystem::create_directories(kScratch);
-    build_ = RunProgram(kSourceDir + "/tests/arm64/cross_build.sh", {kSourceDir, kScratch},
-                        kScratch);
+    build_ =
+        RunProgram(kSourceDir + "/tests/arm64/cross_build.sh", {kSourceDir, kScratch}, kScratch);
     if (build_.exited && build_.code == 77) {
       GTEST_SKIP() << "arm64 cross build not possible here: " << build_.err;
     }
@@ -53,7 +53,23 @@ TEST_F(Arm64Client, UnitTestsPassUnderQemu) {
       << "the tests did not run under qemu-user\n"
       << build_;
   // The robot links the installed library, and the binary is arm64 code.
-  EXPECT_NE(build_.out.find("robot: AArch64"), std::string::npos)
+  EXPECT_NE(build_.out.find("robot: AArch64"), std::string::npos) << build_;
+}
+
+// The ROS 2 bridge is a robot program too: cross-built beside the client (its DDS library from
+// cyclonedds-dev:arm64), its unit tests (names, QoS, type hashes, CDR, parameters, sync) among
+// those that passed under qemu-user above, and the program starts there.
+TEST_F(Arm64Client, Ros2BridgeBuildsAndItsUnitTestsPassUnderQemu) {
+  if (build_.out.find("ros2 bridge: not built") != std::string::npos) {
+    GTEST_SKIP() << "cyclonedds-dev:arm64 is not installed (scripts/setup --arm64)";
+  }
+  EXPECT_NE(build_.out.find("ros2 bridge: AArch64"), std::string::npos) << build_;
+  const std::size_t at = build_.out.find("ros2 unit tests under qemu-user: ");
+  ASSERT_NE(at, std::string::npos) << build_;
+  EXPECT_GE(std::stoi(build_.out.substr(at + 33)), 20) << build_;
+  EXPECT_NE(
+      build_.out.find("ros2 bridge --help under qemu-user: cloudcast-ros2-bridge: a ROS 2 node"),
+      std::string::npos)
       << build_;
 }
 

@@ -3,7 +3,9 @@
 #  1. scripts/build-arm64: the client-only cross build with its unit tests (warm through ccache);
 #  2. those unit tests under qemu-user (ctest uses the toolchain's CMAKE_CROSSCOMPILING_EMULATOR);
 #  3. `cmake --install` into a scratch prefix: an arm64 install tree, without the x86-64 engine;
-#  4. tests/package, a robot's own project, cross-built against it with find_package(cloudcast).
+#  4. tests/package, a robot's own project, cross-built against it with find_package(cloudcast);
+#  and the ROS 2 bridge, when CycloneDDS's arm64 package is there: built, its unit tests among
+#  those of step 2, its --help run under qemu-user.
 # The test then runs that robot under qemu-user against an amd64 cloudcast-server.
 #   cross_build.sh SOURCE_DIR SCRATCH_DIR
 # Exit 77 (the test skips) when the cross toolchain, qemu-user or the arm64 packages are missing.
@@ -46,6 +48,19 @@ ctest --test-dir "$scratch/cloudcast" --output-on-failure --timeout 120 \
   >"$scratch/ctest.log" 2>&1 ||
   { cat "$scratch/ctest.log" >&2; exit 1; }
 grep "tests passed" "$scratch/ctest.log"
+
+echo "== the ROS 2 bridge, a robot program (built when cyclonedds-dev:arm64 is installed)"
+bridge="$scratch/cloudcast/bin/cloudcast-ros2-bridge"
+if [ -x "$bridge" ]; then
+  echo "ros2 bridge: $(aarch64-linux-gnu-readelf -h "$bridge" | awk '/Machine:/ {print $2}')"
+  # Every test passed above; these are the bridge's (their label, tests/client_only/).
+  echo "ros2 unit tests under qemu-user: $(ctest --test-dir "$scratch/cloudcast" -N -L 'unit/ros2_' |
+    sed -n 's/^Total Tests: //p') passed"
+  # The program itself starts under qemu-user and answers --help.
+  echo "ros2 bridge --help under qemu-user: $(qemu-aarch64-static "$bridge" --help 2>&1 | head -1)"
+else
+  echo "ros2 bridge: not built (scripts/setup --arm64 installs cyclonedds-dev:arm64)"
+fi
 
 echo "== install, and a robot project finds it with find_package(cloudcast)"
 rm -rf "$scratch/prefix" "$scratch/robot"
