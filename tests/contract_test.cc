@@ -264,6 +264,39 @@ TEST_F(ContractTest, AnEmptyCloudSaysWhichStageTookItsPoints) {
   EXPECT_EQ(replies[3].cloud().empty().reason(), "VOXELS_UNDER_MIN_POINTS");
 }
 
+// The range an emptied cloud's points spanned costs a second conversion, so a worker measures it
+// on one such frame in 32 (the first always); every empty frame still names its stage and reason.
+// A camera set up for the wrong range sends such frames 30 times a second.
+TEST_F(ContractTest, TheRangeOfFramesThePassthroughEmptiesIsMeasuredOnOneIn32) {
+  server::ServerOptions one_worker = testing::ContractServerOptions();
+  one_worker.threads = 1;  // one worker: which frames it measures is then fixed
+  auto server = testing::StartTestServer(one_worker);
+  ASSERT_NE(server, nullptr);
+  auto stub = testing::NewStub(*server);
+  v1::StreamConfig paper = Focal(615);
+  paper.mutable_passthrough()->set_min(3);
+  paper.mutable_passthrough()->set_max(12);
+  paper.set_delivery(v1::DELIVERY_ALL);
+  std::vector<v1::StreamRequest> requests = {Req(paper)};
+  for (int i = 1; i <= 40; ++i) requests.push_back(Req(DepthFrame(i, DepthMm())));
+  const std::vector<v1::StreamReply> replies = Stream(*stub, requests);
+  ASSERT_EQ(replies.size(), 40u);
+  std::vector<int> measured;
+  for (int i = 0; i < 40; ++i) {
+    const v1::CloudReply& cloud = replies[static_cast<std::size_t>(i)].cloud();
+    EXPECT_EQ(cloud.empty().stage(), v1::STAGE_PASSTHROUGH) << i;
+    EXPECT_EQ(cloud.empty().reason(), "OUTSIDE_RANGE") << i;
+    if (cloud.empty().has_observed_min()) {
+      measured.push_back(i);
+      EXPECT_FLOAT_EQ(cloud.empty().observed_min(), 0.8f);
+    } else {
+      EXPECT_NE(cloud.empty().message().find("one such frame in 32"), std::string::npos)
+          << cloud.empty().message();
+    }
+  }
+  EXPECT_EQ(measured, (std::vector<int>{0, 32}));
+}
+
 // A frame's camera overrides the stream's for that frame only: twice the focal length halves the
 // cloud's width; its errors name frame.camera.
 TEST_F(ContractTest, AFramesCameraOverridesTheStreamsForThatFrame) {

@@ -65,6 +65,10 @@ class FrameProcessor {
   Pipeline pipeline_;
   PointCloud cloud_;
   PointCloud unfiltered_;  // ExplainEmpty's
+  // ExplainEmpty measures the range the points spanned on one frame in kRangeEvery emptied by
+  // the passthrough (on this worker).
+  static constexpr std::uint64_t kRangeEvery = 32;
+  std::uint64_t empty_by_passthrough_ = 0;
   DecodeScratch decode_;
   StereoStage stereo_;
   PlaneCompressor disparity_compressor_;  // the disparity map sent back on request
