@@ -9,9 +9,12 @@
 // The latency bound is the issue's acceptance criterion, measured the way the issue states it
 // (the house rule against timing assertions gives way here to the criterion it was filed with).
 //
-// Two builds of this file: hardening_attacks_test (long: 20 s attacks, the RSS read exactly 10 s
-// after) and hardening_attacks_short_test (long tier too: short attacks, the RSS polled until it is
-// back, for at most 10 s). CLOUDCAST_ATTACK_SECONDS says which.
+// Each attack lasts CLOUDCAST_ATTACK_SECONDS (the environment's; 10 by default, what ctest runs in
+// the long tier): 10 s still fails every defect's server from before its fix (the before figures
+// of docs/http2-hardening.md go wrong within the first seconds: stalls of seconds, gigabytes of
+// RSS, clients locked out or frozen). 20 gives the figures of that document (the RSS read exactly
+// 10 s after the attack); shorter runs poll the RSS until it is back, for at most 10 s. Below 8 s
+// (a quick look while working on the server) the tests that need a longer attack skip.
 #include <fcntl.h>
 #include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
@@ -45,9 +48,6 @@
 #include "support/proc_status.h"
 #include "support/replica_support.h"
 
-#ifndef CLOUDCAST_ATTACK_SECONDS
-#define CLOUDCAST_ATTACK_SECONDS 20
-#endif
 #ifndef CLOUDCAST_SOURCE_DIR
 #error \
     "CLOUDCAST_SOURCE_DIR must name the checkout (the shipped HAProxy configuration is read there)"
@@ -60,8 +60,25 @@ using Clock = std::chrono::steady_clock;
 using std::chrono::milliseconds;
 using std::chrono::seconds;
 
-constexpr double kAttackSeconds = CLOUDCAST_ATTACK_SECONDS;
-constexpr bool kLong = CLOUDCAST_ATTACK_SECONDS >= 15;
+// CLOUDCAST_ATTACK_SECONDS, 1 to 20 (issue 18's attacks last at most 20 s); 10 without it.
+double AttackSecondsFromEnvironment() {
+  const char* text = std::getenv("CLOUDCAST_ATTACK_SECONDS");
+  if (text == nullptr || *text == '\0') return 10;
+  char* end = nullptr;
+  const double s = std::strtod(text, &end);
+  if (*end != '\0' || !(s >= 1 && s <= 20)) {
+    std::fprintf(stderr, "CLOUDCAST_ATTACK_SECONDS is '%s'; must be a number of seconds, 1 to 20\n",
+                 text);
+    std::exit(2);
+  }
+  return s;
+}
+const double kAttackSeconds = AttackSecondsFromEnvironment();
+// The figures' runs (docs/http2-hardening.md): the RSS read exactly 10 s after the attack.
+const bool kLong = kAttackSeconds >= 15;
+// Long enough for every test; shorter runs skip the tests that need more (and say so).
+const bool kFull = kAttackSeconds >= 8;
+constexpr const char* kNeedsFull = "needs an attack of 8 s or more (CLOUDCAST_ATTACK_SECONDS)";
 constexpr double kMb = 1024.0 * 1024.0;
 // Issue 18's bar.
 constexpr double kMaxP99Ms = 50;
@@ -393,7 +410,7 @@ class AttackTest : public ::testing::Test {
     f.rss_peak_mb = sampler.peak(0) / kMb;
     if (proxy_) f.proxy_peak_mb = sampler.peak(1) / kMb;
     f.log_mb = (FileBytes(log_) - std::min(FileBytes(log_), log_before)) / kMb;
-    // 10 s after the attack: read then (long), or polled until it is back (short).
+    // 10 s after the attack: read then (the figures' runs), or polled until it is back.
     const auto after_deadline = attack_end + std::chrono::seconds(10);
     for (;;) {
       f.rss_after_mb = ResidentBytes(server_->pid()) / kMb;
@@ -482,7 +499,7 @@ TEST_F(FloodTest, RapidResetLeavesThePacedStreamAndTheServerAlone) {
                              std::string("/cloudcast.v1.CloudCast/") + method},
                             kFullSpeed}});
     ExpectUnharmed(f);
-    if (!kLong) break;  // the short build: the Stream method only
+    if (!kFull) break;  // a quick look: the Stream method only
   }
 }
 
@@ -671,10 +688,10 @@ TEST_F(AttackTest, SilentStreamsFromTwoAddressesDoNotLockANewClientOut) {
 }
 
 // Defect 6 behind the shipped proxy: every call then comes from the proxy's address, and the
-// server tells the clients apart by the proxy's x-forwarded-for (--trusted-proxy). The long build
-// only (the short one checks the same without the proxy).
-#if CLOUDCAST_ATTACK_SECONDS >= 15
+// server tells the clients apart by the proxy's x-forwarded-for (--trusted-proxy). Skipped in a
+// quick look (SilentStreamsFromTwoAddresses checks the same without the proxy).
 TEST_F(AttackTest, SilentStreamsThroughTheProxyDoNotLockANewClientOut) {
+  if (!kFull) GTEST_SKIP() << kNeedsFull;
   StartServer({"--trusted-proxy", "127.0.0.1"});
   StartProxy();
   ExpectUnharmed(Run("32 silent streams from each of two addresses",
@@ -682,7 +699,6 @@ TEST_F(AttackTest, SilentStreamsThroughTheProxyDoNotLockANewClientOut) {
                       {{"silent-streams", "--source", "127.0.0.3", "--calls", "32"}}},
                      milliseconds(2500)));
 }
-#endif
 
 // Issue 30, defects 2 and 7: one client behind the shipped HAProxy froze every other client, and
 // its streams outlived it. HAProxy 2.6's HTTP/2 backend connection is one demultiplexer: when a
@@ -829,10 +845,10 @@ TEST_F(ProxyIsolationTest, StalledWindowsOfOneClientFreezeNoOtherClient) {
 // Trigger A, slowly: 32 streams whose window comes back at 4 KB/s (the tester: 3 of 3 runs froze
 // every client, not back within 84 s). Frames of 320x320: with 640x640 ones the server holds 128
 // of them (200 MB) for this client, and the paced stream's p99 went past the bar in 2 of 3 runs
-// (66 and 202 ms) on these shared cores, which is issue 18's business, not this one's. The long
-// build only.
-#if CLOUDCAST_ATTACK_SECONDS >= 15
+// (66 and 202 ms) on these shared cores, which is issue 18's business, not this one's. Skipped
+// in a quick look.
 TEST_F(ProxyIsolationTest, WindowsReturnedAt4KBPerSecondFreezeNoOtherClient) {
+  if (!kFull) GTEST_SKIP() << kNeedsFull;
   Recovery r;
   const Figures f =
       RunAndWatch("32 streams giving window back at 4 KB/s",
@@ -842,7 +858,6 @@ TEST_F(ProxyIsolationTest, WindowsReturnedAt4KBPerSecondFreezeNoOtherClient) {
   ExpectUnharmed(f);
   ExpectRecovered(f, r);
 }
-#endif
 
 // Defect 2, trigger B: a client that sends a new StreamConfig before every frame, as fast as flow
 // control lets it (4 calls on 2 connections; its frames zstd-compressed, a few hundred bytes each
@@ -851,21 +866,20 @@ TEST_F(ProxyIsolationTest, WindowsReturnedAt4KBPerSecondFreezeNoOtherClient) {
 // wait behind the frames it sent ahead while the server waits for its window. Before: every
 // client behind the proxy frozen (the tester: about 120 s, 3 of 3 runs), and 3 to 4 of its streams
 // still open on the server meanwhile. Now its calls alone stall, and the server closes the
-// connection the proxy stopped reading (--ping-after, --ping-timeout: defect 7, below). The long
-// build only: the client's first second (some 40,000 messages before its calls lock up) once cost
-// the paced stream a hiccup of about 100 ms, which the short build's 171 frames put into the p99
-// (57 and 64 ms in 2 of 3 short runs; 13 and 17 ms in the long runs).
-#if CLOUDCAST_ATTACK_SECONDS >= 15
+// connection the proxy stopped reading (--ping-after, --ping-timeout: defect 7, below). At least
+// 15 s: the client's first second (some 40,000 messages before its calls lock up) once cost the
+// paced stream a hiccup of about 100 ms, which a 6 s attack's 171 frames put into the p99 (57 and
+// 64 ms in 2 of 3 such runs; 13 and 17 ms in the 20 s runs); skipped in a quick look.
 TEST_F(ProxyIsolationTest, AConfigChurningClientThatLeavesFreezesNoOtherClient) {
+  if (!kFull) GTEST_SKIP() << kNeedsFull;
   Recovery r;
   const Figures f = RunAndWatch("config churn, then the client leaves",
                                 {{{"config-churn", "--source", "127.0.0.2", "--calls", "4",
                                    "--connections", "2", "--encoding", "zstd"}}},
-                                &r, std::max(kAttackSeconds, 6.0));
+                                &r, std::max(kAttackSeconds, 15.0));
   ExpectUnharmed(f);
   ExpectRecovered(f, r);
 }
-#endif
 
 // Defect 7's mechanism, without the proxy: a peer that stops reading its connection (a raw HTTP/2
 // client that opens a Stream call, sends its StreamConfig, then reads nothing more, so answers no
@@ -1144,10 +1158,10 @@ class SignalledStream {
 };
 
 TEST_F(AttackTest, SigtermDuringARapidResetEndsWithinTheGraceAndLosesNoFrameSent) {
-  // Long: the tester's 5 s grace after 10 s of attack. Short: 3 s after 3 s. The attack goes on
+  // The tester's 5 s grace after 10 s of attack (a quick look: 3 s after 3 s). The attack goes on
   // past the end of the grace and its tolerance (at most 20 s in all).
-  const double grace_s = kLong ? 5 : 3;
-  const double lead_s = kLong ? 10 : 3;
+  const double grace_s = kFull ? 5 : 3;
+  const double lead_s = kFull ? 10 : 3;
   const double attack_s = std::min(20.0, lead_s + grace_s + kShutdownToleranceS + 3);
   StartServer({"--shutdown-grace", std::to_string(grace_s)});
   if (HasFatalFailure()) return;
