@@ -1,6 +1,9 @@
 #include "cloudcast/cli/video_flags.h"
 
+#include <algorithm>
 #include <cmath>
+
+#include "cloudcast/cli/checks.h"
 
 namespace cloudcast::cli {
 namespace {
@@ -21,13 +24,14 @@ VideoFlags::VideoFlags(CLI::App& app, const std::string& group) : app_(app) {
   app.add_option("--h264-crf", crf_,
                  "Constant quality with --encoding h264 (1..51, lower is better), capped by "
                  "--h264-mbps; 0: --h264-mbps alone")
-      ->check(CLI::Range(0.0, 51.0))
+      ->check(NumberCheck("0 or a quality in [1, 51]", [](double v) { return v >= 0 && v <= 51; }))
       ->capture_default_str()
       ->group(group);
   app.add_option("--h264-mbps", mbps_,
                  "Bitrate with --encoding h264, Mbit/s, both views of a pair together: the cap "
                  "of a one-frame VBV (no frame waits behind a large one)")
-      ->check(CLI::Range(0.05, 1000.0))
+      ->check(NumberCheck("a bitrate in [0.05, 1000] Mbit/s",
+                          [](double v) { return v >= 0.05 && v <= 1000; }))
       ->capture_default_str()
       ->group(group);
   app.add_option("--h264-keyframe-interval", keyframe_interval_,

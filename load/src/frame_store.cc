@@ -247,6 +247,21 @@ FrameStore FrameStore::FromFrames(const std::vector<v1::Frame>& frames, const Ca
   return store;
 }
 
+absl::StatusOr<FrameStore> FrameStore::FromVideoFrames(const std::vector<v1::Frame>& frames,
+                                                       const CameraModel& camera,
+                                                       const std::string& description) {
+  if (frames.empty() || !frames.front().color().video().keyframe()) {
+    return absl::InvalidArgumentError("a video store starts with an IDR");
+  }
+  FrameStore store = FromFrames(frames, camera, description);
+  VideoSequence sequence;
+  sequence.length = sequence.source_frames = frames.size();
+  for (const v1::Frame& f : frames) sequence.keyframe.push_back(f.color().video().keyframe());
+  store.video_ = std::move(sequence);
+  store.encoding_ = std::string(video::kH264);
+  return store;
+}
+
 void FrameStore::AddTail(const v1::Frame& frame, std::size_t level) {
   v1::Frame tail = frame;
   tail.clear_sequence();

@@ -79,6 +79,11 @@ class FrameStore {
   // Frames made by the caller (tests): each serialized as it is, sequence and time ignored.
   static FrameStore FromFrames(const std::vector<v1::Frame>& frames, const CameraModel& camera,
                                const std::string& description);
+  // A video store of frames made by the caller (tests): their pictures in the order given, the
+  // first an IDR (else an error), sent as the sequence of a video store.
+  static absl::StatusOr<FrameStore> FromVideoFrames(const std::vector<v1::Frame>& frames,
+                                                    const CameraModel& camera,
+                                                    const std::string& description);
 
   std::size_t size() const { return levels_.front().size(); }
   // The bytes of frame `index % size()` on the wire, sequence and time patched in, at `level`
