@@ -296,5 +296,18 @@ TEST_F(LoadVideoCliTest, BadH264FlagsExitTwoNamingTheFlag) {
   }
 }
 
+// The --h264-* flags are cloudcast-client's too (cli::VideoFlags): the same checks there.
+TEST_F(LoadVideoCliTest, CloudcastClientSharesTheFlagsAndTheirChecks) {
+  const std::string client = testing::BinDir() + "/cloudcast-client";
+  const RunResult misuse =
+      testing::RunProgram(client, {"--no-window", "--h264-crf", "3"}, dir_.string());
+  EXPECT_EQ(misuse.code, 2) << misuse;
+  EXPECT_NE(misuse.err.find("--h264-crf needs --encoding h264"), std::string::npos) << misuse;
+  const RunResult nan = testing::RunProgram(
+      client, {"--no-window", "--encoding", "h264", "--h264-mbps", "nan"}, dir_.string());
+  EXPECT_NE(nan.code, 0) << nan;
+  EXPECT_NE(nan.err.find("--h264-mbps"), std::string::npos) << nan;
+}
+
 }  // namespace
 }  // namespace cloudcast::load
