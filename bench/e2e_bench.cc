@@ -15,6 +15,14 @@
 // in the paced runs from each frame's intended send time on the schedule, so a sender that
 // falls behind (flow control, a slow server) shows up in the latency instead of hiding it.
 //
+// --encodings h264: the colour images as H.264 pictures (the --h264-* flags, as cloudcast-client
+// and cloudcast-load take them), the disparity as zstd. The pictures are encoded once, up front,
+// into one sequence (10 frames cycled to a keyframe interval, an IDR first) that every stream
+// sends in order from its IDR, going back to it when a reply asks for an IDR, so the robots'
+// encoding stays off these shared cores (it costs 5 to 7 ms a picture: docs/video.md). Both of
+// its runs use DELIVERY_ALL: the client library's stream replaces a frame that waits for the
+// write slot under DELIVERY_LATEST, which would leave a hole in the bitstream.
+//
 // --compare-bin runs every case on a second server binary too (an older build, say), the two
 // in turn and in alternating order, over --rounds rounds, and prints both sides' medians and
 // their ratios: the way to measure a change on a noisy machine.
@@ -44,6 +52,7 @@
 #include <thread>
 #include <vector>
 
+#include "cloudcast/cli/video_flags.h"
 #include "cloudcast/client/client.h"
 #include "cloudcast/client/config.h"
 #include "cloudcast/datasets/synthetic.h"
@@ -52,6 +61,7 @@
 #include "cloudcast/proto/convert.h"
 #include "cloudcast/sources/uplink.h"
 #include "cloudcast/testing/metrics_scrape.h"
+#include "cloudcast/video/frame_encoder.h"
 #include "stats.h"
 
 namespace cloudcast::bench {
@@ -71,6 +81,19 @@ struct Frame {
 
 // The client programs' uplink names; this bench encodes its frames up front (jpeg it leaves out).
 using sources::Uplink;
+
+// --encodings h264: one picture sequence, encoded up front, that each stream sends in order.
+struct VideoSequence {
+  std::vector<v1::VideoPicture> pictures;  // picture i goes with the disparity of frame_of[i]
+  std::vector<std::size_t> frame_of;
+  double encode_ms = 0;  // thread CPU per picture, median
+};
+
+double ThreadCpuMs() {
+  timespec t{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+  return static_cast<double>(t.tv_sec) * 1e3 + static_cast<double>(t.tv_nsec) / 1e6;
+}
 
 int FreePort() {
   const int fd = socket(AF_INET, SOCK_STREAM, 0);
@@ -147,8 +170,14 @@ struct CaseResult {
   int round = 0, streams = 0;
   double seconds = 0, fps = 0, p50 = 0, p90 = 0, p99 = 0;
   std::uint64_t frames = 0, errors = 0, dropped = 0;
+  std::uint64_t keyframe_requests = 0;  // h264: replies that asked for an IDR
   double server_cpu_ms_per_frame = 0, core_cpu_ms_per_frame = 0, outside_share = 0;
   double client_cpu_ms_per_frame = 0;  // this process: the senders, gRPC's client side
+
+  // Robots at 30 frames/s one server core carries at this case's server CPU per frame.
+  double RobotsPerCore() const {
+    return server_cpu_ms_per_frame > 0 ? 1000.0 / (30 * server_cpu_ms_per_frame) : 0;
+  }
 
   nlohmann::json ToJson() const {
     return {{"server", server},
@@ -164,6 +193,8 @@ struct CaseResult {
             {"frames", frames},
             {"errors", errors},
             {"dropped", dropped},
+            {"keyframe_requests", keyframe_requests},
+            {"robots_per_server_core_at_30fps", RobotsPerCore()},
             {"server_cpu_ms_per_frame", server_cpu_ms_per_frame},
             {"client_cpu_ms_per_frame", client_cpu_ms_per_frame},
             {"core_cpu_ms_per_frame", core_cpu_ms_per_frame},
@@ -183,9 +214,10 @@ struct CaseOptions {
 // One case: `streams` streams, either as fast as possible with o.window frames in flight per
 // stream (paced_fps == 0) or at paced_fps each.
 CaseResult RunCase(const ServerProcess& server, const std::vector<Frame>& frames, Uplink uplink,
-                   int streams, double paced_fps, const CaseOptions& o) {
+                   const VideoSequence* video, int streams, double paced_fps,
+                   const CaseOptions& o) {
   CaseResult r;
-  r.encoding = Name(uplink);
+  r.encoding = video != nullptr ? "h264" : Name(uplink);
   r.mode = paced_fps > 0 ? "paced " + std::to_string(static_cast<int>(paced_fps)) + " fps"
                          : "throughput";
   r.streams = streams;
@@ -210,7 +242,9 @@ CaseResult RunCase(const ServerProcess& server, const std::vector<Frame>& frames
     std::mutex mu;
     std::condition_variable cv;
     int in_flight = 0;
+    std::atomic<bool> restart{false};  // h264: a reply asked for an IDR
   };
+  std::atomic<std::uint64_t> keyframe_requests{0};
   std::vector<std::unique_ptr<StreamState>> states;
   for (int s = 0; s < streams; ++s) {
     auto state = std::make_unique<StreamState>();
@@ -218,7 +252,7 @@ CaseResult RunCase(const ServerProcess& server, const std::vector<Frame>& frames
     // The paper's setting, stated: the server assumes no camera (docs/migration.md). The
     // synthetic fallback's camera at 640 px is the same.
     cc::StreamConfig config = cc::PresetConfig("new_tsukuba").value();
-    config.set_delivery(paced_fps > 0 ? v1::DELIVERY_LATEST : v1::DELIVERY_ALL);
+    config.set_delivery(paced_fps > 0 && video == nullptr ? v1::DELIVERY_LATEST : v1::DELIVERY_ALL);
     cc::StreamOptions so;
     so.on_result = [&, st](cc::Result&& res) {
       {
@@ -226,6 +260,10 @@ CaseResult RunCase(const ServerProcess& server, const std::vector<Frame>& frames
         --st->in_flight;
       }
       st->cv.notify_one();
+      if (video != nullptr && (!res.ok() || res.reply.keyframe_needed_size() > 0)) {
+        st->restart = true;
+        ++keyframe_requests;
+      }
       if (!measuring.load()) return;
       ++answered;
       if (!res.ok()) ++errors;
@@ -249,6 +287,7 @@ CaseResult RunCase(const ServerProcess& server, const std::vector<Frame>& frames
   auto sender = [&](int s) {
     StreamState& st = *states[s];
     std::size_t i = static_cast<std::size_t>(s) * 3;  // streams start at different frames
+    std::size_t picture = 0;                          // h264: every stream from the IDR
     auto next_send = Clock::now();
     // The schedule's times on the Unix clock the replies' latency() is measured in.
     const std::int64_t unix_minus_steady =
@@ -276,8 +315,15 @@ CaseResult RunCase(const ServerProcess& server, const std::vector<Frame>& frames
         std::lock_guard<std::mutex> lock(st.mu);
         ++st.in_flight;
       }
+      if (video != nullptr && st.restart.exchange(false)) picture = 0;
+      const std::size_t p = picture;
+      picture = (picture + 1) % (video != nullptr ? video->pictures.size() : 1);
       absl::Status sent =
-          uplink == Uplink::kPng    ? st.stream->Send(cc::EncodedImage{f.disparity_png},
+          video != nullptr
+              ? st.stream->Send(
+                    cc::PrecompressedDisparity{&frames[video->frame_of[p]].disparity_zstd},
+                    cc::PrecodedVideo{&video->pictures[p]}, meta)
+          : uplink == Uplink::kPng  ? st.stream->Send(cc::EncodedImage{f.disparity_png},
                                                       cc::EncodedImage{f.colour_png}, meta)
           : uplink == Uplink::kZstd ? st.stream->Send(cc::PrecompressedDisparity{&f.disparity_zstd},
                                                       cc::PrecompressedColor{&f.colour_zstd}, meta)
@@ -312,6 +358,7 @@ CaseResult RunCase(const ServerProcess& server, const std::vector<Frame>& frames
   r.frames = answered.load();
   r.errors = errors.load();
   r.dropped = dropped.load();
+  r.keyframe_requests = keyframe_requests.load();
   r.fps = r.frames / r.seconds;
   {
     std::lock_guard<std::mutex> lock(mu);
@@ -535,9 +582,11 @@ int Main(int argc, char** argv) {
   app.add_option("--streams", stream_counts, "concurrent stream counts")
       ->check(CLI::Range(1, 64))
       ->capture_default_str();
-  app.add_option("--encodings,--encoding", encodings,
-                 "raw, zstd (the compressed uplink, compressed once up front) and/or png")
-      ->check(CLI::IsMember({"raw", "zstd", "png"}))
+  app.add_option(
+         "--encodings,--encoding", encodings,
+         "raw, zstd (the compressed uplink, compressed once up front), png and/or h264 (colour "
+         "as H.264 pictures encoded once up front, --h264-* flags; disparity zstd)")
+      ->check(CLI::IsMember({"raw", "zstd", "png", "h264"}))
       ->capture_default_str();
   app.add_option("--window", case_options.window,
                  "frames in flight per stream in the throughput runs")
@@ -552,6 +601,7 @@ int Main(int argc, char** argv) {
   app.add_option("--threads", threads, "server worker threads (0: one per core)")
       ->capture_default_str();
   app.add_option("--json", json_path, "also write the results as JSON");
+  const cli::VideoFlags h264(app, "H.264 (--encodings h264)");
   CLI11_PARSE(app, argc, argv);
   signal(SIGPIPE, SIG_IGN);
 
@@ -573,16 +623,51 @@ int Main(int argc, char** argv) {
     }
   }
   const std::vector<Frame> frames = LoadFrames(data_dir);
-  std::size_t raw_bytes = 0, png_bytes = 0, zstd_bytes = 0;
+  std::size_t raw_bytes = 0, png_bytes = 0, zstd_bytes = 0, zstd_disparity_bytes = 0;
   for (const Frame& f : frames) {
     raw_bytes += f.disparity.pixels.size() + f.colour.pixels.size();
     png_bytes += f.disparity_png.size() + f.colour_png.size();
     zstd_bytes += f.disparity_zstd.payload().size() + f.colour_zstd.payload().size();
+    zstd_disparity_bytes += f.disparity_zstd.payload().size();
   }
   std::cout << frames.size() << " frames of " << frames[0].disparity.width << "x"
             << frames[0].disparity.height << ": " << raw_bytes / frames.size() / 1024 << " KB raw, "
             << zstd_bytes / frames.size() / 1024 << " KB as zstd, "
             << png_bytes / frames.size() / 1024 << " KB as PNG per frame\n";
+  VideoSequence video;
+  if (std::find(encodings.begin(), encodings.end(), "h264") != encodings.end()) {
+    const video::FrameEncoderOptions vo = h264.Options(paced_fps > 0 ? paced_fps : 30);
+    video::FrameEncoder encoder(vo);
+    const int interval = vo.encoder.keyframe_interval > 0 ? vo.encoder.keyframe_interval : 60;
+    const std::size_t length =
+        std::max(frames.size(), (frames.size() + interval - 1) / interval * interval);
+    std::vector<double> ms;
+    double bytes = 0;
+    for (std::size_t i = 0; i < length; ++i) {
+      const Frame& f = frames[i % frames.size()];
+      const double before = ThreadCpuMs();
+      auto coded = encoder.Encode(cc::DisparityFrame{f.disparity.view(), f.colour.view()}, i);
+      ms.push_back(ThreadCpuMs() - before);
+      if (!coded.ok()) {
+        std::cerr << "--encodings h264: " << coded.status() << "\n";
+        return 1;
+      }
+      const auto& colour = std::get<cc::DisparityFrame>(*coded).colour;
+      video.pictures.push_back(*std::get<cc::PrecodedVideo>(colour).message);
+      video.frame_of.push_back(i % frames.size());
+      bytes += static_cast<double>(video.pictures.back().access_unit().size());
+    }
+    video.encode_ms = Median(ms);
+    std::printf(
+        "h264: a sequence of %zu pictures (preset %s, crf %g <= %g Mbit/s, IDR every %d), %.1f KB "
+        "a picture + %.1f KB of zstd disparity a frame; encoded up front in %.2f ms a picture "
+        "(median thread CPU)\n",
+        length, vo.encoder.preset.c_str(), vo.encoder.crf, vo.encoder.bitrate_bps / 1e6, interval,
+        bytes / static_cast<double>(length) / 1024,
+        static_cast<double>(zstd_disparity_bytes) / static_cast<double>(frames.size()) / 1024,
+        video.encode_ms);
+    std::fflush(stdout);
+  }
   for (Contender& c : servers) {
     if (!Start(c, threads)) return 1;
   }
@@ -595,9 +680,10 @@ int Main(int argc, char** argv) {
   const bool labelled = servers.size() > 1 || rounds > 1;
   std::vector<CaseResult> results;
   char line[256];
-  std::snprintf(line, sizeof line, "%s%-4s %-7s %-14s %8s %7s %7s %7s %8s %11s %10s %8s %11s\n",
-                labelled ? "round server     " : "", "enc", "streams", "mode", "frames/s", "p50 ms",
-                "p90 ms", "p99 ms", "dropped", "srv CPU ms", "core+Draco", "outside", "cli CPU ms");
+  std::snprintf(
+      line, sizeof line, "%s%-4s %-7s %-14s %8s %7s %7s %7s %8s %11s %10s %8s %11s %14s\n",
+      labelled ? "round server     " : "", "enc", "streams", "mode", "frames/s", "p50 ms", "p90 ms",
+      "p99 ms", "dropped", "srv CPU ms", "core+Draco", "outside", "cli CPU ms", "robots/core@30");
   std::cout << line;
   for (int round = 1; round <= rounds; ++round) {
     for (const std::string& enc : encodings) {
@@ -611,19 +697,24 @@ int Main(int argc, char** argv) {
           // machine warmed (or heated) by the first.
           for (std::size_t k = 0; k < servers.size(); ++k) {
             const std::size_t s = round % 2 == 0 ? servers.size() - 1 - k : k;
-            CaseResult r = RunCase(*servers[s].server, frames, uplink, n, fps, case_options);
+            CaseResult r = RunCase(*servers[s].server, frames, uplink,
+                                   enc == "h264" ? &video : nullptr, n, fps, case_options);
             r.server = servers[s].label;
             r.round = round;
             std::snprintf(line, sizeof line, "%5d %-10s ", round, r.server.substr(0, 10).c_str());
             std::cout << (labelled ? line : "");
             std::snprintf(
                 line, sizeof line,
-                "%-4s %7d %-14s %8.1f %7.2f %7.2f %7.2f %8lu %11.3f %10.3f %7.0f%% %11.3f\n",
+                "%-4s %7d %-14s %8.1f %7.2f %7.2f %7.2f %8lu %11.3f %10.3f %7.0f%% %11.3f %14.1f\n",
                 r.encoding.c_str(), r.streams, r.mode.c_str(), r.fps, r.p50, r.p90, r.p99,
                 static_cast<unsigned long>(r.dropped), r.server_cpu_ms_per_frame,
-                r.core_cpu_ms_per_frame, 100 * r.outside_share, r.client_cpu_ms_per_frame);
+                r.core_cpu_ms_per_frame, 100 * r.outside_share, r.client_cpu_ms_per_frame,
+                r.RobotsPerCore());
             std::cout << line << std::flush;
             if (r.errors > 0) std::cout << "  (" << r.errors << " frame errors)\n";
+            if (r.keyframe_requests > 0) {
+              std::cout << "  (" << r.keyframe_requests << " replies asked for an IDR)\n";
+            }
             results.push_back(r);
           }
         }
@@ -636,7 +727,8 @@ int Main(int argc, char** argv) {
          "answered frame; core+Draco: the part inside Pipeline::Run and EncodeDraco (thread "
          "CPU time); outside: the rest (gRPC, protobuf, PNG / zstd decoding, scheduling); "
          "cli CPU ms: this process (the senders and gRPC's client side; the client does "
-         "not decode the replies) per answered frame.\n";
+         "not decode the replies) per answered frame; robots/core@30: robots at 30 frames/s "
+         "one server core carries at that server CPU per frame (1000 / (30 x srv CPU ms)).\n";
   // Medians per case and server, in the first round's order: the servers in turn, in their
   // order, within each case (what PrintMedians expects).
   const std::vector<CaseResult> medians = MediansOf(results);

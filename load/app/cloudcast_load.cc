@@ -26,6 +26,7 @@
 #include "cloudcast/cli/role_flags.h"
 #include "cloudcast/cli/stage_flags.h"
 #include "cloudcast/cli/stereo_flags.h"
+#include "cloudcast/cli/video_flags.h"
 #include "cloudcast/core/limits.h"
 #include "cloudcast/load/fleet.h"
 #include "cloudcast/load/frame_store.h"
@@ -91,6 +92,7 @@ struct Flags {
   int synthetic_frames = FrameDefaults().synthetic_frames;
   std::string encoding = cloudcast::sources::Name(FrameDefaults().uplink.encoding);
   int jpeg_quality = FrameDefaults().uplink.jpeg_quality;
+  std::unique_ptr<cloudcast::cli::VideoFlags> h264;  // --h264-*, as cloudcast-client's
   bool rate_control = false;
   bool lossless = false;
   // Server memory and the soak
@@ -259,17 +261,23 @@ std::unique_ptr<cloudcast::cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
       ->check(CLI::Range(1, 1000))
       ->capture_default_str()
       ->group(frames);
+  std::vector<std::string> encodings = cloudcast::sources::UplinkNames();
+  encodings.emplace_back(cloudcast::video::kH264);
   app.add_option("--encoding", f.encoding,
                  "How images travel: raw pixels; zstd (lossless: row deltas + zstd, cheap for "
                  "the server); png (lossless: PNG, float disparities and depths TIFF); jpeg "
-                 "(colour images JPEG, disparity and depth as png)")
-      ->check(CLI::IsMember(cloudcast::sources::UplinkNames()))
+                 "(colour images JPEG, disparity and depth as png); h264 (the colour image, or "
+                 "both views of a stereo pair, as H.264 video, encoded once before the run into "
+                 "a picture sequence each stream plays in order from an IDR; disparity and depth "
+                 "lossless, zstd; --h264-* flags)")
+      ->check(CLI::IsMember(encodings))
       ->capture_default_str()
       ->group(frames);
   app.add_option("--jpeg-quality", f.jpeg_quality, "JPEG quality with --encoding jpeg")
       ->check(CLI::Range(1, 100))
       ->capture_default_str()
       ->group(frames);
+  f.h264 = std::make_unique<cloudcast::cli::VideoFlags>(app, frames);
   app.add_flag("--rate-control", f.rate_control,
                "The adaptive sender, as robots on real links should send: each stream's rate "
                "controller (delay-based, from the replies' timing and the server's byte count) "
@@ -423,8 +431,18 @@ int main(int argc, char** argv) {
     }
   }
   if (f.rate_control && (app.count("--encoding") || app.count("--jpeg-quality"))) {
-    return usage("--rate-control chooses the encoding itself; leave out --encoding and "
-                 "--jpeg-quality");
+    return usage(
+        "--rate-control chooses the encoding itself; leave out --encoding and "
+        "--jpeg-quality");
+  }
+  const bool h264 = f.encoding == cloudcast::video::kH264;
+  if (!h264 && f.h264->AnyGiven()) {
+    return usage(f.h264->GivenFlags().front() + " needs --encoding h264");
+  }
+  if (h264 && f.resilient) {
+    return usage(
+        "--resilient does not take --encoding h264 yet: a new call's decoders start at "
+        "an IDR, and the frames resent on it reference pictures the lost call decoded");
   }
   if (f.fps > 0 && app.count("--in-flight")) {
     return usage("--in-flight is for the closed loop (--fps 0); open loop sends on schedule");
@@ -446,6 +464,9 @@ int main(int argc, char** argv) {
   }
   source.synthetic_frames = f.synthetic_frames;
   cloudcast::sources::ParseUplink(f.encoding, &source.uplink.encoding);
+  // The encoder's one-frame VBV is bitrate / fps: the schedule's starting rate.
+  const double schedule_fps = app.count("--load-start") ? f.load_start : f.fps;
+  if (h264) source.video = f.h264->Options(schedule_fps);
   source.uplink.jpeg_quality = f.jpeg_quality;
   if (f.rate_control) {
     source.jpeg_ladder = {95, 90, 80, 70, 60, 50, 40, 30, 20, 10};
@@ -588,7 +609,7 @@ int main(int argc, char** argv) {
       {"duration", o.duration.count()},
       {"drain-timeout", o.drain_timeout.count()},
       {"delivery", f.lossless ? "all" : "latest"},
-      {"encoding", f.rate_control ? "adaptive" : f.encoding},
+      {"encoding", store->encoding()},
       {"rate-control", f.rate_control},
       {"input", f.input},
       {"frames-source", store->description()},
@@ -600,6 +621,8 @@ int main(int argc, char** argv) {
   };
   load::Report report =
       load::MakeReport(**fleet, result, store->description(), schedule_text, options);
+  report.encoding = store->encoding();
+  report.video = store->video();
   if (memory) {
     report.memory_url = f.watch_memory;
     report.memory = memory->samples();

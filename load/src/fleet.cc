@@ -2,6 +2,7 @@
 
 #include <grpcpp/grpcpp.h>
 #include <spdlog/fmt/fmt.h>
+#include <sys/resource.h>
 
 #include <algorithm>
 #include <optional>
@@ -24,6 +25,16 @@ constexpr auto kSchedulerSlack = std::chrono::milliseconds(1);
 
 std::int64_t Ns(Clock::time_point t) {
   return std::chrono::duration_cast<std::chrono::nanoseconds>(t.time_since_epoch()).count();
+}
+
+// The process's CPU time so far (user + system), seconds.
+double ProcessCpuSeconds() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  const auto seconds = [](const timeval& t) {
+    return static_cast<double>(t.tv_sec) + static_cast<double>(t.tv_usec) / 1e6;
+  };
+  return seconds(u.ru_utime) + seconds(u.ru_stime);
 }
 
 }  // namespace
@@ -79,6 +90,7 @@ class Fleet::Driver : public client::StreamSink {
     std::int64_t t0_unix_ns;    // the same instant, Unix time (capture_time_unix_ns)
     bool rate_control;
     double fps;  // the schedule's rate at its start (the rate controller's frame budget)
+    const VideoSequence* video;  // the store's picture sequence; null: frames in any order
   };
 
   Driver(int index, std::uint64_t frame_limit, const grpc::ByteBuffer* config)
@@ -100,6 +112,12 @@ class Fleet::Driver : public client::StreamSink {
     // DELIVERY_ALL queues every frame due (the generator itself never waits).
     o.machine.latest = !ctx_->lossless;
     o.machine.max_queued = 0;
+    if (ctx_->video != nullptr) {
+      // A picture is never replaced (the class comment): under DELIVERY_LATEST one frame may
+      // wait for the write slot, and a frame due meanwhile is skipped before it is encoded.
+      o.machine.latest = false;
+      if (!ctx_->lossless && !ctx_->closed_loop) o.machine.max_queued = 1;
+    }
     o.machine.resilient = ctx_->resilient;
     o.machine.reconnect_timeout = std::chrono::nanoseconds(ctx_->reconnect_timeout_ns);
     if (config_ != nullptr) o.config = *config_;
@@ -198,6 +216,16 @@ class Fleet::Driver : public client::StreamSink {
       if (frame == nullptr) {
         ctx_->recorder->FrameError("INTERNAL", "a reply to a frame not in flight", instance);
         return;
+      }
+      if (ctx_->video != nullptr) {
+        const int needed = reply.has_cloud() ? reply.cloud().keyframe_needed_size()
+                                             : reply.error().keyframe_needed_size();
+        if (needed > 0) {
+          ++stats_.keyframe_needed;
+          ctx_->recorder->KeyframeNeeded();
+          // One request, one IDR: replies to frames sent before the latest IDR ask for nothing.
+          if (idr_sequence_ <= frame->sequence) restart_ = true;
+        }
       }
       // Latency from the intended time (the schedule's), service time from the latest write.
       const std::int64_t intended = frame->frame.record.intended_ns;
@@ -299,6 +327,10 @@ class Fleet::Driver : public client::StreamSink {
  private:
   // Hands frame `seq`, due at `intended`, to the core.
   void Submit(std::uint64_t seq, std::int64_t intended, bool scheduler_late) {
+    if (ctx_->video != nullptr) {
+      SubmitPicture(seq, intended, scheduler_late);
+      return;
+    }
     // The same bytes for every send of a frame: a new 20-byte header before the shared image.
     const std::size_t frame_index = static_cast<std::size_t>(index_) + seq - 1;
     std::size_t level = 0;
@@ -313,7 +345,49 @@ class Fleet::Driver : public client::StreamSink {
     client::FrameRecord record;
     record.intended_ns = intended;
     record.image_bytes = bytes.Length();
-    switch (core_->Submit(seq, std::move(bytes), std::move(record))) {
+    Account(core_->Submit(seq, std::move(bytes), std::move(record)), scheduler_late);
+  }
+
+  // A video stream's frame `seq`: the next picture of the store's sequence (its start, an IDR,
+  // when a reply asked for one). Pictures go to the core in sequence order, so one at a time.
+  void SubmitPicture(std::uint64_t seq, std::int64_t intended, bool scheduler_late) {
+    std::lock_guard<std::mutex> order(submit_mu_);
+    std::size_t position;
+    bool asked;
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      asked = restart_;
+      position = asked ? 0 : next_picture_;
+    }
+    grpc::ByteBuffer bytes =
+        ctx_->store->Request(position, seq, ctx_->t0_unix_ns + (intended - ctx_->t0_steady_ns));
+    client::FrameRecord record;
+    record.intended_ns = intended;
+    record.image_bytes = bytes.Length();
+    const auto submitted = core_->Submit(seq, std::move(bytes), std::move(record));
+    if (submitted == client::CoreMachine::Submitted::kWriting ||
+        submitted == client::CoreMachine::Submitted::kQueued) {
+      std::lock_guard<std::mutex> lock(mu_);
+      next_picture_ = (position + 1) % ctx_->video->length;
+      if (ctx_->video->keyframe[position]) {
+        idr_sequence_ = seq;
+        restart_ = false;
+        ctx_->recorder->KeyframeSent(asked);
+      }
+    } else if (submitted == client::CoreMachine::Submitted::kFull) {
+      // One frame already waits: this one is never encoded (DELIVERY_LATEST's skip, before the
+      // encoder rather than after it).
+      std::lock_guard<std::mutex> lock(mu_);
+      ++stats_.skipped;
+      ctx_->recorder->Skipped(1);
+      return;
+    }
+    Account(submitted, scheduler_late);
+  }
+
+  // What became of a Submit, counted.
+  void Account(client::CoreMachine::Submitted submitted, bool scheduler_late) {
+    switch (submitted) {
       case client::CoreMachine::Submitted::kWriting:
         if (scheduler_late) ctx_->recorder->Late(/*flow_control=*/false);
         break;
@@ -344,7 +418,8 @@ class Fleet::Driver : public client::StreamSink {
           break;
         }
         const std::uint64_t settled = stats_.answered + stats_.frame_errors + stats_.lost +
-                                      stats_.dropped + stats_.replaced + stats_.unsent;
+                                      stats_.dropped + stats_.replaced + stats_.skipped +
+                                      stats_.unsent;
         if (submitted_ - std::min(submitted_, settled) >=
             static_cast<std::uint64_t>(ctx_->in_flight)) {
           return;
@@ -364,6 +439,7 @@ class Fleet::Driver : public client::StreamSink {
   const Context* ctx_ = nullptr;
   std::shared_ptr<client::StreamCore> core_;
   std::optional<client::RateEstimate> rate_;  // the controller's, after the latest reply
+  std::mutex submit_mu_;  // video: a picture's choice and its Submit, one frame at a time
 
   std::mutex mu_;
   bool no_more_ = false;
@@ -375,6 +451,11 @@ class Fleet::Driver : public client::StreamSink {
   std::int64_t last_send_ns_ = 0;
   std::uint64_t server_dropped_before_ = 0;  // frames_dropped of the calls that ended
   std::uint64_t server_dropped_this_call_ = 0;
+  // Video: the next picture of the sequence; the sequence of the latest frame sent with IDRs;
+  // whether a reply asked for an IDR since.
+  std::size_t next_picture_ = 0;
+  std::uint64_t idr_sequence_ = 0;
+  bool restart_ = false;
   StreamStats stats_;
 };
 
@@ -604,7 +685,9 @@ FleetResult Fleet::Run(const std::function<void(const SecondStats&)>& on_second)
       Ns(t0),
       std::chrono::duration_cast<std::chrono::nanoseconds>(result.start.time_since_epoch()).count(),
       o.rate_control,
-      o.closed_loop ? 30.0 : o.schedule.start};
+      o.closed_loop ? 30.0 : o.schedule.start,
+      store_->video() ? &*store_->video() : nullptr};
+  const double cpu_start = ProcessCpuSeconds();
   for (int s = 0; s < n; ++s) {
     drivers_[s]->Start(channels_[static_cast<std::size_t>(s) % channels_.size()].get(), &ctx);
   }
@@ -696,6 +779,7 @@ FleetResult Fleet::Run(const std::function<void(const SecondStats&)>& on_second)
   result.end_reason = reason;
   result.elapsed_s = t_end;
   result.sending_s = (last_send - Ns(t0)) / 1e9;
+  result.cpu_s = ProcessCpuSeconds() - cpu_start;
   return result;
 }
 

@@ -224,6 +224,20 @@ std::string Html(const Report& r) {
       Row("ended", fmt::format("{} after {:.2f} s", Name(r.result.end_reason), r.result.elapsed_s));
   page += Row("sent / answered", fmt::format("{} / {}", t.sent, t.answered));
   page += Row("throughput", fmt::format("{:.1f} frames/s", r.answered_fps()));
+  page += Row("encoding",
+              fmt::format("{}, {:.1f} KB sent a frame", r.encoding.empty() ? "?" : r.encoding,
+                          r.bytes_per_frame() / 1024));
+  if (r.video) {
+    page += Row("video", fmt::format("{}; a sequence of {} frames, {:.1f} KB of pictures a frame, "
+                                     "encoded once in {:.2f} ms a frame",
+                                     r.video->settings, r.video->length,
+                                     r.video->video_bytes_mean / 1024, r.video->encode_ms_median));
+    page += Row("IDRs sent (asked for) / replies asking / skipped",
+                fmt::format("{} ({}) / {} / {}", t.keyframes_sent, t.keyframe_restarts,
+                            t.keyframe_needed, t.skipped));
+  }
+  page += Row("generator CPU", fmt::format("{:.2f} s, {:.3f} ms a frame sent", r.result.cpu_s,
+                                           r.generator_ms_per_frame()));
   page += Row("frame errors / lost / unsent",
               fmt::format("{} / {} / {}", t.frame_errors, t.lost, t.unsent));
   page += Row("dropped (DELIVERY_LATEST)", std::to_string(t.drops));
@@ -295,8 +309,8 @@ std::string Html(const Report& r) {
       queue.y.push_back(s.rate.queue_delay_ms / 10);
       kb.y.push_back(s.rate.frame_bytes / 1e4);
     }
-    page += LineChart("rate-chart", "Rate control: target bitrate, queueing delay, frame size",
-                      "", rx, {target, queue, kb});
+    page += LineChart("rate-chart", "Rate control: target bitrate, queueing delay, frame size", "",
+                      rx, {target, queue, kb});
   }
   if (!r.memory.empty()) {
     std::vector<double> mx;
@@ -311,11 +325,11 @@ std::string Html(const Report& r) {
   }
   if (r.soak) {
     const SoakVerdict& v = r.soak_verdict;
-    page += fmt::format("<p id=\"soak\">Soak <b>{}</b>: after the {:g} s warm-up memory {:.1f} "
-                        "&rarr; peak {:.1f} MB (bound +{:.1f} MB).</p>\n",
-                        v.passed ? "passed" : "FAILED", r.soak_bounds.warmup_s,
-                        v.baseline_bytes / 1e6, v.peak_bytes / 1e6,
-                        r.soak_bounds.max_growth_bytes / 1e6);
+    page += fmt::format(
+        "<p id=\"soak\">Soak <b>{}</b>: after the {:g} s warm-up memory {:.1f} "
+        "&rarr; peak {:.1f} MB (bound +{:.1f} MB).</p>\n",
+        v.passed ? "passed" : "FAILED", r.soak_bounds.warmup_s, v.baseline_bytes / 1e6,
+        v.peak_bytes / 1e6, r.soak_bounds.max_growth_bytes / 1e6);
     if (!v.failures.empty()) {
       page += "<ul>\n";
       for (const std::string& f : v.failures) page += "<li>" + Escape(f) + "</li>\n";

@@ -71,6 +71,22 @@ void Recorder::Replaced(std::uint64_t frames) {
   totals_.replaced += frames;
 }
 
+void Recorder::Skipped(std::uint64_t frames) {
+  std::lock_guard<std::mutex> lock(mu_);
+  totals_.skipped += frames;
+}
+
+void Recorder::KeyframeNeeded() {
+  std::lock_guard<std::mutex> lock(mu_);
+  ++totals_.keyframe_needed;
+}
+
+void Recorder::KeyframeSent(bool asked) {
+  std::lock_guard<std::mutex> lock(mu_);
+  ++totals_.keyframes_sent;
+  if (asked) ++totals_.keyframe_restarts;
+}
+
 void Recorder::CallStatus(const std::string& code) {
   std::lock_guard<std::mutex> lock(mu_);
   ++call_status_[code];

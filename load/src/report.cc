@@ -141,6 +141,16 @@ std::string FormatTable(const Report& r) {
                      r.answered_fps(),
                      r.result.elapsed_s > 0 ? t.bytes_sent / 1e6 / r.result.elapsed_s : 0.0,
                      r.result.elapsed_s > 0 ? t.bytes_received / 1e6 / r.result.elapsed_s : 0.0);
+  out += fmt::format(
+      "  encoding  {}, {:.1f} KB sent a frame; generator CPU {:.2f} s ({:.3f} ms a frame)\n",
+      r.encoding.empty() ? "?" : r.encoding, r.bytes_per_frame() / 1024, r.result.cpu_s,
+      r.generator_ms_per_frame());
+  if (r.video) {
+    out += fmt::format(
+        "  video     IDRs sent {} ({} asked for)  replies asking for an IDR {}  skipped before "
+        "encoding {}\n",
+        t.keyframes_sent, t.keyframe_restarts, t.keyframe_needed, t.skipped);
+  }
   out += "\n  ms                         p50       p90       p99     p99.9       max      mean\n";
   auto row = [&](const char* name, const Histogram& h) {
     out += fmt::format("  {:<22} {:>9.2f} {:>9.2f} {:>9.2f} {:>9.2f} {:>9.2f} {:>9.2f}\n", name,
@@ -267,6 +277,24 @@ nlohmann::json GhzJson(const Report& r) {
                  {"duplicates", t.duplicates},
                  {"bytesSent", t.bytes_sent},
                  {"bytesReceived", t.bytes_received}};
+  j["frames"]["skipped"] = t.skipped;
+  j["frames"]["bytesPerFrame"] = r.bytes_per_frame();
+  j["encoding"] = {{"name", r.encoding}, {"bytesPerFrame", r.bytes_per_frame()}};
+  if (r.video) {
+    j["encoding"]["video"] = {{"codec", "h264"},
+                              {"settings", r.video->settings},
+                              {"sequenceFrames", r.video->length},
+                              {"sourceFrames", r.video->source_frames},
+                              {"pictureBytesPerFrame", r.video->video_bytes_mean},
+                              {"encodeMsPerFrameMedian", r.video->encode_ms_median},
+                              {"encodeMsPerFrameMean", r.video->encode_ms_mean},
+                              {"keyframesSent", t.keyframes_sent},
+                              {"keyframesAskedFor", t.keyframe_restarts},
+                              {"repliesAskingForKeyframe", t.keyframe_needed},
+                              {"skippedBeforeEncoding", t.skipped}};
+  }
+  j["generator"] = {{"cpuSeconds", r.result.cpu_s},
+                    {"cpuMsPerFrameSent", r.generator_ms_per_frame()}};
   j["drops"] = t.drops;
   j["lateSends"] = {{"total", t.late()},
                     {"previousWriteNotDone", t.late_flow_control},
@@ -305,6 +333,8 @@ nlohmann::json GhzJson(const Report& r) {
                        {"dropped", s.dropped},
                        {"unsent", s.unsent},
                        {"replaced", s.replaced},
+                       {"skipped", s.skipped},
+                       {"keyframeNeeded", s.keyframe_needed},
                        {"duplicates", s.duplicates},
                        {"calls", s.calls},
                        {"reconnects", s.reconnect_ns.size()},

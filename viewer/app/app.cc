@@ -31,12 +31,12 @@
 #include "app/session.h"
 #include "app/stats.h"
 #include "app/viewer.h"
-#include "cloudcast/video/frame_encoder.h"
 #include "cloudcast/cli/checks.h"
 #include "cloudcast/cli/connection_flags.h"
 #include "cloudcast/cli/role_flags.h"
 #include "cloudcast/cli/stage_flags.h"
 #include "cloudcast/cli/stereo_flags.h"
+#include "cloudcast/cli/video_flags.h"
 #include "cloudcast/client/config.h"
 #include "cloudcast/core/camera.h"
 #include "cloudcast/core/draco_codec.h"
@@ -46,6 +46,7 @@
 #include "cloudcast/io/cloud_io.h"
 #include "cloudcast/sources/frame_source.h"
 #include "cloudcast/sources/uplink.h"
+#include "cloudcast/video/frame_encoder.h"
 
 namespace cloudcast::client::app {
 namespace {
@@ -95,15 +96,9 @@ struct Flags {
   bool rate_control = false;
   std::string encoding = sources::Name(SessionDefaults().uplink.encoding);
   int jpeg_quality = SessionDefaults().uplink.jpeg_quality;
-  // --encoding h264 (docs/video.md): the colour image, or a stereo pair, as H.264 pictures.
-  std::string h264_preset = "veryfast";
-  double h264_crf = 18;
-  double h264_mbps = 8;
-  int h264_keyframe_interval = 60;
-  int h264_threads = 1;
-  bool h264_444 = false;
-  bool h264_separate_stereo = false;
-  bool h264_grey = false;
+  // --encoding h264 (docs/video.md): the colour image, or a stereo pair, as H.264 pictures; the
+  // --h264-* flags, shared with cloudcast-load.
+  std::unique_ptr<cli::VideoFlags> h264;
 
   // TLS and the bearer token (cli::ConnectionFlags), read after parsing.
   client::ChannelSecurity security;
@@ -245,52 +240,11 @@ std::unique_ptr<cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
                "from its target bitrate. The progress lines show its target, round trip and "
                "queueing delay. Not with --lossless")
       ->group(streaming);
-  app.add_option("--h264-preset", f.h264_preset,
-                 "x264 preset with --encoding h264 (ultrafast .. medium; docs/video.md measures "
-                 "them)")
-      ->check(CLI::IsMember({"ultrafast", "superfast", "veryfast", "faster", "fast", "medium"}))
-      ->capture_default_str()
-      ->group(streaming);
-  app.add_option("--h264-crf", f.h264_crf,
-                 "Constant quality with --encoding h264 (1..51, lower is better), capped by "
-                 "--h264-mbps; 0: --h264-mbps alone")
-      ->check(CLI::Range(0.0, 51.0))
-      ->capture_default_str()
-      ->group(streaming);
-  app.add_option("--h264-mbps", f.h264_mbps,
-                 "Bitrate with --encoding h264, Mbit/s, both views of a pair together: the cap "
-                 "of a one-frame VBV (no frame waits behind a large one)")
-      ->check(CLI::Range(0.05, 1000.0))
-      ->capture_default_str()
-      ->group(streaming);
-  app.add_option("--h264-keyframe-interval", f.h264_keyframe_interval,
-                 "Frames between IDRs with --encoding h264 (0: only the first and those the "
-                 "server asks for)")
-      ->check(CLI::Range(0, 100000))
-      ->capture_default_str()
-      ->group(streaming);
-  app.add_option("--h264-threads", f.h264_threads,
-                 "Encoder threads with --encoding h264 (x264 sliced threads: no added latency)")
-      ->check(CLI::Range(1, 16))
-      ->capture_default_str()
-      ->group(streaming);
-  app.add_flag("--h264-444", f.h264_444,
-               "Colour as 4:4:4 with --encoding h264 (4:2:0 alone caps colour near 28-39 dB "
-               "PSNR; docs/video.md)")
-      ->group(streaming);
-  app.add_flag("--h264-grey", f.h264_grey,
-               "Images coded grey with --encoding h264 (4:0:0: what stereo matching reads, in "
-               "fewer bits; the points are grey)")
-      ->group(streaming);
-  app.add_flag("--h264-separate-stereo", f.h264_separate_stereo,
-               "A bitstream per view of a stereo pair with --encoding h264, instead of the right "
-               "view interleaved after the left (the measured best)")
-      ->group(streaming);
+  f.h264 = std::make_unique<cli::VideoFlags>(app, streaming);
 
   const std::string stages = "Camera and stages (stage flags left out: the server's defaults)";
-  auto stage_flags =
-      std::make_unique<cli::StageFlags>(app, cli::StageFlags::Groups{stages, stages, stages},
-                                        convert::ContractDefaults().frame);
+  auto stage_flags = std::make_unique<cli::StageFlags>(
+      app, cli::StageFlags::Groups{stages, stages, stages}, convert::ContractDefaults().frame);
   f.stereo = std::make_unique<cli::StereoFlags>(
       app, "Stereo matcher (--input stereo; flags left out: the server's defaults)");
 
@@ -586,17 +540,7 @@ int Run(const Flags& f, const cli::StageFlags& stages) {
   if (f.encoding == video::kH264) {
     // The images are taken raw from the source and coded by the session's FrameEncoder.
     options.uplink.encoding = sources::Uplink::kRaw;
-    video::FrameEncoderOptions v;
-    v.encoder.preset = f.h264_preset;
-    v.encoder.crf = f.h264_crf;
-    v.encoder.bitrate_bps = static_cast<std::int64_t>(std::llround(f.h264_mbps * 1e6));
-    v.encoder.fps = f.fps > 0 ? static_cast<int>(std::lround(f.fps)) : 30;
-    v.encoder.keyframe_interval = f.h264_keyframe_interval;
-    v.encoder.threads = f.h264_threads;
-    v.colour_kind = f.h264_444 ? video::PictureKind::kColour444 : video::PictureKind::kColour;
-    v.interleave_stereo = !f.h264_separate_stereo;
-    v.grey = f.h264_grey;
-    options.video = v;
+    options.video = f.h264->Options(f.fps);
   }
 
   // The window opens first: without a display there is no point in connecting.
@@ -776,13 +720,18 @@ int ClientMain(int argc, char** argv) {
                     f.stereo->GivenFlags().front(), f.input));
   }
   if (absl::Status s = f.stereo->Check(); !s.ok()) return usage(std::string(s.message()));
+  if (f.encoding != video::kH264 && f.h264->AnyGiven()) {
+    return usage(f.h264->GivenFlags().front() + " needs --encoding h264");
+  }
   if (f.rate_control && f.encoding == video::kH264) {
-    return usage("--rate-control does not drive --encoding h264 yet: a frame the rate controller "
-                 "replaces would break the bitstream (docs/video.md); use --encoding jpeg");
+    return usage(
+        "--rate-control does not drive --encoding h264 yet: a frame the rate controller "
+        "replaces would break the bitstream (docs/video.md); use --encoding jpeg");
   }
   if (f.rate_control && f.lossless) {
-    return usage("--rate-control needs DELIVERY_LATEST (a frame past the window is replaced by "
-                 "a newer one): drop --lossless");
+    return usage(
+        "--rate-control needs DELIVERY_LATEST (a frame past the window is replaced by "
+        "a newer one): drop --lossless");
   }
   if (f.no_window) {
     for (const char* flag : {"--open", "--snapshot", "--hidden", "--window"}) {

@@ -12,6 +12,13 @@
 // run it: with DELIVERY_LATEST a frame still waiting for the write slot when the next is due is
 // replaced (counted as replaced); with DELIVERY_ALL every frame waits its turn.
 //
+// Video streams (a FrameStore with video(), --encoding h264) send the store's picture sequence in
+// order from its IDR, and a picture sent is never replaced: the pictures after it reference it.
+// So under DELIVERY_LATEST such a stream lets one frame wait for the write slot and skips (never
+// encodes) a frame due while one waits, counted as skipped; the server still skips stale frames
+// after decoding them. A reply whose keyframe_needed names a bitstream sends the sequence back to
+// its start (an IDR) unless an IDR went after the frame it answers.
+//
 // Resilient streams (FleetOptions::resilient): a stream is a sequence of calls. When a call ends
 // with UNAVAILABLE (a replica killed, drained, or sending GOAWAY), the stream opens a new one (the
 // channel's round_robin picks a live replica), sends its StreamConfig again and, in DELIVERY_ALL,
@@ -87,20 +94,22 @@ std::string DefaultLbPolicy(const std::string& target);
 int ListedAddresses(const std::string& target);
 
 // One stream's account, for the per-stream report. Every frame due ends in exactly one of
-// answered, frame_errors, dropped, lost, replaced or unsent.
+// answered, frame_errors, dropped, lost, replaced, skipped or unsent.
 struct StreamStats {
   int index = 0;
-  std::uint64_t sent = 0;          // distinct frames sent (a resend is not counted again)
-  std::uint64_t answered = 0;      // clouds
-  std::uint64_t frame_errors = 0;  // FrameError replies
-  std::uint64_t resent = 0;        // frames written again on a new call (DELIVERY_ALL)
-  std::uint64_t lost = 0;          // sent, never answered, reported lost
-  std::uint64_t dropped = 0;       // skipped (DELIVERY_LATEST)
-  std::uint64_t unsent = 0;        // due, never sent
-  std::uint64_t replaced = 0;      // due, replaced by a newer frame before it was sent (LATEST)
-  std::uint64_t duplicates = 0;    // answers to a sequence already answered (ignored)
-  int calls = 0;                   // gRPC calls the stream used
-  int reconnect_attempts = 0;      // calls opened after a failure
+  std::uint64_t sent = 0;             // distinct frames sent (a resend is not counted again)
+  std::uint64_t answered = 0;         // clouds
+  std::uint64_t frame_errors = 0;     // FrameError replies
+  std::uint64_t resent = 0;           // frames written again on a new call (DELIVERY_ALL)
+  std::uint64_t lost = 0;             // sent, never answered, reported lost
+  std::uint64_t dropped = 0;          // skipped (DELIVERY_LATEST)
+  std::uint64_t unsent = 0;           // due, never sent
+  std::uint64_t replaced = 0;         // due, replaced by a newer frame before it was sent (LATEST)
+  std::uint64_t skipped = 0;          // due, not encoded: a video frame already waited (LATEST)
+  std::uint64_t keyframe_needed = 0;  // video: replies asking for an IDR
+  std::uint64_t duplicates = 0;       // answers to a sequence already answered (ignored)
+  int calls = 0;                      // gRPC calls the stream used
+  int reconnect_attempts = 0;         // calls opened after a failure
   // Reconnects that worked: from the failure to the new call having written the config and every
   // frame it sent again, ns.
   std::vector<std::int64_t> reconnect_ns;
@@ -117,6 +126,9 @@ struct FleetResult {
   std::chrono::system_clock::time_point start;  // the schedule's time zero
   double elapsed_s = 0;                         // from time zero to the last call's end
   double sending_s = 0;                         // from time zero to the last frame sent
+  // The generator's own CPU time during Run (user + system, every thread of the process): what
+  // it costs to drive the streams.
+  double cpu_s = 0;
 };
 
 class Fleet {

@@ -6,12 +6,21 @@
 // (the StreamRequest tag and length, then Frame.sequence and Frame.capture_time_unix_ns, fields 1
 // and 2, which the wire format lets stand before the others) and points at the shared tail, so
 // nothing large is copied or re-serialized per send.
+//
+// Video (--encoding h264): a bitstream's pictures reference the ones before them, so they cannot
+// be replayed in any order. The store then holds one picture sequence, encoded once before the
+// run by the client library's FrameEncoder (the robots' encoder, at the run's settings): it
+// starts with an IDR and each stream plays it from its start, in order, returning to the start
+// (an IDR) when it loops or when the server asks for a keyframe. Encoding live, per stream, would
+// cost the generator an encoder's time for every frame of every stream (docs/load-testing.md
+// measures both); the replay costs what a raw frame's does.
 #pragma once
 
 #include <grpcpp/support/byte_buffer.h>
 #include <grpcpp/support/slice.h>
 
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -20,6 +29,7 @@
 #include "cloudcast/sources/frame_source.h"
 #include "cloudcast/sources/uplink.h"
 #include "cloudcast/v1/cloudcast.pb.h"
+#include "cloudcast/video/frame_encoder.h"
 
 namespace cloudcast::load {
 
@@ -46,7 +56,27 @@ struct FrameSourceOptions {
   // the pixels, much the same cloud after the voxel grid. The floor when the link cannot carry
   // even the last full-resolution level (whose lossless disparity alone is about 14 KB).
   std::vector<int> half_resolution_ladder;
+  // --encoding h264: the colour images (a stereo pair's both views) as H.264 pictures of one
+  // sequence encoded before the run (the class comment); disparity and depth go lossless with
+  // zstd (row deltas), `uplink`'s other settings apply.
+  std::optional<video::FrameEncoderOptions> video;
 };
+
+// The picture sequence of a video store.
+struct VideoSequence {
+  // Its length in frames: the source's frames, cycled, up to a whole number of keyframe
+  // intervals (60 frames with --h264-keyframe-interval 0), at most kMaxVideoSequence unless the
+  // source has more frames.
+  std::size_t length = 0;
+  std::size_t source_frames = 0;  // distinct frames of the source in it
+  std::vector<bool> keyframe;     // per frame: its pictures are IDRs (frame 0 always)
+  std::string settings;           // e.g. "veryfast crf 18 <= 8 Mbit/s, colour 4:2:0, IDR every 60"
+  // The encoder's cost when the sequence was made: thread CPU ms per frame (both views of a
+  // pair), median and mean over the sequence; and the access unit bytes per frame, mean.
+  double encode_ms_median = 0, encode_ms_mean = 0;
+  double video_bytes_mean = 0;
+};
+inline constexpr std::size_t kMaxVideoSequence = 300;
 
 class FrameStore {
  public:
@@ -56,6 +86,11 @@ class FrameStore {
   // Frames made by the caller (tests): each serialized as it is, sequence and time ignored.
   static FrameStore FromFrames(const std::vector<v1::Frame>& frames, const CameraModel& camera,
                                const std::string& description);
+  // A video store of frames made by the caller (tests): their pictures in the order given, the
+  // first an IDR (else an error), sent as the sequence of a video store.
+  static absl::StatusOr<FrameStore> FromVideoFrames(const std::vector<v1::Frame>& frames,
+                                                    const CameraModel& camera,
+                                                    const std::string& description);
 
   std::size_t size() const { return levels_.front().size(); }
   // The bytes of frame `index % size()` on the wire, sequence and time patched in, at `level`
@@ -79,12 +114,19 @@ class FrameStore {
   void SetStreamCamera(const v1::CameraModel& stream);
   // What the frames hold.
   sources::FrameKind kind() const { return kind_; }
+  // A video store (FrameSourceOptions::video): frame i is picture i of the sequence, to be sent
+  // in order from 0 (an IDR) on each stream. None: any frame may go at any time.
+  const std::optional<VideoSequence>& video() const { return video_; }
+  // The encoding's name: "raw", "zstd", "png", "jpeg", "h264", "adaptive" (the JPEG ladder).
+  const std::string& encoding() const { return encoding_; }
   // e.g. "New Tsukuba (10 stereo frames, 640x480), raw, 1200 KB per frame".
   const std::string& description() const { return description_; }
 
  private:
   FrameStore() = default;
   void AddTail(const v1::Frame& frame, std::size_t level = 0);
+  absl::Status PrepareVideo(const FrameSourceOptions& options, sources::FrameSource& source,
+                            std::uint64_t frames);
 
   // Per level, owned strings, so their slices can be static (no refcount, no copy) for the
   // store's life.
@@ -93,6 +135,8 @@ class FrameStore {
   CameraModel camera_;
   sources::FrameKind kind_ = sources::FrameKind::kDisparity;
   std::string description_;
+  std::string encoding_;
+  std::optional<VideoSequence> video_;
 };
 
 // The wire bytes of a StreamRequest holding `config` (the first message of every stream).

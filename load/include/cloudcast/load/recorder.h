@@ -55,8 +55,8 @@ struct Totals {
   std::uint64_t lost = 0;          // sent, never answered: the call ended first
   std::uint64_t unsent = 0;        // due, never sent: the call ended or the run stopped first
   std::uint64_t drops = 0;
-  std::uint64_t replaced = 0;  // due, never sent: a newer frame replaced it (DELIVERY_LATEST)
-  std::uint64_t server_dropped = 0;     // sum over streams of the last frames_dropped reported
+  std::uint64_t replaced = 0;        // due, never sent: a newer frame replaced it (DELIVERY_LATEST)
+  std::uint64_t server_dropped = 0;  // sum over streams of the last frames_dropped reported
   std::uint64_t late_flow_control = 0;  // the stream's previous write had not completed
   std::uint64_t late_scheduler = 0;     // the generator itself was over 1 ms behind
   std::uint64_t bytes_sent = 0, bytes_received = 0;  // resends included
@@ -66,6 +66,13 @@ struct Totals {
   std::uint64_t reconnects = 0;          // reconnects that worked
   std::uint64_t reconnect_attempts = 0;  // calls opened after a failure
   std::uint64_t streams_given_up = 0;    // streams that found no working call in time
+  // Video streams (--encoding h264).
+  std::uint64_t skipped = 0;  // due, never sent: a frame already waited for the write slot
+                              // (DELIVERY_LATEST), so this one was never encoded (a replaced
+                              // picture would break the bitstream)
+  std::uint64_t keyframe_needed = 0;    // replies naming a bitstream that needs an IDR
+  std::uint64_t keyframes_sent = 0;     // frames sent whose pictures were IDRs
+  std::uint64_t keyframe_restarts = 0;  // IDRs sent because a reply asked (the sequence restarted)
   std::uint64_t late() const { return late_flow_control + late_scheduler; }
 };
 
@@ -88,6 +95,11 @@ class Recorder {
   void Unsent(std::uint64_t frames);
   // A frame replaced by a newer one before it was sent (DELIVERY_LATEST, as robots send).
   void Replaced(std::uint64_t frames);
+  // Video streams: a frame not encoded because one still waited (DELIVERY_LATEST); a reply
+  // asking for an IDR; a frame sent with IDRs (`asked`: because a reply asked).
+  void Skipped(std::uint64_t frames);
+  void KeyframeNeeded();
+  void KeyframeSent(bool asked);
   void CallStatus(const std::string& code);
   // Resilient streams: a frame written again on a new call; an answer to a sequence already
   // answered; a call opened after a failure; a reconnect that worked (its time is in the

@@ -5,6 +5,7 @@
 
 #include <map>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -19,6 +20,8 @@ struct Report {
   // What ran.
   std::string target;
   std::string frames;    // FrameStore::description()
+  std::string encoding;  // FrameStore::encoding(): raw, zstd, png, jpeg, h264, adaptive
+  std::optional<VideoSequence> video;  // --encoding h264: the picture sequence the streams sent
   std::string schedule;  // e.g. "const 30 fps per stream" or "closed loop, 2 in flight"
   std::string delivery;  // "DELIVERY_ALL" / "DELIVERY_LATEST"
   int streams = 0, connections = 0;
@@ -51,6 +54,17 @@ struct Report {
   SoakBounds soak_bounds;
   SoakVerdict soak_verdict;
 
+  // The request bytes a frame sent, mean (image bytes and the message around them).
+  double bytes_per_frame() const {
+    return totals.sent + totals.resent > 0
+               ? static_cast<double>(totals.bytes_sent) / (totals.sent + totals.resent)
+               : 0;
+  }
+  // The generator's CPU ms per frame sent, and the streams at `fps` one of its cores could drive
+  // at that cost (0 when nothing was sent).
+  double generator_ms_per_frame() const {
+    return totals.sent > 0 ? result.cpu_s * 1e3 / static_cast<double>(totals.sent) : 0;
+  }
   double answered_fps() const {
     return result.elapsed_s > 0 ? totals.answered / result.elapsed_s : 0;
   }
