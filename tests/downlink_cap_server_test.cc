@@ -160,15 +160,17 @@ TEST_F(DownlinkCapTest, NoCapIsTodaysReply) {
   zero.mutable_draco()->set_max_cloud_bytes(0);  // stated, not just unset
   absl::StatusOr<client::Result> capped_zero = Process("00001", zero);
   ASSERT_TRUE(capped_zero.ok()) << capped_zero.status();
-  EXPECT_EQ(plain->reply.draco(), capped_zero->reply.draco());
+  EXPECT_TRUE(plain->reply.draco() == capped_zero->reply.draco()) << "0 changed the cloud";
   EXPECT_EQ(plain->reply.position_bits(), 10);
   EXPECT_EQ(plain->reply.color_bits(), 8);
   EXPECT_FALSE(plain->reply.has_over_cap());
   EXPECT_FALSE(capped_zero->reply.has_over_cap());
-  // A cap the cloud is under changes nothing.
+  // A cap the uncapped cloud meets is met (perhaps a step coarser: the server predicts, it does
+  // not try every step).
   absl::StatusOr<client::Result> roomy = Process("00001", Capped(plain->reply.draco().size()));
   ASSERT_TRUE(roomy.ok()) << roomy.status();
-  EXPECT_EQ(roomy->reply.draco(), plain->reply.draco());
+  EXPECT_FALSE(roomy->reply.has_over_cap());
+  EXPECT_LE(roomy->reply.draco().size(), plain->reply.draco().size());
 }
 
 TEST_F(DownlinkCapTest, BadValuesGetErrorsNamingTheField) {

@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <cstdint>
+#include <string>
 #include <string_view>
 
 #include "absl/strings/str_cat.h"
@@ -13,7 +14,7 @@ absl::Status SetMaxCloudBytes(std::uint64_t max_cloud_bytes, StreamConfig* confi
                               int min_color_bits, std::string_view field) {
   if (max_cloud_bytes != 0 && max_cloud_bytes < kMinCloudBytesCap) {
     return absl::InvalidArgumentError(
-        absl::StrCat(field, " is ", max_cloud_bytes, "; it must be 0 (no cap) or at least ",
+        absl::StrCat(std::string(field), " is ", max_cloud_bytes, "; it must be 0 (no cap) or at least ",
                      kMinCloudBytesCap, " bytes (a Draco header alone takes about 30)"));
   }
   if (min_color_bits < 0 || min_color_bits > 8) {
@@ -35,7 +36,7 @@ absl::StatusOr<std::uint64_t> MaxCloudBytesFromKb(double kb, std::string_view fl
   // Up to 4 GB: far above any cloud (a reply is bounded by gRPC's message size anyway).
   if (!std::isfinite(kb) || kb < 0 || (kb > 0 && kb < kMinKb) || kb > 4e6) {
     return absl::InvalidArgumentError(absl::StrCat(
-        flag, " is ", kb, "; it must be 0 (no cap) or a number of kB (1000 bytes) from ", kMinKb,
+        std::string(flag), " is ", kb, "; it must be 0 (no cap) or a number of kB (1000 bytes) from ", kMinKb,
         " to 4000000"));
   }
   return static_cast<std::uint64_t>(std::llround(kb * 1000.0));
