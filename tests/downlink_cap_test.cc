@@ -160,8 +160,7 @@ void CheckCap(const Named& n, float bound, std::uint64_t cap, Tally* tally) {
     } else {
       finer.position_bits = info.position_bits + 1;
     }
-    const bool at_top =
-        info.color_bits == options.color_bits && info.position_bits == position_top;
+    const bool at_top = info.color_bits == options.color_bits && info.position_bits == position_top;
     if (at_top || EncodedSize(n.cloud, finer) > cap) ++tally->finest;
   }
 }
@@ -181,10 +180,11 @@ void CheckAll(const std::vector<Named>& clouds, const std::vector<float>& bounds
       }
     }
   }
-  std::printf("%d cases: %d over the cap at the floors, %.2f encodes a case, %d of %d under the "
-              "cap at the finest step that fits\n",
-              tally.cases, tally.over, tally.cases ? double(tally.encodes) / tally.cases : 0.0,
-              tally.finest, tally.cases - tally.over);
+  std::printf(
+      "%d cases: %d over the cap at the floors, %.2f encodes a case, %d of %d under the "
+      "cap at the finest step that fits\n",
+      tally.cases, tally.over, tally.cases ? double(tally.encodes) / tally.cases : 0.0,
+      tally.finest, tally.cases - tally.over);
   // The model picks the finest fitting step mostly; a miss costs quality, never the cap.
   EXPECT_GE(tally.finest, (tally.cases - tally.over) * min_finest_percent / 100);
 }
@@ -264,7 +264,8 @@ TEST(DownlinkCap, BadValuesNameTheField) {
     options.max_cloud_bytes = bad;
     const absl::Status s = options.Validate("config.draco");
     EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument);
-    EXPECT_THAT(std::string(s.message()), ::testing::StartsWith("config.draco.max_cloud_bytes is "));
+    EXPECT_THAT(std::string(s.message()),
+                ::testing::StartsWith("config.draco.max_cloud_bytes is "));
   }
   options.max_cloud_bytes = kMinCloudBytesCap;
   EXPECT_TRUE(options.Validate().ok());

@@ -49,7 +49,8 @@ double CapSizeModel::Predict(const CapStep& step) const {
 
 void CapSizeModel::Calibrate(const CapStep& step, std::size_t bytes) {
   if (points_ == 0) return;
-  const double per_point = (static_cast<double>(bytes) - kFixedBytes) / static_cast<double>(points_);
+  const double per_point =
+      (static_cast<double>(bytes) - kFixedBytes) / static_cast<double>(points_);
   if (measured_) {
     // Two steps measured: how much a step costs on this cloud, against the table's guess
     // (random colours cost more a bit than a camera's, smooth surfaces less).
@@ -95,8 +96,8 @@ absl::Status EncodeDracoCapped(const PointCloud& cloud, const DracoOptions& opti
   };
 
   thread_local std::string trial;
-  int fitted = -1;    // the finest step that fitted; its bytes are in *out
-  int over = -1;      // the coarsest step that did not
+  int fitted = -1;  // the finest step that fitted; its bytes are in *out
+  int over = -1;    // the coarsest step that did not
   int encodes = 0;
   DracoEncodeInfo kept;
   int next = finest_predicted(-1, last + 1);

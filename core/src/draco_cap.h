@@ -15,8 +15,8 @@ namespace cloudcast::internal {
 
 // One encode with the options' bits as given (raised for max_position_error, cap ignored).
 // `info` must not be null.
-absl::Status EncodeDracoOnce(const PointCloud& cloud, const DracoOptions& options,
-                             std::string* out, DracoEncodeInfo* info);
+absl::Status EncodeDracoOnce(const PointCloud& cloud, const DracoOptions& options, std::string* out,
+                             DracoEncodeInfo* info);
 
 // The fewest position bits that keep `max_position_error` (> 0) on a cloud with this bounding
 // box; INVALID_ARGUMENT when more than 30 would be needed.

@@ -247,8 +247,8 @@ absl::Status PositionBitsFloor(const float lo[3], const float hi[3], float max_p
   return ChoosePositionBits(lo, hi, fewest, bits, &range, &max_abs);
 }
 
-absl::Status EncodeDracoOnce(const PointCloud& cloud, const DracoOptions& options,
-                             std::string* out, DracoEncodeInfo* info) {
+absl::Status EncodeDracoOnce(const PointCloud& cloud, const DracoOptions& options, std::string* out,
+                             DracoEncodeInfo* info) {
   if (std::max(options.encode_speed, options.decode_speed) == 10 && !options.force_libdraco) {
     bool done = false;
     const absl::Status s = EncodeWithCloudcast(cloud, options, out, info, &done);

@@ -22,11 +22,11 @@
 #include <thread>
 
 #include "cloudcast/cli/checks.h"
-#include "cloudcast/client/config.h"
 #include "cloudcast/cli/connection_flags.h"
 #include "cloudcast/cli/role_flags.h"
 #include "cloudcast/cli/stage_flags.h"
 #include "cloudcast/cli/stereo_flags.h"
+#include "cloudcast/client/config.h"
 #include "cloudcast/core/limits.h"
 #include "cloudcast/load/fleet.h"
 #include "cloudcast/load/frame_store.h"

@@ -46,9 +46,9 @@ void ExplainOverCap(const DracoOptions& draco, const DracoEncodeInfo& info, v1::
   const bool bounded = draco.max_position_error > 0.0f;
   const std::string position_bound =
       bounded ? "config.draco.max_position_error" : "config.draco.position_bits";
-  const std::string color_bound =
-      draco.min_color_bits < draco.color_bits ? "config.draco.min_color_bits"
-                                              : "config.draco.color_bits";
+  const std::string color_bound = draco.min_color_bits < draco.color_bits
+                                      ? "config.draco.min_color_bits"
+                                      : "config.draco.color_bits";
   out->add_limited_by(position_bound);
   out->add_limited_by(color_bound);
   out->set_message(absl::StrCat(

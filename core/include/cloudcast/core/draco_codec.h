@@ -60,7 +60,7 @@ struct DracoEncodeInfo {
   float position_error_bound = 0;  // max per-coordinate error those bits allow on this cloud
   std::size_t bytes = 0;
   DracoEncoder encoder = DracoEncoder::kLibdraco;  // which one wrote the bytes
-  int color_bits = 8;  // the colour bits actually used
+  int color_bits = 8;                              // the colour bits actually used
   // With a cap (DracoOptions::max_cloud_bytes): how many encodes it took (1..3), and whether the
   // cloud is over the cap at the floors of both bit depths. 1 and false without a cap.
   int encodes = 1;
