@@ -4,6 +4,12 @@
 // error bound; no cap is today's behaviour byte for byte; bad values get errors naming the field.
 #include <grpcpp/grpcpp.h>
 
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+#include <unistd.h>
+
 #include <algorithm>
 #include <cstdint>
 #include <memory>
@@ -17,6 +23,7 @@
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "support/client_fixture.h"
+#include "support/program_support.h"
 #include "support/test_support.h"
 
 namespace cloudcast {
@@ -220,6 +227,42 @@ TEST_F(DownlinkCapTest, BadValuesGetErrorsNamingTheField) {
   }
   EXPECT_EQ(client::MaxCloudBytesFromKb(12.5, "--max-reply-kb").value_or(0), 12500u);
   EXPECT_EQ(client::MaxCloudBytesFromKb(0, "--max-reply-kb").value_or(1), 0u);
+}
+
+// cloudcast-client --max-reply-kb: the cap reaches the server, the progress lines and the JSON
+// show the bits and the clouds over the cap; a bad value is refused naming the flag.
+TEST_F(DownlinkCapTest, ClientProgramFlag) {
+  REQUIRE_FRAMES();
+  const std::string binary = testing::BinDir() + "/cloudcast-client";
+  ASSERT_TRUE(std::filesystem::exists(binary)) << binary << ": build cloudcast-client";
+  const std::filesystem::path dir =
+      std::filesystem::temp_directory_path() /
+      ("cloudcast_downlink_" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  const std::string json = (dir / "stats.json").string();
+  const testing::RunResult r = testing::RunProgram(
+      binary,
+      {"--tsukuba", testing::TsukubaDir(), "--server", shared_target(), "--no-window",
+       "--lossless", "--max-reply-kb", "30", "--json", json, "--progress", "0.01"},
+      dir.string(), "env -u DISPLAY");
+  ASSERT_TRUE(r.exited && r.code == 0) << r;
+  const nlohmann::json j = nlohmann::json::parse(testing::ReadText(json));
+  EXPECT_EQ(j["frames"]["received"], 10);
+  // At the default bound frames 00001, 00400 and 01400 cannot come under 30 kB (the table in
+  // docs/links.md); the others do.
+  EXPECT_EQ(j["frames_over_cap"], 3);
+  EXPECT_TRUE(j.contains("draco_bits"));
+  EXPECT_EQ(j["draco_bits"]["position"], 10);
+  EXPECT_NE(r.out.find("Draco bits (last cloud)"), std::string::npos) << r;
+
+  const testing::RunResult bad = testing::RunProgram(
+      binary,
+      {"--tsukuba", testing::TsukubaDir(), "--server", shared_target(), "--no-window",
+       "--max-reply-kb", "0.01"},
+      dir.string(), "env -u DISPLAY");
+  EXPECT_NE(bad.code, 0) << bad;
+  EXPECT_NE(bad.err.find("--max-reply-kb is 0.01"), std::string::npos) << bad;
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace
