@@ -22,6 +22,7 @@
 #include "draco/core/encoder_buffer.h"
 #include "draco/mesh/mesh.h"
 #include "draco/point_cloud/point_cloud.h"
+#include "draco_cap.h"
 #include "draco_limits.h"
 #include "draco_sequential_encoder.h"
 
@@ -131,6 +132,7 @@ absl::Status ChoosePositionBits(const float lo[3], const float hi[3], const Drac
 void FillInfo(int bits, float range, float max_abs, std::size_t bytes, DracoEncoder encoder,
               DracoEncodeInfo* info) {
   if (info == nullptr) return;
+  *info = DracoEncodeInfo{};
   info->position_bits = bits;
   // Rounded up, so that the float never understates the bound.
   const double bound = QuantizationErrorBound(range, max_abs, bits);
@@ -164,6 +166,7 @@ absl::Status EncodeWithCloudcast(const PointCloud& cloud, const DracoOptions& op
     internal::EncodeDracoEmpty(out);
     if (info != nullptr) {
       *info = {options.position_bits, 0.0f, out->size(), DracoEncoder::kCloudcast};
+      info->color_bits = options.color_bits;
     }
     *done = true;
     return absl::OkStatus();
@@ -189,6 +192,7 @@ absl::Status EncodeWithCloudcast(const PointCloud& cloud, const DracoOptions& op
                                                      extent.finite, " points at ", bits, " bits"));
   }
   FillInfo(bits, range, max_abs, out->size(), DracoEncoder::kCloudcast, info);
+  info->color_bits = options.color_bits;
   *done = true;
   return absl::OkStatus();
 }
@@ -224,7 +228,27 @@ absl::Status EncodeDraco(const PointCloud& cloud, const DracoOptions& options, s
     return absl::InvalidArgumentError(
         absl::StrCat("draco: ", cloud.size(), " points exceed Draco's 2^31 - 1 limit"));
   }
+  DracoEncodeInfo local;
+  absl::Status s = options.max_cloud_bytes > 0
+                       ? internal::EncodeDracoCapped(cloud, options, out, &local)
+                       : internal::EncodeDracoOnce(cloud, options, out, &local);
+  if (s.ok() && info != nullptr) *info = local;
+  return s;
+}
 
+namespace internal {
+
+absl::Status PositionBitsFloor(const float lo[3], const float hi[3], float max_position_error,
+                               int* bits) {
+  DracoOptions fewest;
+  fewest.position_bits = 1;
+  fewest.max_position_error = max_position_error;
+  float range = 0.0f, max_abs = 0.0f;
+  return ChoosePositionBits(lo, hi, fewest, bits, &range, &max_abs);
+}
+
+absl::Status EncodeDracoOnce(const PointCloud& cloud, const DracoOptions& options, std::string* out,
+                             DracoEncodeInfo* info) {
   if (std::max(options.encode_speed, options.decode_speed) == 10 && !options.force_libdraco) {
     bool done = false;
     const absl::Status s = EncodeWithCloudcast(cloud, options, out, info, &done);
@@ -273,7 +297,10 @@ absl::Status EncodeDraco(const PointCloud& cloud, const DracoOptions& options, s
 
   if (n == 0) {
     if (absl::Status s = EncodeEmpty(out); !s.ok()) return s;
-    if (info != nullptr) *info = {options.position_bits, 0.0f, out->size()};
+    if (info != nullptr) {
+      *info = {options.position_bits, 0.0f, out->size()};
+      info->color_bits = options.color_bits;
+    }
     return absl::OkStatus();
   }
   if (n != cloud.size()) {
@@ -313,7 +340,9 @@ absl::Status EncodeDraco(const PointCloud& cloud, const DracoOptions& options, s
   }
   out->assign(buffer.data(), buffer.size());
   FillInfo(bits, range, max_abs, out->size(), DracoEncoder::kLibdraco, info);
+  info->color_bits = options.color_bits;
   return absl::OkStatus();
 }
 
+}  // namespace internal
 }  // namespace cloudcast

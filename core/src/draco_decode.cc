@@ -329,20 +329,28 @@ absl::Status DracoOptions::Validate(std::string_view field) const {
   // warm encoder allocates nothing (gcc -O3 elides these strings, -O2 and the sanitizer builds do
   // not).
   const auto in = [](int v, int lo, int hi) { return v >= lo && v <= hi; };
+  const bool cap_ok = max_cloud_bytes == 0 || max_cloud_bytes >= kMinCloudBytesCap;
   if (in(position_bits, 1, kMaxPositionBits) && in(color_bits, 1, 8) && in(encode_speed, 0, 10) &&
-      in(decode_speed, 0, 10) && std::isfinite(max_position_error) && max_position_error >= 0.0f) {
+      in(decode_speed, 0, 10) && std::isfinite(max_position_error) && max_position_error >= 0.0f &&
+      cap_ok && in(min_color_bits, 1, 8)) {
     return absl::OkStatus();
   }
   const std::string f(field);
   for (absl::Status s : {check::InRange(f + ".position_bits", position_bits, 1, kMaxPositionBits),
                          check::InRange(f + ".color_bits", color_bits, 1, 8),
                          check::InRange(f + ".encode_speed", encode_speed, 0, 10),
-                         check::InRange(f + ".decode_speed", decode_speed, 0, 10)}) {
+                         check::InRange(f + ".decode_speed", decode_speed, 0, 10),
+                         check::InRange(f + ".min_color_bits", min_color_bits, 1, 8)}) {
     if (!s.ok()) return s;
   }
   if (!std::isfinite(max_position_error) || max_position_error < 0.0f) {
     return absl::InvalidArgumentError(
         absl::StrCat(f, ".max_position_error must be finite and >= 0, got ", max_position_error));
+  }
+  if (!cap_ok) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        f, ".max_cloud_bytes is ", max_cloud_bytes, "; it must be 0 (no cap) or at least ",
+        kMinCloudBytesCap, " (a Draco cloud's header alone takes about 30 bytes)"));
   }
   return absl::OkStatus();
 }

@@ -27,6 +27,7 @@
 #include "cloudcast/cli/stage_flags.h"
 #include "cloudcast/cli/stereo_flags.h"
 #include "cloudcast/cli/video_flags.h"
+#include "cloudcast/client/config.h"
 #include "cloudcast/core/limits.h"
 #include "cloudcast/load/fleet.h"
 #include "cloudcast/load/frame_store.h"
@@ -72,6 +73,7 @@ struct Flags {
   int streams = FleetDefaults().streams;
   int connections = FleetDefaults().connections;
   double fps = FleetDefaults().schedule.start;
+  double max_reply_kb = 0;  // the downlink cap (DracoConfig.max_cloud_bytes), kB; 0 = none
   int in_flight = FleetDefaults().in_flight;
   std::string schedule = std::string(load::Name(FleetDefaults().schedule.kind));
   double load_start = 0;  // unset: --fps
@@ -179,6 +181,11 @@ std::unique_ptr<cloudcast::cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
   app.add_option("--in-flight", f.in_flight,
                  "Closed loop (--fps 0): frames awaiting their reply per stream")
       ->check(CLI::Range(1, 64))
+      ->capture_default_str()
+      ->group(load_group);
+  app.add_option("--max-reply-kb", f.max_reply_kb,
+                 "Downlink cap: each reply's cloud at most this many kB (1000 bytes), met by the "
+                 "server's Draco bits within the error bound (cloudcast-client --help); 0 = none")
       ->capture_default_str()
       ->group(load_group);
   app.add_option("--schedule", f.schedule,
@@ -530,6 +537,9 @@ int main(int argc, char** argv) {
   o.config.set_delivery(f.lossless ? cloudcast::v1::DELIVERY_ALL : cloudcast::v1::DELIVERY_LATEST);
   store->SetStreamCamera(o.config.camera());
   if (f.stereo->AnyGiven()) *o.config.mutable_stereo() = f.stereo->GivenStereoConfig();
+  auto cap = cloudcast::client::MaxCloudBytesFromKb(f.max_reply_kb, "--max-reply-kb");
+  if (!cap.ok()) return usage(std::string(cap.status().message()));
+  cloudcast::client::SetMaxCloudBytes(*cap, &o.config).IgnoreError();  // a checked cap
 
   // Signals: blocked before any thread starts, taken by sigwait on a thread of ours.
   sigset_t signals;

@@ -182,6 +182,8 @@ absl::Status ResolveDraco(const v1::DracoConfig& c, std::string_view p, FrameSet
   if (c.has_color_bits()) d.color_bits = c.color_bits();
   if (c.has_encode_speed()) d.encode_speed = c.encode_speed();
   if (c.has_decode_speed()) d.decode_speed = c.decode_speed();
+  if (c.has_max_cloud_bytes()) d.max_cloud_bytes = c.max_cloud_bytes();
+  if (c.has_min_color_bits()) d.min_color_bits = c.min_color_bits();
   if (c.has_max_position_error()) {
     d.max_position_error = c.max_position_error();
     s->max_position_error = c.max_position_error();
@@ -631,6 +633,8 @@ void SetDraco(const DracoOptions& options, v1::StreamConfig* config) {
   d->set_color_bits(options.color_bits);
   d->set_encode_speed(options.encode_speed);
   d->set_decode_speed(options.decode_speed);
+  d->set_max_cloud_bytes(options.max_cloud_bytes);
+  d->set_min_color_bits(options.min_color_bits);
   if (options.max_position_error > 0) {
     d->set_max_position_error(options.max_position_error);
   } else {

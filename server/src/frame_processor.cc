@@ -36,6 +36,29 @@ std::string RangeText(const PassThroughParams& pt) {
                       limit(pt.min), ", ", limit(pt.max), "]");
 }
 
+// A cloud over config.draco.max_cloud_bytes at the floors of both bit depths: which bounds set
+// those floors, for a client to loosen one (contract revision 4).
+void ExplainOverCap(const DracoOptions& draco, const DracoEncodeInfo& info, v1::OverCap* out) {
+  constexpr char kCap[] = "config.draco.max_cloud_bytes";
+  out->set_field(kCap);
+  out->set_max_cloud_bytes(draco.max_cloud_bytes);
+  out->set_cloud_bytes(info.bytes);
+  const bool bounded = draco.max_position_error > 0.0f;
+  const std::string position_bound =
+      bounded ? "config.draco.max_position_error" : "config.draco.position_bits";
+  const std::string color_bound = draco.min_color_bits < draco.color_bits
+                                      ? "config.draco.min_color_bits"
+                                      : "config.draco.color_bits";
+  out->add_limited_by(position_bound);
+  out->add_limited_by(color_bound);
+  out->set_message(absl::StrCat(
+      "the cloud takes ", info.bytes, " bytes at ", info.position_bits, " position bits (",
+      bounded ? absl::StrCat("the fewest that keep ", position_bound, " ", draco.max_position_error)
+              : absl::StrCat(position_bound, "; no error bound"),
+      ") and ", info.color_bits, " colour bits (", color_bound, "), over ", kCap, " ",
+      draco.max_cloud_bytes));
+}
+
 }  // namespace
 
 void FrameProcessor::ExplainEmpty(
@@ -182,9 +205,11 @@ absl::Status FrameProcessor::ProcessWith(const v1::Frame& frame, const InPlacePi
   }
   const Clock::time_point t2 = Clock::now();
   DracoEncodeInfo info;
+  const DracoOptions draco = settings.Draco();
   if (status.ok()) {
-    // Straight into the reply's own buffer: no copy of the compressed cloud afterwards.
-    status = EncodeDraco(cloud_, settings.Draco(), reply->mutable_draco(), &info);
+    // Straight into the reply's own buffer: no copy of the compressed cloud afterwards. With a
+    // cap (config.draco.max_cloud_bytes) the encoder chooses the bits itself, in 1 to 3 encodes.
+    status = EncodeDraco(cloud_, draco, reply->mutable_draco(), &info);
   }
   const double cpu1 = ThreadCpuSeconds();
   const Clock::time_point t3 = Clock::now();
@@ -214,6 +239,8 @@ absl::Status FrameProcessor::ProcessWith(const v1::Frame& frame, const InPlacePi
   reply->set_point_count(static_cast<std::uint32_t>(counts.after_voxel));
   reply->set_position_error_bound(info.position_error_bound);
   reply->set_position_bits(info.position_bits);
+  reply->set_color_bits(info.color_bits);
+  if (info.over_cap) ExplainOverCap(draco, info, reply->mutable_over_cap());
   v1::StageCounts* c = reply->mutable_counts();
   c->set_pixels(counts.pixels);
   c->set_valid_points(counts.valid_points);

@@ -94,6 +94,7 @@ struct Flags {
   int in_flight = SessionDefaults().max_in_flight;
   bool lossless = false;
   bool rate_control = false;
+  double max_reply_kb = 0;  // the downlink cap (DracoConfig.max_cloud_bytes), kB; 0 = none
   std::string encoding = sources::Name(SessionDefaults().uplink.encoding);
   int jpeg_quality = SessionDefaults().uplink.jpeg_quality;
   // --encoding h264 (docs/video.md): the colour image, or a stereo pair, as H.264 pictures; the
@@ -229,6 +230,12 @@ std::unique_ptr<cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
       ->check(CLI::IsMember(encodings))
       ->capture_default_str()
       ->group(streaming);
+  app.add_option("--max-reply-kb", f.max_reply_kb,
+                 "Downlink cap: each reply's cloud at most this many kB (1000 bytes); the server "
+                 "quantizes positions (down to the error bound) and colours (down to 5 bits) to "
+                 "meet it, and says when it cannot (the progress lines count those). 0 = no cap")
+      ->capture_default_str()
+      ->group(streaming);
   app.add_option("--jpeg-quality", f.jpeg_quality, "JPEG quality with --encoding jpeg")
       ->check(CLI::Range(1, 100))
       ->capture_default_str()
@@ -361,6 +368,9 @@ absl::StatusOr<StreamConfig> BuildConfig(const Flags& f, const cli::StageFlags& 
     config.mutable_camera()->clear_cy();
   }
   config.set_delivery(f.lossless ? v1::DELIVERY_ALL : v1::DELIVERY_LATEST);
+  absl::StatusOr<std::uint64_t> cap = MaxCloudBytesFromKb(f.max_reply_kb, "--max-reply-kb");
+  if (!cap.ok()) return cap.status();
+  if (auto s = SetMaxCloudBytes(*cap, &config); !s.ok()) return s;
   if (f.stereo->AnyGiven()) *config.mutable_stereo() = f.stereo->GivenStereoConfig();
   return config;
 }

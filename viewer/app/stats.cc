@@ -47,6 +47,9 @@ void StreamStats::RecordResult(const Result& result) {
       result.times.receive.time_since_epoch().count() != 0 ? result.times.receive : Clock::now();
   points_ += result.reply.point_count();
   draco_bytes_ += result.draco_bytes();
+  position_bits_ = result.reply.position_bits();
+  color_bits_ = result.reply.color_bits();
+  if (result.reply.has_over_cap()) ++over_cap_;
   if (result.capture_time_unix_ns != 0 && result.times.receive_unix_ns != 0) {
     const double ms = std::chrono::duration<double, std::milli>(result.latency()).count();
     latencies_ms_.push_back(ms);
@@ -79,6 +82,9 @@ StatsSnapshot StreamStats::Snapshot() const {
   s.uplink_bytes = uplink_bytes_;
   s.points = points_;
   s.draco_bytes = draco_bytes_;
+  s.position_bits = position_bits_;
+  s.color_bits = color_bits_;
+  s.over_cap = over_cap_;
   if (received_ > 0) {
     const double span = Seconds(last_receive_ - first_send_);
     s.received_fps = span > 0 ? received_ / span : 0;
@@ -137,6 +143,11 @@ std::string StreamStats::ProgressLine() {
     line += fmt::format(" | latency {:.1f} ms | {:.0f} points, {:.1f} KB per cloud",
                         s.latency_smoothed_ms, PerFrame(s.points, s.received),
                         PerFrame(s.draco_bytes, s.received) / 1024.0);
+    // A server before contract revision 4 sends no colour bits.
+    if (s.color_bits > 0) {
+      line += fmt::format(" ({}/{} position/colour bits", s.position_bits, s.color_bits);
+      line += s.over_cap > 0 ? fmt::format(", {} over the cap)", s.over_cap) : ")";
+    }
   }
   std::lock_guard<std::mutex> lock(mu_);
   if (rate_) {
@@ -166,6 +177,10 @@ std::string StreamStats::SummaryText(const StatsSnapshot& s, bool with_display) 
   out += fmt::format("per cloud: {:.0f} points, {:.1f} KB Draco; {:.1f} KB sent per frame\n",
                      PerFrame(s.points, s.received), PerFrame(s.draco_bytes, s.received) / 1024.0,
                      PerFrame(s.uplink_bytes, s.sent) / 1024.0);
+  if (s.color_bits > 0) {
+    out += fmt::format("Draco bits (last cloud): {} position, {} colour; {} clouds over the cap\n",
+                       s.position_bits, s.color_bits, s.over_cap);
+  }
   out += fmt::format(
       "time per cloud (ms): server decode {:.2f}, pipeline {:.2f}, Draco encode "
       "{:.2f}, queue {:.2f}; client Draco decode {:.2f}\n",
@@ -190,6 +205,8 @@ Json StreamStats::ToJson(const StatsSnapshot& s, bool with_display) {
   j["mean_points_per_frame"] = PerFrame(s.points, s.received);
   j["mean_draco_bytes_per_frame"] = PerFrame(s.draco_bytes, s.received);
   j["mean_uplink_bytes_per_frame"] = PerFrame(s.uplink_bytes, s.sent);
+  j["draco_bits"] = {{"position", s.position_bits}, {"color", s.color_bits}};
+  j["frames_over_cap"] = s.over_cap;
   j["mean_us_per_frame"] = {{"server_decode", s.server_decode_us},
                             {"server_pipeline", s.server_pipeline_us},
                             {"server_draco_encode", s.server_encode_us},

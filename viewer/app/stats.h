@@ -49,6 +49,10 @@ struct StatsSnapshot {
   std::uint64_t uplink_bytes = 0;  // pixel or file bytes handed to the stream
   std::uint64_t points = 0;        // total over received clouds
   std::uint64_t draco_bytes = 0;
+  // The downlink cap (--max-reply-kb): the bits the server chose for the latest cloud, and the
+  // clouds it could not bring under the cap (CloudReply.over_cap).
+  int position_bits = 0, color_bits = 0;
+  std::uint64_t over_cap = 0;
   double received_fps = 0;   // clouds per second, first send to last reply
   double displayed_fps = 0;  // new clouds drawn per second, first to last display
   double latency_smoothed_ms = 0;
@@ -87,6 +91,8 @@ class StreamStats {
   Clock::time_point first_send_, last_receive_, first_display_, last_display_;
   std::uint64_t sent_ = 0, received_ = 0, errors_ = 0, dropped_ = 0, displayed_ = 0;
   std::uint64_t uplink_bytes_ = 0, points_ = 0, draco_bytes_ = 0;
+  int position_bits_ = 0, color_bits_ = 0;
+  std::uint64_t over_cap_ = 0;
   std::vector<double> latencies_ms_;
   Smoothed latency_smoothed_;
   double sum_server_decode_us_ = 0, sum_pipeline_us_ = 0, sum_encode_us_ = 0, sum_queue_us_ = 0;

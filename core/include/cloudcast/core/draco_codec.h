@@ -39,6 +39,16 @@ struct DracoOptions {
   // the two speeds is 10; any bits) and libdraco elsewhere. true always uses libdraco, so that
   // tests and benchmarks can compare the two on the same input.
   bool force_libdraco = false;
+  // The downlink cap: if > 0, the largest encoded size in bytes. EncodeDraco then chooses the
+  // position and colour bits (draco_cap.h): position bits from position_bits down to the fewest
+  // that keep max_position_error (never below position_bits when there is no bound), then colour
+  // bits from color_bits down to min_color_bits. What it cannot meet at those floors it encodes
+  // at the floors and reports (DracoEncodeInfo::over_cap). 0: no cap, the bits as given.
+  std::uint64_t max_cloud_bytes = 0;
+  // The fewest colour bits (1..8) the cap may use; a color_bits below it is its own floor.
+  // 5 (32 levels a channel): colour costs about 0.6 bytes a point less than at 8 bits on New
+  // Tsukuba clouds, and 4 bits or fewer band visibly (docs/links.md, "Downlink").
+  int min_color_bits = 5;
 
   // Errors name the member under `field` (e.g. "draco.position_bits").
   absl::Status Validate(std::string_view field = "draco") const;
@@ -50,7 +60,15 @@ struct DracoEncodeInfo {
   float position_error_bound = 0;  // max per-coordinate error those bits allow on this cloud
   std::size_t bytes = 0;
   DracoEncoder encoder = DracoEncoder::kLibdraco;  // which one wrote the bytes
+  int color_bits = 8;                              // the colour bits actually used
+  // With a cap (DracoOptions::max_cloud_bytes): how many encodes it took (1..3), and whether the
+  // cloud is over the cap at the floors of both bit depths. 1 and false without a cap.
+  int encodes = 1;
+  bool over_cap = false;
 };
+
+// Nonzero caps below this are refused (DracoOptions::Validate): a header alone takes about 30.
+inline constexpr std::uint64_t kMinCloudBytesCap = 64;
 
 // Encodes the finite points of `cloud` (NaN points are dropped). An empty cloud encodes too.
 absl::Status EncodeDraco(const PointCloud& cloud, const DracoOptions& options, std::string* out,
