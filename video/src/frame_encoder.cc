@@ -149,21 +149,21 @@ void FrameEncoder::OnResult(const client::Result& result) {
   const auto request = [&](std::unique_ptr<Bitstream>& b) {
     if (b != nullptr && b->Request(result.sequence)) ++keyframes_requested_;
   };
-  if (result.ok()) {
-    for (int id : result.reply.keyframe_needed()) {
+  // The server's word, on a cloud or an error alike: the bitstreams it cannot decode until an
+  // IDR. A refused config answers no picture.
+  if (result.fate == client::FrameFate::kAnswered) {
+    if (result.config_rejected) return;
+    for (v1::VideoBitstream id : result.keyframe_needed) {
       if (id == v1::VIDEO_BITSTREAM_COLOR) request(colour_);
       if (id == v1::VIDEO_BITSTREAM_RIGHT) request(right_);
     }
     return;
   }
-  // A refused config answers no picture. Any other error may be about this frame's pictures
-  // (FrameError.keyframe_needed does not reach a Result): an IDR costs bytes, a missing one
-  // costs every frame until the next periodic IDR.
-  if (result.config_rejected) return;
   // Skipped by the server under DELIVERY_LATEST: its pictures were decoded all the same (the
   // server decodes every picture it receives). Lost with a call the resilient stream replaced:
   // the new call's decoders ask for an IDR themselves.
   if (result.fate == client::FrameFate::kDropped) return;
+  // Replaced after it was encoded, lost or unsent: the server never decoded these pictures.
   request(colour_);
   request(right_);
 }

@@ -242,7 +242,9 @@ std::unique_ptr<cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
                "Follow the link instead of queueing behind it: a rate controller holds frames "
                "past its window in the sender (a newer frame replaces a waiting one) and, with "
                "--encoding jpeg, sets each frame's JPEG quality (from --jpeg-quality down to 10) "
-               "from its target bitrate. The progress lines show its target, round trip and "
+               "from its target bitrate; with --encoding h264, the encoder's bitrate (up to "
+               "--h264-mbps), frame by frame, and a frame is encoded only once it can be sent "
+               "(a waiting raw frame is what gets replaced). The progress lines show its target, round trip and "
                "queueing delay. Not with --lossless")
       ->group(streaming);
   app.add_option("--h264-preset", f.h264_preset,
@@ -259,7 +261,8 @@ std::unique_ptr<cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
       ->group(streaming);
   app.add_option("--h264-mbps", f.h264_mbps,
                  "Bitrate with --encoding h264, Mbit/s, both views of a pair together: the cap "
-                 "of a one-frame VBV (no frame waits behind a large one)")
+                 "of a one-frame VBV (no frame waits behind a large one); with --rate-control "
+                 "the most the rate controller's target may reach")
       ->check(CLI::Range(0.05, 1000.0))
       ->capture_default_str()
       ->group(streaming);
@@ -776,10 +779,6 @@ int ClientMain(int argc, char** argv) {
                     f.stereo->GivenFlags().front(), f.input));
   }
   if (absl::Status s = f.stereo->Check(); !s.ok()) return usage(std::string(s.message()));
-  if (f.rate_control && f.encoding == video::kH264) {
-    return usage("--rate-control does not drive --encoding h264 yet: a frame the rate controller "
-                 "replaces would break the bitstream (docs/video.md); use --encoding jpeg");
-  }
   if (f.rate_control && f.lossless) {
     return usage("--rate-control needs DELIVERY_LATEST (a frame past the window is replaced by "
                  "a newer one): drop --lossless");

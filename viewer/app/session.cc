@@ -28,7 +28,7 @@ absl::StatusOr<std::unique_ptr<Session>> Session::Start(const SessionOptions& op
   s->source_ = source;
   s->stats_ = stats;
   s->on_result_ = std::move(on_result);
-  if (options.video) s->video_ = std::make_unique<video::FrameEncoder>(*options.video);
+  if (options.video) s->video_ = std::make_shared<video::FrameEncoder>(*options.video);
 
   ClientOptions client_options;
   client_options.security = options.security;
@@ -51,7 +51,20 @@ absl::StatusOr<std::unique_ptr<Session>> Session::Start(const SessionOptions& op
                s->server_info_.draco_version());
 
   StreamOptions stream_options;
-  if (options.rate_control) stream_options.rate_control = RateControlOptions{};
+  if (options.rate_control) {
+    RateControlOptions rate;
+    if (options.video && options.video->encoder.bitrate_bps > 0) {
+      // --h264-mbps caps the target: the controller never asks the encoder for more.
+      rate.max_bps = static_cast<double>(options.video->encoder.bitrate_bps);
+      rate.start_bps = std::min(rate.start_bps, rate.max_bps);
+      rate.min_bps = std::min(rate.min_bps, rate.max_bps);
+    }
+    stream_options.rate_control = rate;
+  }
+  // The stream encodes each raw frame when it can send it (never replacing an encoded picture),
+  // asks the encoder for the IDRs the server's replies ask for and, with --rate-control, sets
+  // its bitrate to the controller's target frame by frame.
+  stream_options.coder = s->video_;
   auto stream = s->client_->OpenStream(options.config, std::move(stream_options));
   if (!stream.ok()) {
     return absl::Status(stream.status().code(),
@@ -99,7 +112,6 @@ void Session::ReceiveLoop() {
   Result result;
   std::uint64_t errors = 0;
   while (stream_->Read(&result)) {
-    if (video_ != nullptr) video_->OnResult(result);  // a keyframe request, or a lost picture
     if (result.fate == client::FrameFate::kReplaced ||
         result.fate == client::FrameFate::kDropped) {
       // Delivery latest: a newer frame took its place (in the client before it was sent, or on
@@ -159,7 +171,7 @@ void Session::SendLoop() {
   sources::UplinkOptions uplink_options = options_.uplink;
   const bool follow = options_.rate_control && uplink_options.encoding == sources::Uplink::kJpeg;
   QualityFollower quality(uplink_options.jpeg_quality, 10, 95);
-  std::uint64_t next_sequence = 0;
+  std::uint64_t bytes_recorded = 0;
 
   for (;;) {
     // The next frame is read (decoded) before waiting, so its decoding overlaps the wait.
@@ -201,20 +213,9 @@ void Session::SendLoop() {
       tiff_noted = true;
       spdlog::info("float disparities and depths are sent as TIFF (PNG has no float samples)");
     }
-    client::FrameInput input = uplink.input();
-    if (video_ != nullptr) {
-      // Numbered here, so that the encoder knows which frame a reply's keyframe request
-      // answers (the stream would number them the same way).
-      meta.sequence = next_sequence++;
-      auto coded = video_->Encode(input, *meta.sequence);
-      if (!coded.ok()) {
-        SetError(absl::Status(coded.status().code(), absl::StrCat("frame ", frame.name, ": ",
-                                                                  coded.status().message())));
-        break;
-      }
-      input = *std::move(coded);
-    }
-    const std::uint64_t bytes_before = stream_->image_bytes_sent();
+    // With --encoding h264 the frame goes raw: the stream's coder (video_) encodes it when the
+    // stream can send it.
+    const client::FrameInput input = uplink.input();
     const absl::Status status = stream_->Send(input, meta);
     if (!status.ok()) {
       // A failed write means the call ended; Finish below says why. Bad inputs are ours.
@@ -224,7 +225,11 @@ void Session::SendLoop() {
       }
       break;
     }
-    const std::uint64_t frame_bytes = stream_->image_bytes_sent() - bytes_before;
+    // The bytes that went out since the last frame (a kept video frame's are counted when it is
+    // encoded, on a gRPC thread).
+    const std::uint64_t bytes_now = stream_->image_bytes_sent();
+    const std::uint64_t frame_bytes = bytes_now - bytes_recorded;
+    bytes_recorded = bytes_now;
     stats_->RecordSent(frame_bytes);
     if (follow) {
       if (const std::optional<RateEstimate> rate = stream_->rate()) {
