@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <map>
 #include <mutex>
@@ -15,6 +16,7 @@
 #include <cstdio>
 #include <memory>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "cloudcast/client/client.h"
@@ -640,9 +642,7 @@ class CountingCoder : public client::FrameCoder {
 // once: answered, replaced before it was encoded, or skipped by the server after decoding.
 TEST_F(VideoUplinkTest, TheStreamsCoderEncodesOnlyWhatItSendsSoEveryPictureDecodes) {
   const std::uint32_t w = 640, h = 480;
-  PipelineOptions options = DisparityOptions();
-  options.voxel.SetLeaf(0.001f);  // slow enough that the window stays full
-  v1::StreamConfig config = client::MakeStreamConfig(options);
+  v1::StreamConfig config = client::MakeStreamConfig(DisparityOptions());
   config.set_delivery(v1::DELIVERY_LATEST);
   video::FrameEncoderOptions eo;
   eo.encoder = EncoderFor(video::PictureKind::kColour, w, h);
@@ -655,7 +655,7 @@ TEST_F(VideoUplinkTest, TheStreamsCoderEncodesOnlyWhatItSendsSoEveryPictureDecod
   so.rate_control = rate;
   auto stream = client_->OpenStream(config, so);
   ASSERT_TRUE(stream.ok()) << stream.status();
-  const int frames = 30;
+  const int frames = 90;
   std::vector<SyntheticFrame> images;
   for (int t = 0; t < 4; ++t) images.push_back(MakeFrame(w, h, t));
   for (int t = 0; t < frames; ++t) {
@@ -663,6 +663,9 @@ TEST_F(VideoUplinkTest, TheStreamsCoderEncodesOnlyWhatItSendsSoEveryPictureDecod
     const SyntheticFrame& f = images[t % images.size()];
     ASSERT_TRUE(
         (*stream)->Send(client::DisparityFrame{f.disparity.view(), f.colour.view()}).ok());
+    // A camera far faster than the server, yet slow enough that the stream sends several
+    // pictures (P pictures referencing the ones before) while the rest are replaced raw.
+    std::this_thread::sleep_for(std::chrono::milliseconds(3));
   }
   ASSERT_TRUE((*stream)->CloseSend().ok());
   std::map<client::FrameFate, std::vector<std::uint64_t>> fates;
@@ -682,6 +685,7 @@ TEST_F(VideoUplinkTest, TheStreamsCoderEncodesOnlyWhatItSendsSoEveryPictureDecod
   EXPECT_THAT(fates[client::FrameFate::kLost], IsEmpty());
   EXPECT_THAT(fates[client::FrameFate::kUnsent], IsEmpty());
   EXPECT_GT(replaced.size(), 0u) << "no frame waited: the test did not test the window";
+  EXPECT_GE(coder->encoded().size(), 3u) << "too few pictures to test references";
   EXPECT_EQ(answered_ok + replaced.size() + dropped.size(), static_cast<std::size_t>(frames));
   EXPECT_EQ((*stream)->frames_replaced(), replaced.size());
   // Encoded: exactly the frames not replaced, in order, the last one included (CloseSend sends
