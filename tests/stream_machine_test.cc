@@ -439,7 +439,7 @@ TEST(StreamMachineTest, RoomIsOfferedOnceWhenTheWindowOpensAndUnmadeFramesCountA
   EXPECT_FALSE(m.WantRoom());
   ASSERT_TRUE(m.Reply(Answer(1)).frame);
   m.SetMaxUnanswered(1, kT0);
-  EXPECT_TRUE(m.TakeEffects().room);   // once
+  EXPECT_TRUE(m.TakeEffects().room);  // once
   EXPECT_FALSE(m.TakeEffects().room);
   EXPECT_TRUE(m.WantRoom());
   EXPECT_EQ(m.Submit(3, "f3", "r3", kT0), Submitted::kWriting);

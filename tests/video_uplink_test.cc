@@ -10,11 +10,11 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <map>
-#include <mutex>
 #include <cstdint>
 #include <cstdio>
+#include <map>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <thread>
 #include <vector>
@@ -614,10 +614,15 @@ class CountingCoder : public client::FrameCoder {
     return encoder_.Encode(raw, sequence);
   }
   void OnResult(const client::Result& result) override { encoder_.OnResult(result); }
-  void SetBitrate(std::int64_t bps) override {
+  void SetStreamBitrate(std::int64_t bps, std::size_t other_bytes) override {
     std::lock_guard<std::mutex> lock(mu_);
     bitrates_.push_back(bps);
-    encoder_.SetBitrate(bps);
+    others_.push_back(other_bytes);
+    encoder_.SetStreamBitrate(bps, other_bytes);
+  }
+  std::vector<std::size_t> others() {
+    std::lock_guard<std::mutex> lock(mu_);
+    return others_;
   }
   std::vector<std::uint64_t> encoded() {
     std::lock_guard<std::mutex> lock(mu_);
@@ -634,6 +639,7 @@ class CountingCoder : public client::FrameCoder {
   std::mutex mu_;
   std::vector<std::uint64_t> encoded_;
   std::vector<std::int64_t> bitrates_;
+  std::vector<std::size_t> others_;
 };
 
 // Raw frames sent far faster than a window of one frame in flight lets them go, under
@@ -661,8 +667,7 @@ TEST_F(VideoUplinkTest, TheStreamsCoderEncodesOnlyWhatItSendsSoEveryPictureDecod
   for (int t = 0; t < frames; ++t) {
     // The images are reused as a camera reuses its buffers: Send keeps a copy of what waits.
     const SyntheticFrame& f = images[t % images.size()];
-    ASSERT_TRUE(
-        (*stream)->Send(client::DisparityFrame{f.disparity.view(), f.colour.view()}).ok());
+    ASSERT_TRUE((*stream)->Send(client::DisparityFrame{f.disparity.view(), f.colour.view()}).ok());
     // A camera far faster than the server, yet slow enough that the stream sends several
     // pictures (P pictures referencing the ones before) while the rest are replaced raw.
     std::this_thread::sleep_for(std::chrono::milliseconds(3));
@@ -701,9 +706,15 @@ TEST_F(VideoUplinkTest, TheStreamsCoderEncodesOnlyWhatItSendsSoEveryPictureDecod
   EXPECT_EQ(coder->encoder().keyframes_requested(), 0u);
   // The rate controller's target reached the encoder before every frame it encoded.
   EXPECT_EQ(coder->bitrates().size(), encoded.size());
-  std::printf("coder under a window of one: %d frames, %zu encoded, %zu replaced raw, %zu skipped "
-              "by the server, %d answered\n",
-              frames, encoded.size(), replaced.size(), dropped.size(), answered_ok);
+  // ... with the bytes beside the pictures: the raw 640x480 u8 disparity map, from the second on.
+  const std::vector<std::size_t> others = coder->others();
+  ASSERT_GE(others.size(), 2u);
+  EXPECT_EQ(others[0], 0u);
+  EXPECT_EQ(others[1], std::size_t{w} * h);
+  std::printf(
+      "coder under a window of one: %d frames, %zu encoded, %zu replaced raw, %zu skipped "
+      "by the server, %d answered\n",
+      frames, encoded.size(), replaced.size(), dropped.size(), answered_ok);
 }
 
 // A FrameError's keyframe_needed reaches the Result, and the encoder asks for an IDR only then: a
@@ -716,7 +727,8 @@ TEST_F(VideoUplinkTest, AFrameErrorsKeyframeRequestReachesTheResult) {
   eo.encoder = EncoderFor(video::PictureKind::kColour, w, h);
   video::FrameEncoder encoder(eo);
   const SyntheticFrame f0 = MakeFrame(w, h, 0), f1 = MakeFrame(w, h, 1), f2 = MakeFrame(w, h, 2);
-  ASSERT_TRUE(encoder.Encode(client::DisparityFrame{f0.disparity.view(), f0.colour.view()}, 0).ok());
+  ASSERT_TRUE(
+      encoder.Encode(client::DisparityFrame{f0.disparity.view(), f0.colour.view()}, 0).ok());
   auto p = encoder.Encode(client::DisparityFrame{f1.disparity.view(), f1.colour.view()}, 1);
   ASSERT_TRUE(p.ok());
   client::FrameMeta meta;

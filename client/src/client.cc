@@ -6,8 +6,8 @@
 #include <atomic>
 #include <chrono>
 #include <climits>
-#include <cstdint>
 #include <condition_variable>
+#include <cstdint>
 #include <deque>
 #include <memory>
 #include <mutex>
@@ -98,6 +98,23 @@ std::int64_t UnixNanosAt(Clock::time_point t) {
          std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now() - t).count();
 }
 
+// The access unit bytes of a frame's video pictures.
+std::uint64_t VideoBytes(const FrameInput& frame) {
+  std::uint64_t bytes = 0;
+  const auto add = [&](const ColorInput& image) {
+    if (const auto* v = std::get_if<PrecodedVideo>(&image); v != nullptr && v->message != nullptr) {
+      bytes += v->message->access_unit().size();
+    }
+  };
+  if (const auto* f = std::get_if<DisparityFrame>(&frame)) add(f->colour);
+  if (const auto* f = std::get_if<DepthFrame>(&frame)) add(f->colour);
+  if (const auto* f = std::get_if<StereoFrame>(&frame)) {
+    add(f->left);
+    add(f->right);
+  }
+  return bytes;
+}
+
 template <typename Repeated>
 std::vector<v1::VideoBitstream> Bitstreams(const Repeated& ids) {
   std::vector<v1::VideoBitstream> out;
@@ -135,6 +152,7 @@ struct Stream::Impl : public StreamSink {
   bool latest = false;
   bool close_when_sent = false;
   bool send_closed = false;
+  std::size_t other_bytes_per_frame = 0;  // the last coded frame's bytes beside its pictures
 
   // Receiving side (the core's events, one at a time).
   std::uint64_t dropped_seen = 0;
@@ -215,7 +233,8 @@ struct Stream::Impl : public StreamSink {
     if (options.coder != nullptr) {
       if (options.rate_control) {
         if (const std::optional<RateEstimate> rate = core->rate()) {
-          options.coder->SetBitrate(static_cast<std::int64_t>(rate->target_bps));
+          options.coder->SetStreamBitrate(static_cast<std::int64_t>(rate->target_bps),
+                                          other_bytes_per_frame);
         }
       }
       coded = options.coder->Encode(input, sequence);
@@ -245,6 +264,10 @@ struct Stream::Impl : public StreamSink {
         break;
     }
     image_bytes_sent.fetch_add(frames.image_bytes(), std::memory_order_relaxed);
+    if (options.coder != nullptr) {
+      const std::uint64_t video = VideoBytes(*frame);
+      other_bytes_per_frame = frames.image_bytes() > video ? frames.image_bytes() - video : 0;
+    }
     return absl::OkStatus();
   }
 

@@ -283,9 +283,9 @@ absl::Status RequestWriter::Write(const FrameInput& input, const FrameMeta& meta
 template <typename View>
 absl::Status HeldFrame::Keep(const View& view, const char* field, View* out) {
   // The same checks as the request's (ToProtoWithoutPixels), then the rows packed.
-  typename std::conditional_t<std::is_same_v<View, DisparityView>, v1::RawDisparity,
-                              std::conditional_t<std::is_same_v<View, DepthView>, v1::RawDepth,
-                                                 v1::RawColor>>
+  typename std::conditional_t<
+      std::is_same_v<View, DisparityView>, v1::RawDisparity,
+      std::conditional_t<std::is_same_v<View, DepthView>, v1::RawDepth, v1::RawColor>>
       scratch;
   if (absl::Status s = convert::ToProtoWithoutPixels(view, field, &scratch); !s.ok()) return s;
   std::string& pixels = bytes_.emplace_back(convert::PackedBytes(view), '\0');

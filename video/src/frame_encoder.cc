@@ -1,5 +1,6 @@
 #include "cloudcast/video/frame_encoder.h"
 
+#include <algorithm>
 #include <utility>
 #include <variant>
 
@@ -177,6 +178,20 @@ void FrameEncoder::RequestKeyframe() {
 void FrameEncoder::SetBitrate(std::int64_t bits_per_second) {
   std::lock_guard<std::mutex> lock(mu_);
   bitrate_bps_ = bits_per_second;
+}
+
+void FrameEncoder::SetStreamBitrate(std::int64_t stream_bps, std::size_t other_bytes_per_frame) {
+  const double fps = options_.encoder.fps;
+  const double pictures = static_cast<double>(stream_bps) - 8.0 * fps * other_bytes_per_frame;
+  // The floor keeps the encoder's own check (a kilobit per picture, two pictures a pair) and some
+  // colour when the other images take the whole link (frames are then replaced: the window).
+  const double floor = std::max(0.1 * static_cast<double>(stream_bps), 2000.0 * fps);
+  double bps = std::max(pictures, floor);
+  // The encoder's own bitrate (a one-frame VBV's cap) is the most the pictures take.
+  if (options_.encoder.bitrate_bps > 0) {
+    bps = std::min(bps, static_cast<double>(options_.encoder.bitrate_bps));
+  }
+  SetBitrate(static_cast<std::int64_t>(bps));
 }
 
 std::uint64_t FrameEncoder::keyframes_sent() const {

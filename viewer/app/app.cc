@@ -242,9 +242,11 @@ std::unique_ptr<cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
                "Follow the link instead of queueing behind it: a rate controller holds frames "
                "past its window in the sender (a newer frame replaces a waiting one) and, with "
                "--encoding jpeg, sets each frame's JPEG quality (from --jpeg-quality down to 10) "
-               "from its target bitrate; with --encoding h264, the encoder's bitrate (up to "
-               "--h264-mbps), frame by frame, and a frame is encoded only once it can be sent "
-               "(a waiting raw frame is what gets replaced). The progress lines show its target, round trip and "
+               "from its target bitrate; with --encoding h264, the encoder's bitrate (the target "
+               "less the other images' bytes, up to --h264-mbps), frame by frame, and a frame is "
+               "encoded only once it can be sent "
+               "(a waiting raw frame is what gets replaced). The progress lines show its target, "
+               "round trip and "
                "queueing delay. Not with --lossless")
       ->group(streaming);
   app.add_option("--h264-preset", f.h264_preset,

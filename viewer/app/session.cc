@@ -51,19 +51,11 @@ absl::StatusOr<std::unique_ptr<Session>> Session::Start(const SessionOptions& op
                s->server_info_.draco_version());
 
   StreamOptions stream_options;
-  if (options.rate_control) {
-    RateControlOptions rate;
-    if (options.video && options.video->encoder.bitrate_bps > 0) {
-      // --h264-mbps caps the target: the controller never asks the encoder for more.
-      rate.max_bps = static_cast<double>(options.video->encoder.bitrate_bps);
-      rate.start_bps = std::min(rate.start_bps, rate.max_bps);
-      rate.min_bps = std::min(rate.min_bps, rate.max_bps);
-    }
-    stream_options.rate_control = rate;
-  }
+  if (options.rate_control) stream_options.rate_control = RateControlOptions{};
   // The stream encodes each raw frame when it can send it (never replacing an encoded picture),
   // asks the encoder for the IDRs the server's replies ask for and, with --rate-control, sets
-  // its bitrate to the controller's target frame by frame.
+  // its bitrate to the controller's target frame by frame (less the other images' bytes, at most
+  // --h264-mbps).
   stream_options.coder = s->video_;
   auto stream = s->client_->OpenStream(options.config, std::move(stream_options));
   if (!stream.ok()) {

@@ -26,8 +26,10 @@ class FrameCoder {
   // callback threads: a video encoder learns here that the server needs a keyframe. Raw frames
   // replaced before they were encoded never reach it.
   virtual void OnResult(const Result& result) = 0;
-  // With StreamOptions::rate_control: the controller's target bitrate, before each Encode.
-  virtual void SetBitrate(std::int64_t bits_per_second) = 0;
+  // With StreamOptions::rate_control, before each Encode: the controller's target for the whole
+  // stream, and the bytes the last frame carried beside what this coder made (a lossless
+  // disparity or depth map, a raw image): the coder's own share is what is left.
+  virtual void SetStreamBitrate(std::int64_t stream_bps, std::size_t other_bytes_per_frame) = 0;
 };
 
 }  // namespace cloudcast::client

@@ -169,7 +169,15 @@ class StreamCore : public std::enable_shared_from_this<StreamCore> {
   // One event for the sink.
   struct Event {
     enum Kind {
-      kReply, kSettled, kWrite, kCallOpened, kCallEnded, kReconnected, kDuplicate, kRoom, kEnded
+      kReply,
+      kSettled,
+      kWrite,
+      kCallOpened,
+      kCallEnded,
+      kReconnected,
+      kDuplicate,
+      kRoom,
+      kEnded
     };
     explicit Event(Kind k) : kind(k) {}
     Kind kind;

@@ -15,8 +15,9 @@
 //   whose encoded pictures must all be sent), nothing queued is replaced: the owner asks
 //   WantRoom before it makes a frame, replaces what it has not made yet itself, and reports
 //   those frames with Unmade (counted and settled kReplaced like the machine's own); Submit
-//   answers kFull past `max_queued` as with DELIVERY_ALL. DELIVERY_ALL: nothing is replaced; Submit answers kFull while `max_queued` frames
-//   wait, and the caller waits (lossless back-pressure) or, with max_queued 0, never.
+//   answers kFull past `max_queued` as with DELIVERY_ALL.
+// - DELIVERY_ALL: nothing is replaced; Submit answers kFull while `max_queued` frames wait, and
+//   the caller waits (lossless back-pressure) or, with max_queued 0, never.
 // - Every frame submitted is settled exactly once: answered (a reply, cloud or error), replaced
 //   (never sent), dropped (sent, skipped by the server or lost with its call under
 //   DELIVERY_LATEST), lost (sent, never answered when the stream ended) or unsent (queued when

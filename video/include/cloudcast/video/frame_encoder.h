@@ -80,7 +80,12 @@ class FrameEncoder : public client::FrameCoder {
   // The next frame's pictures are IDRs (a late joiner, a new stream after a reconnect).
   void RequestKeyframe();
   // The bitrate from the next frame on, for both views together (a rate controller's).
-  void SetBitrate(std::int64_t bits_per_second) override;
+  void SetBitrate(std::int64_t bits_per_second);
+  // As a stream's coder with rate control: the pictures get the stream's target less the other
+  // images' bytes at the encoder's frame rate (a lossless disparity map is sent whatever the
+  // link), at least a tenth of the target and 2 kbit per frame, at most the encoder's own
+  // bitrate_bps (the cap it was opened with).
+  void SetStreamBitrate(std::int64_t stream_bps, std::size_t other_bytes_per_frame) override;
 
   std::uint64_t keyframes_sent() const;
   std::uint64_t keyframes_requested() const;  // honoured ones
