@@ -422,12 +422,14 @@ struct Stream::Impl : public StreamSink {
   }
 
   void OnEnded(const absl::Status& status, bool /*gave_up*/) override {
+    // A raw frame still kept for room never went: its Result comes before the end (delivered
+    // outside send_mu, which a callback's Send would take).
+    std::optional<Result> unsent;
     {
-      // A raw frame still kept for room never went: its Result comes before the end.
       std::lock_guard<std::mutex> lock(send_mu);
       send_closed = true;
       if (kept) {
-        Result r;
+        Result& r = unsent.emplace();
         r.fate = FrameFate::kUnsent;
         r.sequence = kept->sequence;
         r.frame_id = kept->meta.frame_id;
@@ -439,9 +441,9 @@ struct Stream::Impl : public StreamSink {
         r.frames_dropped = dropped_seen;
         r.frames_replaced = replaced_seen;
         kept.reset();
-        Deliver(std::move(r));
       }
     }
+    if (unsent) Deliver(std::move(*unsent));
     {
       std::lock_guard<std::mutex> lock(results_mu);
       ended = true;
