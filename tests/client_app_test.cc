@@ -29,6 +29,7 @@
 #include <thread>
 #include <vector>
 
+#include "absl/strings/match.h"
 #include "app/session.h"
 #include "app/stats.h"
 #include "app/viewer.h"
@@ -270,6 +271,36 @@ TEST_F(ClientSessionTest, SessionSendsH264Colour) {
   EXPECT_EQ(keyframe_requests, std::vector<std::uint64_t>(5, 0));
   // The disparity stays raw (float: 4 bytes a pixel); the colour (3 bytes a pixel) shrinks.
   EXPECT_LT(s.uplink_bytes / 5, 160u * 120u * 5u);
+}
+
+// --rate-control --encoding h264: the stream encodes each frame when it can send it, at the rate
+// controller's target (less the raw disparity's share, capped by the encoder's bitrate), so under
+// DELIVERY_LATEST no picture is lost and no reply is an error or asks for a keyframe.
+TEST_F(ClientSessionTest, SessionSendsH264UnderRateControl) {
+  auto source = LimitFrames(*OpenSynthetic(160, 120), 20);
+  SessionOptions options;
+  options.server = shared_target();
+  options.uplink.encoding = Uplink::kRaw;
+  video::FrameEncoderOptions video;
+  video.encoder.crf = 20;
+  video.encoder.bitrate_bps = 2'000'000;
+  video.encoder.keyframe_interval = 0;
+  options.video = video;
+  options.rate_control = true;
+  options.config.set_delivery(v1::DELIVERY_LATEST);
+  StreamStats stats;
+  std::uint64_t keyframe_requests = 0, rates = 0;
+  auto session = Session::Start(options, source.get(), &stats, [&](client::Result& r) {
+    keyframe_requests += r.keyframe_needed.size();
+    if (r.rate) ++rates;
+  });
+  ASSERT_TRUE(session.ok()) << session.status();
+  EXPECT_TRUE((*session)->Wait().ok());
+  const StatsSnapshot s = stats.Snapshot();
+  EXPECT_GT(s.received, 0u);
+  EXPECT_EQ(s.errors, 0u);
+  EXPECT_EQ(keyframe_requests, 0u);
+  EXPECT_EQ(rates, s.received);
 }
 
 TEST_F(ClientSessionTest, SessionReportsAnUnreachableServer) {
@@ -515,6 +546,19 @@ TEST_F(ClientProgramTest, RateControlShowsItsTargetInTheProgressLines) {
   const std::string all = r.out + r.err;
   EXPECT_NE(all.find("Mbit/s, rtt"), std::string::npos) << r;
   EXPECT_NE(all.find("JPEG quality"), std::string::npos) << r;
+  // With H.264 too: the encoder's bitrate follows the target, and no picture is lost.
+  const RunResult h264 =
+      Run(Join(SourceArgs(),
+               {"--server", shared_target(), "--no-window", "--rate-control", "--encoding", "h264",
+                "--h264-preset", "ultrafast", "--fps", "30", "--progress", "0.05"}),
+          "env -u DISPLAY");
+  ASSERT_TRUE(h264.exited && h264.code == 0) << h264;
+  EXPECT_NE((h264.out + h264.err).find("Mbit/s, rtt"), std::string::npos) << h264;
+  // The summary (stdout): "frames: sent N, received N, dropped N, errors 0".
+  const std::size_t summary = h264.out.find("frames: sent");
+  ASSERT_NE(summary, std::string::npos) << h264;
+  const std::string line = h264.out.substr(summary, h264.out.find('\n', summary) - summary);
+  EXPECT_TRUE(absl::EndsWith(line, "errors 0")) << line;
   const RunResult bad = Run(Join(SourceArgs(), {"--server", shared_target(), "--no-window",
                                                 "--rate-control", "--lossless"}),
                             "env -u DISPLAY");

@@ -404,5 +404,92 @@ TEST(StreamMachineTest, FramesPastTheWindowWaitInTheQueue) {
   EXPECT_EQ(m.Submit(6, "f6", "", kT0), Submitted::kWriting);
 }
 
+// Frames made at dispatch (video): the owner asks for room before it encodes, the machine never
+// replaces what is queued, and the owner's own replacements of raw frames count as replaced.
+StreamMachineOptions MadeAtDispatch() {
+  StreamMachineOptions o = Latest();
+  o.replace_queued = false;
+  o.max_queued = 3;  // bounds the queue as with DELIVERY_ALL
+  return o;
+}
+
+TEST(StreamMachineTest, RoomIsOfferedOnceWhenTheWindowOpensAndUnmadeFramesCountAsReplaced) {
+  Machine m(MadeAtDispatch(), std::string("config"));
+  m.SetMaxUnanswered(1, kT0);
+  m.Start(kT0);
+  m.TakeEffects();  // the config's write
+  // Room while the config is written: a frame queued now goes right after it.
+  EXPECT_TRUE(m.WantRoom());
+  EXPECT_EQ(m.Submit(1, "f1", "r1", kT0), Submitted::kQueued);
+  EXPECT_FALSE(m.WantRoom());  // f1 waits for the write slot
+  // The owner replaces the raw frame it kept meanwhile: settled and counted, never queued.
+  m.Unmade(FrameFate::kReplaced, 2, "r2", kT0);
+  Machine::Effects e = m.TakeEffects();
+  EXPECT_FALSE(e.room);
+  EXPECT_EQ(Sequences(e.settled, FrameFate::kReplaced), std::vector<std::uint64_t>{2});
+  EXPECT_EQ(m.submitted(), 2u);
+  EXPECT_EQ(m.replaced(), 1u);
+  m.WriteDone(true, kT0);  // the config
+  e = m.TakeEffects();
+  ASSERT_TRUE(e.write);
+  EXPECT_EQ(e.write->sequence, 1u);
+  EXPECT_FALSE(e.room);  // f1 fills the window of one
+  m.WriteDone(true, kT0);
+  EXPECT_FALSE(m.TakeEffects().room);
+  EXPECT_FALSE(m.WantRoom());
+  ASSERT_TRUE(m.Reply(Answer(1)).frame);
+  m.SetMaxUnanswered(1, kT0);
+  EXPECT_TRUE(m.TakeEffects().room);  // once
+  EXPECT_FALSE(m.TakeEffects().room);
+  EXPECT_TRUE(m.WantRoom());
+  EXPECT_EQ(m.Submit(3, "f3", "r3", kT0), Submitted::kWriting);
+  // A smaller window after a reply: no room until enough replies came.
+  m.WriteDone(true, kT0);
+  EXPECT_FALSE(m.WantRoom());
+  m.SetMaxUnanswered(1, kT0);
+  EXPECT_FALSE(m.TakeEffects().room);
+  ASSERT_TRUE(m.Reply(Answer(3)).frame);
+  EXPECT_TRUE(m.TakeEffects().room);
+}
+
+TEST(StreamMachineTest, MadeAtDispatchAQueuedFrameIsNeverReplaced) {
+  Machine m(MadeAtDispatch(), std::string("config"));
+  m.Start(kT0);
+  m.TakeEffects();
+  // Frames submitted while the config is written (an owner that did not ask for room): every
+  // one is written, in order; none is replaced.
+  EXPECT_EQ(m.Submit(1, "f1", "", kT0), Submitted::kQueued);
+  EXPECT_EQ(m.Submit(2, "f2", "", kT0), Submitted::kQueued);
+  EXPECT_EQ(m.Submit(3, "f3", "", kT0), Submitted::kQueued);
+  EXPECT_EQ(m.Submit(4, "f4", "", kT0), Submitted::kFull);
+  EXPECT_TRUE(m.TakeEffects().settled.empty());
+  std::vector<std::uint64_t> written;
+  for (int i = 0; i < 4; ++i) {
+    m.WriteDone(true, kT0);
+    Machine::Effects e = m.TakeEffects();
+    if (e.write) written.push_back(e.write->sequence);
+  }
+  EXPECT_EQ(written, (std::vector<std::uint64_t>{1, 2, 3}));
+  EXPECT_EQ(m.replaced(), 0u);
+  // Still DELIVERY_LATEST on the wire: frames the server skipped are dropped, not lost.
+  ASSERT_TRUE(m.Reply(Answer(3)).frame);
+  EXPECT_EQ(m.TakeEffects().settled.size(), 2u);
+}
+
+TEST(StreamMachineTest, NoRoomAfterCloseSendOrTheEnd) {
+  Machine m(MadeAtDispatch(), std::string("config"));
+  m.Start(kT0);
+  m.TakeEffects();
+  m.CloseSend(/*discard_queued=*/false, kT0);
+  EXPECT_FALSE(m.WantRoom());
+  m.WriteDone(true, kT0);
+  EXPECT_FALSE(m.TakeEffects().room);
+  m.CallDone(absl::OkStatus(), kT0);
+  Machine::Effects e = m.TakeEffects();
+  EXPECT_TRUE(e.ended);
+  EXPECT_FALSE(e.room);
+  EXPECT_FALSE(m.WantRoom());
+}
+
 }  // namespace
 }  // namespace cloudcast::client

@@ -7,15 +7,21 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <map>
 #include <memory>
+#include <mutex>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "cloudcast/client/client.h"
 #include "cloudcast/client/config.h"
+#include "cloudcast/client/frame_coder.h"
 #include "cloudcast/datasets/tsukuba.h"
 #include "cloudcast/proto/convert.h"
 #include "cloudcast/stereo/evaluation.h"
@@ -594,6 +600,157 @@ TEST_F(VideoUplinkTest, LatestDeliveryDecodesEveryPictureAndSkipsOnlyProcessing)
   EXPECT_EQ(errors, 0);
   EXPECT_GT(dropped, 0u) << "no frame was replaced: the test did not test the skipping";
   EXPECT_EQ(clouds + static_cast<int>(dropped), frames);
+}
+
+// The library's video sender (StreamOptions::coder): a FrameEncoder behind the stream, counting the
+// frames it encoded.
+class CountingCoder : public client::FrameCoder {
+ public:
+  explicit CountingCoder(video::FrameEncoderOptions o) : encoder_(std::move(o)) {}
+  absl::StatusOr<client::FrameInput> Encode(const client::FrameInput& raw,
+                                            std::uint64_t sequence) override {
+    std::lock_guard<std::mutex> lock(mu_);
+    encoded_.push_back(sequence);
+    return encoder_.Encode(raw, sequence);
+  }
+  void OnResult(const client::Result& result) override { encoder_.OnResult(result); }
+  void SetStreamBitrate(std::int64_t bps, std::size_t other_bytes) override {
+    std::lock_guard<std::mutex> lock(mu_);
+    bitrates_.push_back(bps);
+    others_.push_back(other_bytes);
+    encoder_.SetStreamBitrate(bps, other_bytes);
+  }
+  std::vector<std::size_t> others() {
+    std::lock_guard<std::mutex> lock(mu_);
+    return others_;
+  }
+  std::vector<std::uint64_t> encoded() {
+    std::lock_guard<std::mutex> lock(mu_);
+    return encoded_;
+  }
+  std::vector<std::int64_t> bitrates() {
+    std::lock_guard<std::mutex> lock(mu_);
+    return bitrates_;
+  }
+  video::FrameEncoder& encoder() { return encoder_; }
+
+ private:
+  video::FrameEncoder encoder_;
+  std::mutex mu_;
+  std::vector<std::uint64_t> encoded_;
+  std::vector<std::int64_t> bitrates_;
+  std::vector<std::size_t> others_;
+};
+
+// Raw frames sent far faster than a window of one frame in flight lets them go, under
+// DELIVERY_LATEST: the stream replaces raw frames, never an encoded picture, so every picture
+// decodes (no error, no keyframe request, one IDR in the whole stream) and every frame comes back
+// once: answered, replaced before it was encoded, or skipped by the server after decoding.
+TEST_F(VideoUplinkTest, TheStreamsCoderEncodesOnlyWhatItSendsSoEveryPictureDecodes) {
+  const std::uint32_t w = 640, h = 480;
+  v1::StreamConfig config = client::MakeStreamConfig(DisparityOptions());
+  config.set_delivery(v1::DELIVERY_LATEST);
+  video::FrameEncoderOptions eo;
+  eo.encoder = EncoderFor(video::PictureKind::kColour, w, h);
+  auto coder = std::make_shared<CountingCoder>(eo);
+  client::StreamOptions so;
+  so.coder = coder;
+  client::RateControlOptions rate;
+  rate.min_frames_in_flight = rate.max_frames_in_flight = 1;
+  rate.start_bps = rate.max_bps = 8e6;
+  so.rate_control = rate;
+  auto stream = client_->OpenStream(config, so);
+  ASSERT_TRUE(stream.ok()) << stream.status();
+  const int frames = 90;
+  std::vector<SyntheticFrame> images;
+  for (int t = 0; t < 4; ++t) images.push_back(MakeFrame(w, h, t));
+  for (int t = 0; t < frames; ++t) {
+    // The images are reused as a camera reuses its buffers: Send keeps a copy of what waits.
+    const SyntheticFrame& f = images[t % images.size()];
+    ASSERT_TRUE((*stream)->Send(client::DisparityFrame{f.disparity.view(), f.colour.view()}).ok());
+    // A camera far faster than the server, yet slow enough that the stream sends several
+    // pictures (P pictures referencing the ones before) while the rest are replaced raw.
+    std::this_thread::sleep_for(std::chrono::milliseconds(3));
+  }
+  ASSERT_TRUE((*stream)->CloseSend().ok());
+  std::map<client::FrameFate, std::vector<std::uint64_t>> fates;
+  client::Result r;
+  int answered_ok = 0;
+  while ((*stream)->Read(&r)) {
+    fates[r.fate].push_back(r.sequence);
+    if (r.fate == client::FrameFate::kAnswered) {
+      EXPECT_TRUE(r.ok()) << r.status;
+      EXPECT_THAT(r.keyframe_needed, IsEmpty());
+      if (r.ok()) ++answered_ok;
+    }
+  }
+  EXPECT_TRUE((*stream)->Finish().ok());
+  const auto& replaced = fates[client::FrameFate::kReplaced];
+  const auto& dropped = fates[client::FrameFate::kDropped];
+  EXPECT_THAT(fates[client::FrameFate::kLost], IsEmpty());
+  EXPECT_THAT(fates[client::FrameFate::kUnsent], IsEmpty());
+  EXPECT_GT(replaced.size(), 0u) << "no frame waited: the test did not test the window";
+  EXPECT_GE(coder->encoded().size(), 3u) << "too few pictures to test references";
+  EXPECT_EQ(answered_ok + replaced.size() + dropped.size(), static_cast<std::size_t>(frames));
+  EXPECT_EQ((*stream)->frames_replaced(), replaced.size());
+  // Encoded: exactly the frames not replaced, in order, the last one included (CloseSend sends
+  // the frame still waiting).
+  std::vector<std::uint64_t> encoded = coder->encoded();
+  EXPECT_EQ(encoded.size() + replaced.size(), static_cast<std::size_t>(frames));
+  EXPECT_TRUE(std::is_sorted(encoded.begin(), encoded.end()));
+  for (std::uint64_t s : replaced) {
+    EXPECT_FALSE(std::binary_search(encoded.begin(), encoded.end(), s)) << s;
+  }
+  EXPECT_EQ(encoded.back(), static_cast<std::uint64_t>(frames - 1));
+  EXPECT_EQ(coder->encoder().keyframes_sent(), 1u);
+  EXPECT_EQ(coder->encoder().keyframes_requested(), 0u);
+  // The rate controller's target reached the encoder before every frame it encoded.
+  EXPECT_EQ(coder->bitrates().size(), encoded.size());
+  // ... with the bytes beside the pictures: the raw 640x480 u8 disparity map, from the second on.
+  const std::vector<std::size_t> others = coder->others();
+  ASSERT_GE(others.size(), 2u);
+  EXPECT_EQ(others[0], 0u);
+  EXPECT_EQ(others[1], std::size_t{w} * h);
+  std::printf(
+      "coder under a window of one: %d frames, %zu encoded, %zu replaced raw, %zu skipped "
+      "by the server, %d answered\n",
+      frames, encoded.size(), replaced.size(), dropped.size(), answered_ok);
+}
+
+// A FrameError's keyframe_needed reaches the Result, and the encoder asks for an IDR only then: a
+// P picture with no reference (its IDR never sent) is refused naming the colour bitstream.
+TEST_F(VideoUplinkTest, AFrameErrorsKeyframeRequestReachesTheResult) {
+  const std::uint32_t w = 160, h = 120;
+  auto stream = client_->OpenStream(AllFrames(client::MakeStreamConfig(DisparityOptions())));
+  ASSERT_TRUE(stream.ok()) << stream.status();
+  video::FrameEncoderOptions eo;
+  eo.encoder = EncoderFor(video::PictureKind::kColour, w, h);
+  video::FrameEncoder encoder(eo);
+  const SyntheticFrame f0 = MakeFrame(w, h, 0), f1 = MakeFrame(w, h, 1), f2 = MakeFrame(w, h, 2);
+  ASSERT_TRUE(
+      encoder.Encode(client::DisparityFrame{f0.disparity.view(), f0.colour.view()}, 0).ok());
+  auto p = encoder.Encode(client::DisparityFrame{f1.disparity.view(), f1.colour.view()}, 1);
+  ASSERT_TRUE(p.ok());
+  client::FrameMeta meta;
+  meta.sequence = 1;
+  ASSERT_TRUE((*stream)->Send(*p, meta).ok());
+  client::Result r;
+  ASSERT_TRUE((*stream)->Read(&r));
+  EXPECT_EQ(r.status.code(), absl::StatusCode::kFailedPrecondition) << r.status;
+  EXPECT_THAT(r.keyframe_needed, ElementsAre(v1::VIDEO_BITSTREAM_COLOR));
+  encoder.OnResult(r);
+  EXPECT_EQ(encoder.keyframes_requested(), 1u);
+  auto idr = encoder.Encode(client::DisparityFrame{f2.disparity.view(), f2.colour.view()}, 2);
+  ASSERT_TRUE(idr.ok());
+  meta.sequence = 2;
+  ASSERT_TRUE((*stream)->Send(*idr, meta).ok());
+  ASSERT_TRUE((*stream)->Read(&r));
+  EXPECT_TRUE(r.ok()) << r.status;
+  EXPECT_THAT(r.keyframe_needed, IsEmpty());
+  encoder.OnResult(r);
+  EXPECT_EQ(encoder.keyframes_requested(), 1u);
+  EXPECT_EQ(encoder.keyframes_sent(), 2u);
+  EXPECT_TRUE((*stream)->Finish().ok());
 }
 
 }  // namespace

@@ -6,8 +6,8 @@
 #include <atomic>
 #include <chrono>
 #include <climits>
-#include <cstdint>
 #include <condition_variable>
+#include <cstdint>
 #include <deque>
 #include <memory>
 #include <mutex>
@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "cloudcast/client/frame_coder.h"
 #include "cloudcast/client/stream_core.h"
 #include "cloudcast/core/draco_codec.h"
 #include "cloudcast/proto/convert.h"
@@ -97,6 +98,30 @@ std::int64_t UnixNanosAt(Clock::time_point t) {
          std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now() - t).count();
 }
 
+// The access unit bytes of a frame's video pictures.
+std::uint64_t VideoBytes(const FrameInput& frame) {
+  std::uint64_t bytes = 0;
+  const auto add = [&](const ColorInput& image) {
+    if (const auto* v = std::get_if<PrecodedVideo>(&image); v != nullptr && v->message != nullptr) {
+      bytes += v->message->access_unit().size();
+    }
+  };
+  if (const auto* f = std::get_if<DisparityFrame>(&frame)) add(f->colour);
+  if (const auto* f = std::get_if<DepthFrame>(&frame)) add(f->colour);
+  if (const auto* f = std::get_if<StereoFrame>(&frame)) {
+    add(f->left);
+    add(f->right);
+  }
+  return bytes;
+}
+
+template <typename Repeated>
+std::vector<v1::VideoBitstream> Bitstreams(const Repeated& ids) {
+  std::vector<v1::VideoBitstream> out;
+  for (int id : ids) out.push_back(static_cast<v1::VideoBitstream>(id));
+  return out;
+}
+
 // Blocking mode: replies buffered for Read before reading pauses (gRPC flow control then holds
 // the server back, as an unread stream always did).
 constexpr std::size_t kMaxBufferedResults = 16;
@@ -116,6 +141,18 @@ struct Stream::Impl : public StreamSink {
   internal::RequestWriter frames;
   std::uint64_t next_sequence = 0;
   std::atomic<std::uint64_t> image_bytes_sent{0};
+  // StreamOptions::coder with DELIVERY_LATEST: the newest raw frame, kept while the core has no
+  // room for it (encoded on OnRoom); CloseSend waits for it to go.
+  struct Kept {
+    internal::HeldFrame frame;
+    FrameMeta meta;
+    std::uint64_t sequence = 0;
+  };
+  std::optional<Kept> kept;
+  bool latest = false;
+  bool close_when_sent = false;
+  bool send_closed = false;
+  std::size_t other_bytes_per_frame = 0;  // the last coded frame's bytes beside its pictures
 
   // Receiving side (the core's events, one at a time).
   std::uint64_t dropped_seen = 0;
@@ -144,8 +181,68 @@ struct Stream::Impl : public StreamSink {
   absl::Status Send(const FrameInput& input, const FrameMeta& meta) {
     std::lock_guard<std::mutex> lock(send_mu);
     const std::uint64_t sequence = meta.sequence.value_or(next_sequence);
+    if (options.coder == nullptr || !latest) {
+      if (absl::Status s = Submit(input, meta, sequence, /*wait=*/true); !s.ok()) return s;
+      next_sequence = sequence + 1;
+      return absl::OkStatus();
+    }
+    // Made at dispatch: the raw frame is encoded only when the core has room, so that no
+    // encoded picture is ever replaced (a lost reference); until then the newest waits raw.
+    if (send_closed) {
+      return absl::FailedPreconditionError(
+          absl::StrCat(What(), ": Send after CloseSend or Finish"));
+    }
+    if (core->ended()) return Ended();
+    FrameMeta stamped = meta;
+    stamped.sequence = sequence;
+    if (stamped.capture_time_unix_ns == 0) stamped.capture_time_unix_ns = UnixNanosNow();
+    if (core->WantRoom()) {
+      if (kept) ReplaceKept();
+      if (absl::Status s = Submit(input, stamped, sequence, /*wait=*/false); !s.ok()) return s;
+    } else {
+      Kept k;
+      if (absl::Status s = k.frame.Hold(input); !s.ok()) return s;
+      k.meta = std::move(stamped);
+      k.sequence = sequence;
+      if (kept) ReplaceKept();
+      kept = std::move(k);
+    }
+    next_sequence = sequence + 1;
+    return absl::OkStatus();
+  }
+
+  // Under send_mu: the kept raw frame is replaced by a newer one, never encoded.
+  void ReplaceKept() {
+    core->Unmade(FrameFate::kReplaced, kept->sequence, RecordOf(kept->meta));
+    kept.reset();
+  }
+
+  static FrameRecord RecordOf(const FrameMeta& meta) {
+    FrameRecord record;
+    record.frame_id = meta.frame_id;
+    record.capture_time_unix_ns = meta.capture_time_unix_ns;
+    return record;
+  }
+
+  // Under send_mu: encodes (with a coder) and hands the frame to the core. `wait`: DELIVERY_ALL
+  // back-pressure.
+  absl::Status Submit(const FrameInput& input, const FrameMeta& meta, std::uint64_t sequence,
+                      bool wait) {
+    absl::StatusOr<FrameInput> coded;
+    const FrameInput* frame = &input;
+    if (options.coder != nullptr) {
+      if (options.rate_control) {
+        if (const std::optional<RateEstimate> rate = core->rate()) {
+          options.coder->SetStreamBitrate(static_cast<std::int64_t>(rate->target_bps),
+                                          other_bytes_per_frame);
+        }
+      }
+      coded = options.coder->Encode(input, sequence);
+      if (!coded.ok()) return coded.status();
+      frame = &*coded;
+    }
     grpc::ByteBuffer bytes;
-    if (absl::Status s = frames.Write(input, meta, sequence, &bytes); !s.ok()) return s;
+    if (absl::Status s = frames.Write(*frame, meta, sequence, &bytes); !s.ok()) return s;
     FrameRecord record;
     record.frame_id = meta.frame_id;
     record.capture_time_unix_ns = frames.frame().capture_time_unix_ns();
@@ -153,7 +250,8 @@ struct Stream::Impl : public StreamSink {
     // DELIVERY_ALL waits here while a frame already waits for the write slot (back-pressure);
     // DELIVERY_LATEST never waits.
     const CoreMachine::Submitted submitted =
-        core->SubmitWaiting(sequence, std::move(bytes), std::move(record));
+        wait ? core->SubmitWaiting(sequence, std::move(bytes), std::move(record))
+             : core->Submit(sequence, std::move(bytes), std::move(record));
     switch (submitted) {
       case CoreMachine::Submitted::kClosed:
         return absl::FailedPreconditionError(
@@ -165,9 +263,26 @@ struct Stream::Impl : public StreamSink {
       case CoreMachine::Submitted::kQueued:
         break;
     }
-    next_sequence = sequence + 1;
     image_bytes_sent.fetch_add(frames.image_bytes(), std::memory_order_relaxed);
+    if (options.coder != nullptr) {
+      const std::uint64_t video = VideoBytes(*frame);
+      other_bytes_per_frame = frames.image_bytes() > video ? frames.image_bytes() - video : 0;
+    }
     return absl::OkStatus();
+  }
+
+  // The core has room: the kept raw frame is encoded and sent now (on this gRPC thread).
+  void OnRoom() override {
+    std::lock_guard<std::mutex> lock(send_mu);
+    if (!kept) return;
+    Kept k = std::move(*kept);
+    kept.reset();
+    if (absl::Status s = Submit(k.frame.input(), k.meta, k.sequence, /*wait=*/false); !s.ok()) {
+      // Send has returned long ago: the frame's own Result says why it went nowhere.
+      core->Unmade(FrameFate::kUnsent, k.sequence, RecordOf(k.meta),
+                   absl::Status(s.code(), absl::StrCat("could not be encoded: ", s.message())));
+    }
+    if (close_when_sent) core->CloseSend();
   }
 
   absl::Status Reconfigure(const StreamConfig& config) {
@@ -204,6 +319,7 @@ struct Stream::Impl : public StreamSink {
       case v1::StreamReply::kCloud:
         // Swapped, not copied: the Draco bytes move into the result.
         r.reply.Swap(reply.mutable_cloud());
+        r.keyframe_needed = Bitstreams(r.reply.keyframe_needed());
         r.sequence = r.reply.sequence();
         r.frame_id = r.reply.frame_id();
         r.capture_time_unix_ns = r.reply.capture_time_unix_ns();
@@ -216,6 +332,7 @@ struct Stream::Impl : public StreamSink {
         r.frame_id = error.frame_id();
         r.server_instance = error.server_instance();
         r.config_rejected = error.kind() == v1::ERROR_KIND_CONFIG;
+        r.keyframe_needed = Bitstreams(error.keyframe_needed());
         break;
       }
       case v1::StreamReply::KIND_NOT_SET:
@@ -234,6 +351,7 @@ struct Stream::Impl : public StreamSink {
     r.frames_dropped = dropped_seen;
     r.frames_replaced = replaced_seen;
     r.rate = std::exchange(last_rate, std::nullopt);
+    if (options.coder != nullptr && frame != nullptr) options.coder->OnResult(r);
     Deliver(std::move(r));
   }
 
@@ -282,6 +400,11 @@ struct Stream::Impl : public StreamSink {
     r.frames_dropped = dropped_seen;
     r.frames_replaced = replaced_seen;
     r.cloud.ResizeUnorganized(0);
+    // A replaced frame (the core only replaces raw frames when there is a coder) was never
+    // encoded; the coder hears of every frame it did encode.
+    if (options.coder != nullptr && s.fate != FrameFate::kReplaced) {
+      options.coder->OnResult(r);
+    }
     Deliver(std::move(r));
   }
 
@@ -299,6 +422,28 @@ struct Stream::Impl : public StreamSink {
   }
 
   void OnEnded(const absl::Status& status, bool /*gave_up*/) override {
+    // A raw frame still kept for room never went: its Result comes before the end (delivered
+    // outside send_mu, which a callback's Send would take).
+    std::optional<Result> unsent;
+    {
+      std::lock_guard<std::mutex> lock(send_mu);
+      send_closed = true;
+      if (kept) {
+        Result& r = unsent.emplace();
+        r.fate = FrameFate::kUnsent;
+        r.sequence = kept->sequence;
+        r.frame_id = kept->meta.frame_id;
+        r.capture_time_unix_ns = kept->meta.capture_time_unix_ns;
+        r.status = absl::Status(
+            status.ok() ? absl::StatusCode::kUnavailable : status.code(),
+            absl::StrCat("frame ", kept->sequence, " was never answered (never sent): ",
+                         status.ok() ? "the stream ended first" : status.message()));
+        r.frames_dropped = dropped_seen;
+        r.frames_replaced = replaced_seen;
+        kept.reset();
+      }
+    }
+    if (unsent) Deliver(std::move(*unsent));
     {
       std::lock_guard<std::mutex> lock(results_mu);
       ended = true;
@@ -327,14 +472,30 @@ struct Stream::Impl : public StreamSink {
 
   absl::Status CloseSend() {
     std::lock_guard<std::mutex> lock(send_mu);
-    core->CloseSend();
+    CloseSendLocked();
     return absl::OkStatus();
+  }
+
+  // Under send_mu. A kept raw frame is still sent (OnRoom closes after it).
+  void CloseSendLocked() {
+    send_closed = true;
+    if (kept) {
+      close_when_sent = true;
+    } else {
+      core->CloseSend();
+    }
   }
 
   absl::Status Finish() {
     std::lock_guard<std::mutex> lock(finish_mu);
     if (finished) return final_status;
-    core->CloseSend();  // a dead call still finishes, with its real status
+    // A dead call still finishes, with its real status.
+    if (options.coder != nullptr && latest) {
+      std::lock_guard<std::mutex> lock(send_mu);  // a kept raw frame goes first
+      CloseSendLocked();
+    } else {
+      core->CloseSend();  // never waits for a Send held by back-pressure
+    }
     bool resume = false;
     {
       // Nobody reads what is still to come: it is discarded, and reading goes on to the end.
@@ -501,6 +662,7 @@ absl::StatusOr<Result> Client::Process(const FrameInput& input, const StreamConf
   result.frame_id = result.reply.frame_id();
   result.capture_time_unix_ns = result.reply.capture_time_unix_ns();
   result.frames_dropped = result.reply.frames_dropped();
+  result.keyframe_needed = Bitstreams(result.reply.keyframe_needed());
   DecodeInto(impl_->options.decode_clouds, &result);
   if (!result.status.ok()) return result.status;
   return result;
@@ -532,6 +694,9 @@ absl::StatusOr<std::unique_ptr<Stream>> Client::OpenStream(const StreamConfig& c
   core.wait_for_ready = impl_->options.wait_for_ready;
   core.config = SerializedConfig(config);
   core.rate_control = impl->options.rate_control;
+  // A coder's frames are made when the core has room, and never replaced once made.
+  impl->latest = core.machine.latest;
+  core.machine.replace_queued = impl->options.coder == nullptr;
   impl->channel = impl_->channel;
   impl->core = StreamCore::Start(impl->channel.get(), std::move(core), impl.get());
   return std::unique_ptr<Stream>(new Stream(std::move(impl)));

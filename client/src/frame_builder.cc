@@ -3,6 +3,9 @@
 #include <chrono>
 #include <cstdint>
 #include <string>
+#include <type_traits>
+#include <utility>
+#include <variant>
 
 #include "absl/strings/str_cat.h"
 #include "cloudcast/proto/convert.h"
@@ -274,6 +277,98 @@ absl::Status RequestWriter::Write(const FrameInput& input, const FrameMeta& meta
   if (!head_.empty()) slices[n++] = grpc::Slice(head_);
   grpc::ByteBuffer bytes(slices, n);
   out->Swap(&bytes);
+  return absl::OkStatus();
+}
+
+template <typename View>
+absl::Status HeldFrame::Keep(const View& view, const char* field, View* out) {
+  // The same checks as the request's (ToProtoWithoutPixels), then the rows packed.
+  typename std::conditional_t<
+      std::is_same_v<View, DisparityView>, v1::RawDisparity,
+      std::conditional_t<std::is_same_v<View, DepthView>, v1::RawDepth, v1::RawColor>>
+      scratch;
+  if (absl::Status s = convert::ToProtoWithoutPixels(view, field, &scratch); !s.ok()) return s;
+  std::string& pixels = bytes_.emplace_back(convert::PackedBytes(view), '\0');
+  convert::PackRows(view, pixels.data());
+  *out = view;
+  out->data = pixels.data();
+  out->size_bytes = pixels.size();
+  out->stride_bytes = view.height > 0 ? pixels.size() / view.height : 0;
+  out->rows = nullptr;
+  return absl::OkStatus();
+}
+
+template <typename Input>
+absl::Status HeldFrame::KeepImage(const Input& in, const char* field, Input* out) {
+  return std::visit(
+      [&](const auto& image) -> absl::Status {
+        using T = std::decay_t<decltype(image)>;
+        if constexpr (std::is_same_v<T, DisparityView> || std::is_same_v<T, DepthView> ||
+                      std::is_same_v<T, ColorView>) {
+          T kept;
+          if (absl::Status s = Keep(image, field, &kept); !s.ok()) return s;
+          *out = kept;
+        } else if constexpr (std::is_same_v<T, CompressedDisparityView> ||
+                             std::is_same_v<T, CompressedDepthView> ||
+                             std::is_same_v<T, CompressedColorView>) {
+          T kept = image;
+          if (absl::Status s = Keep(image.view, field, &kept.view); !s.ok()) return s;
+          *out = kept;
+        } else if constexpr (std::is_same_v<T, EncodedImage>) {
+          if (absl::Status s = CheckEncoded(image, field); !s.ok()) return s;
+          *out = EncodedImage{bytes_.emplace_back(image.bytes)};
+        } else if constexpr (std::is_same_v<T, BgraView>) {
+          // Kept as BGR8 (what Send makes of it), checked as Send checks it.
+          v1::RawColor raw;
+          if (absl::Status s = convert::BgraToProto(image.data, image.size_bytes, image.width,
+                                                    image.height, image.stride_bytes, field, &raw);
+              !s.ok()) {
+            return s;
+          }
+          std::string& pixels = bytes_.emplace_back(std::move(*raw.mutable_pixels()));
+          ColorView kept;
+          kept.data = pixels.data();
+          kept.size_bytes = pixels.size();
+          kept.width = image.width;
+          kept.height = image.height;
+          kept.stride_bytes = static_cast<std::size_t>(image.width) * 3;
+          kept.encoding = ColorEncoding::kBGR8;
+          *out = kept;
+        } else {
+          // A message made earlier (precompressed, precoded video): copied.
+          if (image.message == nullptr) {
+            return absl::InvalidArgumentError(absl::StrCat(field, " message is null"));
+          }
+          using M = std::decay_t<decltype(*image.message)>;
+          auto copy = std::make_shared<M>(*image.message);
+          messages_.push_back(copy);
+          *out = T{copy.get()};
+        }
+        return absl::OkStatus();
+      },
+      in);
+}
+
+absl::Status HeldFrame::Hold(const FrameInput& input) {
+  bytes_.clear();
+  messages_.clear();
+  if (const auto* f = std::get_if<DisparityFrame>(&input)) {
+    DisparityFrame kept;
+    if (absl::Status s = KeepImage(f->disparity, "disparity", &kept.disparity); !s.ok()) return s;
+    if (absl::Status s = KeepImage(f->colour, "colour", &kept.colour); !s.ok()) return s;
+    input_ = kept;
+  } else if (const auto* d = std::get_if<DepthFrame>(&input)) {
+    DepthFrame kept;
+    if (absl::Status s = KeepImage(d->depth, "depth", &kept.depth); !s.ok()) return s;
+    if (absl::Status s = KeepImage(d->colour, "colour", &kept.colour); !s.ok()) return s;
+    input_ = kept;
+  } else {
+    const auto& pair = std::get<StereoFrame>(input);
+    StereoFrame kept;
+    if (absl::Status s = KeepImage(pair.left, "left", &kept.left); !s.ok()) return s;
+    if (absl::Status s = KeepImage(pair.right, "right", &kept.right); !s.ok()) return s;
+    input_ = kept;
+  }
   return absl::OkStatus();
 }
 

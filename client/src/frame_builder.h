@@ -4,6 +4,8 @@
 #include <grpcpp/support/byte_buffer.h>
 
 #include <cstdint>
+#include <deque>
+#include <memory>
 #include <string>
 
 #include "absl/status/status.h"
@@ -28,6 +30,25 @@ std::uint64_t ImageBytes(const v1::Frame& frame);
 
 // Sets sequence, capture time (now when meta's is 0) and frame_id.
 void FillMeta(const FrameMeta& meta, std::uint64_t sequence, v1::Frame* frame);
+
+// A frame kept past Send (a raw frame waiting for room to be encoded: StreamOptions::coder): every
+// image copied, raw rows packed tightly, messages and files copied; input() views the copies.
+// Checks what memory safety needs, as FillImages does.
+class HeldFrame {
+ public:
+  absl::Status Hold(const FrameInput& input);
+  const FrameInput& input() const { return input_; }
+
+ private:
+  template <typename View>
+  absl::Status Keep(const View& view, const char* field, View* out);
+  template <typename Input>
+  absl::Status KeepImage(const Input& in, const char* field, Input* out);
+
+  FrameInput input_;
+  std::deque<std::string> bytes_;  // pixels and files (a deque: the views stay where they are)
+  std::deque<std::shared_ptr<const google::protobuf::Message>> messages_;
+};
 
 // A StreamRequest holding one frame, as the bytes gRPC writes, with each raw image's pixels copied
 // once: from the caller's rows straight into a slice of their own. Protobuf's serializer would

@@ -152,6 +152,7 @@ void StreamCore::CollectLocked(Clock::time_point now) {
     ev.reconnected = std::move(*e.reconnected);
     events_.push_back(std::move(ev));
   }
+  if (e.room) events_.push_back(Event{Event::kRoom});
   if (e.wake_at) KickLocked(*e.wake_at);
   if (e.queue_freed || e.ended) changed_.notify_all();
   if (e.ended) {
@@ -294,6 +295,9 @@ void StreamCore::DeliverEvents() {
       case Event::kDuplicate:
         sink_->OnDuplicate();
         break;
+      case Event::kRoom:
+        sink_->OnRoom();
+        break;
       case Event::kEnded:
         sink_->OnEnded(ev.status, ev.gave_up);
         break;
@@ -342,6 +346,22 @@ CoreMachine::Submitted StreamCore::SubmitWaiting(std::uint64_t sequence, grpc::B
   }
   Run(/*deliver=*/false);
   return result;
+}
+
+bool StreamCore::WantRoom() {
+  std::lock_guard<std::mutex> lock(mu_);
+  return machine_.WantRoom();
+}
+
+void StreamCore::Unmade(FrameFate fate, std::uint64_t sequence, FrameRecord record,
+                        absl::Status why) {
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    const Clock::time_point now = Clock::now();
+    machine_.Unmade(fate, sequence, std::move(record), now, std::move(why));
+    CollectLocked(now);
+  }
+  Run(/*deliver=*/false);
 }
 
 absl::Status StreamCore::Reconfigure(grpc::ByteBuffer config) {

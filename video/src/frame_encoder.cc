@@ -1,5 +1,6 @@
 #include "cloudcast/video/frame_encoder.h"
 
+#include <algorithm>
 #include <utility>
 #include <variant>
 
@@ -149,21 +150,21 @@ void FrameEncoder::OnResult(const client::Result& result) {
   const auto request = [&](std::unique_ptr<Bitstream>& b) {
     if (b != nullptr && b->Request(result.sequence)) ++keyframes_requested_;
   };
-  if (result.ok()) {
-    for (int id : result.reply.keyframe_needed()) {
+  // The server's word, on a cloud or an error alike: the bitstreams it cannot decode until an
+  // IDR. A refused config answers no picture.
+  if (result.fate == client::FrameFate::kAnswered) {
+    if (result.config_rejected) return;
+    for (v1::VideoBitstream id : result.keyframe_needed) {
       if (id == v1::VIDEO_BITSTREAM_COLOR) request(colour_);
       if (id == v1::VIDEO_BITSTREAM_RIGHT) request(right_);
     }
     return;
   }
-  // A refused config answers no picture. Any other error may be about this frame's pictures
-  // (FrameError.keyframe_needed does not reach a Result): an IDR costs bytes, a missing one
-  // costs every frame until the next periodic IDR.
-  if (result.config_rejected) return;
   // Skipped by the server under DELIVERY_LATEST: its pictures were decoded all the same (the
   // server decodes every picture it receives). Lost with a call the resilient stream replaced:
   // the new call's decoders ask for an IDR themselves.
   if (result.fate == client::FrameFate::kDropped) return;
+  // Replaced after it was encoded, lost or unsent: the server never decoded these pictures.
   request(colour_);
   request(right_);
 }
@@ -177,6 +178,20 @@ void FrameEncoder::RequestKeyframe() {
 void FrameEncoder::SetBitrate(std::int64_t bits_per_second) {
   std::lock_guard<std::mutex> lock(mu_);
   bitrate_bps_ = bits_per_second;
+}
+
+void FrameEncoder::SetStreamBitrate(std::int64_t stream_bps, std::size_t other_bytes_per_frame) {
+  const double fps = options_.encoder.fps;
+  const double pictures = static_cast<double>(stream_bps) - 8.0 * fps * other_bytes_per_frame;
+  // The floor keeps the encoder's own check (a kilobit per picture, two pictures a pair) and some
+  // colour when the other images take the whole link (frames are then replaced: the window).
+  const double floor = std::max(0.1 * static_cast<double>(stream_bps), 2000.0 * fps);
+  double bps = std::max(pictures, floor);
+  // The encoder's own bitrate (a one-frame VBV's cap) is the most the pictures take.
+  if (options_.encoder.bitrate_bps > 0) {
+    bps = std::min(bps, static_cast<double>(options_.encoder.bitrate_bps));
+  }
+  SetBitrate(static_cast<std::int64_t>(bps));
 }
 
 std::uint64_t FrameEncoder::keyframes_sent() const {

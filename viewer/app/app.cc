@@ -244,7 +244,11 @@ std::unique_ptr<cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
                "Follow the link instead of queueing behind it: a rate controller holds frames "
                "past its window in the sender (a newer frame replaces a waiting one) and, with "
                "--encoding jpeg, sets each frame's JPEG quality (from --jpeg-quality down to 10) "
-               "from its target bitrate. The progress lines show its target, round trip and "
+               "from its target bitrate; with --encoding h264, the encoder's bitrate (the target "
+               "less the other images' bytes, up to --h264-mbps), frame by frame, and a frame is "
+               "encoded only once it can be sent "
+               "(a waiting raw frame is what gets replaced). The progress lines show its target, "
+               "round trip and "
                "queueing delay. Not with --lossless")
       ->group(streaming);
   f.h264 = std::make_unique<cli::VideoFlags>(app, streaming);
@@ -732,11 +736,6 @@ int ClientMain(int argc, char** argv) {
   if (absl::Status s = f.stereo->Check(); !s.ok()) return usage(std::string(s.message()));
   if (f.encoding != video::kH264 && f.h264->AnyGiven()) {
     return usage(f.h264->GivenFlags().front() + " needs --encoding h264");
-  }
-  if (f.rate_control && f.encoding == video::kH264) {
-    return usage(
-        "--rate-control does not drive --encoding h264 yet: a frame the rate controller "
-        "replaces would break the bitstream (docs/video.md); use --encoding jpeg");
   }
   if (f.rate_control && f.lossless) {
     return usage(

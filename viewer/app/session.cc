@@ -28,7 +28,7 @@ absl::StatusOr<std::unique_ptr<Session>> Session::Start(const SessionOptions& op
   s->source_ = source;
   s->stats_ = stats;
   s->on_result_ = std::move(on_result);
-  if (options.video) s->video_ = std::make_unique<video::FrameEncoder>(*options.video);
+  if (options.video) s->video_ = std::make_shared<video::FrameEncoder>(*options.video);
 
   ClientOptions client_options;
   client_options.security = options.security;
@@ -52,6 +52,11 @@ absl::StatusOr<std::unique_ptr<Session>> Session::Start(const SessionOptions& op
 
   StreamOptions stream_options;
   if (options.rate_control) stream_options.rate_control = RateControlOptions{};
+  // The stream encodes each raw frame when it can send it (never replacing an encoded picture),
+  // asks the encoder for the IDRs the server's replies ask for and, with --rate-control, sets
+  // its bitrate to the controller's target frame by frame (less the other images' bytes, at most
+  // --h264-mbps).
+  stream_options.coder = s->video_;
   auto stream = s->client_->OpenStream(options.config, std::move(stream_options));
   if (!stream.ok()) {
     return absl::Status(stream.status().code(),
@@ -99,7 +104,6 @@ void Session::ReceiveLoop() {
   Result result;
   std::uint64_t errors = 0;
   while (stream_->Read(&result)) {
-    if (video_ != nullptr) video_->OnResult(result);  // a keyframe request, or a lost picture
     if (result.fate == client::FrameFate::kReplaced ||
         result.fate == client::FrameFate::kDropped) {
       // Delivery latest: a newer frame took its place (in the client before it was sent, or on
@@ -159,7 +163,7 @@ void Session::SendLoop() {
   sources::UplinkOptions uplink_options = options_.uplink;
   const bool follow = options_.rate_control && uplink_options.encoding == sources::Uplink::kJpeg;
   QualityFollower quality(uplink_options.jpeg_quality, 10, 95);
-  std::uint64_t next_sequence = 0;
+  std::uint64_t bytes_recorded = 0;
 
   for (;;) {
     // The next frame is read (decoded) before waiting, so its decoding overlaps the wait.
@@ -201,20 +205,9 @@ void Session::SendLoop() {
       tiff_noted = true;
       spdlog::info("float disparities and depths are sent as TIFF (PNG has no float samples)");
     }
-    client::FrameInput input = uplink.input();
-    if (video_ != nullptr) {
-      // Numbered here, so that the encoder knows which frame a reply's keyframe request
-      // answers (the stream would number them the same way).
-      meta.sequence = next_sequence++;
-      auto coded = video_->Encode(input, *meta.sequence);
-      if (!coded.ok()) {
-        SetError(absl::Status(coded.status().code(), absl::StrCat("frame ", frame.name, ": ",
-                                                                  coded.status().message())));
-        break;
-      }
-      input = *std::move(coded);
-    }
-    const std::uint64_t bytes_before = stream_->image_bytes_sent();
+    // With --encoding h264 the frame goes raw: the stream's coder (video_) encodes it when the
+    // stream can send it.
+    const client::FrameInput input = uplink.input();
     const absl::Status status = stream_->Send(input, meta);
     if (!status.ok()) {
       // A failed write means the call ended; Finish below says why. Bad inputs are ours.
@@ -224,7 +217,11 @@ void Session::SendLoop() {
       }
       break;
     }
-    const std::uint64_t frame_bytes = stream_->image_bytes_sent() - bytes_before;
+    // The bytes that went out since the last frame (a kept video frame's are counted when it is
+    // encoded, on a gRPC thread).
+    const std::uint64_t bytes_now = stream_->image_bytes_sent();
+    const std::uint64_t frame_bytes = bytes_now - bytes_recorded;
+    bytes_recorded = bytes_now;
     stats_->RecordSent(frame_bytes);
     if (follow) {
       if (const std::optional<RateEstimate> rate = stream_->rate()) {

@@ -89,7 +89,7 @@ class Session {
   std::unique_ptr<Client> client_;
   std::unique_ptr<Stream> stream_;
   v1::ServerInfo server_info_;
-  std::unique_ptr<video::FrameEncoder> video_;  // options.video; Encode by the sender only
+  std::shared_ptr<video::FrameEncoder> video_;  // options.video: the stream's coder
 
   std::mutex mu_;
   std::condition_variable cv_;  // in-flight count changed, stop, receiver ended, done

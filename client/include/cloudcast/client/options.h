@@ -17,6 +17,8 @@
 
 namespace cloudcast::client {
 
+class FrameCoder;  // frame_coder.h
+
 struct Result;
 
 // The server a client program dials when given none: cloudcast-server's default port, here.
@@ -120,6 +122,15 @@ struct StreamOptions {
   // bitrate (Stream::rate(), Result::rate) is what the caller's encoder should follow, for
   // example with QualityFollower (rate_controller.h).
   std::optional<RateControlOptions> rate_control;
+
+  // A coder that makes each frame as it is sent (frame_coder.h): video (video::FrameEncoder).
+  // Send then takes raw frames. With DELIVERY_LATEST a raw frame is encoded only when the stream
+  // has room for it, so no encoded picture is ever replaced: the newest raw frame waits
+  // meanwhile (on a gRPC callback thread once room comes), and an older waiting one is replaced
+  // (Result fate kReplaced). With DELIVERY_ALL each frame is encoded in Send. The coder sees the
+  // results of the frames it encoded (keyframe requests), and with rate_control its target
+  // bitrate before each frame.
+  std::shared_ptr<FrameCoder> coder;
 };
 
 }  // namespace cloudcast::client

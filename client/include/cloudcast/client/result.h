@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "absl/status/status.h"
 #include "cloudcast/client/rate_controller.h"
@@ -59,6 +60,10 @@ struct Result {
   // The error answers a StreamConfig (OpenStream's or a Reconfigure), not a frame: the server
   // keeps the previous settings, and sequence / frame_id are 0 / empty. Streams only.
   bool config_rejected = false;
+  // The video bitstreams (v1::VIDEO_BITSTREAM_COLOR, _RIGHT) the server cannot decode until an
+  // IDR, as its reply says (CloudReply.keyframe_needed, or the FrameError's): the sender's next
+  // picture of each is to be a keyframe. Empty without video, and for frames that got no reply.
+  std::vector<v1::VideoBitstream> keyframe_needed;
   // StreamOptions::rate_control: the rate controller's estimate after this reply (its target
   // bitrate, round trip, queueing delay, window). Unset without rate control and for frames that
   // got no reply.

@@ -15,7 +15,9 @@
 // Rate control plugs in at the sink: OnWrite tells when and how many bytes went out, OnReply
 // when the answer came back and for which frame (its write time); the bitrate it decides is
 // applied where frames are made (the library's Stream::Send, the load generator's FrameStore),
-// before Submit.
+// before Submit. Frames that must not be replaced once made (video pictures) are made at
+// dispatch: the owner asks WantRoom, keeps the raw frame while there is none, and makes and
+// submits it on OnRoom (the core still never looks inside).
 #pragma once
 
 #include <grpcpp/alarm.h>
@@ -82,6 +84,9 @@ class StreamSink {
   virtual void OnDuplicate() {}  // a second answer to a resent frame (ignored)
   // With rate control: the controller's estimate after a reply, just before that OnReply.
   virtual void OnRate(const RateEstimate& /*estimate*/) {}
+  // StreamCore::WantRoom answered false, and now there is room for a frame: the owner makes the
+  // frame it kept (video: encodes it now) and submits it. May call Submit from here.
+  virtual void OnRoom() {}
 };
 
 struct StreamCoreOptions {
@@ -115,6 +120,13 @@ class StreamCore : public std::enable_shared_from_this<StreamCore> {
   CoreMachine::Submitted SubmitWaiting(std::uint64_t sequence, grpc::ByteBuffer bytes,
                                        FrameRecord record,
                                        const std::function<bool()>& give_up = {});
+  // Frames made at dispatch (StreamMachineOptions::replace_queued off: video, whose encoded
+  // pictures must all be sent): true when a frame submitted now is written at once or after the
+  // write in progress (StreamMachine::HasRoom); false arms one OnRoom for when there is.
+  bool WantRoom();
+  // A frame the owner never submitted (replaced while it waited for room, could not be made, or
+  // the stream ended first): settled and reported like the core's own (StreamMachine::Unmade).
+  void Unmade(FrameFate fate, std::uint64_t sequence, FrameRecord record, absl::Status why = {});
   absl::Status Reconfigure(grpc::ByteBuffer config);
   void CloseSend(bool discard_queued = false);
   void Cancel();
@@ -157,7 +169,15 @@ class StreamCore : public std::enable_shared_from_this<StreamCore> {
   // One event for the sink.
   struct Event {
     enum Kind {
-      kReply, kSettled, kWrite, kCallOpened, kCallEnded, kReconnected, kDuplicate, kEnded
+      kReply,
+      kSettled,
+      kWrite,
+      kCallOpened,
+      kCallEnded,
+      kReconnected,
+      kDuplicate,
+      kRoom,
+      kEnded
     };
     explicit Event(Kind k) : kind(k) {}
     Kind kind;

@@ -11,8 +11,13 @@
 //   the queue: frames and Reconfigure's configs in the order they were given.
 // - DELIVERY_LATEST (`Options::latest`): Submit never waits. A frame that is still queued when a
 //   newer one arrives is replaced (settled kReplaced): only the newest unsent frame waits for the
-//   write slot. DELIVERY_ALL: nothing is replaced; Submit answers kFull while `max_queued` frames
-//   wait, and the caller waits (lossless back-pressure) or, with max_queued 0, never.
+//   write slot. With `replace_queued` off (frames made only when the machine has room: video,
+//   whose encoded pictures must all be sent), nothing queued is replaced: the owner asks
+//   WantRoom before it makes a frame, replaces what it has not made yet itself, and reports
+//   those frames with Unmade (counted and settled kReplaced like the machine's own); Submit
+//   answers kFull past `max_queued` as with DELIVERY_ALL.
+// - DELIVERY_ALL: nothing is replaced; Submit answers kFull while `max_queued` frames wait, and
+//   the caller waits (lossless back-pressure) or, with max_queued 0, never.
 // - Every frame submitted is settled exactly once: answered (a reply, cloud or error), replaced
 //   (never sent), dropped (sent, skipped by the server or lost with its call under
 //   DELIVERY_LATEST), lost (sent, never answered when the stream ended) or unsent (queued when
@@ -69,6 +74,9 @@ inline const char* FateName(FrameFate fate) {
 struct StreamMachineOptions {
   std::string name = "stream";  // in messages: "stream to host:port"
   bool latest = false;          // DELIVERY_LATEST: a newer frame replaces a queued one
+  // DELIVERY_LATEST: false: a queued frame is never replaced (its owner makes frames only when
+  // WantRoom says there is room, and replaces unmade frames itself).
+  bool replace_queued = true;
   std::size_t max_queued = 1;   // DELIVERY_ALL: frames that may wait for the write slot; 0: any
   bool resilient = false;
   std::chrono::nanoseconds reconnect_timeout = std::chrono::seconds(30);
@@ -140,6 +148,7 @@ class StreamMachine {
     std::optional<Reconnected> reconnected;
     std::optional<Clock::time_point> wake_at;  // call Timer then (backoff, give-up deadline)
     bool queue_freed = false;  // a waiting frame left the queue: a blocked Submit may retry
+    bool room = false;         // WantRoom was false, and now there is room for a frame
     bool ended = false;        // the stream is over: status() says how
   };
 
@@ -167,7 +176,7 @@ class StreamMachine {
   Submitted Submit(std::uint64_t sequence, Payload payload, Record record, Clock::time_point now) {
     if (writes_closed_) return Submitted::kClosed;
     if (ended_) return Submitted::kEnded;
-    if (options_.latest) {
+    if (options_.latest && options_.replace_queued) {
       for (auto it = queue_.begin(); it != queue_.end();) {
         if (!it->is_frame) {
           ++it;
@@ -189,6 +198,34 @@ class StreamMachine {
     const bool writing = effects_.write && effects_.write->is_frame && !effects_.write->resend &&
                          effects_.write->sequence == sequence && queued_frames_ == 0;
     return writing ? Submitted::kWriting : Submitted::kQueued;
+  }
+
+  // Room for a frame now: a call that takes writes, no frame waiting for the write slot, and the
+  // window (SetMaxUnanswered) open. A frame submitted now is written at once or as soon as the
+  // write in progress is done.
+  bool HasRoom() const {
+    return !ended_ && !writes_closed_ && call_open_ && !broken_ && !writes_released_ &&
+           queued_frames_ == 0 && (max_unanswered_ == 0 || ledger_.unanswered() < max_unanswered_);
+  }
+  // HasRoom(); when false, the first TakeEffects that finds room sets Effects::room (once).
+  bool WantRoom() {
+    if (HasRoom()) {
+      room_wanted_ = false;
+      return true;
+    }
+    room_wanted_ = true;
+    return false;
+  }
+
+  // A frame the owner never made into a payload, settled without entering the queue: kReplaced
+  // (a newer frame took its place while it waited for room; counted as submitted and replaced),
+  // or kUnsent (it could not be made, or the stream ended first: `why`).
+  void Unmade(FrameFate fate, std::uint64_t sequence, Record record, Clock::time_point now,
+              absl::Status why = {}) {
+    ++submitted_;
+    if (fate == FrameFate::kReplaced) ++replaced_;
+    effects_.settled.push_back(
+        Settled{fate, sequence, Frame{Payload{}, std::move(record), now, {}}, 0, std::move(why)});
   }
 
   // A new config for the frames submitted after it (sent in order with them).
@@ -370,6 +407,10 @@ class StreamMachine {
   }
 
   Effects TakeEffects() {
+    if (room_wanted_ && HasRoom()) {
+      room_wanted_ = false;
+      effects_.room = true;
+    }
     Effects out = std::move(effects_);
     effects_ = Effects{};
     return out;
@@ -536,6 +577,7 @@ class StreamMachine {
   std::deque<Item> queue_;
   std::size_t queued_frames_ = 0;
   std::size_t max_unanswered_ = 0;  // SetMaxUnanswered
+  bool room_wanted_ = false;        // WantRoom answered false
   Ledger ledger_;
 
   // The current call.

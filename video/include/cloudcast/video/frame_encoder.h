@@ -22,6 +22,7 @@
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "cloudcast/client/frame.h"
+#include "cloudcast/client/frame_coder.h"
 #include "cloudcast/client/result.h"
 #include "cloudcast/io/image_io.h"
 #include "cloudcast/v1/cloudcast.pb.h"
@@ -51,10 +52,10 @@ inline constexpr std::string_view kH264 = "h264";
 
 // Encode on one thread; OnResult, RequestKeyframe and SetBitrate from any (a receiving thread):
 // they wait for an Encode in progress.
-class FrameEncoder {
+class FrameEncoder : public client::FrameCoder {
  public:
   explicit FrameEncoder(FrameEncoderOptions options);
-  ~FrameEncoder();
+  ~FrameEncoder() override;
   FrameEncoder(const FrameEncoder&) = delete;
   FrameEncoder& operator=(const FrameEncoder&) = delete;
 
@@ -65,19 +66,26 @@ class FrameEncoder {
   // raw (ColorView, or BgraView); a size change starts new bitstreams at an IDR. Errors name the
   // image ("colour", "left", "right").
   absl::StatusOr<client::FrameInput> Encode(const client::FrameInput& input,
-                                            std::uint64_t sequence);
+                                            std::uint64_t sequence) override;
 
-  // A reply: its keyframe_needed makes the next picture of each bitstream named an IDR, unless one
-  // was sent since the frame it answers. A frame the server refused (a FrameError, whose own
-  // keyframe_needed a Result does not carry), or that never reached the server (replaced before
-  // it was sent, or lost or unsent when its stream ended) gets an IDR on every bitstream, under
-  // the same rule. A frame the server skipped (kDropped) asks for nothing: it decoded its
-  // pictures all the same.
-  void OnResult(const client::Result& result);
+  // A reply (cloud or FrameError): its keyframe_needed (Result::keyframe_needed) makes the next
+  // picture of each bitstream named an IDR, unless one was sent since the frame it answers; a
+  // reply that names none asks for nothing (the server decodes every picture as it reads it,
+  // whatever becomes of the frame). A frame encoded but never decoded by the server (replaced
+  // after encoding, when the application sends the pictures itself to a DELIVERY_LATEST stream;
+  // lost or unsent when its stream ended) gets an IDR on every bitstream, under the same rule. A
+  // frame the server skipped (kDropped) asks for nothing: it decoded its pictures all the same.
+  // As a stream's coder (StreamOptions::coder) the stream calls it.
+  void OnResult(const client::Result& result) override;
   // The next frame's pictures are IDRs (a late joiner, a new stream after a reconnect).
   void RequestKeyframe();
   // The bitrate from the next frame on, for both views together (a rate controller's).
   void SetBitrate(std::int64_t bits_per_second);
+  // As a stream's coder with rate control: the pictures get the stream's target less the other
+  // images' bytes at the encoder's frame rate (a lossless disparity map is sent whatever the
+  // link), at least a tenth of the target and 2 kbit per frame, at most the encoder's own
+  // bitrate_bps (the cap it was opened with).
+  void SetStreamBitrate(std::int64_t stream_bps, std::size_t other_bytes_per_frame) override;
 
   std::uint64_t keyframes_sent() const;
   std::uint64_t keyframes_requested() const;  // honoured ones
