@@ -20,6 +20,7 @@
 #include "cloudcast/load/schedule.h"
 #include "cloudcast/server/server.h"
 #include "cloudcast/v1/cloudcast.grpc.pb.h"
+#include "support/frame_store_requests.h"
 #include "support/waiting.h"
 
 namespace cloudcast::load {
@@ -130,13 +131,8 @@ TEST(FrameStoreTest, RequestsParseAsStreamRequestsWithPatchedFields) {
   FrameStore store = SmallStore();
   ASSERT_EQ(store.size(), 3u);
   for (std::uint64_t seq : {1ull, 127ull, 128ull, 1ull << 40}) {
-    grpc::ByteBuffer buffer = store.Request(seq, seq, 1'700'000'000'000'000'000 + seq);
-    std::vector<grpc::Slice> slices;
-    ASSERT_TRUE(buffer.Dump(&slices).ok());
-    std::string bytes;
-    for (auto& s : slices) bytes.append(reinterpret_cast<const char*>(s.begin()), s.size());
-    v1::StreamRequest request;
-    ASSERT_TRUE(request.ParseFromString(bytes)) << seq;
+    const v1::StreamRequest request =
+        testing::ParsedRequest(store, seq, seq, 1'700'000'000'000'000'000 + seq);
     ASSERT_TRUE(request.has_frame());
     EXPECT_EQ(request.frame().sequence(), seq);
     EXPECT_EQ(request.frame().capture_time_unix_ns(), 1'700'000'000'000'000'000 + seq);
@@ -153,13 +149,7 @@ TEST(FrameStoreTest, PngAndJpegUplinksEncodeTheImages) {
   o.synthetic_frames = 1;
   o.uplink.encoding = sources::Uplink::kJpeg;
   FrameStore store = FrameStore::Prepare(o).value();
-  grpc::ByteBuffer buffer = store.Request(0, 1, 1);
-  std::vector<grpc::Slice> slices;
-  ASSERT_TRUE(buffer.Dump(&slices).ok());
-  std::string bytes;
-  for (auto& s : slices) bytes.append(reinterpret_cast<const char*>(s.begin()), s.size());
-  v1::StreamRequest request;
-  ASSERT_TRUE(request.ParseFromString(bytes));
+  const v1::StreamRequest request = testing::ParsedRequest(store, 0, 1, 1);
   EXPECT_FALSE(request.frame().color().encoded().empty());
   EXPECT_FALSE(request.frame().disparity().encoded().empty());  // 16-bit disparity as PNG
 }
@@ -239,13 +229,7 @@ TEST_F(FleetTest, HalfResolutionLevelsMakeTheSameSurface) {
     double lo[3] = {1e9, 1e9, 1e9}, hi[3] = {-1e9, -1e9, -1e9};
   };
   auto process = [&](std::size_t level) {
-    grpc::ByteBuffer buffer = store.Request(0, 1, 1, level);
-    std::vector<grpc::Slice> slices;
-    EXPECT_TRUE(buffer.Dump(&slices).ok());
-    std::string bytes;
-    for (auto& s : slices) bytes.append(reinterpret_cast<const char*>(s.begin()), s.size());
-    v1::StreamRequest request;
-    EXPECT_TRUE(request.ParseFromString(bytes));
+    const v1::StreamRequest request = testing::ParsedRequest(store, 0, 1, 1, level);
     v1::ProcessRequest process;
     *process.mutable_frame() = request.frame();
     *process.mutable_config() = config;

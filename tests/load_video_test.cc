@@ -13,6 +13,7 @@
 #include "cloudcast/load/frame_store.h"
 #include "cloudcast/load/null_server.h"
 #include "cloudcast/load/report.h"
+#include "support/frame_store_requests.h"
 #include "support/program_support.h"
 #include "support/server_fixture.h"
 #include "support/test_support.h"
@@ -26,14 +27,7 @@ using testing::RunResult;
 
 // The request of frame `index` of `store`, parsed back.
 v1::StreamRequest Parsed(const FrameStore& store, std::size_t index) {
-  grpc::ByteBuffer buffer = store.Request(index, index + 1, 1);
-  std::vector<grpc::Slice> slices;
-  EXPECT_TRUE(buffer.Dump(&slices).ok());
-  std::string bytes;
-  for (auto& s : slices) bytes.append(reinterpret_cast<const char*>(s.begin()), s.size());
-  v1::StreamRequest request;
-  EXPECT_TRUE(request.ParseFromString(bytes));
-  return request;
+  return testing::ParsedRequest(store, index, index + 1, 1);
 }
 
 FrameSourceOptions SyntheticVideo(std::uint32_t w, std::uint32_t h, int frames,

@@ -27,6 +27,7 @@
 #include "cloudcast/video/frame_encoder.h"
 #include "gtest/gtest.h"
 #include "nlohmann/json.hpp"
+#include "support/moving_plane.h"
 #include "support/program_support.h"
 #include "support/replica_support.h"
 
@@ -36,30 +37,8 @@ namespace {
 using Clock = std::chrono::steady_clock;
 
 // A tilted plane's disparity (sent zstd-compressed, lossless) and a texture scrolling across it.
-struct Frame {
-  OwnedDisparity disparity;
-  OwnedColor colour;
-};
-Frame MakeFrame(std::uint32_t w, std::uint32_t h, int t) {
-  Frame f;
-  f.disparity.width = f.colour.width = w;
-  f.disparity.height = f.colour.height = h;
-  f.disparity.encoding = DisparityEncoding::kU8;
-  f.colour.encoding = ColorEncoding::kBGR8;
-  f.disparity.pixels.resize(std::size_t{w} * h);
-  f.colour.pixels.resize(std::size_t{w} * h * 3);
-  for (std::uint32_t v = 0; v < h; ++v) {
-    for (std::uint32_t u = 0; u < w; ++u) {
-      f.disparity.pixels[v * w + u] = static_cast<std::uint8_t>(20 + 20 * v / h);
-      const double x = u + 3.0 * t;
-      std::uint8_t* p = &f.colour.pixels[(std::size_t{v} * w + u) * 3];
-      p[0] = static_cast<std::uint8_t>(128 + 100 * std::sin(x * 0.07) * std::cos(v * 0.05));
-      p[1] = static_cast<std::uint8_t>(128 + 90 * std::cos(x * 0.023 + v * 0.031));
-      p[2] = static_cast<std::uint8_t>(((static_cast<int>(x) / 12 + v / 12) % 2) ? 210 : 50);
-    }
-  }
-  return f;
-}
+using Frame = testing::MovingPlaneFrame;
+Frame MakeFrame(std::uint32_t w, std::uint32_t h, int t) { return testing::MovingPlane(w, h, t); }
 
 // The encoder behind the stream, remembering the bitrate it was given for each picture.
 class RecordingCoder : public client::FrameCoder {

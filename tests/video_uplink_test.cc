@@ -30,6 +30,7 @@
 #include "cloudcast/video/frame_encoder.h"
 #include "cloudcast/video/h264_bitstream.h"
 #include "support/client_fixture.h"
+#include "support/moving_plane.h"
 #include "support/h264_sps.h"
 #include "support/server_fixture.h"
 
@@ -40,31 +41,9 @@ using ::testing::ElementsAre;
 using ::testing::HasSubstr;
 using ::testing::IsEmpty;
 
-// A disparity map and colour image of a tilted, textured plane, moving a little each frame (so
-// that P pictures have motion to code): 320x240, disparities 20 to 40.
-struct SyntheticFrame {
-  OwnedDisparity disparity;
-  OwnedColor colour;
-};
+using SyntheticFrame = testing::MovingPlaneFrame;
 SyntheticFrame MakeFrame(std::uint32_t w, std::uint32_t h, int t) {
-  SyntheticFrame f;
-  f.disparity.width = f.colour.width = w;
-  f.disparity.height = f.colour.height = h;
-  f.disparity.encoding = DisparityEncoding::kU8;
-  f.colour.encoding = ColorEncoding::kBGR8;
-  f.disparity.pixels.resize(std::size_t{w} * h);
-  f.colour.pixels.resize(std::size_t{w} * h * 3);
-  for (std::uint32_t v = 0; v < h; ++v) {
-    for (std::uint32_t u = 0; u < w; ++u) {
-      f.disparity.pixels[v * w + u] = static_cast<std::uint8_t>(20 + 20 * v / h);
-      const double x = u + 2.0 * t;
-      std::uint8_t* p = &f.colour.pixels[(std::size_t{v} * w + u) * 3];
-      p[0] = static_cast<std::uint8_t>(128 + 100 * std::sin(x * 0.05) * std::cos(v * 0.04));
-      p[1] = static_cast<std::uint8_t>(128 + 90 * std::cos(x * 0.031 + v * 0.017));
-      p[2] = static_cast<std::uint8_t>(((u / 16 + v / 16 + t / 4) % 2) ? 200 : 60);
-    }
-  }
-  return f;
+  return testing::MovingPlane(w, h, t);
 }
 
 PipelineOptions DisparityOptions() {
