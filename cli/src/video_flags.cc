@@ -29,7 +29,8 @@ VideoFlags::VideoFlags(CLI::App& app, const std::string& group) : app_(app) {
       ->group(group);
   app.add_option("--h264-mbps", mbps_,
                  "Bitrate with --encoding h264, Mbit/s, both views of a pair together: the cap "
-                 "of a one-frame VBV (no frame waits behind a large one)")
+                 "of a one-frame VBV (no frame waits behind a large one); with cloudcast-client's "
+                 "--rate-control, the most the rate controller's target may give the encoder")
       ->check(NumberCheck("a bitrate in [0.05, 1000] Mbit/s",
                           [](double v) { return v >= 0.05 && v <= 1000; }))
       ->capture_default_str()
