@@ -326,7 +326,9 @@ absl::Status HeldFrame::KeepImage(const Input& in, const char* field, Input* out
             return s;
           }
           std::string& pixels = bytes_.emplace_back(std::move(*raw.mutable_pixels()));
-          ColorView kept;
+          // ColorView, named through T so that the assignment below depends on this lambda's
+          // parameter: clang checks a discarded branch's non-dependent code for every Input.
+          std::conditional_t<std::is_same_v<T, BgraView>, ColorView, T> kept;
           kept.data = pixels.data();
           kept.size_bytes = pixels.size();
           kept.width = image.width;
