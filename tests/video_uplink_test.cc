@@ -30,9 +30,10 @@
 #include "cloudcast/video/frame_encoder.h"
 #include "cloudcast/video/h264_bitstream.h"
 #include "support/client_fixture.h"
-#include "support/moving_plane.h"
 #include "support/h264_sps.h"
+#include "support/moving_plane.h"
 #include "support/server_fixture.h"
+#include "support/waiting.h"
 
 namespace cloudcast {
 namespace {
@@ -649,7 +650,7 @@ TEST_F(VideoUplinkTest, TheStreamsCoderEncodesOnlyWhatItSendsSoEveryPictureDecod
     ASSERT_TRUE((*stream)->Send(client::DisparityFrame{f.disparity.view(), f.colour.view()}).ok());
     // A camera far faster than the server, yet slow enough that the stream sends several
     // pictures (P pictures referencing the ones before) while the rest are replaced raw.
-    std::this_thread::sleep_for(std::chrono::milliseconds(3));
+    testing::PauseFor(std::chrono::milliseconds(3));
   }
   ASSERT_TRUE((*stream)->CloseSend().ok());
   std::map<client::FrameFate, std::vector<std::uint64_t>> fates;
