@@ -73,6 +73,14 @@ video::EncoderOptions EncoderFor(video::PictureKind kind, std::uint32_t w, std::
   return o;
 }
 
+// A stream's FrameEncoder with EncoderFor's settings.
+video::FrameEncoderOptions FrameEncoderFor(video::PictureKind kind, std::uint32_t w,
+                                           std::uint32_t h) {
+  video::FrameEncoderOptions o;
+  o.encoder = EncoderFor(kind, w, h);
+  return o;
+}
+
 // The colour channels of a packed point, 0xAARRGGBB.
 int Channel(std::uint32_t rgba, int shift) { return static_cast<int>((rgba >> shift) & 0xff); }
 
@@ -93,8 +101,7 @@ TEST_F(VideoUplinkTest, ColourOverH264IsWithinABoundOfTheLosslessPath) {
   auto lossless = client_->OpenStream(config);
   auto video = client_->OpenStream(config);
   ASSERT_TRUE(lossless.ok() && video.ok());
-  video::FrameEncoderOptions eo;
-  eo.encoder = EncoderFor(video::PictureKind::kColour444, w, h);
+  video::FrameEncoderOptions eo = FrameEncoderFor(video::PictureKind::kColour444, w, h);
   video::FrameEncoder encoder(eo);
   std::uint64_t video_bytes = 0, raw_bytes = 0;
   double abs_error = 0;
@@ -167,8 +174,7 @@ TEST_F(VideoUplinkTest, StereoPairsOverH264MatchCloseToLossless) {
   auto lossless = client_->OpenStream(config);
   auto video = client_->OpenStream(config);
   ASSERT_TRUE(lossless.ok() && video.ok());
-  video::FrameEncoderOptions eo;
-  eo.encoder = EncoderFor(video::PictureKind::kGrey, 640, 480);
+  video::FrameEncoderOptions eo = FrameEncoderFor(video::PictureKind::kGrey, 640, 480);
   eo.encoder.preset = "superfast";
   eo.encoder.crf = 2;
   eo.encoder.bitrate_bps = 8'000'000;  // docs/video.md: +0.18 points at 6.8 Mbit/s
@@ -229,8 +235,7 @@ TEST_F(VideoUplinkTest, StereoPairsOverH264MatchCloseToLossless) {
 TEST_F(VideoUplinkTest, ProcessCallsDecodeAnIdrAndRefuseAPicture) {
   const std::uint32_t w = 160, h = 120;
   const v1::StreamConfig config = client::MakeStreamConfig(DisparityOptions());
-  video::FrameEncoderOptions eo;
-  eo.encoder = EncoderFor(video::PictureKind::kColour, w, h);
+  video::FrameEncoderOptions eo = FrameEncoderFor(video::PictureKind::kColour, w, h);
   video::FrameEncoder encoder(eo);
   for (int t = 0; t < 2; ++t) {
     const SyntheticFrame f = MakeFrame(w, h, t);
@@ -389,8 +394,7 @@ TEST_F(VideoUplinkTest, FrameEncoderAnswersAKeyframeRequestWithAnIdr) {
   const std::uint32_t w = 160, h = 120;
   auto stream = client_->OpenStream(AllFrames(client::MakeStreamConfig(DisparityOptions())));
   ASSERT_TRUE(stream.ok()) << stream.status();
-  video::FrameEncoderOptions eo;
-  eo.encoder = EncoderFor(video::PictureKind::kColour, w, h);
+  video::FrameEncoderOptions eo = FrameEncoderFor(video::PictureKind::kColour, w, h);
   video::FrameEncoder encoder(eo);
   std::vector<absl::StatusCode> codes;
   for (int t = 0; t < 6; ++t) {
@@ -630,8 +634,7 @@ TEST_F(VideoUplinkTest, TheStreamsCoderEncodesOnlyWhatItSendsSoEveryPictureDecod
   const std::uint32_t w = 640, h = 480;
   v1::StreamConfig config = client::MakeStreamConfig(DisparityOptions());
   config.set_delivery(v1::DELIVERY_LATEST);
-  video::FrameEncoderOptions eo;
-  eo.encoder = EncoderFor(video::PictureKind::kColour, w, h);
+  video::FrameEncoderOptions eo = FrameEncoderFor(video::PictureKind::kColour, w, h);
   auto coder = std::make_shared<CountingCoder>(eo);
   client::StreamOptions so;
   so.coder = coder;
@@ -703,8 +706,7 @@ TEST_F(VideoUplinkTest, AFrameErrorsKeyframeRequestReachesTheResult) {
   const std::uint32_t w = 160, h = 120;
   auto stream = client_->OpenStream(AllFrames(client::MakeStreamConfig(DisparityOptions())));
   ASSERT_TRUE(stream.ok()) << stream.status();
-  video::FrameEncoderOptions eo;
-  eo.encoder = EncoderFor(video::PictureKind::kColour, w, h);
+  video::FrameEncoderOptions eo = FrameEncoderFor(video::PictureKind::kColour, w, h);
   video::FrameEncoder encoder(eo);
   const SyntheticFrame f0 = MakeFrame(w, h, 0), f1 = MakeFrame(w, h, 1), f2 = MakeFrame(w, h, 2);
   ASSERT_TRUE(
