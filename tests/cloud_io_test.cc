@@ -264,6 +264,67 @@ TEST_F(CloudIoTest, HeaderEntriesOutOfOrderAreRefusedBeforePclReadsThem) {
   EXPECT_EQ(back.size(), 2u);
 }
 
+// PCL's PLY parser splits a header whose first line ends "ply\r" at each carriage return and
+// skips the character after it (the line feed of CRLF); our check split at line feeds. A bare
+// CR hid whole lines from the check: here an "element range_grid" (which the check refuses)
+// inside what it took for a comment, with a vertex index of -1 that makes PCL 1.13 copy from 4 GB
+// past its buffer (SEGV; the fuzzer found the family in CI). Header lines are now split as PCL
+// splits them, and a line PCL would split differently is refused.
+TEST_F(CloudIoTest, PlyHeaderLinesThatPclSplitsDifferentlyAreRefused) {
+  const std::string vertices =
+      "element vertex 2\r\nproperty float x\r\nproperty float y\r\nproperty float z\r\n";
+  std::string body(24, '\0');
+  body += std::string("\x01\xff\xff\xff\xff", 5);
+  WriteFile(Path("hidden.ply"),
+            "ply\r\nformat binary_little_endian 1.0\r\n" + vertices +
+                "comment a\rXelement range_grid 1\rXproperty list uchar int vertex_indices\r\n"
+                "end_header\r\n" +
+                body);
+  PointCloud back;
+  const absl::Status hidden = LoadCloud(Path("hidden.ply"), &back);
+  EXPECT_EQ(hidden.code(), absl::StatusCode::kInvalidArgument) << hidden;
+  EXPECT_NE(hidden.message().find("line 7"), std::string::npos) << hidden;
+  EXPECT_NE(hidden.message().find("carriage return"), std::string::npos) << hidden;
+
+  // A line feed without its carriage return in a CRLF header: PCL joins the two lines.
+  WriteFile(Path("bare_lf.ply"),
+            "ply\r\nformat binary_little_endian 1.0\r\nelement vertex 2\r\n"
+            "property float x\nproperty float y\r\nproperty float z\r\nend_header\r\n" +
+                std::string(24, '\0'));
+  const absl::Status bare_lf = LoadCloud(Path("bare_lf.ply"), &back);
+  EXPECT_EQ(bare_lf.code(), absl::StatusCode::kInvalidArgument) << bare_lf;
+  EXPECT_NE(bare_lf.message().find("line 4"), std::string::npos) << bare_lf;
+
+  // Other control characters split words for one parser and not the other (obj_info's values).
+  WriteFile(Path("vtab.ply"), "ply\nformat ascii 1.0\nobj_info num_cols\v2\nelement vertex 2\n"
+                              "property float x\nproperty float y\nproperty float z\n"
+                              "end_header\n1 2 3\n4 5 6\n");
+  const absl::Status vtab = LoadCloud(Path("vtab.ply"), &back);
+  EXPECT_EQ(vtab.code(), absl::StatusCode::kInvalidArgument) << vtab;
+  EXPECT_NE(vtab.message().find("control character"), std::string::npos) << vtab;
+
+  // CRLF and LF headers that both parsers split alike load, to the same points.
+  const std::string points = std::string("\0\0\x80?\0\0\0@\0\0@@", 12) +
+                             std::string("\0\0\x80@\0\0\xa0@\0\0\xc0@", 12);
+  WriteFile(Path("crlf.ply"),
+            "ply\r\nformat binary_little_endian 1.0\r\ncomment from Windows\r\n" + vertices +
+                "end_header\r\n" + points);
+  WriteFile(Path("lf.ply"),
+            "ply\nformat binary_little_endian 1.0\nelement vertex 2\nproperty float x\n"
+            "property float y\nproperty float z\nend_header\n" +
+                points);
+  PointCloud crlf, lf;
+  ASSERT_TRUE(LoadCloud(Path("crlf.ply"), &crlf).ok());
+  ASSERT_TRUE(LoadCloud(Path("lf.ply"), &lf).ok());
+  ASSERT_EQ(crlf.size(), 2u);
+  ASSERT_EQ(lf.size(), 2u);
+  for (std::size_t i = 0; i < 2; ++i) {
+    EXPECT_EQ(crlf.points[i].x, lf.points[i].x);
+    EXPECT_EQ(crlf.points[i].z, lf.points[i].z);
+  }
+  EXPECT_EQ(lf.points[1].z, 6.0f);
+}
+
 TEST_F(CloudIoTest, ErrorsNameTheFileAndTheReason) {
   PointCloud cloud = FiniteOnly(OrganizedCloudWithHoles());
   PointCloud back;

@@ -409,6 +409,35 @@ absl::StatusOr<std::uint64_t> CheckPlyHeader(const std::string& path, std::istre
   };
   std::string line;
   if (!std::getline(in, line) || line.rfind("ply", 0) != 0) return bad("it does not start 'ply'");
+  // PCL splits the header as its first line ends: at carriage returns, skipping the character
+  // after each (CRLF), when the fourth byte is '\r'; at line feeds otherwise. Lines are read here
+  // at line feeds, so a CRLF header must have every line end in exactly "\r\n": a bare CR hid
+  // lines from these checks that PCL then read (an element range_grid inside a "comment" made PCL
+  // 1.13 copy from 4 GB past its buffer), and a bare LF joins two lines for PCL. Control
+  // characters other than tab split words for one parser and not the other (PCL splits obj_info
+  // at blanks and tabs only), so header lines are plain text.
+  const bool crlf = line.size() > 3 && line[3] == '\r';
+  int line_number = 1;
+  auto text_line = [&](std::string* l) -> absl::Status {
+    const bool ends_in_cr = !l->empty() && l->back() == '\r';
+    if (crlf && !ends_in_cr && !in.eof()) {
+      return bad(absl::StrCat("line ", line_number,
+                              " ends in a bare line feed in a header whose lines end in "
+                              "carriage return + line feed"));
+    }
+    if (ends_in_cr) l->pop_back();
+    for (const char c : *l) {
+      if (c == '\r') {
+        return bad(absl::StrCat("line ", line_number, " holds a carriage return before its end"));
+      }
+      if ((static_cast<unsigned char>(c) < 0x20 && c != '\t') || c == 0x7f) {
+        return bad(absl::StrCat("line ", line_number, " holds control character ",
+                                static_cast<int>(static_cast<unsigned char>(c))));
+      }
+    }
+    return absl::OkStatus();
+  };
+  if (crlf && line != "ply\r") return bad("its first line is not 'ply'");
   struct Element {
     std::string name;
     std::uint64_t count = 0, min_step = 0, properties = 0;
@@ -421,7 +450,8 @@ absl::StatusOr<std::uint64_t> CheckPlyHeader(const std::string& path, std::istre
   // PCL's width and height as its reader sets them while walking the header.
   std::uint64_t width = 0, height = 0;
   for (int i = 0; i < 10000 && !ended && std::getline(in, line); ++i) {
-    if (!line.empty() && line.back() == '\r') line.pop_back();
+    ++line_number;
+    if (absl::Status s = text_line(&line); !s.ok()) return s;
     std::istringstream ss(line);
     std::string key;
     ss >> key;
