@@ -1,10 +1,13 @@
 // The video sender (the client library's stream with a FrameEncoder as its coder and the rate
-// controller) through an emulated link: 10 Mbit/s up with 40 ms round trip, then a step down to
-// 3 Mbit/s. It asserts what the sender does, never how fast: its target, and the bitrate the
-// encoder is given, fall below the link's rate after the step; every frame comes back once,
-// answered, replaced (raw, before encoding) or skipped by the server, and no answer is an error
-// or asks for a keyframe (no encoded picture was lost on the way); the link's queue never
-// overflows. Skips without root. The server runs in the emulator's namespace, the stream in this
+// controller) through an emulated link, asserting what the sender does, never how fast:
+// - 10 Mbit/s up with 40 ms round trip, then a step down to 3 Mbit/s: its target, and the bitrate
+//   the encoder is given, fall below the link's rate after the step; the link's queue never
+//   overflows;
+// - a 1 s outage: the frames made meanwhile are replaced before encoding, and the stream goes on
+//   after it without asking for a keyframe.
+// In both every frame comes back once, answered, replaced (raw, before encoding) or skipped by the
+// server, and no answer is an error or asks for a keyframe (no encoded picture was lost on the
+// way). Skips without root. The server runs in the emulator's namespace, the stream in this
 // process (BBR, the host's default here).
 #include <unistd.h>
 
@@ -66,30 +69,55 @@ class RecordingCoder : public client::FrameCoder {
   std::vector<std::pair<Clock::time_point, std::int64_t>> given_;
 };
 
-TEST(VideoLinkTest, TheH264SenderFollowsAStepDownWithoutLosingAPicture) {
-  if (geteuid() != 0) GTEST_SKIP() << "needs root (network namespaces, NFQUEUE)";
-  if (std::system("command -v ip >/dev/null && command -v iptables >/dev/null") != 0) {
-    GTEST_SKIP() << "needs iproute2 and iptables";
-  }
-  const std::filesystem::path dir =
-      std::filesystem::temp_directory_path() / ("video_link_" + std::to_string(getpid()));
-  std::filesystem::create_directories(dir);
-  // Link times count from its ready line: the uplink's step at 6 s.
+// What one run through the link saw: each frame's fate as the stream reported it.
+struct Seen {
+  Clock::time_point at;
+  client::FrameFate fate;
+  bool ok = false;
+  bool keyframe_needed = false;
+  double target_bps = 0;
+};
+
+struct LinkRun {
+  Clock::time_point ready;  // the link's schedule counts from here
+  int sent = 0;
+  std::vector<Seen> seen;
+  std::shared_ptr<RecordingCoder> coder;
+  nlohmann::json link_stats;
+  std::filesystem::path dir;  // the server's log
+  // Fates counted: answered without error, replaced raw before encoding, skipped by the server,
+  // anything else (an error reply, unsent, lost); and the replies asking for a keyframe.
+  int answered = 0, replaced = 0, dropped = 0, other = 0, keyframe_requests = 0;
+};
+
+bool CanEmulate() {
+  return geteuid() == 0 &&
+         std::system("command -v ip >/dev/null && command -v iptables >/dev/null") == 0;
+}
+
+// Streams H.264 at 30 frames a second through a link made with `link_flags` (the server in its
+// namespace, the stream in this process, BBR: the host's default here) from the link's ready line
+// until `send_until` after it; the stream uses DELIVERY_LATEST and the rate controller. Fatal
+// failures leave `run` partly filled.
+void RunThroughLink(const std::vector<std::string>& link_flags, Clock::duration send_until,
+                    LinkRun* run) {
+  run->dir = std::filesystem::temp_directory_path() /
+             ("video_link_" + std::to_string(getpid()) + "_" +
+              ::testing::UnitTest::GetInstance()->current_test_info()->name());
+  std::filesystem::create_directories(run->dir);
   linkemu::EmulatedLink::Options link_options;
   link_options.binary = testing::BinDir() + "/cloudcast-linkemu";
-  link_options.flags = {"--up-rate", "10mbit", "--down-rate",   "100mbit",
-                        "--delay",   "20ms",   "--up-schedule", "6s=3mbit"};
+  link_options.flags = link_flags;
   link_options.timeout_s = 40;
   auto link = linkemu::EmulatedLink::Start(link_options);
   ASSERT_TRUE(link.ok()) << link.status();
-  const Clock::time_point ready = Clock::now();
-  const Clock::time_point step = ready + std::chrono::seconds(6);
+  run->ready = Clock::now();
   const std::string address = (*link)->server_ip() + ":50051";
-  testing::ServerProcess server(address, "linked", {}, (dir / "server.log").string(), "warn", "",
-                                (*link)->ServerPrefix());
+  testing::ServerProcess server(address, "linked", {}, (run->dir / "server.log").string(), "warn",
+                                "", (*link)->ServerPrefix());
   ASSERT_TRUE(server.WaitUntilServing(std::chrono::seconds(20)));
-  ASSERT_LT(Clock::now(), step - std::chrono::seconds(2))
-      << "the server took too long to start for the schedule";
+  ASSERT_LT(Clock::now(), run->ready + std::chrono::seconds(4))
+      << "the server took too long to start for the link's schedule";
 
   const std::uint32_t w = 640, h = 480;
   std::vector<Frame> frames;
@@ -111,75 +139,81 @@ TEST(VideoLinkTest, TheH264SenderFollowsAStepDownWithoutLosingAPicture) {
   eo.encoder.crf = 0;               // the bitrate alone: the rate controller's
   eo.encoder.bitrate_bps = 8'000'000;
   eo.encoder.fps = 30;
-  auto coder = std::make_shared<RecordingCoder>(eo);
+  run->coder = std::make_shared<RecordingCoder>(eo);
 
-  struct Seen {
-    Clock::time_point at;
-    client::FrameFate fate;
-    bool ok = false;
-    bool keyframe_needed = false;
-    double target_bps = 0;
-  };
   std::mutex mu;
-  std::vector<Seen> seen;
   client::StreamOptions so;
-  so.coder = coder;
+  so.coder = run->coder;
   so.rate_control = client::RateControlOptions{};
   so.on_result = [&](client::Result&& r) {
     std::lock_guard<std::mutex> lock(mu);
-    seen.push_back(Seen{Clock::now(), r.fate, r.ok(), !r.keyframe_needed.empty(),
-                        r.rate ? r.rate->target_bps : 0.0});
+    run->seen.push_back(Seen{Clock::now(), r.fate, r.ok(), !r.keyframe_needed.empty(),
+                             r.rate ? r.rate->target_bps : 0.0});
     if (r.fate == client::FrameFate::kAnswered && !r.ok()) ADD_FAILURE() << r.status;
   };
   auto stream = (*client)->OpenStream(config, so);
   ASSERT_TRUE(stream.ok()) << stream.status();
-  // 30 frames a second until 5 s after the step.
-  int sent = 0;
   Clock::time_point due = Clock::now();
-  const Clock::time_point end = step + std::chrono::seconds(5);
+  const Clock::time_point end = run->ready + send_until;
   while (Clock::now() < end) {
     std::this_thread::sleep_until(due);
     due += std::chrono::milliseconds(33);
-    const Frame& f = frames[sent % frames.size()];
+    const Frame& f = frames[run->sent % frames.size()];
     const absl::Status s = (*stream)->Send(
         client::DisparityFrame{client::Compressed(f.disparity.view()), f.colour.view()});
     ASSERT_TRUE(s.ok()) << s;
-    ++sent;
+    ++run->sent;
   }
   ASSERT_TRUE((*stream)->CloseSend().ok());
   EXPECT_TRUE((*stream)->Finish().ok());
   auto stats = (*link)->Stop();
   ASSERT_TRUE(stats.ok()) << stats.status();
+  run->link_stats = *stats;
+
+  std::lock_guard<std::mutex> lock(mu);
+  for (const Seen& s : run->seen) {
+    switch (s.fate) {
+      case client::FrameFate::kAnswered:
+        run->answered += s.ok ? 1 : 0;
+        run->other += s.ok ? 0 : 1;
+        break;
+      case client::FrameFate::kReplaced:
+        ++run->replaced;
+        break;
+      case client::FrameFate::kDropped:
+        ++run->dropped;
+        break;
+      default:
+        ++run->other;
+    }
+    run->keyframe_requests += s.keyframe_needed ? 1 : 0;
+  }
+}
+
+TEST(VideoLinkTest, TheH264SenderFollowsAStepDownWithoutLosingAPicture) {
+  if (!CanEmulate()) GTEST_SKIP() << "needs root, iproute2 and iptables (namespaces, NFQUEUE)";
+  // 10 Mbit/s up with a 40 ms round trip; the uplink steps down to 3 Mbit/s at 6 s.
+  LinkRun run;
+  const auto step_at = std::chrono::seconds(6);
+  RunThroughLink({"--up-rate", "10mbit", "--down-rate", "100mbit", "--delay", "20ms",
+                  "--up-schedule", "6s=3mbit"},
+                 step_at + std::chrono::seconds(5), &run);
+  if (HasFatalFailure()) return;
+  const Clock::time_point step = run.ready + step_at;
 
   // Every frame came back once: answered without error or keyframe request, replaced raw, or
   // skipped by the server; none lost or unsent.
-  int answered = 0, replaced = 0, dropped = 0, other = 0, keyframe_requests = 0;
+  EXPECT_EQ(run.answered + run.replaced + run.dropped + run.other, run.sent);
+  EXPECT_EQ(run.other, 0);
+  EXPECT_EQ(run.keyframe_requests, 0);
+  EXPECT_GT(run.answered, 60);
   bool below_after = false;
-  for (const Seen& s : seen) {
-    switch (s.fate) {
-      case client::FrameFate::kAnswered:
-        answered += s.ok ? 1 : 0;
-        other += s.ok ? 0 : 1;
-        break;
-      case client::FrameFate::kReplaced:
-        ++replaced;
-        break;
-      case client::FrameFate::kDropped:
-        ++dropped;
-        break;
-      default:
-        ++other;
-    }
-    keyframe_requests += s.keyframe_needed ? 1 : 0;
+  for (const Seen& s : run.seen) {
     if (s.at > step && s.at <= step + std::chrono::seconds(2) && s.target_bps > 0 &&
         s.target_bps < 3e6) {
       below_after = true;
     }
   }
-  EXPECT_EQ(answered + replaced + dropped + other, sent);
-  EXPECT_EQ(other, 0);
-  EXPECT_EQ(keyframe_requests, 0);
-  EXPECT_GT(answered, 60);
   EXPECT_TRUE(below_after) << "the target did not fall below the link's 3 Mbit/s within 2 s";
   // After the step the encoder follows the link, not the 10 Mbit/s before: the controller probes a
   // little over what it last saw delivered (up to 1.25 times it) and falls back under it, so its
@@ -187,7 +221,7 @@ TEST(VideoLinkTest, TheH264SenderFollowsAStepDownWithoutLosingAPicture) {
   // it is the bound.
   int given_after = 0;
   double sum_after = 0, most_after = 0;
-  for (const auto& [at, bps] : coder->given()) {
+  for (const auto& [at, bps] : run.coder->given()) {
     if (at <= step + std::chrono::seconds(2)) continue;
     ++given_after;
     sum_after += static_cast<double>(bps);
@@ -201,13 +235,49 @@ TEST(VideoLinkTest, TheH264SenderFollowsAStepDownWithoutLosingAPicture) {
       "(the link: 3)\n",
       mean_after / 1e6, most_after / 1e6);
   // The sender kept the link's drop-tail queue from overflowing.
-  EXPECT_EQ((*stats)["up"]["queue_drops"].get<int>(), 0) << stats->dump();
+  EXPECT_EQ(run.link_stats["up"]["queue_drops"].get<int>(), 0) << run.link_stats.dump();
   std::printf(
       "h264 through 10 -> 3 Mbit/s: %d frames, %d answered, %d replaced raw, %d skipped "
       "by the server, %llu IDRs\n",
-      sent, answered, replaced, dropped,
-      static_cast<unsigned long long>(coder->encoder().keyframes_sent()));
-  if (!HasFailure()) std::filesystem::remove_all(dir);  // else kept: the server's log
+      run.sent, run.answered, run.replaced, run.dropped,
+      static_cast<unsigned long long>(run.coder->encoder().keyframes_sent()));
+  if (!HasFailure()) std::filesystem::remove_all(run.dir);  // else kept: the server's log
+}
+
+// An outage (nothing crosses either way for a while; packets wait) in the middle of an H.264
+// stream. The frames the camera makes meanwhile wait in the sender and are replaced raw, before
+// encoding, by newer ones; the pictures already encoded are kept and sent when the link comes
+// back, so the server's decoder never misses a reference: no keyframe request, no error, the call
+// stays up, and frames are answered again after it.
+TEST(VideoLinkTest, AnOutageKeepsEveryEncodedPicture) {
+  if (!CanEmulate()) GTEST_SKIP() << "needs root, iproute2 and iptables (namespaces, NFQUEUE)";
+  LinkRun run;
+  const auto outage_at = std::chrono::seconds(5);
+  const auto outage = std::chrono::milliseconds(1000);
+  RunThroughLink({"--rate", "10mbit", "--delay", "20ms", "--outage", "5s:1000ms"},
+                 outage_at + outage + std::chrono::seconds(4), &run);
+  if (HasFatalFailure()) return;
+  const Clock::time_point back = run.ready + outage_at + outage;
+
+  EXPECT_EQ(run.answered + run.replaced + run.dropped + run.other, run.sent);
+  EXPECT_EQ(run.other, 0);
+  EXPECT_EQ(run.keyframe_requests, 0);
+  // A second at 30 frames a second, with a few frames in flight: most of the outage's frames were
+  // replaced in the sender rather than queued behind the link.
+  EXPECT_GE(run.replaced, 15) << "the sender queued the outage's frames instead of replacing them";
+  int answered_after = 0;
+  for (const Seen& s : run.seen) {
+    if (s.fate == client::FrameFate::kAnswered && s.ok && s.at > back + std::chrono::seconds(1)) {
+      ++answered_after;
+    }
+  }
+  EXPECT_GE(answered_after, 20) << "frames were not answered again after the outage";
+  std::printf(
+      "h264 through a 1 s outage: %d frames, %d answered (%d from 1 s after it), %d replaced raw, "
+      "%d skipped by the server, %llu IDRs\n",
+      run.sent, run.answered, answered_after, run.replaced, run.dropped,
+      static_cast<unsigned long long>(run.coder->encoder().keyframes_sent()));
+  if (!HasFailure()) std::filesystem::remove_all(run.dir);
 }
 
 }  // namespace
