@@ -3,8 +3,10 @@
 // AdaptiveJpegCoder going to half resolution under a low target and back when it rises.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include "cloudcast/client/adaptive_jpeg_coder.h"
 #include "cloudcast/client/half_resolution.h"
@@ -57,8 +59,8 @@ TEST(HalfResolutionTest, RefusesWhatItCannotHalve) {
   EXPECT_NE(s.message().find("disparity"), std::string::npos) << s;
 }
 
-// Under a target far below a full-resolution frame, the quality falls to its floor and then the
-// frames go at half resolution with a halved camera; when the target rises they come back.
+// Under a target below even the lossless disparity map, the next frame goes at half resolution
+// with a halved camera (no JPEG quality could help); when the target rises the frames come back.
 TEST(AdaptiveJpegCoderTest, FallsToHalfResolutionAndComesBack) {
   const testing::SyntheticFrame f = testing::MakeSyntheticFrame(320, 240);
   sources::UplinkFrame uplink;
@@ -77,13 +79,10 @@ TEST(AdaptiveJpegCoderTest, FallsToHalfResolutionAndComesBack) {
   EXPECT_FALSE(coder.last_half());
   EXPECT_EQ(coder.last_resolution().divisor, 1);
   EXPECT_FALSE(coder.last_resolution().camera.has_value());
-  int frames = 0;
-  while (!coder.last_half() && frames < 40) {
-    encode(20'000);  // 83 bytes a frame: nothing at full resolution fits
-    ++frames;
-  }
-  ASSERT_TRUE(coder.last_half()) << "still at full resolution after " << frames << " frames";
-  EXPECT_EQ(coder.last_quality(), options.min_quality) << "half only below the lowest quality";
+  ASSERT_GT(coder.last_geometry_bytes(), 83u);
+  encode(20'000);  // 83 bytes a frame: under the lossless disparity alone
+  ASSERT_TRUE(coder.last_half()) << "the disparity alone is over the budget";
+  EXPECT_EQ(coder.last_quality(), options.min_quality);
   EXPECT_LT(coder.last_bytes(), full_bytes / 2);
   const FrameCoder::Resolution half = coder.last_resolution();
   EXPECT_EQ(half.divisor, 2);
@@ -96,6 +95,32 @@ TEST(AdaptiveJpegCoderTest, FallsToHalfResolutionAndComesBack) {
   encode(50'000'000);
   EXPECT_FALSE(coder.last_half());
   EXPECT_EQ(coder.last_resolution().divisor, 1);
+}
+
+// When the disparity fits the budget but the frame does not, the quality goes down first and
+// only at its floor does the resolution.
+TEST(AdaptiveJpegCoderTest, LowersTheQualityBeforeTheResolution) {
+  testing::SyntheticFrame f = testing::MakeSyntheticFrame(320, 240);
+  f.frame.images[0].setTo(100);  // a flat disparity map: a few bytes compressed
+  sources::UplinkFrame uplink;
+  ASSERT_TRUE(uplink.Encode(f.frame, sources::UplinkOptions{}).ok());
+  AdaptiveJpegOptions options;
+  options.fps = 1;  // the target is the budget in bits
+  AdaptiveJpegCoder coder(options);
+  coder.SetStreamBitrate(50'000'000, 0);
+  ASSERT_TRUE(coder.Encode(uplink.input(), 0).ok());
+  const std::size_t geometry = coder.last_geometry_bytes();
+  ASSERT_LT(geometry, 1000u);
+  std::vector<int> qualities;
+  for (int i = 0; i < 40 && !coder.last_half(); ++i) {
+    qualities.push_back(coder.last_quality());
+    coder.SetStreamBitrate(static_cast<std::int64_t>(8 * (geometry + 20)), 0);
+    ASSERT_TRUE(coder.Encode(uplink.input(), 0).ok());
+  }
+  ASSERT_TRUE(coder.last_half());
+  ASSERT_GE(qualities.size(), 3u) << "the quality went down before the resolution";
+  EXPECT_EQ(qualities.back(), options.min_quality);
+  EXPECT_TRUE(std::is_sorted(qualities.rbegin(), qualities.rend()));
 }
 
 }  // namespace

@@ -2,6 +2,7 @@
 
 #include <opencv2/core/mat.hpp>
 #include <opencv2/imgproc.hpp>
+#include <algorithm>
 #include <utility>
 #include <variant>
 
@@ -57,8 +58,14 @@ void AdaptiveJpegCoder::Follow(bool halvable) {
     const bool at_floor = last_quality_.load() <= options_.min_quality;
     if (at_floor) full_floor_bytes_ = bytes;
     full_.Encoded(bytes, budget);
-    // Even the lowest quality at full resolution is over the budget: the floor below it.
-    if (at_floor && bytes > budget && halvable && options_.half_resolution_floor) {
+    // Even the lowest quality at full resolution is over the budget, or the lossless geometry
+    // alone is (no JPEG quality can help then: straight down, as after a step down of the link):
+    // the floor below it.
+    const bool geometry_over = last_geometry_bytes_.load() > budget;
+    if ((at_floor || geometry_over) && bytes > budget && halvable &&
+        options_.half_resolution_floor) {
+      // What a full-resolution frame takes at the lowest quality, at least (to come back).
+      if (!at_floor) full_floor_bytes_ = std::max(full_floor_bytes_, last_geometry_bytes_.load());
       at_half_ = true;
       half_ = QualityFollower(options_.min_quality, options_.min_quality, options_.max_quality);
     }
@@ -139,7 +146,7 @@ absl::StatusOr<FrameInput> AdaptiveJpegCoder::Encode(const FrameInput& raw,
       source = DepthFrame{Compressed(halved_.depth(), compression), halved_.colour()};
     }
   }
-  std::size_t bytes = 0;
+  std::size_t bytes = 0, geometry_bytes = 0;
   FrameInput coded;
   if (const auto* pair = std::get_if<StereoFrame>(&source)) {
     if (absl::Status s = EncodeColour(pair->left, "left", &colour_jpeg_); !s.ok()) return s;
@@ -158,7 +165,8 @@ absl::StatusOr<FrameInput> AdaptiveJpegCoder::Encode(const FrameInput& raw,
       return s;
     }
     if (absl::Status s = EncodeColour(f->colour, "colour", &colour_jpeg_); !s.ok()) return s;
-    bytes = disparity_.payload().size() + colour_jpeg_.size();
+    geometry_bytes = disparity_.payload().size();
+    bytes = geometry_bytes + colour_jpeg_.size();
     coded = DisparityFrame{PrecompressedDisparity{&disparity_}, EncodedImage{colour_jpeg_}};
   } else {
     const auto& depth = std::get<DepthFrame>(source);
@@ -171,11 +179,13 @@ absl::StatusOr<FrameInput> AdaptiveJpegCoder::Encode(const FrameInput& raw,
     }
     if (absl::Status s = convert::ToProto(*d, compression, "depth", &depth_); !s.ok()) return s;
     if (absl::Status s = EncodeColour(depth.colour, "colour", &colour_jpeg_); !s.ok()) return s;
-    bytes = depth_.payload().size() + colour_jpeg_.size();
+    geometry_bytes = depth_.payload().size();
+    bytes = geometry_bytes + colour_jpeg_.size();
     coded = DepthFrame{PrecompressedDepth{&depth_}, EncodedImage{colour_jpeg_}};
   }
   last_half_.store(half);
   last_bytes_.store(bytes);
+  last_geometry_bytes_.store(geometry_bytes);
   made_ = true;
   return coded;
 }

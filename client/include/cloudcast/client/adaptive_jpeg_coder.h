@@ -2,9 +2,10 @@
 // that follows the rate controller's target frame by frame (QualityFollower), the disparity or
 // depth lossless (row deltas + zstd), and below the lowest quality at the camera's resolution a
 // floor at half resolution (half_resolution.h): when even quality `min_quality` at full
-// resolution came out over the target's bytes per frame, frames go at half their width and
-// height, their own camera halved to match (FrameCoder::last_resolution), until the target
-// carries a full-resolution frame again. What cloudcast-client --rate-control --encoding jpeg
+// resolution came out over the target's bytes per frame (or the lossless disparity or depth
+// alone did, which no quality can help), frames go at half their width and height, their own
+// camera halved to match (FrameCoder::last_resolution), until the target carries a
+// full-resolution frame again. What cloudcast-client --rate-control --encoding jpeg
 // runs; cloudcast-load's ladder (FrameStore) halves its frames the same way.
 //
 // Takes raw frames (Stream::Send with StreamOptions::coder set): disparity or depth frames whose
@@ -59,6 +60,8 @@ class AdaptiveJpegCoder : public FrameCoder {
   int last_quality() const { return last_quality_.load(); }
   bool last_half() const { return last_half_.load(); }
   std::size_t last_bytes() const { return last_bytes_.load(); }
+  // Of them, the lossless disparity or depth (0 for a stereo pair).
+  std::size_t last_geometry_bytes() const { return last_geometry_bytes_.load(); }
 
  private:
   // Adjusts quality and resolution to how the last frame fared against the budget now.
@@ -79,6 +82,7 @@ class AdaptiveJpegCoder : public FrameCoder {
   std::atomic<int> last_quality_{0};
   std::atomic<bool> last_half_{false};
   std::atomic<std::size_t> last_bytes_{0};
+  std::atomic<std::size_t> last_geometry_bytes_{0};
 };
 
 }  // namespace cloudcast::client
