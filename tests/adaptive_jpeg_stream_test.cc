@@ -42,8 +42,8 @@ TEST(AdaptiveJpegStreamTest, HalfResolutionFramesMakeTheSameSurface) {
   options.coder = coder;
   options.rate_control = RateControlOptions{};
   // 100 kbit/s whatever the link: 417 bytes a frame at 30 fps.
-  options.rate_control->start_bps = options.rate_control->min_bps =
-      options.rate_control->max_bps = 100e3;
+  options.rate_control->start_bps = options.rate_control->min_bps = options.rate_control->max_bps =
+      100e3;
   auto client = Client::Connect(server->address());
   ASSERT_TRUE(client.ok()) << client.status();
   auto stream = (*client)->OpenStream(config, std::move(options));

@@ -1,6 +1,8 @@
 // The half-resolution floor of the client library's adaptive JPEG coder: the halving itself
 // (cloudcast/client/half_resolution.h, which cloudcast-load's FrameStore uses too) and
 // AdaptiveJpegCoder going to half resolution under a low target and back when it rises.
+#include "cloudcast/client/half_resolution.h"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -9,7 +11,6 @@
 #include <vector>
 
 #include "cloudcast/client/adaptive_jpeg_coder.h"
-#include "cloudcast/client/half_resolution.h"
 #include "cloudcast/sources/uplink.h"
 #include "support/synthetic_frame.h"
 

@@ -1,8 +1,8 @@
 #include "cloudcast/client/adaptive_jpeg_coder.h"
 
+#include <algorithm>
 #include <opencv2/core/mat.hpp>
 #include <opencv2/imgproc.hpp>
-#include <algorithm>
 #include <utility>
 #include <variant>
 
@@ -129,9 +129,8 @@ absl::StatusOr<FrameInput> AdaptiveJpegCoder::Encode(const FrameInput& raw,
     convert::Compression compression = options_.compression;
     FrameInput views;
     if (const auto* f = std::get_if<DisparityFrame>(&raw)) {
-      const DisparityView* d =
-          RawGeometry<DisparityView, CompressedDisparityView>(f->disparity, compression,
-                                                              &compression);
+      const DisparityView* d = RawGeometry<DisparityView, CompressedDisparityView>(
+          f->disparity, compression, &compression);
       views = DisparityFrame{d != nullptr ? DisparityInput(*d) : f->disparity, f->colour};
     } else {
       const auto& depth = std::get<DepthFrame>(raw);

@@ -30,8 +30,7 @@ absl::StatusOr<std::unique_ptr<Session>> Session::Start(const SessionOptions& op
   s->stats_ = stats;
   s->on_result_ = std::move(on_result);
   if (options.video) s->video_ = std::make_shared<video::FrameEncoder>(*options.video);
-  if (options.rate_control && !options.video &&
-      options.uplink.encoding == sources::Uplink::kJpeg) {
+  if (options.rate_control && !options.video && options.uplink.encoding == sources::Uplink::kJpeg) {
     // The library's adaptive JPEG coder: quality, then half resolution, follow the target.
     AdaptiveJpegOptions jpeg;
     jpeg.fps = options.fps > 0 ? options.fps : 30.0;  // unpaced: at most 30 replies a second
