@@ -23,6 +23,7 @@
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
 #include <random>
+#include <regex>
 #include <set>
 #include <sstream>
 #include <string>
@@ -546,6 +547,9 @@ TEST_F(ClientProgramTest, RateControlShowsItsTargetInTheProgressLines) {
   const std::string all = r.out + r.err;
   EXPECT_NE(all.find("Mbit/s, rtt"), std::string::npos) << r;
   EXPECT_NE(all.find("JPEG quality"), std::string::npos) << r;
+  // ... and the resolution the adaptive JPEG coder sent it at (half below quality 10).
+  EXPECT_TRUE(std::regex_search(all, std::regex("JPEG quality [0-9]+ at (full|half) resolution")))
+      << r;
   // With H.264 too: the encoder's bitrate follows the target, and no picture is lost.
   const RunResult h264 =
       Run(Join(SourceArgs(),

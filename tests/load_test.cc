@@ -267,6 +267,34 @@ TEST_F(FleetTest, HalfResolutionLevelsMakeTheSameSurface) {
   }
 }
 
+// The JSON (and the table) say what the replies said of the downlink (contract revision 4): the
+// Draco colour bits the server chose and the clouds over the stream's cap.
+TEST_F(FleetTest, TheReportCarriesTheDownlinksColourBitsAndOverCap) {
+  auto server = StartServer(1);
+  FrameStore store = SmallStore(2, 160, 120);
+  Report report;
+  FleetOptions o = Options(server->address(), 1, 50, 6, true);
+  Run(o, store, &report);
+  ASSERT_EQ(report.totals.answered, 6u);
+  nlohmann::json j = GhzJson(report);
+  ASSERT_TRUE(j.contains("downlink")) << j.dump();
+  EXPECT_EQ(j["downlink"]["colorBitsMedian"], 8);  // no cap: exact colours
+  EXPECT_EQ(j["downlink"]["colorBits"]["8"], 6);
+  EXPECT_EQ(j["downlink"]["overCap"], 0);
+
+  // A cap no cloud can meet: every cloud at the floors (5 colour bits by default), over it.
+  o.config.mutable_draco()->set_max_cloud_bytes(64);
+  Run(o, store, &report);
+  ASSERT_EQ(report.totals.answered, 6u);
+  j = GhzJson(report);
+  EXPECT_EQ(j["downlink"]["colorBitsMedian"], 5);
+  EXPECT_EQ(j["downlink"]["colorBits"]["5"], 6);
+  EXPECT_EQ(j["downlink"]["overCap"], 6);
+  EXPECT_NE(FormatTable(report).find("Draco colour bits 5 (median of the clouds), 6 over the cap"),
+            std::string::npos)
+      << FormatTable(report);
+}
+
 TEST_F(FleetTest, LosslessRunAgainstTheServerAnswersEveryFrame) {
   auto server = StartServer(2);
   FrameStore store = SmallStore(4, 160, 120);

@@ -230,6 +230,9 @@ struct Stream::Impl : public StreamSink {
                       bool wait) {
     absl::StatusOr<FrameInput> coded;
     const FrameInput* frame = &input;
+    const FrameMeta* sent_meta = &meta;
+    FrameMeta coded_meta;
+    int resolution_divisor = 1;
     if (options.coder != nullptr) {
       if (options.rate_control) {
         if (const std::optional<RateEstimate> rate = core->rate()) {
@@ -240,13 +243,22 @@ struct Stream::Impl : public StreamSink {
       coded = options.coder->Encode(input, sequence);
       if (!coded.ok()) return coded.status();
       frame = &*coded;
+      // A frame made below the camera's resolution carries the camera that matches it.
+      FrameCoder::Resolution resolution = options.coder->last_resolution();
+      resolution_divisor = resolution.divisor;
+      if (resolution.camera) {
+        coded_meta = meta;
+        coded_meta.camera = std::move(resolution.camera);
+        sent_meta = &coded_meta;
+      }
     }
     grpc::ByteBuffer bytes;
-    if (absl::Status s = frames.Write(*frame, meta, sequence, &bytes); !s.ok()) return s;
+    if (absl::Status s = frames.Write(*frame, *sent_meta, sequence, &bytes); !s.ok()) return s;
     FrameRecord record;
     record.frame_id = meta.frame_id;
     record.capture_time_unix_ns = frames.frame().capture_time_unix_ns();
     record.image_bytes = frames.image_bytes();
+    record.resolution_divisor = resolution_divisor;
     // DELIVERY_ALL waits here while a frame already waits for the write slot (back-pressure);
     // DELIVERY_LATEST never waits.
     const CoreMachine::Submitted submitted =
@@ -347,6 +359,7 @@ struct Stream::Impl : public StreamSink {
       if (r.capture_time_unix_ns == 0) {
         r.capture_time_unix_ns = frame->frame.record.capture_time_unix_ns;
       }
+      r.resolution_divisor = frame->frame.record.resolution_divisor;
     }
     r.frames_dropped = dropped_seen;
     r.frames_replaced = replaced_seen;
@@ -364,6 +377,7 @@ struct Stream::Impl : public StreamSink {
     r.sequence = s.sequence;
     r.frame_id = std::move(s.frame.record.frame_id);
     r.capture_time_unix_ns = s.frame.record.capture_time_unix_ns;
+    r.resolution_divisor = s.frame.record.resolution_divisor;
     r.times.send = s.frame.written;
     r.times.send_unix_ns = UnixNanosAt(s.frame.written);
     switch (s.fate) {

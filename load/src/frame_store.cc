@@ -6,9 +6,10 @@
 #include <algorithm>
 #include <variant>
 
-#include <opencv2/imgproc.hpp>
+#include <opencv2/core/mat.hpp>
 
 #include "absl/status/status.h"
+#include "cloudcast/client/half_resolution.h"
 
 namespace cloudcast::load {
 namespace {
@@ -44,9 +45,9 @@ std::string Label(const sources::SourceInfo& info) {
   return info.kind;
 }
 
-// `frame` at half its width and height: depth and disparity by taking every second pixel (their
-// values are measurements: averaging them would make points between two surfaces), colour by
-// averaging each 2x2 block.
+// `frame` at half its width and height, as the client library's floor makes it
+// (cloudcast/client/half_resolution.h): depth and disparity every second pixel, colour averaged
+// over each 2x2 block.
 sources::SourceFrame HalfResolution(const sources::SourceFrame& frame) {
   sources::SourceFrame half = frame;
   const std::vector<sources::ImageRole>& roles = sources::RolesOf(frame.kind);
@@ -54,9 +55,15 @@ sources::SourceFrame HalfResolution(const sources::SourceFrame& frame) {
     const cv::Mat& full = frame.images[i];
     const bool measurement =
         roles[i] == sources::ImageRole::kDisparity || roles[i] == sources::ImageRole::kDepth;
-    cv::Mat out;
-    cv::resize(full, out, cv::Size(full.cols / 2, full.rows / 2), 0, 0,
-               measurement ? cv::INTER_NEAREST : cv::INTER_AREA);
+    cv::Mat out(static_cast<int>(client::HalfSize(full.rows)),
+                static_cast<int>(client::HalfSize(full.cols)), full.type());
+    const auto cols = static_cast<std::uint32_t>(full.cols);
+    const auto rows = static_cast<std::uint32_t>(full.rows);
+    if (measurement) {
+      client::SampleHalf(full.data, full.step, cols, rows, full.elemSize(), out.data, out.step);
+    } else {
+      client::AverageHalf(full.data, full.step, cols, rows, full.channels(), out.data, out.step);
+    }
     half.images[i] = out;
   }
   return half;
@@ -295,18 +302,8 @@ FrameStore FrameStore::FromFrames(const std::vector<v1::Frame>& frames, const Ca
 
 void FrameStore::SetStreamCamera(const v1::CameraModel& stream) {
   if (first_half_level_ == 0) return;
-  // Pixel (u, v) of a half-resolution frame is pixel (2u, 2v) of the full one: the focal lengths
-  // and a principal point that is set halve (unset, it is the image's centre either way), and
-  // so does a disparity in pixels: d' = d * scale + offset.
-  v1::CameraModel half;
-  half.set_fx(stream.fx() / 2);
-  if (stream.has_fy()) half.set_fy(stream.fy() / 2);
-  if (stream.has_cx()) half.set_cx(stream.cx() / 2);
-  if (stream.has_cy()) half.set_cy(stream.cy() / 2);
-  if (kind_ == sources::FrameKind::kDisparity) {
-    half.set_disparity_scale((stream.has_disparity_scale() ? stream.disparity_scale() : 1.0) / 2);
-    if (stream.has_disparity_offset()) half.set_disparity_offset(stream.disparity_offset() / 2);
-  }
+  const v1::CameraModel half =
+      client::HalfResolutionCamera(stream, kind_ == sources::FrameKind::kDisparity);
   for (std::size_t level = first_half_level_; level < levels_.size(); ++level) {
     for (std::shared_ptr<const std::string>& tail : levels_[level]) {
       v1::Frame frame;

@@ -29,6 +29,25 @@ void Recorder::Answered(std::int64_t latency_ns, std::int64_t service_ns,
   ++status_codes_["OK"];
 }
 
+void Recorder::Downlink(int color_bits, bool over_cap) {
+  std::lock_guard<std::mutex> lock(mu_);
+  ++totals_.color_bits[color_bits];
+  if (over_cap) ++totals_.over_cap;
+}
+
+int Totals::color_bits_median() const {
+  std::uint64_t n = 0;
+  for (const auto& [bits, clouds] : color_bits) n += bits > 0 ? clouds : 0;
+  // Nearest rank, as the latency percentiles.
+  std::uint64_t seen = 0;
+  for (const auto& [bits, clouds] : color_bits) {
+    if (bits <= 0) continue;
+    seen += clouds;
+    if (2 * seen >= n) return bits;
+  }
+  return 0;
+}
+
 void Recorder::FrameError(const std::string& code, const std::string& message,
                           const std::string& instance) {
   std::lock_guard<std::mutex> lock(mu_);

@@ -145,6 +145,10 @@ std::string FormatTable(const Report& r) {
       "  encoding  {}, {:.1f} KB sent a frame; generator CPU {:.2f} s ({:.3f} ms a frame)\n",
       r.encoding.empty() ? "?" : r.encoding, r.bytes_per_frame() / 1024, r.result.cpu_s,
       r.generator_ms_per_frame());
+  if (t.answered > 0) {
+    out += fmt::format("  downlink  Draco colour bits {} (median of the clouds), {} over the cap\n",
+                       t.color_bits_median(), t.over_cap);
+  }
   if (r.video) {
     out += fmt::format(
         "  video     IDRs sent {} ({} asked for)  replies asking for an IDR {}  skipped before "
@@ -293,6 +297,11 @@ nlohmann::json GhzJson(const Report& r) {
                               {"repliesAskingForKeyframe", t.keyframe_needed},
                               {"skippedBeforeEncoding", t.skipped}};
   }
+  json color_bits = json::object();
+  for (const auto& [bits, clouds] : t.color_bits) color_bits[std::to_string(bits)] = clouds;
+  j["downlink"] = {{"colorBitsMedian", t.color_bits_median()},
+                   {"colorBits", color_bits},
+                   {"overCap", t.over_cap}};
   j["generator"] = {{"cpuSeconds", r.result.cpu_s},
                     {"cpuMsPerFrameSent", r.generator_ms_per_frame()}};
   j["drops"] = t.drops;

@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "cloudcast/client/adaptive_jpeg_coder.h"
 
 namespace cloudcast::client::app {
 namespace {
@@ -29,6 +30,14 @@ absl::StatusOr<std::unique_ptr<Session>> Session::Start(const SessionOptions& op
   s->stats_ = stats;
   s->on_result_ = std::move(on_result);
   if (options.video) s->video_ = std::make_shared<video::FrameEncoder>(*options.video);
+  if (options.rate_control && !options.video && options.uplink.encoding == sources::Uplink::kJpeg) {
+    // The library's adaptive JPEG coder: quality, then half resolution, follow the target.
+    AdaptiveJpegOptions jpeg;
+    jpeg.fps = options.fps > 0 ? options.fps : 30.0;  // unpaced: at most 30 replies a second
+    jpeg.start_quality = options.uplink.jpeg_quality;
+    jpeg.stream_camera = options.config.camera();
+    s->jpeg_ = std::make_shared<AdaptiveJpegCoder>(jpeg);
+  }
 
   ClientOptions client_options;
   client_options.security = options.security;
@@ -56,7 +65,10 @@ absl::StatusOr<std::unique_ptr<Session>> Session::Start(const SessionOptions& op
   // asks the encoder for the IDRs the server's replies ask for and, with --rate-control, sets
   // its bitrate to the controller's target frame by frame (less the other images' bytes, at most
   // --h264-mbps).
+  // --rate-control --encoding jpeg: the adaptive JPEG coder makes each frame from raw images as
+  // it is sent, the same way.
   stream_options.coder = s->video_;
+  if (s->jpeg_ != nullptr) stream_options.coder = s->jpeg_;
   auto stream = s->client_->OpenStream(options.config, std::move(stream_options));
   if (!stream.ok()) {
     return absl::Status(stream.status().code(),
@@ -133,7 +145,9 @@ void Session::ReceiveLoop() {
       }
     }
     stats_->RecordResult(result);
-    if (result.rate) stats_->RecordRate(*result.rate, jpeg_quality_.load());
+    if (result.rate) {
+      stats_->RecordRate(*result.rate, jpeg_ != nullptr ? jpeg_->last_quality() : 0);
+    }
     if (on_result_) on_result_(result);
     {
       std::lock_guard<std::mutex> lock(mu_);
@@ -161,8 +175,8 @@ void Session::SendLoop() {
   sources::UplinkFrame uplink;
   bool tiff_noted = false;
   sources::UplinkOptions uplink_options = options_.uplink;
-  const bool follow = options_.rate_control && uplink_options.encoding == sources::Uplink::kJpeg;
-  QualityFollower quality(uplink_options.jpeg_quality, 10, 95);
+  // The adaptive JPEG coder takes raw images.
+  if (jpeg_ != nullptr) uplink_options.encoding = sources::Uplink::kRaw;
   std::uint64_t bytes_recorded = 0;
 
   for (;;) {
@@ -193,10 +207,6 @@ void Session::SendLoop() {
     FrameMeta meta;
     meta.capture_time_unix_ns = UnixNanosNow();  // encoding below counts as latency
     meta.frame_id = frame.name;
-    if (follow) {
-      uplink_options.jpeg_quality = quality.quality();
-      jpeg_quality_.store(quality.quality());
-    }
     if (absl::Status s = uplink.Encode(frame, uplink_options); !s.ok()) {
       SetError(absl::Status(s.code(), absl::StrCat("frame ", frame.name, ": ", s.message())));
       break;
@@ -223,13 +233,6 @@ void Session::SendLoop() {
     const std::uint64_t frame_bytes = bytes_now - bytes_recorded;
     bytes_recorded = bytes_now;
     stats_->RecordSent(frame_bytes);
-    if (follow) {
-      if (const std::optional<RateEstimate> rate = stream_->rate()) {
-        // Unpaced: the budget of a frame at the rate the replies come back (30 fps at most).
-        const double fps = paced ? options_.fps : 30.0;
-        quality.Encoded(frame_bytes, static_cast<std::size_t>(rate->target_bps / 8 / fps));
-      }
-    }
     {
       std::lock_guard<std::mutex> lock(mu_);
       ++sent_;

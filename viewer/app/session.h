@@ -18,6 +18,7 @@
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "app/stats.h"
+#include "cloudcast/client/adaptive_jpeg_coder.h"
 #include "cloudcast/client/client.h"
 #include "cloudcast/sources/frame_source.h"
 #include "cloudcast/sources/uplink.h"
@@ -43,8 +44,10 @@ struct SessionOptions {
   // Decode the Draco replies (off for pure load measurements).
   bool decode_clouds = true;
   // The adaptive sender (--rate-control): the stream's rate controller holds frames past its
-  // window (the stream must be DELIVERY_LATEST), and with JPEG colour the quality follows its
-  // target bitrate frame by frame (QualityFollower).
+  // window (the stream must be DELIVERY_LATEST), and with JPEG colour (no video) the library's
+  // AdaptiveJpegCoder makes each frame as it goes: the quality follows its target bitrate frame
+  // by frame, and below quality 10 at full resolution the frames go at half resolution (their
+  // camera halved) until the target allows full again.
   bool rate_control = false;
 };
 
@@ -90,6 +93,8 @@ class Session {
   std::unique_ptr<Stream> stream_;
   v1::ServerInfo server_info_;
   std::shared_ptr<video::FrameEncoder> video_;  // options.video: the stream's coder
+  // --rate-control with JPEG (and no video): the stream's coder.
+  std::shared_ptr<AdaptiveJpegCoder> jpeg_;
 
   std::mutex mu_;
   std::condition_variable cv_;  // in-flight count changed, stop, receiver ended, done
@@ -104,7 +109,6 @@ class Session {
   bool stop_ = false;
   absl::Status error_;
   std::atomic<bool> done_{false};
-  std::atomic<int> jpeg_quality_{0};  // --rate-control with JPEG: the quality in force
 
   std::thread sender_, receiver_;
 };

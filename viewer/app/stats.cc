@@ -50,6 +50,8 @@ void StreamStats::RecordResult(const Result& result) {
   position_bits_ = result.reply.position_bits();
   color_bits_ = result.reply.color_bits();
   if (result.reply.has_over_cap()) ++over_cap_;
+  resolution_divisor_ = result.resolution_divisor;
+  if (result.resolution_divisor == 2) ++half_resolution_;
   if (result.capture_time_unix_ns != 0 && result.times.receive_unix_ns != 0) {
     const double ms = std::chrono::duration<double, std::milli>(result.latency()).count();
     latencies_ms_.push_back(ms);
@@ -85,6 +87,8 @@ StatsSnapshot StreamStats::Snapshot() const {
   s.position_bits = position_bits_;
   s.color_bits = color_bits_;
   s.over_cap = over_cap_;
+  s.half_resolution = half_resolution_;
+  s.resolution_divisor = resolution_divisor_;
   if (received_ > 0) {
     const double span = Seconds(last_receive_ - first_send_);
     s.received_fps = span > 0 ? received_ / span : 0;
@@ -156,7 +160,10 @@ std::string StreamStats::ProgressLine() {
         "frame",
         rate_->target_bps / 1e6, rate_->rtt_ms, rate_->queue_delay_ms, rate_->frames_in_flight,
         PerFrame(s.uplink_bytes, s.sent) / 1024.0);
-    if (jpeg_quality_ > 0) line += fmt::format(", JPEG quality {}", jpeg_quality_);
+    if (jpeg_quality_ > 0) {
+      line += fmt::format(", JPEG quality {} at {} resolution", jpeg_quality_,
+                          s.resolution_divisor == 2 ? "half" : "full");
+    }
   }
   return line;
 }
@@ -177,6 +184,10 @@ std::string StreamStats::SummaryText(const StatsSnapshot& s, bool with_display) 
   out += fmt::format("per cloud: {:.0f} points, {:.1f} KB Draco; {:.1f} KB sent per frame\n",
                      PerFrame(s.points, s.received), PerFrame(s.draco_bytes, s.received) / 1024.0,
                      PerFrame(s.uplink_bytes, s.sent) / 1024.0);
+  if (s.half_resolution > 0) {
+    out += fmt::format("resolution: {} of {} clouds from frames sent at half resolution\n",
+                       s.half_resolution, s.received);
+  }
   if (s.color_bits > 0) {
     out += fmt::format("Draco bits (last cloud): {} position, {} colour; {} clouds over the cap\n",
                        s.position_bits, s.color_bits, s.over_cap);
@@ -207,6 +218,7 @@ Json StreamStats::ToJson(const StatsSnapshot& s, bool with_display) {
   j["mean_uplink_bytes_per_frame"] = PerFrame(s.uplink_bytes, s.sent);
   j["draco_bits"] = {{"position", s.position_bits}, {"color", s.color_bits}};
   j["frames_over_cap"] = s.over_cap;
+  j["half_resolution_frames"] = s.half_resolution;
   j["mean_us_per_frame"] = {{"server_decode", s.server_decode_us},
                             {"server_pipeline", s.server_pipeline_us},
                             {"server_draco_encode", s.server_encode_us},

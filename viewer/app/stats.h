@@ -53,6 +53,10 @@ struct StatsSnapshot {
   // clouds it could not bring under the cap (CloudReply.over_cap).
   int position_bits = 0, color_bits = 0;
   std::uint64_t over_cap = 0;
+  // Clouds of frames sent at half resolution (--rate-control's floor: Result::resolution_divisor
+  // 2), and the resolution divisor of the latest (1: the camera's).
+  std::uint64_t half_resolution = 0;
+  int resolution_divisor = 1;
   double received_fps = 0;   // clouds per second, first send to last reply
   double displayed_fps = 0;  // new clouds drawn per second, first to last display
   double latency_smoothed_ms = 0;
@@ -93,6 +97,8 @@ class StreamStats {
   std::uint64_t uplink_bytes_ = 0, points_ = 0, draco_bytes_ = 0;
   int position_bits_ = 0, color_bits_ = 0;
   std::uint64_t over_cap_ = 0;
+  std::uint64_t half_resolution_ = 0;
+  int resolution_divisor_ = 1;
   std::vector<double> latencies_ms_;
   Smoothed latency_smoothed_;
   double sum_server_decode_us_ = 0, sum_pipeline_us_ = 0, sum_encode_us_ = 0, sum_queue_us_ = 0;

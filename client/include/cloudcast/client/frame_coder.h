@@ -8,6 +8,7 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
 
 #include "absl/status/statusor.h"
 #include "cloudcast/client/frame.h"
@@ -30,6 +31,16 @@ class FrameCoder {
   // stream, and the bytes the last frame carried beside what this coder made (a lossless
   // disparity or depth map, a raw image): the coder's own share is what is left.
   virtual void SetStreamBitrate(std::int64_t stream_bps, std::size_t other_bytes_per_frame) = 0;
+
+  // The resolution the last Encode made its frame at. A coder whose floor is a lower resolution
+  // than the camera's (AdaptiveJpegCoder: half) gives that frame its own camera, which the stream
+  // sends as Frame.camera in place of FrameMeta::camera, and the frame's Result says so
+  // (Result::resolution_divisor). Default: the camera's resolution, the caller's camera.
+  struct Resolution {
+    int divisor = 1;                        // 1: the camera's; 2: half its width and height
+    std::optional<v1::CameraModel> camera;  // set with divisor > 1
+  };
+  virtual Resolution last_resolution() const { return {}; }
 };
 
 }  // namespace cloudcast::client

@@ -68,6 +68,10 @@ struct Result {
   // bitrate, round trip, queueing delay, window). Unset without rate control and for frames that
   // got no reply.
   std::optional<RateEstimate> rate;
+  // The resolution the frame went at: 1, the camera's; 2, half its width and height (the floor
+  // of a rate-controlled coder, StreamOptions::coder: AdaptiveJpegCoder), with a camera halved to
+  // match. Set for every frame that was made (sent or not); 1 for frames replaced before it.
+  int resolution_divisor = 1;
 
   // The decoded cloud: unorganized, finite points, alpha 255. Empty on errors, when the filters
   // left nothing, or with ClientOptions::decode_clouds off.

@@ -49,6 +49,7 @@ struct FrameRecord {
   std::int64_t capture_time_unix_ns = 0;
   std::int64_t intended_ns = 0;  // steady-clock ns the frame was due (load schedules); 0: none
   std::uint64_t image_bytes = 0;
+  int resolution_divisor = 1;  // FrameCoder::Resolution (Result::resolution_divisor)
 };
 
 using CoreMachine = StreamMachine<grpc::ByteBuffer, FrameRecord>;

@@ -73,7 +73,14 @@ struct Totals {
   std::uint64_t keyframe_needed = 0;    // replies naming a bitstream that needs an IDR
   std::uint64_t keyframes_sent = 0;     // frames sent whose pictures were IDRs
   std::uint64_t keyframe_restarts = 0;  // IDRs sent because a reply asked (the sequence restarted)
+  // The downlink (contract revision 4): clouds by the Draco colour bits the server chose
+  // (CloudReply.color_bits; 0 from an older server), and those over the stream's cap
+  // (CloudReply.over_cap: DracoConfig.max_cloud_bytes could not be met within its bounds).
+  std::map<int, std::uint64_t> color_bits;
+  std::uint64_t over_cap = 0;
   std::uint64_t late() const { return late_flow_control + late_scheduler; }
+  // The median colour bits of the clouds that said (0 when none did).
+  int color_bits_median() const;
 };
 
 class Recorder {
@@ -84,6 +91,9 @@ class Recorder {
   void Late(bool flow_control);
   void Answered(std::int64_t latency_ns, std::int64_t service_ns, const std::string& instance,
                 std::size_t bytes);
+  // What an answered frame's cloud says of the downlink: its colour bits and whether it was over
+  // the cap.
+  void Downlink(int color_bits, bool over_cap);
   // A FrameError: its code's name (e.g. "INVALID_ARGUMENT") and message.
   void FrameError(const std::string& code, const std::string& message, const std::string& instance);
   void Dropped(std::uint64_t frames);
