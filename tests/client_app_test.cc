@@ -287,7 +287,7 @@ TEST_F(ClientSessionTest, SessionSendsH264UnderRateControl) {
   video.encoder.bitrate_bps = 2'000'000;
   video.encoder.keyframe_interval = 0;
   options.video = video;
-  options.rate_control = true;
+  options.rate_control = client::RateControlOptions{};
   options.config.set_delivery(v1::DELIVERY_LATEST);
   StreamStats stats;
   std::uint64_t keyframe_requests = 0, rates = 0;
@@ -568,6 +568,14 @@ TEST_F(ClientProgramTest, RateControlShowsItsTargetInTheProgressLines) {
                             "env -u DISPLAY");
   EXPECT_EQ(bad.code, 2) << bad;
   EXPECT_NE((bad.out + bad.err).find("--rate-control"), std::string::npos) << bad;
+  // The controller's settings (cli/rate_flags.h) need it.
+  const RunResult orphan = Run(Join(SourceArgs(), {"--server", shared_target(), "--no-window",
+                                                   "--rate-target-delay-ms", "15"}),
+                               "env -u DISPLAY");
+  EXPECT_EQ(orphan.code, 2) << orphan;
+  EXPECT_NE((orphan.out + orphan.err).find("--rate-target-delay-ms needs --rate-control"),
+            std::string::npos)
+      << orphan;
 }
 
 TEST_F(ClientProgramTest, DefaultSourceIsTsukubaWhenPresentElseSynthetic) {

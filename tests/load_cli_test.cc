@@ -61,6 +61,8 @@ TEST_F(LoadCliTest, BadFlagsExitTwoNamingTheFlag) {
       {{"--input", "stereo", "--matcher", "census"}, "--matcher"},
       {{"--depth-glob", "z/*.png"}, "--depth-glob does not apply to --input disparity"},
       {{"--input", "stereo", "--colour-glob", "c/*.png"}, "needs --right-glob"},
+      {{"--rate-target-delay-ms", "15"}, "--rate-target-delay-ms needs --rate-control"},
+      {{"--rate-control", "--rate-max-mbps", "inf"}, "--rate-max-mbps"},
   };
   for (const auto& [args, flag] : cases) {
     std::vector<std::string> full = {"--server", null_->address(), "--synthetic", "64x48"};

@@ -56,7 +56,7 @@ TEST(RateFlagsTest, GivenValuesReachTheOptions) {
 
 TEST(RateFlagsTest, ErrorsNameTheFlag) {
   EXPECT_NE(Parsed({"--rate-target-delay-ms", "15"}).error.find(
-                "--rate-target-delay-ms need --rate-control"),
+                "--rate-target-delay-ms needs --rate-control"),
             std::string::npos);
   EXPECT_NE(Parsed({"--rate-control", "--rate-target-delay-ms", "0"})
                 .error.find("--rate-target-delay-ms"),

@@ -63,7 +63,8 @@ std::vector<std::string> RateFlags::GivenFlags() const {
 absl::Status RateFlags::Check(bool rate_control) const {
   if (!rate_control && AnyGiven()) {
     return absl::InvalidArgumentError(
-        absl::StrCat(absl::StrJoin(GivenFlags(), ", "), " need --rate-control"));
+        absl::StrCat(absl::StrJoin(GivenFlags(), ", "),
+                     GivenFlags().size() == 1 ? " needs" : " need", " --rate-control"));
   }
   if (min_mbps_ > max_mbps_) {
     return absl::InvalidArgumentError(absl::StrCat("--rate-min-mbps (", min_mbps_,

@@ -26,6 +26,7 @@
 #include "cloudcast/cli/role_flags.h"
 #include "cloudcast/cli/stage_flags.h"
 #include "cloudcast/cli/stereo_flags.h"
+#include "cloudcast/cli/rate_flags.h"
 #include "cloudcast/cli/video_flags.h"
 #include "cloudcast/client/config.h"
 #include "cloudcast/core/limits.h"
@@ -95,6 +96,7 @@ struct Flags {
   std::string encoding = cloudcast::sources::Name(FrameDefaults().uplink.encoding);
   int jpeg_quality = FrameDefaults().uplink.jpeg_quality;
   std::unique_ptr<cloudcast::cli::VideoFlags> h264;  // --h264-*, as cloudcast-client's
+  std::unique_ptr<cloudcast::cli::RateFlags> rate;   // --rate-*, as cloudcast-client's
   bool rate_control = false;
   bool lossless = false;
   // Server memory and the soak
@@ -292,6 +294,7 @@ std::unique_ptr<cloudcast::cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
                "disparity and depth lossless (zstd), colour JPEG at the best quality of a ladder "
                "(95 to 10) that fits the target. Replaces --encoding and --jpeg-quality")
       ->group(frames);
+  f.rate = std::make_unique<cloudcast::cli::RateFlags>(app, frames);
   app.add_flag("--lossless", f.lossless,
                "Every frame is answered (DELIVERY_ALL). Default: DELIVERY_LATEST, the server "
                "skips stale frames (counted as drops)")
@@ -437,6 +440,9 @@ int main(int argc, char** argv) {
       return usage("--watch-memory " + std::string(rss.status().message()));
     }
   }
+  if (absl::Status s = f.rate->Check(f.rate_control); !s.ok()) {
+    return usage(std::string(s.message()));
+  }
   if (f.rate_control && (app.count("--encoding") || app.count("--jpeg-quality"))) {
     return usage(
         "--rate-control chooses the encoding itself; leave out --encoding and "
@@ -502,7 +508,7 @@ int main(int argc, char** argv) {
   o.scheduler_threads = f.scheduler_threads;
   o.lb_policy = f.lb;
   o.resilient = f.resilient;
-  o.rate_control = f.rate_control;
+  if (f.rate_control) o.rate_control = f.rate->Options();
   o.reconnect_timeout =
       std::chrono::nanoseconds(static_cast<std::int64_t>(f.reconnect_timeout_s * 1e9));
   std::string schedule_text =
@@ -621,6 +627,8 @@ int main(int argc, char** argv) {
       {"delivery", f.lossless ? "all" : "latest"},
       {"encoding", store->encoding()},
       {"rate-control", f.rate_control},
+      {"rate-target-delay-ms",
+       o.rate_control ? static_cast<double>(o.rate_control->target_delay.count()) : 0.0},
       {"input", f.input},
       {"frames-source", store->description()},
       {"seed", f.seed},

@@ -88,7 +88,7 @@ class Fleet::Driver : public client::StreamSink {
     std::int64_t reconnect_timeout_ns;
     std::int64_t t0_steady_ns;  // time zero of the schedule, steady clock
     std::int64_t t0_unix_ns;    // the same instant, Unix time (capture_time_unix_ns)
-    bool rate_control;
+    std::optional<client::RateControlOptions> rate_control;
     double fps;  // the schedule's rate at its start (the rate controller's frame budget)
     const VideoSequence* video;  // the store's picture sequence; null: frames in any order
   };
@@ -121,7 +121,7 @@ class Fleet::Driver : public client::StreamSink {
     o.machine.resilient = ctx_->resilient;
     o.machine.reconnect_timeout = std::chrono::nanoseconds(ctx_->reconnect_timeout_ns);
     if (config_ != nullptr) o.config = *config_;
-    if (ctx_->rate_control) o.rate_control = client::RateControlOptions{};
+    o.rate_control = ctx_->rate_control;
     core_ = client::StreamCore::Start(channel, std::move(o), this);
     if (ctx_->closed_loop) TopUp();
   }
@@ -338,7 +338,7 @@ class Fleet::Driver : public client::StreamSink {
     if (ctx_->rate_control) {
       std::lock_guard<std::mutex> lock(mu_);
       // Before the first reply: the controller's starting rate.
-      const double target = rate_ ? rate_->target_bps : client::RateControlOptions{}.start_bps;
+      const double target = rate_ ? rate_->target_bps : ctx_->rate_control->start_bps;
       level = ctx_->store->LevelFor(target / 8 / ctx_->fps);
     }
     grpc::ByteBuffer bytes = ctx_->store->Request(

@@ -36,6 +36,7 @@
 #include "cloudcast/cli/role_flags.h"
 #include "cloudcast/cli/stage_flags.h"
 #include "cloudcast/cli/stereo_flags.h"
+#include "cloudcast/cli/rate_flags.h"
 #include "cloudcast/cli/video_flags.h"
 #include "cloudcast/client/config.h"
 #include "cloudcast/core/camera.h"
@@ -100,6 +101,7 @@ struct Flags {
   // --encoding h264 (docs/video.md): the colour image, or a stereo pair, as H.264 pictures; the
   // --h264-* flags, shared with cloudcast-load.
   std::unique_ptr<cli::VideoFlags> h264;
+  std::unique_ptr<cli::RateFlags> rate;  // --rate-*
 
   // TLS and the bearer token (cli::ConnectionFlags), read after parsing.
   client::ChannelSecurity security;
@@ -253,6 +255,7 @@ std::unique_ptr<cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
                "round trip and "
                "queueing delay. Not with --lossless")
       ->group(streaming);
+  f.rate = std::make_unique<cli::RateFlags>(app, streaming);
   f.h264 = std::make_unique<cli::VideoFlags>(app, streaming);
 
   const std::string stages = "Camera and stages (stage flags left out: the server's defaults)";
@@ -550,7 +553,7 @@ int Run(const Flags& f, const cli::StageFlags& stages) {
   options.config = *std::move(config);
   options.fps = f.fps;
   options.max_in_flight = f.in_flight;
-  options.rate_control = f.rate_control;
+  if (f.rate_control) options.rate_control = f.rate->Options();
   sources::ParseUplink(f.encoding, &options.uplink.encoding);
   options.uplink.jpeg_quality = f.jpeg_quality;
   if (f.encoding == video::kH264) {
@@ -738,6 +741,9 @@ int ClientMain(int argc, char** argv) {
   if (absl::Status s = f.stereo->Check(); !s.ok()) return usage(std::string(s.message()));
   if (f.encoding != video::kH264 && f.h264->AnyGiven()) {
     return usage(f.h264->GivenFlags().front() + " needs --encoding h264");
+  }
+  if (absl::Status s = f.rate->Check(f.rate_control); !s.ok()) {
+    return usage(std::string(s.message()));
   }
   if (f.rate_control && f.lossless) {
     return usage(

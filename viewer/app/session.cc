@@ -60,7 +60,7 @@ absl::StatusOr<std::unique_ptr<Session>> Session::Start(const SessionOptions& op
                s->server_info_.draco_version());
 
   StreamOptions stream_options;
-  if (options.rate_control) stream_options.rate_control = RateControlOptions{};
+  stream_options.rate_control = options.rate_control;
   // The stream encodes each raw frame when it can send it (never replacing an encoded picture),
   // asks the encoder for the IDRs the server's replies ask for and, with --rate-control, sets
   // its bitrate to the controller's target frame by frame (less the other images' bytes, at most

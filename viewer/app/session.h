@@ -47,8 +47,8 @@ struct SessionOptions {
   // window (the stream must be DELIVERY_LATEST), and with JPEG colour (no video) the library's
   // AdaptiveJpegCoder makes each frame as it goes: the quality follows its target bitrate frame
   // by frame, and below quality 10 at full resolution the frames go at half resolution (their
-  // camera halved) until the target allows full again.
-  bool rate_control = false;
+  // camera halved) until the target allows full again. Unset: no rate control.
+  std::optional<RateControlOptions> rate_control;
 };
 
 class Session {

@@ -34,6 +34,7 @@
 #include <functional>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -80,8 +81,8 @@ struct FleetOptions {
   std::chrono::nanoseconds reconnect_timeout = client::StreamOptions{}.reconnect_timeout;
   // The adaptive sender (client::RateControlOptions): each stream's rate controller sets its
   // window and picks each frame's level of the store's ladder (FrameSourceOptions::jpeg_ladder)
-  // from its target bitrate at the schedule's rate.
-  bool rate_control = false;
+  // from its target bitrate at the schedule's rate. Unset: a fixed encoding.
+  std::optional<client::RateControlOptions> rate_control;
   // TLS and the bearer token of every channel (cloudcast/client/security.h); default plaintext.
   client::ChannelSecurity security;
 };
