@@ -73,6 +73,10 @@ void BridgeStats::Reply(const client::Result& r) {
   points_.Add(r.reply.point_count());
   draco_bytes_.Add(static_cast<double>(r.draco_bytes()));
   position_error_bound_ = r.reply.position_error_bound();
+  position_bits_ = r.reply.position_bits();
+  color_bits_ = r.reply.color_bits();
+  if (r.reply.has_over_cap()) ++over_cap_;
+  if (r.rate) rate_ = *r.rate;
 }
 
 void BridgeStats::StreamDropped(std::uint64_t frames_dropped) {
@@ -147,6 +151,15 @@ DiagnosticReport BridgeStats::Report(double now_s, const std::string& name,
   Add(&s, "points_mean", Fixed(n > 0 ? points_.sum / n : 0.0, 0));
   Add(&s, "draco_bytes_mean", Fixed(n > 0 ? draco_bytes_.sum / n : 0.0, 0));
   Add(&s, "position_error_bound", Fixed(position_error_bound_, 6));
+  Add(&s, "position_bits", std::to_string(position_bits_));
+  Add(&s, "color_bits", std::to_string(color_bits_));
+  Add(&s, "replies_over_cap", std::to_string(over_cap_));
+  if (rate_) {
+    Add(&s, "target_kbps", Fixed(rate_->target_bps / 1000.0, 0));
+    Add(&s, "delivered_kbps", Fixed(rate_->delivered_bps / 1000.0, 0));
+    Add(&s, "rtt_ms", Fixed(rate_->rtt_ms));
+    Add(&s, "queue_delay_ms", Fixed(rate_->queue_delay_ms));
+  }
   if (!last_error_.empty()) Add(&s, "last_error", last_error_);
 
   period_clouds_ = period_errors_ = period_sent_ = 0;
