@@ -72,6 +72,9 @@ class BridgeStats {
   // replies that came back over the cap.
   int position_bits_ = 0, color_bits_ = 0;
   std::uint64_t over_cap_ = 0;
+  // The uplink: the bytes the server counted on the stream (CloudReply.stream_bytes_received,
+  // a running total per stream) since the period began, and the last total seen.
+  std::uint64_t period_uplink_bytes_ = 0, last_stream_bytes_ = 0;
   // rate_control: the rate controller's estimate after the last reply (its target is what the
   // video encoder follows).
   std::optional<client::RateEstimate> rate_;

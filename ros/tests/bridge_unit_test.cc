@@ -538,6 +538,50 @@ TEST(BridgeStats, ReportsTheReplysStageTimesAndCounters) {
   EXPECT_NE(next.status[0].message.find("no stream"), std::string::npos);
 }
 
+// The uplink's bytes (from the server's running count per stream), the quantization a downlink
+// cap made the server choose, and the rate controller's estimate.
+TEST(BridgeStats, ReportsTheUplinkTheCapsBitsAndTheRateTarget) {
+  BridgeStats stats;
+  (void)stats.Report(0.0, "bridge", "x");  // the first period starts at 0 s
+  const auto reply = [&](std::uint64_t stream_bytes, int color_bits, bool over_cap) {
+    client::Result r;
+    r.reply.set_stream_bytes_received(stream_bytes);
+    r.reply.set_position_bits(11);
+    r.reply.set_color_bits(color_bits);
+    if (over_cap) r.reply.mutable_over_cap()->set_max_cloud_bytes(1000);
+    client::RateEstimate rate;
+    rate.target_bps = 2.5e6;
+    rate.rtt_ms = 40;
+    r.rate = rate;
+    stats.Sent();
+    stats.Reply(r);
+  };
+  reply(10000, 8, false);
+  reply(30000, 5, true);
+  std::map<std::string, std::string> v;
+  for (const auto& [key, value] : stats.Report(2.0, "bridge", "x").values) v[key] = value;
+  EXPECT_EQ(v["uplink_bytes_per_cloud"], "15000");
+  EXPECT_EQ(v["uplink_kbps"], "120");  // 30,000 bytes in 2 s
+  EXPECT_EQ(v["position_bits"], "11");
+  EXPECT_EQ(v["color_bits"], "5");
+  EXPECT_EQ(v["replies_over_cap"], "1");
+  EXPECT_EQ(v["target_kbps"], "2500");
+  EXPECT_EQ(v["rtt_ms"], "40.000");
+  // A new stream (after a lost one) counts from 0 again: all of its total is new.
+  reply(4000, 8, false);
+  v.clear();
+  for (const auto& [key, value] : stats.Report(3.0, "bridge", "x").values) v[key] = value;
+  EXPECT_EQ(v["uplink_bytes_per_cloud"], "4000");
+  EXPECT_EQ(v["replies_over_cap"], "1");
+  // Without rate control no estimate is reported.
+  BridgeStats plain;
+  client::Result r;
+  plain.Reply(r);
+  v.clear();
+  for (const auto& [key, value] : plain.Report(1.0, "bridge", "x").values) v[key] = value;
+  EXPECT_EQ(v.count("target_kbps"), 0u);
+}
+
 // A refusal of the bridge's first call (a wrong token) is reported before any frame comes.
 TEST(BridgeStats, ALinkDownFromTheStartIsAnErrorNamingWhy) {
   BridgeStats stats;
