@@ -331,6 +331,13 @@ absl::Status ReadUplink(const ParamReader& p, BridgeOptions* o) {
     CLOUDCAST_ASSIGN_OR_RETURN(value, p.Bool(name));
     if (value) *out = *value;
   }
+  // One image to code: the layout of a pair's two would be silently ignored.
+  CLOUDCAST_ASSIGN_OR_RETURN(separate, p.Bool("h264/separate_stereo"));
+  if (separate && o->input != InputKind::kStereo) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        p.Display("h264/separate_stereo"), " is set but ", p.Display("input"), " is '",
+        std::string(Name(o->input)), "'; it applies to ", p.Display("input"), " stereo only"));
+  }
   return absl::OkStatus();
 }
 

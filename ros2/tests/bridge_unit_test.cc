@@ -299,6 +299,8 @@ TEST(BridgeUplink, H264SettingsAreCheckedByTheFlagsRulesNamingTheParameter) {
       {{"h264.threads:=17"}, "h264.threads is 17; must be in 1..16"},
       {{"h264.threads:=two"}, "h264.threads is 'two'; must be an integer"},
       {{"h264.grey:=3"}, "h264.grey"},
+      {{"h264.separate_stereo:=true"},
+       "h264.separate_stereo is set but input is 'disparity'; it applies to input stereo only"},
   };
   for (const auto& [params, message] : bad) {
     std::vector<std::string> with = params;
@@ -310,7 +312,8 @@ TEST(BridgeUplink, H264SettingsAreCheckedByTheFlagsRulesNamingTheParameter) {
 
 TEST(BridgeUplink, H264SettingsReachTheStreamsEncoder) {
   if (!ros_bridge::HasVideoEncoder()) GTEST_SKIP() << "this build has no video encoder";
-  auto o = Read({"encoding:=h264", "h264.preset:=ultrafast", "h264.crf:=0", "h264.mbps:=2.5",
+  auto o = Read({"input:=stereo", "encoding:=h264", "h264.preset:=ultrafast", "h264.crf:=0",
+                 "h264.mbps:=2.5",
                  "h264.fps:=15.0", "h264.keyframe_interval:=30", "h264.threads:=2",
                  "h264.colour_444:=true", "h264.grey:=false", "h264.separate_stereo:=true",
                  "rate_control:=true"});
