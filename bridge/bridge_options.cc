@@ -8,11 +8,17 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
+#include "cloudcast/client/config.h"
 #include "cloudcast/core/stereo.h"
 #include "cloudcast/proto/convert.h"
 
 namespace cloudcast::ros_bridge {
 namespace {
+
+const video::H264Settings& H264Default() {
+  static const video::H264Settings s;
+  return s;
+}
 
 const std::vector<ParamDoc>& Docs() {
   static const std::vector<ParamDoc> docs = {
@@ -39,9 +45,38 @@ const std::vector<ParamDoc>& Docs() {
        "follow the link instead of queueing behind it (a robot on Wi-Fi or LTE): a rate "
        "controller keeps a window of frames in flight and a newer frame replaces one waiting "
        "past it (needs delivery latest, which it sets when delivery is left unset)"},
+      {"encoding", "string", "raw",
+       "how the images travel: raw; zstd (lossless: row deltas + zstd, about a third of the "
+       "bytes); h264 (the colour image, or both views of a stereo pair, as H.264 video, about "
+       "a tenth; a disparity or depth map stays lossless, zstd; the h264/ parameters). For a "
+       "thin uplink (Wi-Fi, LTE), with rate_control"},
       {"compress", "bool", "false",
-       "send the pixels losslessly compressed (row deltas + zstd, about a third of the bytes) "
-       "for a thin uplink"},
+       "deprecated: true is encoding zstd (kept for existing launch files; refused beside "
+       "another encoding)"},
+      {"h264/preset", "string", H264Default().preset,
+       "encoding h264: the x264 preset, ultrafast .. medium (docs/video.md measures them)"},
+      {"h264/crf", "double", absl::StrCat(H264Default().crf),
+       "encoding h264: constant quality, 1..51 (lower is better), capped by h264/mbps; 0: "
+       "h264/mbps alone"},
+      {"h264/mbps", "double", absl::StrCat(H264Default().mbps),
+       "encoding h264: bitrate, Mbit/s, both views of a pair together, 0.05..1000: the cap of "
+       "a one-frame VBV; with rate_control, the most the rate controller's target may give the "
+       "encoder"},
+      {"h264/fps", "double", "30",
+       "encoding h264: the camera's frame rate, for the one-frame VBV (h264/mbps / h264/fps "
+       "bits a frame), 1..1000"},
+      {"h264/keyframe_interval", "int", absl::StrCat(H264Default().keyframe_interval),
+       "encoding h264: frames between IDRs (0: only the first and those the server asks for)"},
+      {"h264/threads", "int", absl::StrCat(H264Default().threads),
+       "encoding h264: encoder threads, 1..16 (x264 sliced threads: no added latency)"},
+      {"h264/colour_444", "bool", "false",
+       "encoding h264: colour as 4:4:4 (4:2:0 alone caps colour near 28-39 dB PSNR)"},
+      {"h264/grey", "bool", "false",
+       "encoding h264: images coded grey (4:0:0: what stereo matching reads, in fewer bits; "
+       "the points are grey)"},
+      {"h264/separate_stereo", "bool", "false",
+       "encoding h264, input stereo: a bitstream per view instead of the right view "
+       "interleaved after the left (the measured best)"},
       {"passthrough/enabled", "bool", "(server's)", "keep only points with z in [min, max]"},
       {"passthrough/min", "double", "(server's)",
        "passthrough lower bound on z, in the camera's unit (metres for a baseline T in metres)"},
@@ -56,6 +91,14 @@ const std::vector<ParamDoc>& Docs() {
        "largest per-coordinate position error Draco may add; 0: no bound"},
       {"draco/encode_speed", "int", "(server's)", "Draco encode speed 0 (smallest) .. 10"},
       {"draco/decode_speed", "int", "(server's)", "Draco decode speed 0 .. 10"},
+      {"draco/max_reply_kb", "double", "0",
+       "the downlink cap: each reply's cloud at most this many kB (1000 bytes), the server "
+       "lowering position bits (within draco/max_position_error) and colour bits to meet it; "
+       "a cloud it cannot bring under still comes back, marked over the cap. 0: no cap; else "
+       "at least 0.064"},
+      {"draco/min_color_bits", "int", "(server's)",
+       "with draco/max_reply_kb: the fewest colour bits per channel the server may go down to, "
+       "1..8 (the server's default: 5)"},
       {"tls/enabled", "bool", "false",
        "connect with TLS, trusting the system's CAs (implied by every other tls/ parameter)"},
       {"tls/ca", "string", "", "PEM file of the CA certificates to trust for the server"},
@@ -150,8 +193,6 @@ absl::Status ReadConnection(const ParamReader& p, BridgeOptions* o) {
     }
     o->reconnect_timeout = std::chrono::milliseconds(std::llround(*reconnect * 1000));
   }
-  CLOUDCAST_ASSIGN_OR_RETURN(compress, p.Bool("compress"));
-  if (compress) o->compress = *compress;
   CLOUDCAST_ASSIGN_OR_RETURN(rate_control, p.Bool("rate_control"));
   if (rate_control) o->rate_control = *rate_control;
 
@@ -192,6 +233,110 @@ absl::Status ReadConnection(const ParamReader& p, BridgeOptions* o) {
       return absl::InvalidArgumentError(absl::StrCat(p.Display("token_file"), ": ", token.status().message()));
     }
     o->client.security.bearer_token = *std::move(token);
+  }
+  return absl::OkStatus();
+}
+
+// ~encoding (and ~compress, its old name for zstd) and, with h264, the ~h264/* settings, by the
+// rules of the programs' --h264-* flags (video::H264Settings).
+absl::Status ReadUplink(const ParamReader& p, BridgeOptions* o) {
+  CLOUDCAST_ASSIGN_OR_RETURN(encoding, p.String("encoding"));
+  if (encoding) {
+    if (*encoding == "raw") {
+      o->uplink = Uplink::kRaw;
+    } else if (*encoding == "zstd") {
+      o->uplink = Uplink::kZstd;
+    } else if (*encoding == "h264") {
+      o->uplink = Uplink::kH264;
+    } else {
+      return absl::InvalidArgumentError(absl::StrCat(p.Display("encoding"), " is '", *encoding,
+                                                     "'; must be raw, zstd or h264"));
+    }
+  }
+  CLOUDCAST_ASSIGN_OR_RETURN(compress, p.Bool("compress"));
+  if (compress.value_or(false)) {
+    if (encoding && o->uplink != Uplink::kZstd) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          p.Display("compress"), " is true (the old name of ", p.Display("encoding"),
+          " zstd) but ", p.Display("encoding"), " is '", *encoding, "'; drop ",
+          p.Display("compress")));
+    }
+    o->uplink = Uplink::kZstd;
+  }
+  if (o->uplink != Uplink::kH264) {
+    for (const std::string& name : p.Names()) {
+      if (name.rfind("h264/", 0) != 0) continue;
+      return absl::InvalidArgumentError(absl::StrCat(
+          p.Display(name), " is set but ", p.Display("encoding"), " is '",
+          std::string(Name(o->uplink)), "'; it applies to ", p.Display("encoding"), " h264 only"));
+    }
+    return absl::OkStatus();
+  }
+  if (!HasVideoEncoder()) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        p.Display("encoding"), " is 'h264' but this bridge was built without the video encoder "
+        "(CLOUDCAST_WITH_VIDEO, FFmpeg); use raw or zstd"));
+  }
+  video::H264Settings& h = o->h264;
+  CLOUDCAST_ASSIGN_OR_RETURN(preset, p.String("h264/preset"));
+  if (preset) {
+    if (!video::H264Settings::PresetOk(*preset)) {
+      return absl::InvalidArgumentError(absl::StrCat(p.Display("h264/preset"), " is '", *preset,
+                                                     "'; must be ",
+                                                     video::H264Settings::kPresetRule));
+    }
+    h.preset = *preset;
+  }
+  CLOUDCAST_ASSIGN_OR_RETURN(crf, p.Double("h264/crf"));
+  if (crf) {
+    if (!video::H264Settings::CrfOk(*crf)) {
+      return OutOfRange(p, "h264/crf", *crf, video::H264Settings::kCrfRule);
+    }
+    h.crf = *crf;
+  }
+  CLOUDCAST_ASSIGN_OR_RETURN(mbps, p.Double("h264/mbps"));
+  if (mbps) {
+    if (!video::H264Settings::MbpsOk(*mbps)) {
+      return OutOfRange(p, "h264/mbps", *mbps, video::H264Settings::kMbpsRule);
+    }
+    h.mbps = *mbps;
+  }
+  CLOUDCAST_ASSIGN_OR_RETURN(fps, p.Double("h264/fps"));
+  if (fps) {
+    if (!(std::isfinite(*fps) && *fps >= 1 && *fps <= 1000)) {
+      return OutOfRange(p, "h264/fps", *fps, "in [1, 1000] frames a second");
+    }
+    o->h264_fps = *fps;
+  }
+  CLOUDCAST_ASSIGN_OR_RETURN(interval, p.Int("h264/keyframe_interval"));
+  if (interval) {
+    if (*interval < 0 || *interval > video::H264Settings::kMaxKeyframeInterval) {
+      return OutOfRange(p, "h264/keyframe_interval", *interval,
+                        absl::StrCat("in 0..", video::H264Settings::kMaxKeyframeInterval));
+    }
+    h.keyframe_interval = *interval;
+  }
+  CLOUDCAST_ASSIGN_OR_RETURN(threads, p.Int("h264/threads"));
+  if (threads) {
+    if (*threads < 1 || *threads > video::H264Settings::kMaxThreads) {
+      return OutOfRange(p, "h264/threads", *threads,
+                        absl::StrCat("in 1..", video::H264Settings::kMaxThreads));
+    }
+    h.threads = *threads;
+  }
+  const std::pair<const char*, bool*> flags[] = {{"h264/colour_444", &h.colour_444},
+                                                 {"h264/grey", &h.grey},
+                                                 {"h264/separate_stereo", &h.separate_stereo}};
+  for (const auto& [name, out] : flags) {
+    CLOUDCAST_ASSIGN_OR_RETURN(value, p.Bool(name));
+    if (value) *out = *value;
+  }
+  // One image to code: the layout of a pair's two would be silently ignored.
+  CLOUDCAST_ASSIGN_OR_RETURN(separate, p.Bool("h264/separate_stereo"));
+  if (separate && o->input != InputKind::kStereo) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        p.Display("h264/separate_stereo"), " is set but ", p.Display("input"), " is '",
+        std::string(Name(o->input)), "'; it applies to ", p.Display("input"), " stereo only"));
   }
   return absl::OkStatus();
 }
@@ -376,6 +521,36 @@ absl::Status ReadStages(const ParamReader& p, BridgeOptions* o) {
     }
   }
 
+  // The downlink cap (contract revision 4): the client library's rules (MaxCloudBytesFromKb,
+  // SetMaxCloudBytes), as cloudcast-client's --max-reply-kb.
+  CLOUDCAST_ASSIGN_OR_RETURN(cap_kb, p.Double("draco/max_reply_kb"));
+  CLOUDCAST_ASSIGN_OR_RETURN(min_color_bits, p.Int("draco/min_color_bits"));
+  std::uint64_t cap = 0;
+  if (cap_kb) {
+    absl::StatusOr<std::uint64_t> bytes =
+        client::MaxCloudBytesFromKb(*cap_kb, p.Display("draco/max_reply_kb"));
+    if (!bytes.ok()) return absl::InvalidArgumentError(bytes.status().message());
+    cap = *bytes;
+  }
+  if (min_color_bits) {
+    if (*min_color_bits < 1 || *min_color_bits > 8) {
+      return OutOfRange(p, "draco/min_color_bits", *min_color_bits, "in 1..8");
+    }
+    if (cap == 0) {
+      // Without a cap the server keeps every colour bit: the floor would be silently ignored.
+      return absl::InvalidArgumentError(
+          absl::StrCat(p.Display("draco/min_color_bits"), " needs ",
+                       p.Display("draco/max_reply_kb"), " (the cap it is the floor of)"));
+    }
+  }
+  if (cap > 0) {
+    if (absl::Status s = client::SetMaxCloudBytes(cap, &c, min_color_bits.value_or(0),
+                                                  p.Display("draco/max_reply_kb"));
+        !s.ok()) {
+      return absl::InvalidArgumentError(s.message());
+    }
+  }
+
   // The proto boundary's own checks, as the server will make them (a safety net: every value
   // above was checked already, so this names proto fields only for rules not repeated here).
   if (auto resolved = convert::Resolve(c, convert::StreamSettings{}); !resolved.ok()) {
@@ -397,6 +572,26 @@ std::string_view Name(InputKind kind) {
       return "stereo";
   }
   return "?";
+}
+
+std::string_view Name(Uplink uplink) {
+  switch (uplink) {
+    case Uplink::kRaw:
+      return "raw";
+    case Uplink::kZstd:
+      return "zstd";
+    case Uplink::kH264:
+      return "h264";
+  }
+  return "?";
+}
+
+bool HasVideoEncoder() {
+#ifdef CLOUDCAST_BRIDGE_VIDEO
+  return true;
+#else
+  return false;
+#endif
 }
 
 const std::vector<ParamDoc>& ParamDocs() { return Docs(); }
@@ -424,6 +619,7 @@ absl::StatusOr<BridgeOptions> ReadBridgeOptions(const ParamReader& p, const std:
   o.client.connect_timeout = std::chrono::milliseconds(5000);
   if (absl::Status s = ReadConnection(p, &o); !s.ok()) return s;
   if (absl::Status s = ReadInput(p, &o); !s.ok()) return s;
+  if (absl::Status s = ReadUplink(p, &o); !s.ok()) return s;
   if (absl::Status s = OnlyFor(p, o, InputKind::kDepth, "depth_scale"); !s.ok()) return s;
   if (absl::Status s = OnlyFor(p, o, InputKind::kStereo, "stereo/"); !s.ok()) return s;
   if (o.input == InputKind::kDepth) {

@@ -12,6 +12,7 @@
 #include "absl/status/statusor.h"
 #include "cloudcast/client/config.h"
 #include "cloudcast/client/options.h"
+#include "cloudcast/video/h264_settings.h"
 
 namespace cloudcast::ros_bridge {
 
@@ -19,6 +20,16 @@ namespace cloudcast::ros_bridge {
 // camera's, REP 118) or a rectified stereo pair that the server matches.
 enum class InputKind { kDisparity, kDepth, kStereo };
 std::string_view Name(InputKind kind);  // "disparity", "depth", "stereo"
+
+// How the images travel to the server (~encoding; the programs' --encoding): raw pixels, zstd
+// (lossless: row deltas + zstd, about a third of raw) or h264 (the colour image, or both views of
+// a stereo pair, as H.264 pictures of one encoder per bitstream kept across frames; a disparity or
+// depth map stays lossless and goes zstd-compressed).
+enum class Uplink { kRaw, kZstd, kH264 };
+std::string_view Name(Uplink uplink);  // "raw", "zstd", "h264"
+// Whether this build has the video encoder (cloudcast_video_frames: FFmpeg); without it (the
+// client-only arm64 build) ~encoding h264 is refused.
+bool HasVideoEncoder();
 
 // How the input topics are paired into frames (message_filters).
 struct SyncOptions {
@@ -43,7 +54,12 @@ struct BridgeOptions {
   // ~input stereo: publish the server's disparity map as a stereo_msgs/DisparityImage
   // (~stereo/publish_disparity; sets config.stereo.return_disparity).
   bool publish_disparity = false;
-  bool compress = false;  // lossless zstd uplink (row deltas): for a thin link
+  Uplink uplink = Uplink::kRaw;  // ~encoding (~compress true: zstd)
+  // ~encoding h264: the encoder's settings (~h264/*: the programs' --h264-* flags, with their
+  // defaults and rules), made into the stream's coder (StreamOptionsFor in cloud_link.h) for
+  // frames at ~h264/fps.
+  video::H264Settings h264;
+  double h264_fps = 30;
   double diagnostics_period_s = 1.0;
 };
 

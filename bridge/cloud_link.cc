@@ -5,6 +5,9 @@
 #include <utility>
 
 #include "absl/strings/str_cat.h"
+#ifdef CLOUDCAST_BRIDGE_VIDEO
+#include "cloudcast/video/frame_encoder.h"
+#endif
 
 namespace cloudcast::ros_bridge {
 
@@ -25,6 +28,51 @@ bool SameCamera(const CameraModel& a, const CameraModel& b) {
          a.disparity_scale == b.disparity_scale && a.disparity_offset == b.disparity_offset &&
          a.invalid_disparities == b.invalid_disparities && a.depth_scale == b.depth_scale;
 }
+
+absl::StatusOr<client::StreamOptions> StreamOptionsFor(const BridgeOptions& options) {
+  client::StreamOptions so;
+  so.resilient = options.resilient;
+  so.reconnect_timeout = options.reconnect_timeout;
+  if (options.rate_control) so.rate_control = client::RateControlOptions{};
+  if (options.uplink == Uplink::kH264) {
+#ifdef CLOUDCAST_BRIDGE_VIDEO
+    // A new encoder per stream: a new stream (after the old one ended) starts at an IDR. The
+    // stream encodes each raw frame when it can send it, so with delivery latest no encoded
+    // picture is ever replaced; it passes the server's keyframe requests and (rate_control) the
+    // controller's target on to the encoder.
+    so.coder = std::make_shared<video::FrameEncoder>(
+        video::ToFrameEncoderOptions(options.h264, options.h264_fps));
+#else
+    return absl::InvalidArgumentError("encoding h264: this bridge was built without video");
+#endif
+  }
+  return so;
+}
+
+namespace {
+
+// The frame as ~encoding sends it. zstd: every raw image compressed (losslessly). h264: the
+// disparity or depth map compressed losslessly, the colour images left raw for the stream's
+// video coder.
+client::FrameInput ForUplink(const client::FrameInput& images, Uplink uplink) {
+  switch (uplink) {
+    case Uplink::kRaw:
+      return images;
+    case Uplink::kZstd:
+      return client::CompressRaw(images);
+    case Uplink::kH264:
+      if (const auto* f = std::get_if<client::DisparityFrame>(&images)) {
+        return client::DisparityFrame{client::CompressRaw(f->disparity), f->colour};
+      }
+      if (const auto* f = std::get_if<client::DepthFrame>(&images)) {
+        return client::DepthFrame{client::CompressRaw(f->depth), f->colour};
+      }
+      return images;
+  }
+  return images;
+}
+
+}  // namespace
 
 CloudLink::CloudLink(const BridgeOptions& options, BridgeStats* stats, CloudSink on_cloud,
                      LogSink log)
@@ -91,10 +139,9 @@ absl::Status CloudLink::EnsureStream(const CameraModel& camera) {
     return absl::UnavailableError("no stream to the server (retrying once a second)");
   }
   last_open_attempt_ = now;
-  client::StreamOptions so;
-  so.resilient = options_.resilient;
-  so.reconnect_timeout = options_.reconnect_timeout;
-  if (options_.rate_control) so.rate_control = client::RateControlOptions{};
+  absl::StatusOr<client::StreamOptions> made = StreamOptionsFor(options_);
+  if (!made.ok()) return made.status();
+  client::StreamOptions so = *std::move(made);
   so.on_result = [this](client::Result&& r) { OnResult(std::move(r)); };
   so.on_reconnect = [this](const client::Reconnect& r) {
     stats_->Reconnected();
@@ -107,8 +154,8 @@ absl::Status CloudLink::EnsureStream(const CameraModel& camera) {
   if (!opened.ok()) return opened.status();
   stream_ = *std::move(opened);
   camera_ = camera;
-  log_(LogLevel::kInfo,
-       absl::StrCat("stream open to ", options_.server, " (", camera.ToString(), ")"));
+  log_(LogLevel::kInfo, absl::StrCat("stream open to ", options_.server, " (", camera.ToString(),
+                                     "; encoding ", std::string(Name(options_.uplink)), ")"));
   return absl::OkStatus();
 }
 
@@ -159,8 +206,7 @@ void CloudLink::Send(const OutgoingFrame& frame) {
     std::lock_guard<std::mutex> lock(sent_mu_);
     sent_[*meta.sequence] = {frame.header, frame.camera};  // before Send: the reply may come first
   }
-  const absl::Status s = options_.compress ? stream_->Send(client::CompressRaw(frame.images), meta)
-                                           : stream_->Send(frame.images, meta);
+  const absl::Status s = stream_->Send(ForUplink(frame.images, options_.uplink), meta);
   if (s.ok()) {
     stats_->Sent();
     return;

@@ -86,6 +86,12 @@ class CloudLink {
   std::map<std::uint64_t, SentFrame> sent_;  // frames sent and not answered
 };
 
+// The stream's options as the link opens it: resilience, the rate controller (~rate_control)
+// and, with ~encoding h264, a new video::FrameEncoder as its coder (under ~rate_control the
+// controller sets the encoder's bitrate frame by frame, at most ~h264/mbps). on_result and
+// on_reconnect are the link's to set. INVALID_ARGUMENT for h264 in a build without video.
+absl::StatusOr<client::StreamOptions> StreamOptionsFor(const BridgeOptions& options);
+
 // The stream config a frame with `camera` is sent under: `base` (the parameters) plus the camera.
 client::StreamConfig ConfigFor(const client::StreamConfig& base, const CameraModel& camera);
 // `camera` as the protocol's message, every field set (Frame.camera, StreamConfig.camera).

@@ -73,6 +73,14 @@ void BridgeStats::Reply(const client::Result& r) {
   points_.Add(r.reply.point_count());
   draco_bytes_.Add(static_cast<double>(r.draco_bytes()));
   position_error_bound_ = r.reply.position_error_bound();
+  // A smaller total is a new stream's (after a lost one): all of it is new bytes.
+  const std::uint64_t total = r.reply.stream_bytes_received();
+  period_uplink_bytes_ += total >= last_stream_bytes_ ? total - last_stream_bytes_ : total;
+  last_stream_bytes_ = total;
+  position_bits_ = r.reply.position_bits();
+  color_bits_ = r.reply.color_bits();
+  if (r.reply.has_over_cap()) ++over_cap_;
+  if (r.rate) rate_ = *r.rate;
 }
 
 void BridgeStats::StreamDropped(std::uint64_t frames_dropped) {
@@ -147,9 +155,26 @@ DiagnosticReport BridgeStats::Report(double now_s, const std::string& name,
   Add(&s, "points_mean", Fixed(n > 0 ? points_.sum / n : 0.0, 0));
   Add(&s, "draco_bytes_mean", Fixed(n > 0 ? draco_bytes_.sum / n : 0.0, 0));
   Add(&s, "position_error_bound", Fixed(position_error_bound_, 6));
+  // What the uplink carried this period (~encoding): per cloud (the bytes of frames the server
+  // skipped or refused count with the next cloud's; frames replaced in the bridge never went),
+  // and as a rate.
+  Add(&s, "uplink_bytes_per_cloud",
+      Fixed(n > 0 ? static_cast<double>(period_uplink_bytes_) / n : 0.0, 0));
+  Add(&s, "uplink_kbps",
+      Fixed(seconds > 0 ? static_cast<double>(period_uplink_bytes_) * 8 / 1000 / seconds : 0.0, 0));
+  Add(&s, "position_bits", std::to_string(position_bits_));
+  Add(&s, "color_bits", std::to_string(color_bits_));
+  Add(&s, "replies_over_cap", std::to_string(over_cap_));
+  if (rate_) {
+    Add(&s, "target_kbps", Fixed(rate_->target_bps / 1000.0, 0));
+    Add(&s, "delivered_kbps", Fixed(rate_->delivered_bps / 1000.0, 0));
+    Add(&s, "rtt_ms", Fixed(rate_->rtt_ms));
+    Add(&s, "queue_delay_ms", Fixed(rate_->queue_delay_ms));
+  }
   if (!last_error_.empty()) Add(&s, "last_error", last_error_);
 
   period_clouds_ = period_errors_ = period_sent_ = 0;
+  period_uplink_bytes_ = 0;
   decode_ = rectify_ = match_ = pipeline_ = encode_ = queue_ = round_trip_ = bridge_decode_ =
       points_ = draco_bytes_ = Stage{};
   period_start_s_ = now_s;

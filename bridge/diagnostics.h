@@ -5,6 +5,7 @@
 
 #include <cstdint>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -67,6 +68,16 @@ class BridgeStats {
   Stage decode_, rectify_, match_, pipeline_, encode_, queue_, round_trip_, bridge_decode_, points_,
       draco_bytes_;
   float position_error_bound_ = 0;
+  // The last reply's Draco quantization (what a downlink cap made the server choose), and the
+  // replies that came back over the cap.
+  int position_bits_ = 0, color_bits_ = 0;
+  std::uint64_t over_cap_ = 0;
+  // The uplink: the bytes the server counted on the stream (CloudReply.stream_bytes_received,
+  // a running total per stream) since the period began, and the last total seen.
+  std::uint64_t period_uplink_bytes_ = 0, last_stream_bytes_ = 0;
+  // rate_control: the rate controller's estimate after the last reply (its target is what the
+  // video encoder follows).
+  std::optional<client::RateEstimate> rate_;
   double period_start_s_ = -1;  // none yet
 };
 

@@ -538,6 +538,50 @@ TEST(BridgeStats, ReportsTheReplysStageTimesAndCounters) {
   EXPECT_NE(next.status[0].message.find("no stream"), std::string::npos);
 }
 
+// The uplink's bytes (from the server's running count per stream), the quantization a downlink
+// cap made the server choose, and the rate controller's estimate.
+TEST(BridgeStats, ReportsTheUplinkTheCapsBitsAndTheRateTarget) {
+  BridgeStats stats;
+  (void)stats.Report(0.0, "bridge", "x");  // the first period starts at 0 s
+  const auto reply = [&](std::uint64_t stream_bytes, int color_bits, bool over_cap) {
+    client::Result r;
+    r.reply.set_stream_bytes_received(stream_bytes);
+    r.reply.set_position_bits(11);
+    r.reply.set_color_bits(color_bits);
+    if (over_cap) r.reply.mutable_over_cap()->set_max_cloud_bytes(1000);
+    client::RateEstimate rate;
+    rate.target_bps = 2.5e6;
+    rate.rtt_ms = 40;
+    r.rate = rate;
+    stats.Sent();
+    stats.Reply(r);
+  };
+  reply(10000, 8, false);
+  reply(30000, 5, true);
+  std::map<std::string, std::string> v;
+  for (const auto& [key, value] : stats.Report(2.0, "bridge", "x").values) v[key] = value;
+  EXPECT_EQ(v["uplink_bytes_per_cloud"], "15000");
+  EXPECT_EQ(v["uplink_kbps"], "120");  // 30,000 bytes in 2 s
+  EXPECT_EQ(v["position_bits"], "11");
+  EXPECT_EQ(v["color_bits"], "5");
+  EXPECT_EQ(v["replies_over_cap"], "1");
+  EXPECT_EQ(v["target_kbps"], "2500");
+  EXPECT_EQ(v["rtt_ms"], "40.000");
+  // A new stream (after a lost one) counts from 0 again: all of its total is new.
+  reply(4000, 8, false);
+  v.clear();
+  for (const auto& [key, value] : stats.Report(3.0, "bridge", "x").values) v[key] = value;
+  EXPECT_EQ(v["uplink_bytes_per_cloud"], "4000");
+  EXPECT_EQ(v["replies_over_cap"], "1");
+  // Without rate control no estimate is reported.
+  BridgeStats plain;
+  client::Result r;
+  plain.Reply(r);
+  v.clear();
+  for (const auto& [key, value] : plain.Report(1.0, "bridge", "x").values) v[key] = value;
+  EXPECT_EQ(v.count("target_kbps"), 0u);
+}
+
 // A refusal of the bridge's first call (a wrong token) is reported before any frame comes.
 TEST(BridgeStats, ALinkDownFromTheStartIsAnErrorNamingWhy) {
   BridgeStats stats;
@@ -561,6 +605,121 @@ TEST(HelpText, ListsEveryParameter) {
     EXPECT_NE(help.find(topic), std::string::npos) << topic;
   }
   EXPECT_NE(help.find("/diagnostics"), std::string::npos);
+}
+
+
+// ---- The uplink and downlink-cap parameters with ROS 1's spelling ("~name"), through a reader
+// of a plain map (the node's reader needs a master; ros/tests/ros_bridge_test.py runs that one).
+
+class MapParams : public ParamReader {
+ public:
+  struct Value {
+    enum { kString, kBool, kInt, kDouble } type;
+    std::string s;
+    bool b = false;
+    int i = 0;
+    double d = 0;
+  };
+  std::map<std::string, Value> values;
+
+  void Set(const std::string& name, const std::string& v) { values[name] = {Value::kString, v}; }
+  void Set(const std::string& name, bool v) { values[name] = {Value::kBool, "", v}; }
+  void Set(const std::string& name, int v) { values[name] = {Value::kInt, "", false, v}; }
+  void Set(const std::string& name, double v) { values[name] = {Value::kDouble, "", false, 0, v}; }
+
+  absl::StatusOr<std::optional<std::string>> String(const std::string& n) const override {
+    auto it = values.find(n);
+    if (it == values.end()) return std::optional<std::string>();
+    if (it->second.type != Value::kString) return absl::InvalidArgumentError(Display(n) + " type");
+    return std::optional<std::string>(it->second.s);
+  }
+  absl::StatusOr<std::optional<bool>> Bool(const std::string& n) const override {
+    auto it = values.find(n);
+    if (it == values.end()) return std::optional<bool>();
+    if (it->second.type != Value::kBool) return absl::InvalidArgumentError(Display(n) + " type");
+    return std::optional<bool>(it->second.b);
+  }
+  absl::StatusOr<std::optional<int>> Int(const std::string& n) const override {
+    auto it = values.find(n);
+    if (it == values.end()) return std::optional<int>();
+    if (it->second.type != Value::kInt) return absl::InvalidArgumentError(Display(n) + " type");
+    return std::optional<int>(it->second.i);
+  }
+  absl::StatusOr<std::optional<double>> Double(const std::string& n) const override {
+    auto it = values.find(n);
+    if (it == values.end()) return std::optional<double>();
+    if (it->second.type == Value::kInt) return std::optional<double>(it->second.i);
+    if (it->second.type != Value::kDouble) return absl::InvalidArgumentError(Display(n) + " type");
+    return std::optional<double>(it->second.d);
+  }
+  std::vector<std::string> Names() const override {
+    std::vector<std::string> out;
+    for (const auto& [name, value] : values) out.push_back(name);
+    return out;
+  }
+  std::string Display(const std::string& name) const override { return "~" + name; }
+};
+
+std::string ErrorOf(const MapParams& p) {
+  auto o = ReadBridgeOptions(p, "cloudcast-ros-bridge");
+  return o.ok() ? "(accepted)" : std::string(o.status().message());
+}
+
+TEST(BridgeParams, UplinkAndCapErrorsNameTheRos1Parameter) {
+  MapParams p;
+  p.Set("encoding", std::string("jpeg2000"));
+  EXPECT_EQ(ErrorOf(p), "~encoding is 'jpeg2000'; must be raw, zstd or h264");
+  p.values.clear();
+  p.Set("h264/preset", std::string("ultrafast"));
+  EXPECT_EQ(ErrorOf(p),
+            "~h264/preset is set but ~encoding is 'raw'; it applies to ~encoding h264 only");
+  p.values.clear();
+  p.Set("encoding", std::string("raw"));
+  p.Set("compress", true);
+  EXPECT_EQ(ErrorOf(p),
+            "~compress is true (the old name of ~encoding zstd) but ~encoding is 'raw'; drop "
+            "~compress");
+  p.values.clear();
+  p.Set("draco/max_reply_kb", 0.05);
+  EXPECT_EQ(ErrorOf(p).rfind("~draco/max_reply_kb is 0.05; it must be 0 (no cap)", 0), 0u)
+      << ErrorOf(p);
+  p.values.clear();
+  p.Set("draco/max_reply_kb", 30.0);
+  p.Set("draco/min_color_bits", 12);
+  EXPECT_EQ(ErrorOf(p), "~draco/min_color_bits is 12; must be in 1..8");
+  if (HasVideoEncoder()) {
+    p.values.clear();
+    p.Set("encoding", std::string("h264"));
+    p.Set("h264/mbps", 2000.0);
+    EXPECT_EQ(ErrorOf(p), "~h264/mbps is 2000; must be a bitrate in [0.05, 1000] Mbit/s");
+  }
+}
+
+TEST(BridgeParams, H264AndTheCapReachTheStream) {
+  MapParams p;
+  p.Set("compress", true);
+  auto o = ReadBridgeOptions(p, "cloudcast-ros-bridge");
+  ASSERT_TRUE(o.ok()) << o.status();
+  EXPECT_EQ(o->uplink, Uplink::kZstd);  // the old name
+  if (!HasVideoEncoder()) GTEST_SKIP() << "this build has no video encoder";
+  p.values.clear();
+  p.Set("encoding", std::string("h264"));
+  p.Set("h264/mbps", 3);  // an integer, as a launch file may write it
+  p.Set("h264/grey", true);
+  p.Set("rate_control", true);
+  p.Set("draco/max_reply_kb", 30.0);
+  o = ReadBridgeOptions(p, "cloudcast-ros-bridge");
+  ASSERT_TRUE(o.ok()) << o.status();
+  EXPECT_EQ(o->uplink, Uplink::kH264);
+  EXPECT_EQ(o->h264.mbps, 3.0);
+  EXPECT_TRUE(o->h264.grey);
+  EXPECT_EQ(o->config.draco().max_cloud_bytes(), 30000u);
+  EXPECT_EQ(o->config.delivery(), v1::DELIVERY_LATEST);
+  auto so = StreamOptionsFor(*o);
+  ASSERT_TRUE(so.ok()) << so.status();
+  EXPECT_NE(so->coder, nullptr);
+  EXPECT_TRUE(so->rate_control.has_value());
+  EXPECT_TRUE(so->resilient);
 }
 
 }  // namespace

@@ -10,7 +10,10 @@
 // 10 ms) and of the bridge alone, points and bytes per cloud (medians).
 //
 //   cloudcast-ros2-bridge-bench --bin-dir build/bin --data ../shared/data/new_tsukuba
-//       [--frames 100] [--rates 10,20,30] [--json]
+//       [--frames 100] [--rates 10,20,30] [--uplinks raw,zstd,h264] [--json]
+//
+// --uplinks: the paper-filter bridge once per ~encoding instead of the two filter settings, with
+// the uplink's bytes per cloud and kbit/s (the bridge's /diagnostics: what the server counted).
 #include <unistd.h>
 
 #include <algorithm>
@@ -67,6 +70,8 @@ struct Row {
   // From the bridge's last /diagnostics: frames the server skipped (delivery latest), sets the
   // inputs refused or could not pair, and the last error.
   std::string dropped = "-", input_errors = "-", last_error;
+  // The uplink (median over the /diagnostics periods with clouds): bytes per cloud, kbit/s.
+  double uplink_bytes = 0, uplink_kbps = 0;
 };
 
 double WallSeconds() {
@@ -125,6 +130,34 @@ Row Run(const std::string& bin, const std::string& scratch, const std::string& c
                           static_cast<double>(c.data._length), Clock::now()});
     }
   };
+  std::vector<double> uplink_bytes, uplink_kbps;
+  auto take_diagnostics = [&](bool record) {
+    for (;;) {
+      TakenSample s(kDiagnosticArrayType);
+      void* buf[1] = {s.get()};
+      dds_sample_info_t info;
+      if (dds_take(*rd, buf, &info, 1, 1) <= 0) break;
+      if (!info.valid_data) continue;
+      const auto& a = s.as<diagnostic_msgs_msg_dds__DiagnosticArray_>();
+      for (std::uint32_t i = 0; i < a.status._length; ++i) {
+        const auto& values = a.status._buffer[i].values;
+        std::map<std::string, std::string> v;
+        for (std::uint32_t j = 0; j < values._length; ++j) {
+          v[values._buffer[j].key] = values._buffer[j].value;
+        }
+        if (v.count("frames_dropped")) row.dropped = v["frames_dropped"];
+        if (v.count("input_errors")) row.input_errors = v["input_errors"];
+        if (v.count("last_error")) row.last_error = v["last_error"];
+        const double per_cloud = v.count("uplink_bytes_per_cloud")
+                                     ? std::atof(v["uplink_bytes_per_cloud"].c_str())
+                                     : 0.0;
+        if (record && per_cloud > 0) {
+          uplink_bytes.push_back(per_cloud);
+          uplink_kbps.push_back(std::atof(v["uplink_kbps"].c_str()));
+        }
+      }
+    }
+  };
   auto publish = [&](int k) {
     testing::TsukubaSamples& s = *samples[static_cast<std::size_t>(k) % samples.size()];
     const double now = WallSeconds();
@@ -148,6 +181,7 @@ Row Run(const std::string& bin, const std::string& scratch, const std::string& c
   }
   std::this_thread::sleep_for(std::chrono::milliseconds(500));
   take(false);
+  take_diagnostics(false);
   arrivals.clear();
   const long long cpu0 = CpuTicks(bridge.pid()) + CpuTicks(server.pid());
   const long long bridge0 = CpuTicks(bridge.pid());
@@ -158,6 +192,7 @@ Row Run(const std::string& bin, const std::string& scratch, const std::string& c
     next += std::chrono::duration_cast<Clock::duration>(period);
     while (Clock::now() < next) {
       take(true);
+      take_diagnostics(true);
       std::this_thread::sleep_for(std::chrono::milliseconds(1));
     }
   }
@@ -169,23 +204,9 @@ Row Run(const std::string& bin, const std::string& scratch, const std::string& c
   }
   const long long cpu1 = CpuTicks(bridge.pid()) + CpuTicks(server.pid());
   std::this_thread::sleep_for(std::chrono::milliseconds(1200));  // one more diagnostics period
-  for (;;) {
-    TakenSample s(kDiagnosticArrayType);
-    void* buf[1] = {s.get()};
-    dds_sample_info_t info;
-    if (dds_take(*rd, buf, &info, 1, 1) <= 0) break;
-    if (!info.valid_data) continue;
-    const auto& a = s.as<diagnostic_msgs_msg_dds__DiagnosticArray_>();
-    for (std::uint32_t i = 0; i < a.status._length; ++i) {
-      const auto& values = a.status._buffer[i].values;
-      for (std::uint32_t j = 0; j < values._length; ++j) {
-        const std::string key = values._buffer[j].key, value = values._buffer[j].value;
-        if (key == "frames_dropped") row.dropped = value;
-        if (key == "input_errors") row.input_errors = value;
-        if (key == "last_error") row.last_error = value;
-      }
-    }
-  }
+  take_diagnostics(false);
+  row.uplink_bytes = Median(uplink_bytes);
+  row.uplink_kbps = Median(uplink_kbps);
   const long long bridge1 = CpuTicks(bridge.pid());
   row.clouds = static_cast<int>(arrivals.size());
   if (row.clouds == 0) return row;
@@ -209,7 +230,7 @@ Row Run(const std::string& bin, const std::string& scratch, const std::string& c
 int Usage(const char* why) {
   std::fprintf(stderr,
                "cloudcast-ros2-bridge-bench: %s\nusage: cloudcast-ros2-bridge-bench --bin-dir DIR "
-               "--data DIR [--frames 100] [--rates 10,20,30] [--json]\n",
+               "--data DIR [--frames 100] [--rates 10,20,30] [--uplinks raw,zstd,h264] [--json]\n",
                why);
   return 2;
 }
@@ -221,6 +242,7 @@ int main(int argc, char** argv) {
   int frames = 100;
   std::vector<int> rates = {10, 20, 30};
   bool json = false;
+  std::vector<std::string> uplinks;
   for (int i = 1; i < argc; ++i) {
     const std::string f = argv[i];
     if (f == "--help" || f == "-h") return Usage("the ROS 2 bridge's CPU per cloud and latency");
@@ -236,6 +258,14 @@ int main(int argc, char** argv) {
       data = v;
     } else if (f == "--frames") {
       frames = std::atoi(v.c_str());
+    } else if (f == "--uplinks") {
+      std::stringstream ss(v);
+      for (std::string u; std::getline(ss, u, ',');) {
+        if (u != "raw" && u != "zstd" && u != "h264") {
+          return Usage(("--uplinks: '" + u + "' is not raw, zstd or h264").c_str());
+        }
+        uplinks.push_back(u);
+      }
     } else if (f == "--rates") {
       rates.clear();
       std::stringstream ss(v);
@@ -263,17 +293,31 @@ int main(int argc, char** argv) {
   char scratch_template[] = "/tmp/cloudcast-ros2-bench-XXXXXX";
   const std::string scratch = mkdtemp(scratch_template);
   // The ROS 1 benchmark's two bridge configurations (ros/bench/bridge_bench.py).
-  const std::vector<std::pair<std::string, std::vector<std::string>>> consumers = {
+  std::vector<std::pair<std::string, std::vector<std::string>>> consumers = {
       {"ROS 2 bridge, no filters",
        {"passthrough.enabled:=false", "voxel.enabled:=false", "draco.position_bits:=16"}},
       {"ROS 2 bridge, paper filters",
        {"passthrough.enabled:=true", "passthrough.min:=0.3", "passthrough.max:=8.0",
         "voxel.enabled:=true", "voxel.leaf:=0.03"}},
   };
+  if (!uplinks.empty()) {
+    // The paper-filter bridge once per ~encoding (h264 at the rate's VBV: h264.fps per run).
+    const auto paper = consumers[1].second;
+    consumers.clear();
+    for (const std::string& u : uplinks) {
+      std::vector<std::string> params = paper;
+      params.push_back("encoding:=" + u);
+      consumers.emplace_back("ROS 2 bridge, paper filters, encoding " + u, params);
+    }
+  }
   std::vector<Row> rows;
   for (int rate : rates) {
     for (const auto& [name, params] : consumers) {
-      rows.push_back(Run(bin, scratch, name, params, rate, frames, samples));
+      std::vector<std::string> with = params;
+      if (std::find(with.begin(), with.end(), "encoding:=h264") != with.end()) {
+        with.push_back("h264.fps:=" + std::to_string(rate) + ".0");
+      }
+      rows.push_back(Run(bin, scratch, name, with, rate, frames, samples));
       std::fprintf(stderr, "bench: %s at %d Hz: %d clouds; the bridge: %s dropped by the server, "
                    "%s input errors%s%s\n", name.c_str(), rate, rows.back().clouds,
                    rows.back().dropped.c_str(), rows.back().input_errors.c_str(),
@@ -284,13 +328,15 @@ int main(int argc, char** argv) {
   std::printf(
       "| consumer | publisher rate | published | clouds | clouds/s | latency ms (median) | CPU ms "
       "/ cloud (bridge + server) | CPU ms / cloud (bridge) | points (median) | cloud bytes "
-      "(median) | server-skipped | input errors |\n"
-      "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n");
+      "(median) | uplink bytes / cloud | uplink kbit/s | server-skipped | input errors |\n"
+      "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n");
   for (const Row& r : rows) {
-    std::printf("| %s | %d Hz | %d | %d | %.1f | %.1f | %.1f | %.1f | %.0f | %.0f | %s | %s |\n",
-                r.consumer.c_str(), r.rate, r.published, r.clouds, r.clouds_per_s, r.latency_ms,
-                r.cpu_ms, r.bridge_cpu_ms, r.points, r.bytes, r.dropped.c_str(),
-                r.input_errors.c_str());
+    std::printf(
+        "| %s | %d Hz | %d | %d | %.1f | %.1f | %.1f | %.1f | %.0f | %.0f | %.0f | %.0f | %s | %s "
+        "|\n",
+        r.consumer.c_str(), r.rate, r.published, r.clouds, r.clouds_per_s, r.latency_ms, r.cpu_ms,
+        r.bridge_cpu_ms, r.points, r.bytes, r.uplink_bytes, r.uplink_kbps, r.dropped.c_str(),
+        r.input_errors.c_str());
   }
   if (json) {
     std::printf("[");
@@ -299,9 +345,11 @@ int main(int argc, char** argv) {
       std::printf(
           "%s{\"consumer\": \"%s\", \"rate_hz\": %d, \"published\": %d, \"clouds\": %d, "
           "\"clouds_per_s\": %.2f, \"latency_ms_median\": %.2f, \"cpu_ms_per_cloud\": %.2f, "
-          "\"bridge_cpu_ms_per_cloud\": %.2f, \"points_median\": %.0f, \"bytes_median\": %.0f}",
+          "\"bridge_cpu_ms_per_cloud\": %.2f, \"points_median\": %.0f, \"bytes_median\": %.0f, "
+          "\"uplink_bytes_per_cloud_median\": %.0f, \"uplink_kbps_median\": %.0f}",
           i ? ", " : "", r.consumer.c_str(), r.rate, r.published, r.clouds, r.clouds_per_s,
-          r.latency_ms, r.cpu_ms, r.bridge_cpu_ms, r.points, r.bytes);
+          r.latency_ms, r.cpu_ms, r.bridge_cpu_ms, r.points, r.bytes, r.uplink_bytes,
+          r.uplink_kbps);
     }
     std::printf("]\n");
   }

@@ -86,6 +86,7 @@ dds_entity_t Writer(DdsNode* node, const MessageType& type, const std::string& t
 struct Received {
   std::vector<std::shared_ptr<TakenSample>> clouds;
   std::vector<std::string> diagnostics;  // each status's message and last_error
+  std::vector<std::map<std::string, std::string>> values;  // each status's values, by key
 };
 
 class Ros2BridgeTest : public ::testing::Test {
@@ -198,7 +199,9 @@ class Ros2BridgeTest : public ::testing::Test {
       for (std::uint32_t i = 0; i < a.status._length; ++i) {
         const auto& st = a.status._buffer[i];
         std::string text = std::string(st.name) + " | " + st.message;
+        std::map<std::string, std::string>& values = r->values.emplace_back();
         for (std::uint32_t j = 0; j < st.values._length; ++j) {
+          values[st.values._buffer[j].key] = st.values._buffer[j].value;
           if (std::string(st.values._buffer[j].key) == "last_error") {
             text += " | last_error: " + std::string(st.values._buffer[j].value);
           }
@@ -509,6 +512,149 @@ TEST_F(Ros2BridgeTest, EachFrameIsProjectedWithItsOwnCameraInfo) {
     }
     EXPECT_EQ(off, 0u) << "frame " << k << " (f = " << (k % 2 ? 1230 : 615) << ")";
   }
+}
+
+// ---- The video uplink (encoding h264) and the downlink cap (draco.max_reply_kb), parameters
+// both bridges share (bridge/bridge_options.cc).
+
+// The bridge with encoding h264 under rate_control (the rate controller sets the encoder's
+// bitrate frame by frame): the server decodes the colour pictures, and the clouds have the raw
+// uplink's geometry exactly (the disparity map stays lossless) and its colours nearly (H.264 is
+// lossy, so some differ: the pictures did travel as video).
+TEST_F(Ros2BridgeTest, H264UplinkGivesTheRawGeometryAndNearlyItsColours) {
+  const std::vector<sensor_msgs::PointCloud2> expected = Ros1Clouds();
+  ASSERT_EQ(expected.size(), samples_.size());
+  StartBridge({"passthrough.enabled:=false", "voxel.enabled:=false", "input_qos:=default",
+               "encoding:=h264", "h264.preset:=ultrafast", "h264.crf:=18", "h264.mbps:=8.0",
+               "h264.fps:=20.0", "rate_control:=true"});
+  const CameraWriters w = Camera();
+  Received r;
+  // The rate controller ran: /diagnostics carries its target (once a reply has come).
+  const auto target_seen = [&] {
+    for (const auto& v : r.values) {
+      auto it = v.find("target_kbps");
+      if (it != v.end() && std::stod(it->second) > 0) return true;
+    }
+    return false;
+  };
+  ASSERT_TRUE(PublishUntil(
+      w, &r, [&] { return r.clouds.size() >= samples_.size() + 2 && target_seen(); }, 40))
+      << r.clouds.size() << " clouds, target_kbps on /diagnostics: " << target_seen() << "\n"
+      << bridge_->Log();
+  double colour_diff = 0;
+  std::size_t channels = 0;
+  for (std::size_t c = 1; c < r.clouds.size(); ++c) {
+    const auto& got = r.clouds[c]->as<sensor_msgs_msg_dds__PointCloud2_>();
+    const int k = got.header.stamp.sec - 1000;
+    ASSERT_GE(k, 0);
+    const sensor_msgs::PointCloud2& want = expected[static_cast<std::size_t>(k) % expected.size()];
+    ASSERT_GT(want.width, 100000u);
+    ASSERT_EQ(got.width, want.width) << "cloud of stamp " << got.header.stamp.sec;
+    ASSERT_EQ(got.point_step, 16u);
+    ASSERT_EQ(got.data._length, want.data.size());
+    std::size_t xyz_off = 0;
+    for (std::size_t i = 0; i < got.width; ++i) {
+      const std::uint8_t* a = got.data._buffer + 16 * i;
+      const std::uint8_t* b = want.data.data() + 16 * i;
+      if (std::memcmp(a, b, 12) != 0) ++xyz_off;
+      for (int ch = 12; ch < 15; ++ch) colour_diff += std::abs(int(a[ch]) - int(b[ch]));
+      channels += 3;
+    }
+    EXPECT_EQ(xyz_off, 0u) << "cloud of stamp " << got.header.stamp.sec;
+  }
+  ASSERT_GT(channels, 0u);
+  const double mean = colour_diff / static_cast<double>(channels);
+  EXPECT_GT(mean, 0.0) << "the colours are exact: the pictures did not travel as H.264";
+  // Under rate_control the encoder gets the controller's target less the lossless disparity
+  // map's bytes (at 20 frames/s those alone exceed the 4 Mbit/s start), so it starts at its
+  // floor: the colours are coarse, far nearer than another frame's (tens of levels) all the same.
+  EXPECT_LT(mean, 20.0) << "mean colour error per channel, 8-bit levels";
+  std::fprintf(stderr, "H.264 uplink: %zu clouds, mean colour error %.2f levels per channel\n",
+               r.clouds.size() - 1, mean);
+  EXPECT_NE(bridge_->Log().find("encoding h264"), std::string::npos) << bridge_->Log();
+}
+
+// draco.max_reply_kb and draco.min_color_bits reach the server through the bridges' link: each
+// reply is within the cap or says it is over (CloudReply.over_cap), the colour bits the server
+// chose never go below the floor, and the capped clouds are smaller than the uncapped ones.
+TEST_F(Ros2BridgeTest, DownlinkCapParametersReachTheServer) {
+  // The bridge's link (CloudLink) with these parameters: the replies, by stamp.
+  const auto replies = [&](const std::vector<std::string>& extra) {
+    std::map<std::uint32_t, v1::CloudReply> out;
+    auto parsed = ParseRosArgs([&] {
+      std::vector<std::string> args = {"--ros-args", "-p", "server:=" + server_->address()};
+      for (const std::string& p : extra) args.insert(args.end(), {"-p", p});
+      return args;
+    }(), "reference");
+    EXPECT_TRUE(parsed.ok()) << parsed.status();
+    if (!parsed.ok()) return out;
+    auto options = ros_bridge::ReadBridgeOptions(Ros2ParamReader(parsed->params, {}), "test");
+    EXPECT_TRUE(options.ok()) << options.status();
+    if (!options.ok()) return out;
+    options->config.set_delivery(v1::DELIVERY_ALL);
+    ros_bridge::BridgeStats stats;
+    std::mutex mu;
+    {
+      ros_bridge::CloudLink link(
+          *options, &stats,
+          [&](client::Result&& r, const ros_bridge::SentFrame& f) {
+            std::lock_guard<std::mutex> lock(mu);
+            out[f.header.stamp.sec] = r.reply;
+          },
+          [](ros_bridge::LogLevel, const std::string& line) {
+            std::fprintf(stderr, "link: %s\n", line.c_str());
+          });
+      EXPECT_TRUE(link.Probe().ok());
+      std::vector<float> masked;
+      for (std::size_t i = 0; i < samples_.size(); ++i) {
+        samples_[i]->Stamp(static_cast<std::int32_t>(i), 0);
+        ros_bridge::OutgoingFrame frame;
+        const TsukubaSamples& in = *samples_[i];
+        EXPECT_TRUE(ros_bridge::ToFrame(View(in.disparity), View(in.colour), View(in.info),
+                                        &masked, &frame)
+                        .ok());
+        link.Send(frame);
+      }
+    }
+    return out;
+  };
+  // No passthrough and no voxel grid: frame 00001's 307,200 points, hundreds of kB of Draco.
+  const std::vector<std::string> unfiltered = {"passthrough.enabled:=false",
+                                               "voxel.enabled:=false"};
+  const auto uncapped = replies(unfiltered);
+  ASSERT_EQ(uncapped.size(), samples_.size());
+  for (const auto& [stamp, reply] : uncapped) {
+    std::fprintf(stderr, "uncapped %u: %zu bytes, position bits %d, colour bits %d\n", stamp,
+                 reply.draco().size(), reply.position_bits(), reply.color_bits());
+  }
+  const std::uint64_t cap = 200000;
+  std::vector<std::string> with_cap = unfiltered;
+  with_cap.insert(with_cap.end(), {"draco.max_reply_kb:=200", "draco.min_color_bits:=3"});
+  const auto capped = replies(with_cap);
+  for (const auto& [stamp, reply] : capped) {
+    std::fprintf(stderr, "capped %u: %zu bytes, position bits %d, colour bits %d, over cap %d\n",
+                 stamp, reply.draco().size(), reply.position_bits(), reply.color_bits(),
+                 reply.has_over_cap());
+  }
+  ASSERT_EQ(capped.size(), samples_.size());
+  ASSERT_GT(uncapped.at(0).draco().size(), 2 * cap) << "frame 00001 is too small to cap";
+  EXPECT_EQ(uncapped.at(0).color_bits(), 8);
+  EXPECT_FALSE(uncapped.at(0).has_over_cap());
+  for (const auto& [stamp, reply] : capped) {
+    if (reply.has_over_cap()) {
+      EXPECT_EQ(reply.over_cap().max_cloud_bytes(), cap) << stamp;
+      EXPECT_EQ(reply.over_cap().cloud_bytes(), reply.draco().size()) << stamp;
+    } else {
+      EXPECT_LE(reply.draco().size(), cap) << stamp;
+    }
+    EXPECT_GE(reply.color_bits(), 3) << stamp;
+    EXPECT_LE(reply.draco().size(), uncapped.at(stamp).draco().size()) << stamp;
+  }
+  // Frame 00001: the server gave up position or colour bits to come down.
+  const v1::CloudReply& first = capped.at(0);
+  EXPECT_LT(first.draco().size(), uncapped.at(0).draco().size());
+  EXPECT_TRUE(first.color_bits() < 8 || first.position_bits() < uncapped.at(0).position_bits())
+      << "colour bits " << first.color_bits() << ", position bits " << first.position_bits();
 }
 
 // ---- ros_discovery_info: the bridge's entry, read by a plain Cyclone reader as rmw's graph

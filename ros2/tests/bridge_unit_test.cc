@@ -4,14 +4,19 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <set>
 #include <string>
 #include <vector>
 
 #include "bridge_options.h"
+#include "cloud_link.h"
 #include "help.h"
 #include "ros2_inputs.h"
 #include "ros_args.h"
 #include "sample_views.h"
+#ifdef CLOUDCAST_BRIDGE_VIDEO
+#include "cloudcast/video/frame_encoder.h"
+#endif
 
 namespace cloudcast::ros2_bridge {
 namespace {
@@ -41,7 +46,7 @@ TEST(Ros2Args, ParametersRemapsNamespaceAndNode) {
   EXPECT_EQ(o->server, "10.0.0.2:50051");
   EXPECT_EQ(o->input, ros_bridge::InputKind::kDepth);
   EXPECT_EQ(o->sync.queue_size, 7);
-  EXPECT_TRUE(o->compress);
+  EXPECT_EQ(o->uplink, ros_bridge::Uplink::kZstd);  // compress: the old name of encoding zstd
   EXPECT_FLOAT_EQ(o->config.voxel_grid().leaf(), 0.01f);
 }
 
@@ -157,6 +162,8 @@ TEST(Ros2Args, TheExampleParamsFileIsValid) {
   ASSERT_TRUE(o.ok()) << o.status();
   EXPECT_TRUE(o->config.voxel_grid().enabled());
   EXPECT_FLOAT_EQ(o->config.passthrough().max(), 8.0f);
+  EXPECT_EQ(o->uplink, ros_bridge::Uplink::kRaw);
+  EXPECT_FALSE(o->config.draco().has_max_cloud_bytes());
 }
 
 std::shared_ptr<TakenSample> ImageAt(std::int32_t sec, std::uint32_t nanosec) {
@@ -240,6 +247,163 @@ TEST(Ros2Help, ListsEveryParameterInRos2SpellingAndTheTopics) {
     EXPECT_NE(help.find(text), std::string::npos) << text;
   }
   EXPECT_EQ(help.find("~"), std::string::npos);  // no ROS 1 private names
+}
+
+
+// ---- The uplink (encoding, h264.*) and the downlink cap (draco.max_reply_kb, min_color_bits),
+// shared with the ROS 1 bridge (bridge/bridge_options.cc).
+
+absl::StatusOr<ros_bridge::BridgeOptions> Read(const std::vector<std::string>& params) {
+  std::vector<std::string> args = {"--ros-args"};
+  for (const std::string& p : params) args.insert(args.end(), {"-p", p});
+  auto a = Parse(args);
+  if (!a.ok()) return a.status();
+  return ros_bridge::ReadBridgeOptions(Ros2ParamReader(a->params, {}), "cloudcast-ros2-bridge");
+}
+
+std::string ErrorOf(const std::vector<std::string>& params) {
+  auto o = Read(params);
+  return o.ok() ? "(accepted)" : std::string(o.status().message());
+}
+
+TEST(BridgeUplink, EncodingTakesRawZstdAndH264AndNamesABadOne) {
+  EXPECT_EQ(Read({})->uplink, ros_bridge::Uplink::kRaw);
+  EXPECT_EQ(Read({"encoding:=zstd"})->uplink, ros_bridge::Uplink::kZstd);
+  EXPECT_EQ(Read({"encoding:=raw"})->uplink, ros_bridge::Uplink::kRaw);
+  EXPECT_EQ(Read({"encoding:=zstd", "compress:=true"})->uplink, ros_bridge::Uplink::kZstd);
+  EXPECT_EQ(ErrorOf({"encoding:=vp9"}), "encoding is 'vp9'; must be raw, zstd or h264");
+  EXPECT_EQ(ErrorOf({"encoding:=h264", "compress:=true"}),
+            "compress is true (the old name of encoding zstd) but encoding is 'h264'; drop "
+            "compress");
+  // An h264 setting without encoding h264 would be silently ignored: refused, naming both.
+  EXPECT_EQ(ErrorOf({"h264.crf:=20"}),
+            "h264.crf is set but encoding is 'raw'; it applies to encoding h264 only");
+  EXPECT_EQ(ErrorOf({"compress:=true", "h264.mbps:=2.0"}),
+            "h264.mbps is set but encoding is 'zstd'; it applies to encoding h264 only");
+}
+
+TEST(BridgeUplink, H264SettingsAreCheckedByTheFlagsRulesNamingTheParameter) {
+  if (!ros_bridge::HasVideoEncoder()) {
+    EXPECT_NE(ErrorOf({"encoding:=h264"}).find("built without the video encoder"),
+              std::string::npos);
+    GTEST_SKIP() << "this build has no video encoder (CLOUDCAST_WITH_VIDEO off)";
+  }
+  const std::vector<std::pair<std::vector<std::string>, std::string>> bad = {
+      {{"h264.preset:=placebo"},
+       "h264.preset is 'placebo'; must be ultrafast, superfast, veryfast, faster, fast or medium"},
+      {{"h264.crf:=52.0"}, "h264.crf is 52; must be 0 or a quality in [1, 51]"},
+      {{"h264.crf:=-1"}, "h264.crf is -1; must be 0 or a quality in [1, 51]"},
+      {{"h264.mbps:=0.01"}, "h264.mbps is 0.01; must be a bitrate in [0.05, 1000] Mbit/s"},
+      {{"h264.fps:=0"}, "h264.fps is 0; must be in [1, 1000] frames a second"},
+      {{"h264.keyframe_interval:=-1"}, "h264.keyframe_interval is -1; must be in 0..100000"},
+      {{"h264.threads:=17"}, "h264.threads is 17; must be in 1..16"},
+      {{"h264.threads:=two"}, "h264.threads is 'two'; must be an integer"},
+      {{"h264.grey:=3"}, "h264.grey"},
+      {{"h264.separate_stereo:=true"},
+       "h264.separate_stereo is set but input is 'disparity'; it applies to input stereo only"},
+  };
+  for (const auto& [params, message] : bad) {
+    std::vector<std::string> with = params;
+    with.push_back("encoding:=h264");
+    const std::string error = ErrorOf(with);
+    EXPECT_EQ(error.rfind(message, 0), 0u) << params[0] << ": " << error;
+  }
+}
+
+TEST(BridgeUplink, H264SettingsReachTheStreamsEncoder) {
+  if (!ros_bridge::HasVideoEncoder()) GTEST_SKIP() << "this build has no video encoder";
+  auto o = Read({"input:=stereo", "encoding:=h264", "h264.preset:=ultrafast", "h264.crf:=0",
+                 "h264.mbps:=2.5",
+                 "h264.fps:=15.0", "h264.keyframe_interval:=30", "h264.threads:=2",
+                 "h264.colour_444:=true", "h264.grey:=false", "h264.separate_stereo:=true",
+                 "rate_control:=true"});
+  ASSERT_TRUE(o.ok()) << o.status();
+  EXPECT_EQ(o->uplink, ros_bridge::Uplink::kH264);
+  EXPECT_EQ(o->h264.preset, "ultrafast");
+  EXPECT_EQ(o->h264.crf, 0);
+  EXPECT_EQ(o->h264.mbps, 2.5);
+  EXPECT_EQ(o->h264_fps, 15);
+  EXPECT_EQ(o->h264.keyframe_interval, 30);
+  EXPECT_EQ(o->h264.threads, 2);
+  EXPECT_TRUE(o->h264.colour_444);
+  EXPECT_TRUE(o->h264.separate_stereo);
+#ifdef CLOUDCAST_BRIDGE_VIDEO
+  // The one mapping the programs' --h264-* flags use (video::ToFrameEncoderOptions).
+  const video::FrameEncoderOptions e = video::ToFrameEncoderOptions(o->h264, o->h264_fps);
+  EXPECT_EQ(e.encoder.preset, "ultrafast");
+  EXPECT_EQ(e.encoder.crf, 0);
+  EXPECT_EQ(e.encoder.bitrate_bps, 2'500'000);
+  EXPECT_EQ(e.encoder.fps, 15);
+  EXPECT_EQ(e.encoder.keyframe_interval, 30);
+  EXPECT_EQ(e.encoder.threads, 2);
+  EXPECT_EQ(e.colour_kind, video::PictureKind::kColour444);
+  EXPECT_FALSE(e.interleave_stereo);
+  EXPECT_FALSE(e.grey);
+  // The stream the link opens: the encoder as its coder, and the rate controller driving it.
+  auto so = ros_bridge::StreamOptionsFor(*o);
+  ASSERT_TRUE(so.ok()) << so.status();
+  ASSERT_NE(so->coder, nullptr);
+  EXPECT_NE(dynamic_cast<video::FrameEncoder*>(so->coder.get()), nullptr);
+  EXPECT_TRUE(so->rate_control.has_value());
+  EXPECT_EQ(o->config.delivery(), v1::DELIVERY_LATEST);
+  // Each stream its own encoder (a new stream starts at an IDR).
+  EXPECT_NE(ros_bridge::StreamOptionsFor(*o)->coder, so->coder);
+#endif
+  // Without h264 there is no coder.
+  auto raw = Read({"encoding:=zstd"});
+  ASSERT_TRUE(raw.ok());
+  auto plain = ros_bridge::StreamOptionsFor(*raw);
+  ASSERT_TRUE(plain.ok());
+  EXPECT_EQ(plain->coder, nullptr);
+  EXPECT_FALSE(plain->rate_control.has_value());
+}
+
+TEST(BridgeDownlinkCap, MaxReplyKbAndMinColorBitsReachTheStreamConfig) {
+  auto o = Read({"draco.max_reply_kb:=12.5", "draco.min_color_bits:=4"});
+  ASSERT_TRUE(o.ok()) << o.status();
+  EXPECT_EQ(o->config.draco().max_cloud_bytes(), 12500u);
+  EXPECT_EQ(o->config.draco().min_color_bits(), 4);
+  o = Read({"draco.max_reply_kb:=20"});  // an integer, as YAML writes it
+  ASSERT_TRUE(o.ok()) << o.status();
+  EXPECT_EQ(o->config.draco().max_cloud_bytes(), 20000u);
+  EXPECT_FALSE(o->config.draco().has_min_color_bits());
+  o = Read({"draco.max_reply_kb:=0"});  // no cap
+  ASSERT_TRUE(o.ok()) << o.status();
+  EXPECT_FALSE(o->config.draco().has_max_cloud_bytes());
+  o = Read({});
+  ASSERT_TRUE(o.ok()) << o.status();
+  EXPECT_FALSE(o->config.draco().has_max_cloud_bytes());
+}
+
+TEST(BridgeDownlinkCap, BadValuesAreRefusedNamingTheParameter) {
+  EXPECT_EQ(ErrorOf({"draco.max_reply_kb:=0.01"}).rfind("draco.max_reply_kb is 0.01; it must be 0 "
+                                                        "(no cap) or a number of kB",
+                                                        0),
+            0u)
+      << ErrorOf({"draco.max_reply_kb:=0.01"});
+  EXPECT_EQ(ErrorOf({"draco.max_reply_kb:=-5"}).rfind("draco.max_reply_kb is -5", 0), 0u);
+  EXPECT_EQ(ErrorOf({"draco.max_reply_kb:=5000000.0"}).rfind("draco.max_reply_kb is 5", 0), 0u)
+      << ErrorOf({"draco.max_reply_kb:=5000000.0"});
+  EXPECT_EQ(ErrorOf({"draco.max_reply_kb:=big"}),
+            "draco.max_reply_kb is 'big'; must be a number");
+  EXPECT_EQ(ErrorOf({"draco.max_reply_kb:=10", "draco.min_color_bits:=9"}),
+            "draco.min_color_bits is 9; must be in 1..8");
+  EXPECT_EQ(ErrorOf({"draco.max_reply_kb:=10", "draco.min_color_bits:=0"}),
+            "draco.min_color_bits is 0; must be in 1..8");
+  EXPECT_EQ(ErrorOf({"draco.min_color_bits:=4"}),
+            "draco.min_color_bits needs draco.max_reply_kb (the cap it is the floor of)");
+}
+
+// The docs the help prints carry the new parameters (docs/ros.md and docs/ros2.md list them too).
+TEST(BridgeUplink, ParamDocsListTheUplinkAndCapParameters) {
+  std::set<std::string> names;
+  for (const ros_bridge::ParamDoc& d : ros_bridge::ParamDocs()) names.insert(d.name);
+  for (const char* name :
+       {"encoding", "compress", "h264/preset", "h264/crf", "h264/mbps", "h264/fps",
+        "h264/keyframe_interval", "h264/threads", "h264/colour_444", "h264/grey",
+        "h264/separate_stereo", "draco/max_reply_kb", "draco/min_color_bits"}) {
+    EXPECT_EQ(names.count(name), 1u) << name;
+  }
 }
 
 }  // namespace

@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "cloudcast/video/frame_encoder.h"
+#include "cloudcast/video/h264_settings.h"
 
 namespace cloudcast::cli {
 
@@ -26,21 +27,17 @@ class VideoFlags {
 
   // The encoder's settings for a stream of `fps` frames (pairs) per second (the one-frame VBV is
   // bitrate / fps); fps <= 0 (a closed loop, an unpaced source) counts as 30.
-  video::FrameEncoderOptions Options(double fps) const;
+  video::FrameEncoderOptions Options(double fps) const {
+    return video::ToFrameEncoderOptions(s_, fps);
+  }
   // The --h264-* flags given, in the order registered (for "needs --encoding h264").
   std::vector<std::string> GivenFlags() const;
   bool AnyGiven() const { return !GivenFlags().empty(); }
 
  private:
   CLI::App& app_;
-  std::string preset_ = "veryfast";
-  double crf_ = 18;
-  double mbps_ = 8;
-  int keyframe_interval_ = video::EncoderOptions{}.keyframe_interval;
-  int threads_ = video::EncoderOptions{}.threads;
-  bool colour_444_ = false;
-  bool grey_ = false;
-  bool separate_stereo_ = false;
+  // The values, defaults and mapping the ROS bridges' h264/* parameters share.
+  video::H264Settings s_;
 };
 
 }  // namespace cloudcast::cli

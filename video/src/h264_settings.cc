@@ -1,0 +1,25 @@
+#include "cloudcast/video/h264_settings.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+
+#include "cloudcast/video/frame_encoder.h"
+
+namespace cloudcast::video {
+
+FrameEncoderOptions ToFrameEncoderOptions(const H264Settings& s, double fps) {
+  FrameEncoderOptions o;
+  o.encoder.preset = s.preset;
+  o.encoder.crf = s.crf;
+  o.encoder.bitrate_bps = static_cast<std::int64_t>(std::llround(s.mbps * 1e6));
+  o.encoder.fps = fps > 0 ? std::max(1, static_cast<int>(std::lround(fps))) : 30;
+  o.encoder.keyframe_interval = s.keyframe_interval;
+  o.encoder.threads = s.threads;
+  o.colour_kind = s.colour_444 ? PictureKind::kColour444 : PictureKind::kColour;
+  o.interleave_stereo = !s.separate_stereo;
+  o.grey = s.grey;
+  return o;
+}
+
+}  // namespace cloudcast::video
