@@ -79,113 +79,127 @@ T Pick(T value, double lo, double hi, const Ok& ok) {
   }
 }
 
-// Per pixel ray lengths: |P' - P| = |z' - z| * ray.
-struct Rays {
-  const std::vector<double>& x2;
-  double y2;
-  double at(std::uint32_t u) const { return std::sqrt(1.0 + x2[u] + y2); }
-};
-
-void FillRayX2(const CameraModel& camera, std::uint32_t width, std::vector<double>* x2) {
-  x2->resize(width);
-  for (std::uint32_t u = 0; u < width; ++u) {
-    const double a = (u - camera.cx) / camera.fx;
-    (*x2)[u] = a * a;
+// The longest ray of the image: |P' - P| = |z' - z| * ray, ray = sqrt(1 + ((u - cx) / fx)^2 +
+// ((v - cy) / fy)^2), largest at a corner. The quantizer bounds every pixel with it, so that its
+// choice depends on the value alone: equal values stay equal (a smooth region keeps its runs),
+// and 8- and 16-bit samples are mapped through a table.
+double LongestRay(const CameraModel& c, std::uint32_t width, std::uint32_t height) {
+  double longest = 1;
+  for (double u : {0.0, width - 1.0}) {
+    for (double v : {0.0, height - 1.0}) {
+      const double a = (u - c.cx) / c.fx, b = (v - c.cy) / c.fy;
+      longest = std::max(longest, std::sqrt(1 + a * a + b * b));
+    }
   }
+  return longest;
 }
 
-template <typename T>
-void QuantizeDisparityRows(const DisparityView& in, const CameraModel& c, double bound,
-                           const std::vector<double>& ray_x2, std::uint8_t* out,
-                           QuantizeStats* stats) {
-  const double fb = c.fx * c.baseline;
-  const double s = c.disparity_scale;
-  const double o = c.disparity_offset;
+// A disparity value's replacement, `valid` false for a value the server makes no point of.
+struct DisparityMapper {
+  double fb, s, o, bound;  // bound: on |z' - z|, before the float margin
+  float ffb, fs, fo;
+  const std::vector<double>* invalid;
+
+  DisparityMapper(const CameraModel& c, double z_bound)
+      : fb(c.fx * c.baseline),
+        s(c.disparity_scale),
+        o(c.disparity_offset),
+        bound(z_bound),
+        ffb(static_cast<float>(fb)),
+        fs(static_cast<float>(s)),
+        fo(static_cast<float>(o)),
+        invalid(&c.invalid_disparities) {}
+
   // Whether the server makes a point of a raw value: its test, in its float arithmetic
   // (camera.h; core's DepthConstants::Depth), so that validity is kept exactly.
-  const float ffb = static_cast<float>(fb), fs = static_cast<float>(s),
-              fo = static_cast<float>(o);
-  auto valid = [&](double d) {
+  bool Valid(double d) const {
     const float f = static_cast<float>(d);
     if (!std::isfinite(f)) return false;
-    for (double invalid : c.invalid_disparities) {
-      if (f == static_cast<float>(invalid)) return false;
+    for (double v : *invalid) {
+      if (f == static_cast<float>(v)) return false;
     }
     const float den = f * fs + fo;
-    return den > 0.0f && std::isfinite(ffb / den);
-  };
+    return den > 0.0f && std::isfinite(ffb / den) && d * s + o > 0;
+  }
+
+  template <typename T>
+  T Map(T raw, bool* valid) const {
+    const double d = static_cast<double>(raw);
+    *valid = Valid(d);
+    if (!*valid) return raw;
+    const double z = fb / (d * s + o);
+    const double t = bound - kFloatError * std::abs(z);  // |z' - z| allowed
+    if (!(t > 0)) return raw;
+    // z' in [max(z - t, z / 2), z + t]: the lower end kept positive so d' stays finite.
+    double lo = (fb / (z + t) - o) / s, hi = (fb / std::max(z - t, z / 2) - o) / s;
+    if (lo > hi) std::swap(lo, hi);
+    return Pick<T>(raw, lo, hi, [&](T x) {
+      const double dx = static_cast<double>(x);
+      return Valid(dx) && std::abs(fb / (dx * s + o) - z) <= t;
+    });
+  }
+};
+
+// A depth value's replacement.
+struct DepthMapper {
+  double scale, bound;  // bound: on |z' - z|, before the float margin
+  float fscale;
+
+  DepthMapper(const CameraModel& c, DepthEncoding e, double z_bound)
+      : scale(c.DepthScale(e)), bound(z_bound), fscale(static_cast<float>(scale)) {}
+
+  // The server's test of a depth (core's DepthConstants::Depth): z = raw * scale, in float, a
+  // positive normal float.
+  bool Valid(double d) const {
+    const float f = static_cast<float>(d);
+    return std::isfinite(f) && f * fscale >= std::numeric_limits<float>::min();
+  }
+
+  template <typename T>
+  T Map(T raw, bool* valid) const {
+    const double d = static_cast<double>(raw);
+    *valid = Valid(d);
+    if (!*valid) return raw;
+    const double t = (bound - kFloatError * std::abs(d * scale)) / std::abs(scale);  // raw units
+    if (!(t > 0)) return raw;
+    // D' in [max(D - t, D / 2), D + t]: never 0 (valid depths are positive).
+    return Pick<T>(raw, std::max(d - t, d / 2), d + t, [&](T x) {
+      const double dx = static_cast<double>(x);
+      return Valid(dx) && std::abs(dx - d) <= t;
+    });
+  }
+};
+
+// Every pixel of `in` through `mapper` into packed rows at `out`. 8- and 16-bit samples go
+// through a table of the values met (`table`: value -> replacement + 1, 0 = not yet).
+template <typename T, typename View, typename Mapper>
+void MapRows(const View& in, const Mapper& mapper, std::vector<std::uint32_t>* table,
+             std::uint8_t* out, QuantizeStats* stats) {
+  constexpr bool kTabled = std::is_integral_v<T>;
+  constexpr std::uint32_t kValidBit = 1u << 31;
+  if constexpr (kTabled) table->assign(std::size_t{1} << (8 * sizeof(T)), 0);
   const std::size_t row_bytes = std::size_t{in.width} * sizeof(T);
   for (std::uint32_t v = 0; v < in.height; ++v) {
-    const double ry = (v - c.cy) / c.fy;
-    const Rays rays{ray_x2, ry * ry};
     const std::uint8_t* src = in.row(v);
     std::uint8_t* dst = out + v * row_bytes;
     for (std::uint32_t u = 0; u < in.width; ++u) {
       T raw;  // read through memcpy: views need not be aligned
       std::memcpy(&raw, src + u * sizeof(T), sizeof(T));
-      const double d = static_cast<double>(raw);
-      const double den = d * s + o;
-      T result = raw;
-      if (valid(d) && den > 0) {
-        ++stats->valid;
-        const double z = fb / den;
-        const double t = bound / rays.at(u) - kFloatError * std::abs(z);  // |z' - z| allowed
-        // z' in [max(z - t, z / 2), z + t]: the lower end kept positive so d' stays finite.
-        const double den_lo = fb / (z + t);
-        const double den_hi = fb / std::max(z - t, z / 2);
-        double lo = (den_lo - o) / s, hi = (den_hi - o) / s;
-        if (lo > hi) std::swap(lo, hi);
-        auto ok = [&](T x) {
-          const double dx = static_cast<double>(x);
-          const double den_x = dx * s + o;
-          if (!valid(dx) || !(den_x > 0)) return false;
-          return std::abs(fb / den_x - z) <= t;
-        };
-        if (t > 0) result = Pick<T>(raw, lo, hi, ok);
-        if (result != raw) ++stats->changed;
+      T result;
+      bool valid;
+      if constexpr (kTabled) {
+        std::uint32_t& entry = (*table)[raw];
+        if (entry == 0) {
+          result = mapper.Map(raw, &valid);
+          entry = (std::uint32_t{result} + 1) | (valid ? kValidBit : 0);
+        }
+        result = static_cast<T>((entry & ~kValidBit) - 1);
+        valid = (entry & kValidBit) != 0;
+      } else {
+        result = mapper.Map(raw, &valid);
       }
-      std::memcpy(dst + u * sizeof(T), &result, sizeof(T));
-    }
-  }
-}
-
-template <typename T>
-void QuantizeDepthRows(const DepthView& in, const CameraModel& c, double bound,
-                       const std::vector<double>& ray_x2, std::uint8_t* out,
-                       QuantizeStats* stats) {
-  const double scale = c.DepthScale(in.encoding);
-  // The server's test of a depth (core's DepthConstants::Depth): z = raw * scale, in float, a
-  // positive normal float.
-  const float fscale = static_cast<float>(scale);
-  auto valid = [&](double d) {
-    const float f = static_cast<float>(d);
-    return std::isfinite(f) && f * fscale >= std::numeric_limits<float>::min();
-  };
-  const std::size_t row_bytes = std::size_t{in.width} * sizeof(T);
-  for (std::uint32_t v = 0; v < in.height; ++v) {
-    const double ry = (v - c.cy) / c.fy;
-    const Rays rays{ray_x2, ry * ry};
-    const std::uint8_t* src = in.row(v);
-    std::uint8_t* dst = out + v * row_bytes;
-    for (std::uint32_t u = 0; u < in.width; ++u) {
-      T raw;
-      std::memcpy(&raw, src + u * sizeof(T), sizeof(T));
-      const double d = static_cast<double>(raw);
-      T result = raw;
-      if (valid(d)) {
-        ++stats->valid;
-        // |D' - D| allowed, in raw units.
-        const double t = (bound / rays.at(u) - kFloatError * std::abs(d * scale)) / std::abs(scale);
-        // D' in [max(D - t, D / 2), D + t]: never 0 (valid depths are positive).
-        const double lo = std::max(d - t, d / 2);
-        const double hi = d + t;
-        auto ok = [&](T x) {
-          const double dx = static_cast<double>(x);
-          return valid(dx) && std::abs(dx - d) <= t;
-        };
-        if (t > 0) result = Pick<T>(raw, lo, hi, ok);
-        if (result != raw) ++stats->changed;
-      }
+      stats->valid += valid;
+      stats->changed += std::memcmp(&result, &raw, sizeof(T)) != 0;
       std::memcpy(dst + u * sizeof(T), &result, sizeof(T));
     }
   }
@@ -211,22 +225,22 @@ absl::Status PointErrorQuantizer::Quantize(const DisparityView& in, const Camera
   stats_ = {};
   const std::size_t row_bytes = std::size_t{in.width} * BytesPerPixel(in.encoding);
   buffer_.resize(row_bytes * in.height);
-  const double bound = max_point_error * kMargin;
-  FillRayX2(camera, in.width, &ray_x2_);
   if (max_point_error == 0) {
     for (std::uint32_t v = 0; v < in.height; ++v) {
       std::memcpy(buffer_.data() + v * row_bytes, in.row(v), row_bytes);
     }
   } else {
+    const DisparityMapper mapper(
+        camera, max_point_error * kMargin / LongestRay(camera, in.width, in.height));
     switch (in.encoding) {
       case DisparityEncoding::kU8:
-        QuantizeDisparityRows<std::uint8_t>(in, camera, bound, ray_x2_, buffer_.data(), &stats_);
+        MapRows<std::uint8_t>(in, mapper, &table_, buffer_.data(), &stats_);
         break;
       case DisparityEncoding::kU16:
-        QuantizeDisparityRows<std::uint16_t>(in, camera, bound, ray_x2_, buffer_.data(), &stats_);
+        MapRows<std::uint16_t>(in, mapper, &table_, buffer_.data(), &stats_);
         break;
       case DisparityEncoding::kF32:
-        QuantizeDisparityRows<float>(in, camera, bound, ray_x2_, buffer_.data(), &stats_);
+        MapRows<float>(in, mapper, &table_, buffer_.data(), &stats_);
         break;
     }
   }
@@ -242,19 +256,19 @@ absl::Status PointErrorQuantizer::Quantize(const DepthView& in, const CameraMode
   stats_ = {};
   const std::size_t row_bytes = std::size_t{in.width} * BytesPerPixel(in.encoding);
   buffer_.resize(row_bytes * in.height);
-  const double bound = max_point_error * kMargin;
-  FillRayX2(camera, in.width, &ray_x2_);
   if (max_point_error == 0) {
     for (std::uint32_t v = 0; v < in.height; ++v) {
       std::memcpy(buffer_.data() + v * row_bytes, in.row(v), row_bytes);
     }
   } else {
+    const DepthMapper mapper(camera, in.encoding,
+                             max_point_error * kMargin / LongestRay(camera, in.width, in.height));
     switch (in.encoding) {
       case DepthEncoding::kU16:
-        QuantizeDepthRows<std::uint16_t>(in, camera, bound, ray_x2_, buffer_.data(), &stats_);
+        MapRows<std::uint16_t>(in, mapper, &table_, buffer_.data(), &stats_);
         break;
       case DepthEncoding::kF32:
-        QuantizeDepthRows<float>(in, camera, bound, ray_x2_, buffer_.data(), &stats_);
+        MapRows<float>(in, mapper, &table_, buffer_.data(), &stats_);
         break;
     }
   }

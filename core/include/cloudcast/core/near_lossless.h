@@ -8,16 +8,19 @@
 // z forward). It is a bound per point, before any filter or voxel grid.
 //
 // How: the server's point of pixel (u, v) lies on the ray through (u, v), so a value that moves the
-// point's z by dz moves the point by |dz| * sqrt(1 + ((u - cx) / fx)^2 + ((v - cy) / fy)^2). For
-// each valid pixel the quantizer takes the interval of raw values whose point stays within the
-// bound and replaces the value by the "roundest" value of that interval: the one with the most
-// trailing zero bits (for floats: in its bit pattern, i.e. the shortest mantissa). Neighbouring
-// pixels of similar values then take the very same value, so the row deltas + zstd coder that
-// follows (frame_codec.h) finds long runs of zeros. Every replacement is checked against the bound
-// in double precision, with a 1% margin for the server's float arithmetic; a pixel whose check
-// fails keeps its value. Invalid pixels (an invalid disparity value, a non-finite value, a zero
-// depth) are copied bit for bit, and a valid pixel never becomes invalid. The server decodes the
-// result as any lossless frame: no contract change.
+// point's z by dz moves the point by |dz| * sqrt(1 + ((u - cx) / fx)^2 + ((v - cy) / fy)^2),
+// most at the image's corners. For each valid value the quantizer takes the interval of raw
+// values whose point stays within the bound on that longest ray, and replaces the value by the
+// "roundest" value of the interval: the one with the most trailing zero bits (for floats: in its
+// bit pattern, i.e. the shortest mantissa). The choice depends on the value alone, so equal
+// values stay equal and neighbours of similar values take the very same value: the row deltas +
+// zstd coder that follows (frame_codec.h) finds longer runs of zeros (and 8- and 16-bit samples
+// go through a table). Every replacement is checked against the bound in double precision, with a
+// margin for the server's float arithmetic (1% of the bound and 1e-6 of the point's distance); a
+// value whose check fails is kept. Invalid pixels (by the server's own test: an invalid disparity
+// value, a non-finite value, a depth that is not a positive normal float) are copied bit for bit,
+// and a valid pixel never becomes invalid. The server decodes the result as any lossless frame:
+// no contract change.
 //
 // Measured on New Tsukuba (cloudcast-nearlossless-bench, docs/client.md).
 #pragma once
@@ -55,7 +58,7 @@ class PointErrorQuantizer {
 
  private:
   std::vector<std::uint8_t> buffer_;
-  std::vector<double> ray_x2_;  // ((u - cx) / fx)^2 per column
+  std::vector<std::uint32_t> table_;  // 8- and 16-bit samples: value -> replacement
   QuantizeStats stats_;
 };
 
