@@ -4,11 +4,13 @@
 // default level, the client's encode time (quantize + compress, this thread's CPU), the share of
 // valid pixels whose value changed, and the largest point error measured through the server's
 // own conversion (a check, not a promise: it must stay under the bound). Medians over the frames
-// (each frame's time the median of --rounds). Inputs:
-//   u8 disparity      the 8-bit ground truth (z = 615 / d: whole pixels move points by cm)
-//   u16 disparity     our matcher's output on the grey pairs (1/16 px fixed point, sgm defaults)
-//   f32 depth         z = 615 / d in float metres (cloudcast-client's New Tsukuba depth frames)
-//   u16 depth         the same in millimetres (a depth camera's 16UC1)
+// (each frame's time the median of --rounds). The camera: f = 615 px and New Tsukuba's real 10 cm
+// baseline (--baseline; 1 is the paper's z = 615 / d). Inputs:
+//   u8 disparity (truth)     the 8-bit ground truth: whole pixels move points by centimetres
+//   u16 disparity (matcher)  our matcher's output on the grey pairs (1/16 px, sgm defaults)
+//   u16 depth mm (matcher)   that disparity as a stereo depth camera gives it (16UC1, mm)
+//   f32 depth m (matcher)    the same in float metres (32FC1)
+//   u16 / f32 depth (truth)  the ground truth's depth (piecewise constant: few distinct values)
 #include <time.h>
 
 #include <CLI/CLI.hpp>
@@ -82,16 +84,42 @@ struct Input {
   std::vector<Plane> frames;
 };
 
-std::vector<Input> LoadInputs(const std::string& dir, int max_frames) {
+// Depth planes (float metres, 16-bit millimetres) of disparities `d` read by `camera`.
+template <typename T>
+void AddDepths(const std::vector<T>& d, std::uint32_t w, std::uint32_t h, const CameraModel& camera,
+               Input* f32, Input* u16) {
+  std::vector<float> zf(d.size());
+  std::vector<std::uint16_t> z16(d.size());
+  for (std::size_t i = 0; i < d.size(); ++i) {
+    const double den = d[i] * camera.disparity_scale + camera.disparity_offset;
+    const double z = d[i] == 0 || !(den > 0) ? 0.0 : camera.fx * camera.baseline / den;
+    zf[i] = static_cast<float>(z);
+    z16[i] = static_cast<std::uint16_t>(std::lround(std::min(z * 1000, 65535.0)));
+  }
+  CameraModel depth_camera = camera;
+  depth_camera.depth_scale.reset();  // REP 118's units
+  Plane df = Packed(w, h, zf);
+  df.depth = true;
+  df.depth_encoding = DepthEncoding::kF32;
+  df.camera = depth_camera;
+  f32->frames.push_back(std::move(df));
+  Plane d16 = Packed(w, h, z16);
+  d16.depth = true;
+  d16.depth_encoding = DepthEncoding::kU16;
+  d16.camera = depth_camera;
+  u16->frames.push_back(std::move(d16));
+}
+
+std::vector<Input> LoadInputs(const std::string& dir, int max_frames, double baseline) {
   FrameSettings settings;
   if (!ApplyPreset("new_tsukuba", &settings, "preset", false).ok()) std::exit(2);
-  const CameraModel camera = settings.PipelineFor(640, 480).camera;
+  CameraModel camera = settings.PipelineFor(640, 480).camera;
+  camera.baseline = baseline;
   auto pairs = Check(tsukuba::LoadAllStereo(dir), "New Tsukuba");
   auto matcher = Check(stereo::MakeMatcher(StereoParams{}), "matcher");
-  std::vector<Input> inputs = {{"u8 disparity", {}},
-                               {"u16 disparity (our matcher)", {}},
-                               {"f32 depth", {}},
-                               {"u16 depth", {}}};
+  std::vector<Input> inputs = {{"u8 disparity (truth)", {}},     {"u16 disparity (matcher)", {}},
+                               {"u16 depth mm (matcher)", {}},   {"f32 depth m (matcher)", {}},
+                               {"u16 depth mm (truth)", {}},     {"f32 depth m (truth)", {}}};
   for (const StereoFrame& f : pairs) {
     if (max_frames > 0 && static_cast<int>(inputs[0].frames.size()) >= max_frames) break;
     const std::uint32_t w = f.truth.width, h = f.truth.height;
@@ -111,25 +139,8 @@ std::vector<Input> LoadInputs(const std::string& dir, int max_frames) {
     u16.disparity_encoding = DisparityEncoding::kU16;
     u16.camera = stereo::ForMatcherOutput(camera);
     inputs[1].frames.push_back(std::move(u16));
-
-    std::vector<float> zf(std::size_t{w} * h);
-    std::vector<std::uint16_t> z16(zf.size());
-    for (std::size_t i = 0; i < zf.size(); ++i) {
-      const int d = f.truth.pixels[i];
-      const double z = d == 0 ? 0.0 : camera.fx * camera.baseline / d;
-      zf[i] = static_cast<float>(z);
-      z16[i] = static_cast<std::uint16_t>(std::lround(std::min(z * 1000, 65535.0)));
-    }
-    Plane df = Packed(w, h, zf);
-    df.depth = true;
-    df.depth_encoding = DepthEncoding::kF32;
-    df.camera = camera;
-    inputs[2].frames.push_back(std::move(df));
-    Plane d16 = Packed(w, h, z16);
-    d16.depth = true;
-    d16.depth_encoding = DepthEncoding::kU16;
-    d16.camera = camera;
-    inputs[3].frames.push_back(std::move(d16));
+    AddDepths(map.values, w, h, stereo::ForMatcherOutput(camera), &inputs[3], &inputs[2]);
+    AddDepths(f.truth.pixels, w, h, camera, &inputs[5], &inputs[4]);
   }
   return inputs;
 }
@@ -239,6 +250,7 @@ int Main(int argc, char** argv) {
       "medians over the frames; the worst point error measured through the server's conversion"};
   std::string data_dir = tsukuba::DefaultDir(), json_path, bounds_list = "1,5,10,20";
   int rounds = 5, frames = 0;
+  double baseline = 0.1;
   app.add_option("--data", data_dir, "New Tsukuba folder (default: $CLOUDCAST_DATA or the build's)");
   app.add_option("--bounds-mm", bounds_list, "comma-separated point error bounds, millimetres")
       ->capture_default_str();
@@ -246,6 +258,11 @@ int Main(int argc, char** argv) {
       ->check(CLI::Range(1, 1000))
       ->capture_default_str();
   app.add_option("--frames", frames, "at most this many frames (0: all)")->capture_default_str();
+  app.add_option("--baseline", baseline,
+                 "stereo baseline, metres: New Tsukuba's real 0.1 (z = 61.5 / d m, 0.3 to 6 m); "
+                 "1 is the paper's and PCL's z = 615 / d")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
   app.add_option("--json", json_path, "also write the rows as JSON here");
   CLI11_PARSE(app, argc, argv);
 
@@ -264,7 +281,7 @@ int Main(int argc, char** argv) {
     start = comma + 1;
   }
 
-  const std::vector<Input> inputs = LoadInputs(data_dir, frames);
+  const std::vector<Input> inputs = LoadInputs(data_dir, frames, baseline);
   std::vector<Row> rows;
   for (const Input& input : inputs) {
     double lossless_kb = 0;
@@ -274,9 +291,10 @@ int Main(int argc, char** argv) {
     }
   }
 
-  std::printf("New Tsukuba, %zu frames 640x480, row deltas + zstd level %d, medians (encode: "
-              "this thread's CPU, median of %d)\n\n",
-              inputs[0].frames.size(), kDefaultCompressionLevel, rounds);
+  std::printf("New Tsukuba, %zu frames 640x480, f = 615 px, baseline %g m; row deltas + zstd "
+              "level %d; medians over the frames (encode: quantize + compress, this thread's CPU, "
+              "median of %d)\n\n",
+              inputs[0].frames.size(), baseline, kDefaultCompressionLevel, rounds);
   std::printf("| input | bound mm | KB a frame | vs lossless | encode ms | values changed | "
               "worst point error mm |\n| --- | --- | --- | --- | --- | --- | --- |\n");
   nlohmann::json json = nlohmann::json::array();
@@ -297,6 +315,7 @@ int Main(int argc, char** argv) {
   }
   if (!json_path.empty()) {
     std::ofstream(json_path) << nlohmann::json{{"frames", inputs[0].frames.size()},
+                                               {"baseline_m", baseline},
                                                {"rows", json}}
                                     .dump(2)
                              << "\n";

@@ -7,8 +7,12 @@
 
 #include <opencv2/core.hpp>
 
+#include <unistd.h>
+
 #include <cmath>
+#include <filesystem>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
@@ -19,6 +23,7 @@
 #include "cloudcast/sources/frame.h"
 #include "cloudcast/sources/uplink.h"
 #include "support/client_fixture.h"
+#include "support/program_support.h"
 #include "support/test_support.h"
 
 namespace cloudcast {
@@ -173,6 +178,42 @@ TEST_F(NearLosslessServerTest, CloudsWithinTheBoundOfTheLosslessOnes) {
     EXPECT_GT(disparity_totals.moved[b], 0u);
     EXPECT_LT(disparity_totals.near_bytes[b], disparity_totals.lossless_bytes);
   }
+}
+
+// cloudcast-client --max-point-error: New Tsukuba depth frames (float metres) with zstd, every
+// frame answered, fewer uplink bytes than without it; a negative bound refused naming the flag.
+TEST_F(NearLosslessServerTest, ClientProgramFlagShrinksTheUplink) {
+  CLOUDCAST_REQUIRE_TSUKUBA();
+  const std::string binary = testing::BinDir() + "/cloudcast-client";
+  ASSERT_TRUE(std::filesystem::exists(binary)) << binary << " is missing: build cloudcast-client";
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() /
+                                    ("near_lossless_server_test_" + std::to_string(getpid()));
+  std::filesystem::create_directories(dir);
+  auto run = [&](const std::string& bound) {
+    const std::string json = (dir / ("run_" + bound + ".json")).string();
+    const testing::RunResult r = testing::RunProgram(
+        binary,
+        {"--server", shared_target(), "--tsukuba", testing::TsukubaDir(), "--input", "depth",
+         "--encoding", "zstd", "--frames", "10", "--lossless", "--no-window", "--quiet",
+         "--max-point-error", bound, "--json", json},
+        dir.string(), "env -u DISPLAY");
+    EXPECT_TRUE(r.exited && r.code == 0) << r;
+    return nlohmann::json::parse(testing::ReadText(json), nullptr, false);
+  };
+  const nlohmann::json lossless = run("0");
+  const nlohmann::json near = run("0.05");
+  ASSERT_FALSE(lossless.is_discarded());
+  ASSERT_FALSE(near.is_discarded());
+  EXPECT_EQ(lossless["frames"]["received"], 10);
+  EXPECT_EQ(near["frames"]["received"], 10);
+  EXPECT_LT(near["mean_uplink_bytes_per_frame"].get<double>(),
+            lossless["mean_uplink_bytes_per_frame"].get<double>());
+  const testing::RunResult bad = testing::RunProgram(
+      binary, {"--server", shared_target(), "--no-window", "--max-point-error", "-1"},
+      dir.string(), "env -u DISPLAY");
+  EXPECT_EQ(bad.code, 2) << bad;
+  EXPECT_NE((bad.out + bad.err).find("--max-point-error"), std::string::npos) << bad;
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace
