@@ -179,6 +179,8 @@ void MapRows(const View& in, const Mapper& mapper, std::vector<std::uint32_t>* t
   constexpr std::uint32_t kValidBit = 1u << 31;
   if constexpr (kTabled) table->assign(std::size_t{1} << (8 * sizeof(T)), 0);
   const std::size_t row_bytes = std::size_t{in.width} * sizeof(T);
+  [[maybe_unused]] T last_raw{}, last_result{};  // floats: the previous pixel's value, replacement
+  [[maybe_unused]] bool last_valid = false;
   for (std::uint32_t v = 0; v < in.height; ++v) {
     const std::uint8_t* src = in.row(v);
     std::uint8_t* dst = out + v * row_bytes;
@@ -195,8 +197,14 @@ void MapRows(const View& in, const Mapper& mapper, std::vector<std::uint32_t>* t
         }
         result = static_cast<T>((entry & ~kValidBit) - 1);
         valid = (entry & kValidBit) != 0;
+      } else if (u > 0 && std::memcmp(&raw, &last_raw, sizeof(T)) == 0) {
+        result = last_result;  // runs of one value (a plane, a hole) cost one Map
+        valid = last_valid;
       } else {
         result = mapper.Map(raw, &valid);
+        last_raw = raw;
+        last_result = result;
+        last_valid = valid;
       }
       stats->valid += valid;
       stats->changed += std::memcmp(&result, &raw, sizeof(T)) != 0;

@@ -41,7 +41,7 @@ struct UplinkOptions {
   double max_point_error = 0;
   // With max_point_error: the camera the stream sends (principal point unset: each frame's
   // centre, as the server resolves it).
-  FrameSettings camera;
+  FrameSettings camera{};
 };
 
 // One frame's images as the uplink carries them, of any kind (disparity + colour, depth +
