@@ -181,6 +181,9 @@ void MapRows(const View& in, const Mapper& mapper, std::vector<std::uint32_t>* t
   const std::size_t row_bytes = std::size_t{in.width} * sizeof(T);
   [[maybe_unused]] T last_raw{}, last_result{};  // floats: the previous pixel's value, replacement
   [[maybe_unused]] bool last_valid = false;
+  // Counted in locals: through `stats` every byte stored to `out` (which may alias it) would
+  // force a reload.
+  std::uint64_t valid_count = 0, changed_count = 0;
   for (std::uint32_t v = 0; v < in.height; ++v) {
     const std::uint8_t* src = in.row(v);
     std::uint8_t* dst = out + v * row_bytes;
@@ -206,11 +209,13 @@ void MapRows(const View& in, const Mapper& mapper, std::vector<std::uint32_t>* t
         last_result = result;
         last_valid = valid;
       }
-      stats->valid += valid;
-      stats->changed += std::memcmp(&result, &raw, sizeof(T)) != 0;
+      valid_count += valid;
+      changed_count += std::memcmp(&result, &raw, sizeof(T)) != 0;
       std::memcpy(dst + u * sizeof(T), &result, sizeof(T));
     }
   }
+  stats->valid = valid_count;
+  stats->changed = changed_count;
 }
 
 }  // namespace
