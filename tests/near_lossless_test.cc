@@ -11,9 +11,11 @@
 #include <limits>
 #include <map>
 #include <random>
+#include <variant>
 #include <string>
 #include <vector>
 
+#include "cloudcast/client/near_lossless.h"
 #include "cloudcast/core/camera.h"
 #include "cloudcast/core/filters.h"
 #include "cloudcast/core/frame_codec.h"
@@ -275,6 +277,52 @@ TEST(NearLossless, RoundestInRangeHasTheMostTrailingZeros) {
   }
   EXPECT_EQ(RoundestInRange(0xFFFFFFFEu, 0xFFFFFFFFu), 0xFFFFFFFEu);
   EXPECT_EQ(RoundestInRange(1u, 0xFFFFFFFFu), 0x80000000u);
+}
+
+// The client library's form: a frame's raw or Compressed disparity or depth replaced by the
+// quantized pixels of the same kind (the compression kept), colour untouched, encoded inputs
+// refused naming the image, stereo pairs as they are.
+TEST(NearLossless, ClientFramesKeepTheirKind) {
+  std::vector<float> depth(64 * 48);
+  for (std::size_t i = 0; i < depth.size(); ++i) depth[i] = 2.0f + 0.001237f * (i % 97);
+  std::vector<std::uint8_t> grey(64 * 48, 7);
+  CameraModel camera;
+  camera.cx = 32;
+  camera.cy = 24;
+  const auto plane = MakePlane("f32", 64, 48, DepthEncoding::kF32, camera, depth);
+  const ColorView colour{grey.data(), grey.size(), 64, 48, 64, ColorEncoding::kMono8};
+  PointErrorQuantizer quantizer;
+  convert::Compression compression;
+  compression.level = 3;
+  client::FrameInput compressed =
+      client::DepthFrame{client::Compressed(plane.view(), compression), colour};
+  absl::StatusOr<client::FrameInput> near =
+      client::NearLossless(compressed, camera, 0.01, &quantizer);
+  ASSERT_TRUE(near.ok()) << near.status();
+  const auto& frame = std::get<client::DepthFrame>(*near);
+  const auto& c = std::get<client::CompressedDepthView>(frame.depth);
+  EXPECT_EQ(c.compression.level, 3);
+  EXPECT_NE(c.view.data, plane.view().data);  // the quantizer's buffer
+  EXPECT_GT(quantizer.stats().changed, 0u);
+  ExpectWithinBound(plane, c.view, 0.01, "client frame");
+  EXPECT_EQ(std::get<ColorView>(frame.colour).data, colour.data);
+
+  client::FrameInput raw = client::DepthFrame{plane.view(), colour};
+  near = client::NearLossless(raw, camera, 0.01, &quantizer);
+  ASSERT_TRUE(near.ok()) << near.status();
+  EXPECT_TRUE(std::holds_alternative<DepthView>(std::get<client::DepthFrame>(*near).depth));
+
+  const std::string png = "not really a png";
+  client::FrameInput encoded =
+      client::DisparityFrame{client::EncodedImage{png}, colour};
+  near = client::NearLossless(encoded, camera, 0.01, &quantizer);
+  EXPECT_EQ(near.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(std::string(near.status().message()), ::testing::StartsWith("disparity"));
+
+  client::FrameInput stereo = client::StereoFrame{colour, colour};
+  near = client::NearLossless(stereo, camera, 0.01, &quantizer);
+  ASSERT_TRUE(near.ok());
+  EXPECT_TRUE(std::holds_alternative<client::StereoFrame>(*near));
 }
 
 TEST(NearLossless, BadArgumentsNameTheField) {
