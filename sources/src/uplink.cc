@@ -85,6 +85,44 @@ absl::StatusOr<std::string> ColourFile(const cv::Mat& m, const UplinkOptions& op
                                            : client::EncodePng(m, options.png_compression);
 }
 
+// `g` (a disparity or depth Mat) quantized for `options.max_point_error` into `quantizer`'s
+// buffer, as a Mat header over it (valid until the quantizer's next use); `g` itself when the
+// bound is 0.
+absl::StatusOr<cv::Mat> NearLossless(const cv::Mat& g, FrameKind kind, const UplinkOptions& options,
+                                     PointErrorQuantizer* quantizer) {
+  if (options.max_point_error == 0 || kind == FrameKind::kStereo) return g;
+  const CameraModel camera =
+      options.camera.PipelineFor(static_cast<std::uint32_t>(g.cols), static_cast<std::uint32_t>(g.rows))
+          .camera;
+  const void* data = nullptr;
+  if (kind == FrameKind::kDisparity) {
+    absl::StatusOr<client::DisparityInput> in = client::DisparityFromMat(g);
+    if (!in.ok()) return in.status();
+    const auto* view = std::get_if<DisparityView>(&*in);
+    if (view == nullptr) return absl::InternalError("disparity Mat is not a raw view");
+    DisparityView out;
+    if (absl::Status s = quantizer->Quantize(*view, camera,
+                                             options.max_point_error, "disparity", &out);
+        !s.ok()) {
+      return s;
+    }
+    data = out.data;
+  } else {
+    absl::StatusOr<client::DepthInput> in = client::DepthFromMat(g);
+    if (!in.ok()) return in.status();
+    const auto* view = std::get_if<DepthView>(&*in);
+    if (view == nullptr) return absl::InternalError("depth Mat is not a raw view");
+    DepthView out;
+    if (absl::Status s = quantizer->Quantize(*view, camera,
+                                             options.max_point_error, "depth", &out);
+        !s.ok()) {
+      return s;
+    }
+    data = out.data;
+  }
+  return cv::Mat(g.rows, g.cols, g.type(), const_cast<void*>(data));
+}
+
 }  // namespace
 
 bool ParseUplink(std::string_view name, Uplink* out) {
@@ -124,7 +162,10 @@ absl::Status UplinkFrame::Encode(const SourceFrame& frame, const UplinkOptions& 
   const cv::Mat& c = frame.colour();
   const bool stereo = kind_ == FrameKind::kStereo;
   // What gives the points depth: a disparity or depth image; a stereo pair has none.
-  const cv::Mat& g = kind_ == FrameKind::kDepth ? frame.depth() : frame.disparity();
+  absl::StatusOr<cv::Mat> geometry = NearLossless(
+      kind_ == FrameKind::kDepth ? frame.depth() : frame.disparity(), kind_, options, &quantizer_);
+  if (!geometry.ok()) return geometry.status();
+  const cv::Mat& g = *geometry;
   const char* left = stereo ? "left" : "colour";
   if (encoding_ == Uplink::kRaw || encoding_ == Uplink::kZstd) {
     const bool zstd = encoding_ == Uplink::kZstd;

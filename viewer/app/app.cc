@@ -98,6 +98,7 @@ struct Flags {
   double max_reply_kb = 0;  // the downlink cap (DracoConfig.max_cloud_bytes), kB; 0 = none
   std::string encoding = sources::Name(SessionDefaults().uplink.encoding);
   int jpeg_quality = SessionDefaults().uplink.jpeg_quality;
+  double max_point_error = 0;  // near-lossless disparity and depth, metres; 0 = lossless
   // --encoding h264 (docs/video.md): the colour image, or a stereo pair, as H.264 pictures; the
   // --h264-* flags, shared with cloudcast-load.
   std::unique_ptr<cli::VideoFlags> h264;
@@ -230,6 +231,14 @@ std::unique_ptr<cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
                  "views of a stereo pair, as H.264 video: the thinnest; disparity and depth "
                  "still lossless; --h264-* flags)")
       ->check(CLI::IsMember(encodings))
+      ->capture_default_str()
+      ->group(streaming);
+  app.add_option("--max-point-error", f.max_point_error,
+                 "Near-lossless disparity and depth: each value may change as long as the point "
+                 "the server makes from it moves by at most this many metres (per point, before "
+                 "any filter; e.g. a quarter of the voxel leaf), which shrinks zstd and png "
+                 "frames. 0 = lossless")
+      ->check(CLI::NonNegativeNumber)
       ->capture_default_str()
       ->group(streaming);
   app.add_option("--max-reply-kb", f.max_reply_kb,
@@ -556,6 +565,15 @@ int Run(const Flags& f, const cli::StageFlags& stages) {
   if (f.rate_control) options.rate_control = f.rate->Options();
   sources::ParseUplink(f.encoding, &options.uplink.encoding);
   options.uplink.jpeg_quality = f.jpeg_quality;
+  options.uplink.max_point_error = f.max_point_error;
+  if (f.max_point_error > 0) {
+    // The quantizer bounds the points of the camera the stream sends (BuildConfig).
+    if (auto s = convert::ApplyCamera(options.config.camera(), "config.camera",
+                                      &options.uplink.camera);
+        !s.ok()) {
+      return Fail(s);
+    }
+  }
   if (f.encoding == video::kH264) {
     // The images are taken raw from the source and coded by the session's FrameEncoder.
     options.uplink.encoding = sources::Uplink::kRaw;

@@ -10,6 +10,8 @@
 #include "absl/status/status.h"
 #include "cloudcast/client/frame.h"
 #include "cloudcast/client/opencv.h"
+#include "cloudcast/core/near_lossless.h"
+#include "cloudcast/core/settings.h"
 #include "cloudcast/sources/frame.h"
 #include "cloudcast/v1/cloudcast.pb.h"
 
@@ -33,6 +35,13 @@ struct UplinkOptions {
   Uplink encoding = Uplink::kRaw;
   int jpeg_quality = client::kDefaultJpegQuality;  // 1..100, kJpeg
   int png_compression = 1;                         // 0..9, kPng and kJpeg's disparity
+  // Near-lossless disparity and depth (core/near_lossless.h): the most any point may move, in
+  // the cloud's units (metres), per point, in the camera's REP 103 optical frame. 0 (the
+  // default): lossless. Applies before every encoding (it pays with zstd and png).
+  double max_point_error = 0;
+  // With max_point_error: the camera the stream sends (principal point unset: each frame's
+  // centre, as the server resolves it).
+  FrameSettings camera{};
 };
 
 // One frame's images as the uplink carries them, of any kind (disparity + colour, depth +
@@ -69,6 +78,7 @@ class UplinkFrame {
   client::ColorInput colour_view_, right_view_;
   std::string geometry_file_, colour_file_, right_file_;  // kPng, kJpeg
   bool float_as_tiff_ = false;
+  PointErrorQuantizer quantizer_;  // owns the quantized disparity or depth the views point into
 };
 
 }  // namespace cloudcast::sources
