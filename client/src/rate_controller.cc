@@ -113,22 +113,14 @@ void RateController::OnReply(const Reply& reply) {
     const auto since = last_decrease_ ? received - *last_decrease_ : Clock::duration::max();
     const auto once_a_round_trip = std::chrono::duration_cast<Clock::duration>(
         std::chrono::duration<double, std::milli>(std::max(estimate_.rtt_ms, 100.0)));
-    // While the queue a cut left behind drains, replies still show it, and the server's rate
-    // falls to the sender's own: cutting again to a fraction of that stacks the cuts (on the
-    // emulated 10 -> 3 Mbit/s step they took the target to half the link). So within an episode
-    // of overuse a further cut needs the delay to have grown past where it stood at the last one.
-    const bool draining = episode_delay_ms_ > 0 && last_queue_sample_ <= episode_delay_ms_;
-    if (since >= once_a_round_trip && !draining) {
+    if (since >= once_a_round_trip) {
       const double cut =
           estimate_.delivered_bps > 0 ? options_.backoff * estimate_.delivered_bps : 0.5 * target;
       target = std::min(target, cut);
       last_decrease_ = received;
       capacity_bps_ = estimate_.delivered_bps;
-      episode_delay_ms_ = last_queue_sample_;
     }
-  }
-  if (!over) episode_delay_ms_ = 0;  // the episode is over: the next overuse cuts at once
-  if (!estimate_.overuse && estimate_.queue_delay_ms < options_.grow_below * target_delay) {
+  } else if (estimate_.queue_delay_ms < options_.grow_below * target_delay) {
     const bool near_capacity =
         capacity_bps_ > 0 && target >= 0.95 * capacity_bps_ && target <= 1.3 * capacity_bps_;
     const double growth = !seen_overuse_  ? options_.startup_growth_per_second

@@ -116,7 +116,6 @@ class RateController {
   std::optional<Clock::time_point> last_decrease_;
   bool seen_overuse_ = false;
   double capacity_bps_ = 0;  // delivered at the last overuse (0: none yet)
-  double episode_delay_ms_ = 0;  // the queueing delay at this overuse episode's last cut (0: none)
 };
 
 // An encoder quality (JPEG's 1..100, or any scale where higher means more bytes) that follows a
