@@ -9,6 +9,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <deque>
 #include <functional>
@@ -223,6 +224,26 @@ TEST(RateControllerTest, AnOutageHoldsFramesInTheSenderAndTheStreamResumes) {
   const std::vector<Sample> after = Between(s, 7000, 12000, Any);
   ASSERT_GT(after.size(), 100u);
   for (const Sample& x : after) EXPECT_LT(x.latency_ms, 300) << x.t_ms;
+}
+
+// A low target delay keeps the queue short, but the window must still hold the frames of a round
+// trip plus a retransmission's: with it sized from twice the target delay alone (20 ms here), a
+// lost packet left the camera's frames waiting in the sender (emulated profile (a) at 10 ms:
+// 27.4 fps answered; with 60 ms of slack 29.8).
+TEST(RateControllerTest, TheWindowKeepsRoomForARetransmissionAtALowTargetDelay) {
+  RateControlOptions o;
+  o.target_delay = milliseconds(10);
+  RateController c(o);
+  const Clock::time_point t0{};
+  c.OnFrameWritten(20'000);
+  c.OnReply({t0, t0 + milliseconds(70), 20'000});
+  const double target = c.estimate().target_bps;
+  const double slack_s = static_cast<double>(o.min_window_slack.count()) / 1000;
+  ASSERT_GE(slack_s, 2 * 0.010);
+  const int expected = static_cast<int>(std::ceil(target / 8 * (0.070 + slack_s) / 20'000));
+  EXPECT_EQ(c.frames_in_flight(), std::clamp(expected, o.min_frames_in_flight,
+                                             o.max_frames_in_flight));
+  EXPECT_GE(c.frames_in_flight(), 3);
 }
 
 TEST(RateControllerTest, WithoutTheServersByteCountOveruseHalvesTheTarget) {

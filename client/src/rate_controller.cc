@@ -148,9 +148,9 @@ void RateController::UpdateWindow() {
   // packet CUBIC's smaller window makes a frame take a round trip more, 0.1 % loss does that a
   // few times a second at 10 Mbit/s). Less than that and the camera's 30 frames a second do not
   // fit in flight on a 40 ms link.
-  const double seconds = (round_trips_.front().second +
-                          2 * static_cast<double>(options_.target_delay.count())) /
-                         1000;
+  const double slack = std::max(2 * static_cast<double>(options_.target_delay.count()),
+                                static_cast<double>(options_.min_window_slack.count()));
+  const double seconds = (round_trips_.front().second + slack) / 1000;
   const double frames = estimate_.target_bps / 8 * seconds / mean_frame_bytes_;
   estimate_.frames_in_flight =
       std::clamp(static_cast<int>(std::ceil(frames)), options_.min_frames_in_flight,

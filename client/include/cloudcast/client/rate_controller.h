@@ -51,6 +51,9 @@ struct RateControlOptions {
   double near_capacity_growth_per_second = 0.1;
   // Growth stops at this multiple of the delivered rate (the probe's margin).
   double max_over_delivered = 1.6;
+  // The window covers the minimum round trip plus twice target_delay, and at least this much
+  // beyond it: after a lost packet TCP makes a frame take a round trip more whatever the target.
+  std::chrono::milliseconds min_window_slack{60};
   int min_frames_in_flight = 2;
   int max_frames_in_flight = 8;
   std::chrono::seconds min_rtt_window{10};
