@@ -45,6 +45,16 @@ const std::vector<ParamDoc>& Docs() {
        "follow the link instead of queueing behind it (a robot on Wi-Fi or LTE): a rate "
        "controller keeps a window of frames in flight and a newer frame replaces one waiting "
        "past it (needs delivery latest, which it sets when delivery is left unset)"},
+      {"rate/target_delay_ms", "double",
+       absl::StrCat(client::RateControlOptions{}.target_delay.count()),
+       "with rate_control: the queueing delay (ms) over which the link counts as full, 1..1000; "
+       "lower keeps latency lower at the cost of bytes per frame (docs/links.md measures 15)"},
+      {"rate/start_mbps", "double", absl::StrCat(client::RateControlOptions{}.start_bps / 1e6),
+       "with rate_control: the bitrate a stream starts at, Mbit/s, 0.01..10000"},
+      {"rate/min_mbps", "double", absl::StrCat(client::RateControlOptions{}.min_bps / 1e6),
+       "with rate_control: the least the controller sets, Mbit/s, 0.01..10000"},
+      {"rate/max_mbps", "double", absl::StrCat(client::RateControlOptions{}.max_bps / 1e6),
+       "with rate_control: the most the controller sets, Mbit/s, 0.01..10000"},
       {"encoding", "string", "raw",
        "how the images travel: raw; zstd (lossless: row deltas + zstd, about a third of the "
        "bytes); h264 (the colour image, or both views of a stereo pair, as H.264 video, about "
@@ -171,6 +181,48 @@ absl::Status CheckNoUnknownParams(const ParamReader& p, const std::string& progr
   if (!lhs##_or.ok()) return lhs##_or.status(); \
   auto lhs = *std::move(lhs##_or)
 
+// rate/*: the rate controller's settings, as cloudcast-client's --rate-* flags (the same ranges),
+// and only with rate_control, so that a setting is never silently ignored.
+absl::Status ReadRateSettings(const ParamReader& p, BridgeOptions* o) {
+  struct Setting {
+    const char* name;
+    double lo, hi;
+    const char* unit;
+  };
+  static constexpr Setting kSettings[] = {{"rate/target_delay_ms", 1, 1000, "ms"},
+                                          {"rate/start_mbps", 0.01, 10000, "Mbit/s"},
+                                          {"rate/min_mbps", 0.01, 10000, "Mbit/s"},
+                                          {"rate/max_mbps", 0.01, 10000, "Mbit/s"}};
+  double values[4] = {static_cast<double>(o->rate.target_delay.count()), o->rate.start_bps / 1e6,
+                      o->rate.min_bps / 1e6, o->rate.max_bps / 1e6};
+  for (int i = 0; i < 4; ++i) {
+    const Setting& s = kSettings[i];
+    CLOUDCAST_ASSIGN_OR_RETURN(v, p.Double(s.name));
+    if (!v) continue;
+    if (!o->rate_control) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(p.Display(s.name), " needs ", p.Display("rate_control"), " true"));
+    }
+    if (!(std::isfinite(*v) && *v >= s.lo && *v <= s.hi)) {
+      std::ostringstream rule;
+      rule << "in [" << s.lo << ", " << s.hi << "] " << s.unit;
+      return OutOfRange(p, s.name, *v, rule.str());
+    }
+    values[i] = *v;
+  }
+  if (values[2] > values[3] || values[1] < values[2] || values[1] > values[3]) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        p.Display("rate/min_mbps"), " <= ", p.Display("rate/start_mbps"), " <= ",
+        p.Display("rate/max_mbps"), " must hold; they are ", values[2], ", ", values[1], ", ",
+        values[3]));
+  }
+  o->rate.target_delay = std::chrono::milliseconds(std::llround(values[0]));
+  o->rate.start_bps = values[1] * 1e6;
+  o->rate.min_bps = values[2] * 1e6;
+  o->rate.max_bps = values[3] * 1e6;
+  return absl::OkStatus();
+}
+
 absl::Status ReadConnection(const ParamReader& p, BridgeOptions* o) {
   CLOUDCAST_ASSIGN_OR_RETURN(server, p.String("server"));
   if (server) {
@@ -195,6 +247,7 @@ absl::Status ReadConnection(const ParamReader& p, BridgeOptions* o) {
   }
   CLOUDCAST_ASSIGN_OR_RETURN(rate_control, p.Bool("rate_control"));
   if (rate_control) o->rate_control = *rate_control;
+  if (absl::Status s = ReadRateSettings(p, o); !s.ok()) return s;
 
   // TLS and the token: the same rules as the programs' --tls-* and --token-file flags.
   CLOUDCAST_ASSIGN_OR_RETURN(tls, p.Bool("tls/enabled"));

@@ -44,7 +44,10 @@ struct BridgeOptions {
   // Connection: timeouts, TLS and the bearer token (ClientOptions::security).
   client::ClientOptions client;
   bool resilient = true;  // StreamOptions::resilient
-  bool rate_control = false;  // StreamOptions::rate_control (its defaults), with delivery latest
+  bool rate_control = false;  // StreamOptions::rate_control, with delivery latest
+  // The controller's settings (rate/*: target_delay_ms, start_mbps, min_mbps, max_mbps, as
+  // cloudcast-client's --rate-* flags); the library's defaults when unset.
+  client::RateControlOptions rate;
   std::chrono::milliseconds reconnect_timeout{30000};
   // The stream's passthrough, voxel grid, Draco, delivery and (~input stereo) matcher; the camera
   // is added per frame. Unset fields take the server's defaults.

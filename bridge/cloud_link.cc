@@ -33,7 +33,7 @@ absl::StatusOr<client::StreamOptions> StreamOptionsFor(const BridgeOptions& opti
   client::StreamOptions so;
   so.resilient = options.resilient;
   so.reconnect_timeout = options.reconnect_timeout;
-  if (options.rate_control) so.rate_control = client::RateControlOptions{};
+  if (options.rate_control) so.rate_control = options.rate;
   if (options.uplink == Uplink::kH264) {
 #ifdef CLOUDCAST_BRIDGE_VIDEO
     // A new encoder per stream: a new stream (after the old one ended) starts at an IDR. The

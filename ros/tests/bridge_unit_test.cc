@@ -722,5 +722,38 @@ TEST(BridgeParams, H264AndTheCapReachTheStream) {
   EXPECT_TRUE(so->resilient);
 }
 
+// rate/*: the rate controller's settings reach the stream, only with rate_control, each named
+// when out of range.
+TEST(BridgeParams, RateSettingsReachTheStreamsController) {
+  MapParams p;
+  p.Set("rate_control", true);
+  p.Set("rate/target_delay_ms", 15.0);
+  p.Set("rate/start_mbps", 2);  // an integer, as a launch file may write it
+  p.Set("rate/max_mbps", 12.0);
+  auto o = ReadBridgeOptions(p, "cloudcast-ros-bridge");
+  ASSERT_TRUE(o.ok()) << o.status();
+  auto so = StreamOptionsFor(*o);
+  ASSERT_TRUE(so.ok()) << so.status();
+  ASSERT_TRUE(so->rate_control.has_value());
+  EXPECT_EQ(so->rate_control->target_delay, std::chrono::milliseconds(15));
+  EXPECT_EQ(so->rate_control->start_bps, 2e6);
+  EXPECT_EQ(so->rate_control->max_bps, 12e6);
+  EXPECT_EQ(so->rate_control->min_bps, client::RateControlOptions{}.min_bps);
+
+  p.values.clear();
+  p.Set("rate/target_delay_ms", 15.0);
+  EXPECT_EQ(ErrorOf(p), "~rate/target_delay_ms needs ~rate_control true");
+  p.Set("rate_control", true);
+  p.Set("rate/target_delay_ms", 0.0);
+  EXPECT_EQ(ErrorOf(p), "~rate/target_delay_ms is 0; must be in [1, 1000] ms");
+  p.values.clear();
+  p.Set("rate_control", true);
+  p.Set("rate/min_mbps", 5.0);
+  p.Set("rate/max_mbps", 2.0);
+  EXPECT_NE(ErrorOf(p).find("~rate/min_mbps <= ~rate/start_mbps <= ~rate/max_mbps must hold"),
+            std::string::npos)
+      << ErrorOf(p);
+}
+
 }  // namespace
 }  // namespace cloudcast::ros_bridge
