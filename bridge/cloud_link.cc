@@ -61,13 +61,7 @@ client::FrameInput ForUplink(const client::FrameInput& images, Uplink uplink) {
     case Uplink::kZstd:
       return client::CompressRaw(images);
     case Uplink::kH264:
-      if (const auto* f = std::get_if<client::DisparityFrame>(&images)) {
-        return client::DisparityFrame{client::CompressRaw(f->disparity), f->colour};
-      }
-      if (const auto* f = std::get_if<client::DepthFrame>(&images)) {
-        return client::DepthFrame{client::CompressRaw(f->depth), f->colour};
-      }
-      return images;
+      return client::CompressGeometry(images);
   }
   return images;
 }

@@ -46,6 +46,16 @@ FrameInput CompressRaw(const FrameInput& input, const convert::Compression& comp
   return StereoFrame{CompressRaw(f.left, compression), CompressRaw(f.right, compression)};
 }
 
+FrameInput CompressGeometry(const FrameInput& input, const convert::Compression& compression) {
+  if (const auto* f = std::get_if<DisparityFrame>(&input)) {
+    return DisparityFrame{CompressRaw(f->disparity, compression), f->colour};
+  }
+  if (const auto* f = std::get_if<DepthFrame>(&input)) {
+    return DepthFrame{CompressRaw(f->depth, compression), f->colour};
+  }
+  return input;
+}
+
 namespace internal {
 namespace {
 

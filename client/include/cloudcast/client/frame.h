@@ -120,6 +120,10 @@ DepthInput CompressRaw(const DepthInput& input, const convert::Compression& comp
 ColorInput CompressRaw(const ColorInput& input, const convert::Compression& compression = {});
 // Every raw view of the frame compressed.
 FrameInput CompressRaw(const FrameInput& input, const convert::Compression& compression = {});
+// Only the disparity or depth map compressed (losslessly), the colour images as they are: what a
+// video coder (StreamOptions::coder, e.g. video::FrameEncoder) is given, since it codes the colour
+// images and passes the map through. A stereo pair is returned as it is.
+FrameInput CompressGeometry(const FrameInput& input, const convert::Compression& compression = {});
 
 // A frame's metadata, echoed by the server in its reply.
 struct FrameMeta {
