@@ -218,6 +218,20 @@ void MapRows(const View& in, const Mapper& mapper, std::vector<std::uint32_t>* t
   stats->changed = changed_count;
 }
 
+// Sizes `buffer` for `in`'s rows packed (no row padding) and returns a row's bytes; with `copy`
+// (a bound of 0: lossless) copies them in, else the caller maps each pixel into it.
+template <typename View>
+std::size_t PackRows(const View& in, bool copy, std::vector<std::uint8_t>* buffer) {
+  const std::size_t row_bytes = std::size_t{in.width} * BytesPerPixel(in.encoding);
+  buffer->resize(row_bytes * in.height);
+  if (copy) {
+    for (std::uint32_t v = 0; v < in.height; ++v) {
+      std::memcpy(buffer->data() + v * row_bytes, in.row(v), row_bytes);
+    }
+  }
+  return row_bytes;
+}
+
 }  // namespace
 
 std::uint32_t RoundestInRange(std::uint32_t lo, std::uint32_t hi) {
@@ -236,13 +250,8 @@ absl::Status PointErrorQuantizer::Quantize(const DisparityView& in, const Camera
                                            DisparityView* out) {
   if (absl::Status s = CheckInput(in, camera, max_point_error, field); !s.ok()) return s;
   stats_ = {};
-  const std::size_t row_bytes = std::size_t{in.width} * BytesPerPixel(in.encoding);
-  buffer_.resize(row_bytes * in.height);
-  if (max_point_error == 0) {
-    for (std::uint32_t v = 0; v < in.height; ++v) {
-      std::memcpy(buffer_.data() + v * row_bytes, in.row(v), row_bytes);
-    }
-  } else {
+  const std::size_t row_bytes = PackRows(in, max_point_error == 0, &buffer_);
+  if (max_point_error != 0) {
     const DisparityMapper mapper(
         camera, max_point_error * kMargin / LongestRay(camera, in.width, in.height));
     switch (in.encoding) {
@@ -267,13 +276,8 @@ absl::Status PointErrorQuantizer::Quantize(const DepthView& in, const CameraMode
                                            DepthView* out) {
   if (absl::Status s = CheckInput(in, camera, max_point_error, field); !s.ok()) return s;
   stats_ = {};
-  const std::size_t row_bytes = std::size_t{in.width} * BytesPerPixel(in.encoding);
-  buffer_.resize(row_bytes * in.height);
-  if (max_point_error == 0) {
-    for (std::uint32_t v = 0; v < in.height; ++v) {
-      std::memcpy(buffer_.data() + v * row_bytes, in.row(v), row_bytes);
-    }
-  } else {
+  const std::size_t row_bytes = PackRows(in, max_point_error == 0, &buffer_);
+  if (max_point_error != 0) {
     const DepthMapper mapper(camera, in.encoding,
                              max_point_error * kMargin / LongestRay(camera, in.width, in.height));
     switch (in.encoding) {
