@@ -28,6 +28,7 @@ struct Sample {
   double queue_ms;    // the bottleneck's queue, in ms at its rate then
   double latency_ms;  // of the frame answered then: capture to reply
   int window;
+  double reply_target_bps;
 };
 
 // What a real link and server add to the ideal one (defaults: nothing).
@@ -37,13 +38,23 @@ struct Realism {
   bool vary_sizes = false;   // frames 0.8 to 1.2 times their budget (JPEG content), replies of
                              // 15 to 30 KB over a 10 Mbit/s downlink, 1 to 10 ms in the server
   double floor_bytes = 8'000;  // the encoder's smallest frame
+  // A downlink of its own (0: as above): each reply takes `reply_bytes` (the server's cloud),
+  // or the controller's reply budget when that is smaller (the stream core's cap, set when the
+  // frame was written), at least `reply_floor_bytes` (the server's error bound).
+  double downlink_bps = 0;
+  double reply_bytes = 16'000;
+  double reply_floor_bytes = 2'000;
 };
 
 // One millisecond a step. `rate_bps(t_ms)` is the bottleneck's rate (0: an outage).
 class LinkSimulation {
  public:
-  LinkSimulation(std::function<double(double)> rate_bps, double one_way_ms, Realism realism = {})
-      : rate_bps_(std::move(rate_bps)), one_way_ms_(one_way_ms), realism_(realism) {}
+  LinkSimulation(std::function<double(double)> rate_bps, double one_way_ms, Realism realism = {},
+                 RateControlOptions options = {})
+      : rate_bps_(std::move(rate_bps)),
+        one_way_ms_(one_way_ms),
+        realism_(realism),
+        controller_(options) {}
 
   std::vector<Sample> Run(double seconds) {
     std::vector<Sample> samples;
@@ -66,17 +77,23 @@ class LinkSimulation {
           }
           arrival = std::max(arrival, hol_until_ms_);  // TCP delivers in order
           hol_until_ms_ = arrival;
-          double in_server = 5, reply_ms = 0;
+          double in_server = 5, reply_ms = 0, reply_bytes = 0;
           if (realism_.vary_sizes) {
             in_server = 1 + static_cast<double>(completed_ * 7 % 10);
-            const double reply_bytes = 15'000 + 1'500 * static_cast<double>(completed_ * 3 % 11);
+            reply_bytes = 15'000 + 1'500 * static_cast<double>(completed_ * 3 % 11);
             reply_ms = reply_bytes * 8 / 10e6 * 1000;
+          }
+          if (realism_.downlink_bps > 0) {
+            reply_bytes = realism_.reply_bytes;
+            if (f.reply_cap > 0) reply_bytes = std::min(reply_bytes, f.reply_cap);
+            reply_bytes = std::max(reply_bytes, realism_.reply_floor_bytes);
+            reply_ms = reply_bytes * 8 / realism_.downlink_bps * 1000;
           }
           const double sent = std::max(arrival + in_server, server_sent_ms_);
           server_sent_ms_ = sent;
           downlink_free_ms_ = std::max(downlink_free_ms_, sent) + reply_ms;
           replies_.push_back({downlink_free_ms_ + one_way_ms_, f.written_ms, f.captured_ms,
-                              arrival, f.bytes, server_bytes_, sent});
+                              arrival, f.bytes, server_bytes_, sent, reply_bytes});
           link_.pop_front();
         }
       }
@@ -88,9 +105,11 @@ class LinkSimulation {
         // The server holds each frame 5 ms, and says so.
         controller_.OnReply({At(r.written_ms), At(t), static_cast<std::size_t>(r.bytes),
                              static_cast<std::int64_t>(r.server_ms * 1e6),
-                             static_cast<std::int64_t>(r.server_sent_ms * 1e6), r.server_bytes});
+                             static_cast<std::int64_t>(r.server_sent_ms * 1e6), r.server_bytes,
+                             static_cast<std::size_t>(r.reply_bytes)});
         samples.push_back({t, controller_.estimate().target_bps, QueueMs(t), t - r.captured_ms,
-                           controller_.frames_in_flight()});
+                           controller_.frames_in_flight(),
+                           controller_.estimate().reply_target_bps});
       }
       // The camera: the newest frame replaces one still waiting.
       if (t >= next_capture) {
@@ -105,7 +124,8 @@ class LinkSimulation {
             static_cast<double>(controller_.FrameBudgetBytes(fps)) * content,
             realism_.floor_bytes, 60'000);
         controller_.OnFrameWritten(static_cast<std::size_t>(bytes));
-        link_.push_back({bytes, bytes, t, *waiting_});
+        link_.push_back({bytes, bytes, t, *waiting_,
+                         static_cast<double>(controller_.ReplyBudgetBytes(fps))});
         ++in_flight_;
         waiting_.reset();
       }
@@ -116,11 +136,12 @@ class LinkSimulation {
  private:
   struct InLink {
     double bytes, bytes_left, written_ms, captured_ms;
+    double reply_cap;  // the controller's reply budget when it was written (0: none)
   };
   struct Reply {
     double at_ms, written_ms, captured_ms, server_ms, bytes;
     std::uint64_t server_bytes;
-    double server_sent_ms;
+    double server_sent_ms, reply_bytes;
   };
   static Clock::time_point At(double ms) {
     return Clock::time_point(std::chrono::microseconds(static_cast<std::int64_t>(ms * 1000)));
@@ -212,6 +233,32 @@ TEST(RateControllerTest, AStepDownIsFollowedWithinASecondAndAStepUpIsTaken) {
   // The step up is taken: the target is back above 6 Mbit/s within 5 s.
   EXPECT_FALSE(
       Between(s, 10000, 15000, [](const Sample& x) { return x.target_bps > 6e6; }).empty());
+}
+
+// The replies fill the downlink: 16 KB clouds at 30 fps are 3.8 Mbit/s, the downlink carries 3
+// (profile (c)'s step, docs/links.md round three). Following the downlink, the replies' bitrate
+// settles under its rate and the camera's frames all come back, soon after capture; replies that
+// take what they take hold the frames in flight, and a quarter of the camera's frames are
+// replaced in the sender.
+TEST(RateControllerTest, TheRepliesFollowADownlinkTheyWouldFill) {
+  Realism realism;
+  realism.downlink_bps = 3e6;
+  auto run = [&](bool cap_replies) {
+    RateControlOptions o;
+    o.cap_replies = cap_replies;
+    LinkSimulation sim([](double) { return 10e6; }, 20, realism, o);
+    return sim.Run(20);
+  };
+  const std::vector<Sample> following = Between(run(true), 8000, 20000, Any);
+  EXPECT_GE(following.size(), 29u * 12);  // the camera's 30 a second, answered
+  for (const Sample& x : following) {
+    EXPECT_LT(x.latency_ms, 250) << x.t_ms;
+    EXPECT_GT(x.reply_target_bps, 0) << x.t_ms;
+    EXPECT_LT(x.reply_target_bps, 3e6 * 1.3) << x.t_ms;
+  }
+  const std::vector<Sample> unlimited = Between(run(false), 8000, 20000, Any);
+  EXPECT_LT(unlimited.size(), 26u * 12);
+  for (const Sample& x : unlimited) EXPECT_EQ(x.reply_target_bps, 0) << x.t_ms;
 }
 
 TEST(RateControllerTest, AnOutageHoldsFramesInTheSenderAndTheStreamResumes) {

@@ -39,6 +39,8 @@ TEST(RateFlagsTest, DefaultsAreTheLibrarys) {
   EXPECT_EQ(o.start_bps, d.start_bps);
   EXPECT_EQ(o.min_bps, d.min_bps);
   EXPECT_EQ(o.max_bps, d.max_bps);
+  EXPECT_EQ(o.cap_replies, d.cap_replies);
+  EXPECT_TRUE(o.cap_replies);  // the replies follow the downlink unless told not to
   EXPECT_FALSE(p.flags.AnyGiven());
 }
 
@@ -52,6 +54,9 @@ TEST(RateFlagsTest, GivenValuesReachTheOptions) {
   EXPECT_EQ(o.min_bps, 0.5e6);
   EXPECT_EQ(o.max_bps, 12e6);
   EXPECT_EQ(p.flags.GivenFlags().size(), 4u);
+  Parsed off({"--rate-control", "--rate-reply-cap", "false"});
+  ASSERT_EQ(off.error, "");
+  EXPECT_FALSE(off.flags.Options().cap_replies);
 }
 
 TEST(RateFlagsTest, ErrorsNameTheFlag) {
@@ -65,6 +70,10 @@ TEST(RateFlagsTest, ErrorsNameTheFlag) {
             std::string::npos);
   EXPECT_NE(Parsed({"--rate-control", "--rate-min-mbps", "5", "--rate-max-mbps", "2"})
                 .error.find("--rate-min-mbps (5) is over --rate-max-mbps (2)"),
+            std::string::npos);
+  EXPECT_NE(Parsed({"--rate-reply-cap", "false"}).error.find("--rate-reply-cap needs --rate-control"),
+            std::string::npos);
+  EXPECT_NE(Parsed({"--rate-control", "--rate-reply-cap", "maybe"}).error.find("--rate-reply-cap"),
             std::string::npos);
   EXPECT_NE(Parsed({"--rate-control", "--rate-start-mbps", "200"})
                 .error.find("--rate-start-mbps (200) is outside"),

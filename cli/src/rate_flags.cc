@@ -11,7 +11,7 @@ namespace cloudcast::cli {
 namespace {
 
 const char* const kFlags[] = {"--rate-target-delay-ms", "--rate-start-mbps", "--rate-min-mbps",
-                              "--rate-max-mbps"};
+                              "--rate-max-mbps", "--rate-reply-cap"};
 
 }  // namespace
 
@@ -41,6 +41,12 @@ RateFlags::RateFlags(CLI::App& app, const std::string& group) : app_(app) {
       ->check(kMbps)
       ->capture_default_str()
       ->group(group);
+  app.add_option("--rate-reply-cap", cap_replies_,
+                 "With --rate-control: the replies follow the downlink too, each reply's cloud "
+                 "capped at the bitrate the downlink carries (never above --max-reply-kb); "
+                 "false: replies take what they take")
+      ->capture_default_str()
+      ->group(group);
 }
 
 client::RateControlOptions RateFlags::Options() const {
@@ -49,6 +55,7 @@ client::RateControlOptions RateFlags::Options() const {
   o.start_bps = start_mbps_ * 1e6;
   o.min_bps = min_mbps_ * 1e6;
   o.max_bps = max_mbps_ * 1e6;
+  o.cap_replies = cap_replies_;
   return o;
 }
 

@@ -21,6 +21,13 @@ absl::Status FromGrpc(const grpc::Status& status, const std::string& what) {
                       absl::StrCat(what, ": ", status.error_message()));
 }
 
+// A StreamRequest's bytes, parsed (false: not one).
+bool ParseRequest(const grpc::ByteBuffer& bytes, v1::StreamRequest* out) {
+  grpc::ByteBuffer copy(bytes);  // shares the slices; the reader needs a mutable buffer
+  grpc::ProtoBufferReader reader(&copy);
+  return out->ParseFromZeroCopyStream(&reader);
+}
+
 std::chrono::system_clock::time_point SystemTime(std::chrono::steady_clock::time_point t) {
   const auto from_now = t - std::chrono::steady_clock::now();
   return std::chrono::system_clock::now() +
@@ -107,7 +114,30 @@ StreamCore::StreamCore(grpc::Channel* channel, StreamCoreOptions options, Stream
   if (options_.rate_control) {
     rate_.emplace(*options_.rate_control);
     machine_.SetMaxUnanswered(static_cast<std::size_t>(rate_->frames_in_flight()), Clock::now());
+    // A stream without a config has the server's defaults, as has an empty config: the cap can
+    // go in either.
+    if (options_.rate_control->cap_replies &&
+        (!options_.config || ParseRequest(*options_.config, &stream_config_))) {
+      stream_config_.mutable_config();
+      reply_cap_.emplace();
+      reply_cap_->SetStreamCap(stream_config_.config().draco().max_cloud_bytes());
+    }
   }
+}
+
+grpc::ByteBuffer StreamCore::ConfigWithReplyCapLocked() const {
+  v1::StreamRequest request = stream_config_;
+  const std::uint64_t cap = reply_cap_->cap();
+  // The stream's own min_color_bits stays; only the cap changes.
+  v1::DracoConfig* draco = request.mutable_config()->mutable_draco();
+  if (cap == 0) {
+    draco->clear_max_cloud_bytes();
+  } else {
+    draco->set_max_cloud_bytes(cap);
+  }
+  const std::string bytes = request.SerializeAsString();
+  grpc::Slice slice(bytes);
+  return grpc::ByteBuffer(&slice, 1);
 }
 
 StreamCore::~StreamCore() {
@@ -130,6 +160,7 @@ void StreamCore::CollectLocked(Clock::time_point now) {
     if (rate_ && e.write->is_frame && !e.write->resend) {
       rate_->OnFrameWritten(e.write->payload.Length());
       written_bytes_.emplace_back(e.write->sequence, e.write->payload.Length());
+      if (reply_cap_) reply_cap_->OnFrameWritten(now);
     }
     Event ev{Event::kWrite};
     ev.write = WriteEvent{e.write->is_frame, e.write->resend, e.write->sequence,
@@ -369,6 +400,13 @@ absl::Status StreamCore::Reconfigure(grpc::ByteBuffer config) {
   {
     std::lock_guard<std::mutex> lock(mu_);
     const Clock::time_point now = Clock::now();
+    v1::StreamRequest parsed;
+    if (reply_cap_ && ParseRequest(config, &parsed) && parsed.has_config()) {
+      // The owner's new config, with the replies' cap in force (never above its own).
+      stream_config_ = std::move(parsed);
+      reply_cap_->SetStreamCap(stream_config_.config().draco().max_cloud_bytes());
+      config = ConfigWithReplyCapLocked();
+    }
     s = machine_.Reconfigure(std::move(config), now);
     CollectLocked(now);
   }
@@ -463,9 +501,16 @@ void StreamCore::OnReadDone(Call* call, bool ok) {
       }
       const v1::CloudReply& cloud = ev.reply.cloud();  // the default instance for an error
       rate_->OnReply({answer.frame->frame.written, now, frame_bytes, cloud.receive_time_unix_ns(),
-                      cloud.send_time_unix_ns(), cloud.stream_bytes_received()});
+                      cloud.send_time_unix_ns(), cloud.stream_bytes_received(), ev.bytes});
       machine_.SetMaxUnanswered(static_cast<std::size_t>(rate_->frames_in_flight()), now);
       ev.rate = rate_->estimate();
+      if (reply_cap_) {
+        if (reply_cap_->Update(*ev.rate, now)) {
+          // Written in order with the frames: the server caps the replies of those after it.
+          machine_.Reconfigure(ConfigWithReplyCapLocked(), now).IgnoreError();
+        }
+        ev.rate->reply_cap_bytes = reply_cap_->cap();
+      }
     }
     CollectLocked(now);  // frames skipped before this one come first
     if (answer.kind == CoreMachine::Answer::kDuplicate) {

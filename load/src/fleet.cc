@@ -235,9 +235,7 @@ class Fleet::Driver : public client::StreamSink {
         ctx_->recorder->Answered(now - intended, now - actual, instance, bytes);
         ctx_->recorder->Downlink(reply.cloud().color_bits(), reply.cloud().has_over_cap());
         if (rate_) {
-          ctx_->recorder->RateSample(index_, rate_->target_bps, rate_->rtt_ms,
-                                     rate_->queue_delay_ms, rate_->frames_in_flight,
-                                     frame->frame.record.image_bytes);
+          ctx_->recorder->RateSample(index_, *rate_, frame->frame.record.image_bytes);
         }
       } else {
         ++stats_.frame_errors;

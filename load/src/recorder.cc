@@ -194,16 +194,18 @@ std::vector<SecondStats> Recorder::series() const {
   return series_;
 }
 
-void Recorder::RateSample(int stream, double target_bps, double rtt_ms, double queue_delay_ms,
-                          int window, std::size_t frame_bytes) {
+void Recorder::RateSample(int stream, const client::RateEstimate& rate, std::size_t frame_bytes) {
   std::lock_guard<std::mutex> lock(mu_);
   for (RateSums* sums : {&interval_rate_, &run_rate_}) {
     ++sums->n;
-    sums->rtt += rtt_ms;
-    sums->queue += queue_delay_ms;
-    sums->window += window;
+    sums->rtt += rate.rtt_ms;
+    sums->queue += rate.queue_delay_ms;
+    sums->window += rate.frames_in_flight;
     sums->bytes += static_cast<double>(frame_bytes);
-    sums->target_sum[stream] += target_bps;
+    sums->reply_cap += static_cast<double>(rate.reply_cap_bytes);
+    sums->reply_queue += rate.reply_queue_delay_ms;
+    sums->target_sum[stream] += rate.target_bps;
+    sums->reply_target_sum[stream] += rate.reply_target_bps;
     ++sums->target_n[stream];
   }
 }
@@ -217,8 +219,13 @@ RateSummary Recorder::RateSums::Summary() const {
   r.queue_delay_ms = queue / count;
   r.window = window / count;
   r.frame_bytes = bytes / count;
+  r.reply_cap_bytes = reply_cap / count;
+  r.reply_queue_delay_ms = reply_queue / count;
   for (const auto& [stream, sum] : target_sum) {
     r.target_bps += sum / static_cast<double>(target_n.at(stream));
+  }
+  for (const auto& [stream, sum] : reply_target_sum) {
+    r.reply_target_bps += sum / static_cast<double>(target_n.at(stream));
   }
   return r;
 }

@@ -37,7 +37,9 @@ std::string Rfc3339(std::chrono::system_clock::time_point t) {
 nlohmann::json RateJson(const RateSummary& r) {
   return {{"samples", r.samples}, {"targetBps", r.target_bps},
           {"rttMs", r.rtt_ms},    {"queueDelayMs", r.queue_delay_ms},
-          {"window", r.window},   {"frameBytes", r.frame_bytes}};
+          {"window", r.window},   {"frameBytes", r.frame_bytes},
+          {"replyTargetBps", r.reply_target_bps}, {"replyCapBytes", r.reply_cap_bytes},
+          {"replyQueueDelayMs", r.reply_queue_delay_ms}};
 }
 
 nlohmann::json Percentiles(const Histogram& h) {
@@ -411,6 +413,11 @@ std::string ProgressLine(const SecondStats& s, std::uint64_t errors, std::uint64
     line += fmt::format(
         "  target {:.1f} Mbit/s  rtt {:.0f} ms  queueing {:.0f} ms  {:.0f} KB/frame",
         s.rate.target_bps / 1e6, s.rate.rtt_ms, s.rate.queue_delay_ms, s.rate.frame_bytes / 1024);
+    if (s.rate.reply_target_bps > 0) {
+      line += fmt::format("  replies {:.1f} Mbit/s, cap {:.0f} KB, queueing {:.0f} ms",
+                          s.rate.reply_target_bps / 1e6, s.rate.reply_cap_bytes / 1024,
+                          s.rate.reply_queue_delay_ms);
+    }
   }
   return line;
 }

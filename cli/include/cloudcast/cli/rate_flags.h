@@ -1,6 +1,6 @@
 // The rate controller's settings (client::RateControlOptions), defined once for the programs
 // that send frames under --rate-control (cloudcast-client, cloudcast-load): --rate-target-delay-ms,
-// --rate-start-mbps, --rate-min-mbps, --rate-max-mbps. Defaults are the library's; bad values are
+// --rate-start-mbps, --rate-min-mbps, --rate-max-mbps, --rate-reply-cap. Defaults are the library's; bad values are
 // refused by the parser with the flag's name.
 //
 //   cloudcast::cli::RateFlags rate(app, "Rate control");
@@ -40,6 +40,7 @@ class RateFlags {
   double start_mbps_ = defaults_.start_bps / 1e6;
   double min_mbps_ = defaults_.min_bps / 1e6;
   double max_mbps_ = defaults_.max_bps / 1e6;
+  bool cap_replies_ = defaults_.cap_replies;
 };
 
 }  // namespace cloudcast::cli

@@ -1,23 +1,33 @@
 // A sender's rate control: from what each reply tells (its round trip, and the request bytes the
 // server had received and when), it estimates the link and sets two things: the bitrate frames
 // are made at (the encoder follows it: JPEG quality today) and how many frames may be in flight
-// (written and not yet answered). gRPC-free and clock-free: times come in as arguments, so
-// rate_controller_test drives it through steps and outages.
+// (written and not yet answered). It watches the way back too, and sets the bitrate the replies
+// may take (the stream core caps each reply's cloud at it). gRPC-free and clock-free: times come
+// in as arguments, so rate_controller_test drives it through steps and outages.
 //
-// Delay-based, in the spirit of WebRTC's GCC (Carlucci et al., 2016): the queueing delay is the
-// growth of each frame's one-way delay (our write to the server's receive time, two clocks
-// whose constant offset cancels) over its windowed minimum; the reply's way back and the
-// server's processing stay out of it. While it stays under
+// Delay-based, in the spirit of WebRTC's GCC (Carlucci et al., 2016), once per direction
+// (DirectionRate): a direction's queueing delay is the growth of its one-way delay over its
+// windowed minimum; the uplink's is our write to the server's receive time, the downlink's the
+// server's send time to our receipt of the reply (two clocks whose constant offset cancels), so
+// neither sees the other's queue nor the server's processing. While the delay stays under
 // most of the target delay the bitrate grows multiplicatively (never past a margin over the
-// delivered rate); above the target it falls to a fraction of the rate the server saw delivered
-// (CloudReply.stream_bytes_received over receive_time_unix_ns), at most once a round trip. Loss
-// does not steer it: TCP hides loss as delay, which this sees.
+// delivered rate); above the target it falls to a fraction of the rate delivered (the uplink's
+// as the server counted it, CloudReply.stream_bytes_received over receive_time_unix_ns; the
+// downlink's as we counted the replies), at most once a round trip. Loss does not steer it: TCP
+// hides loss as delay, which this sees.
+//
+// Why the replies need their own bitrate: on a thin link the clouds coming back (15 to 20 KB a
+// frame, 4 to 5 Mbit/s at 30 fps) can fill the downlink, and the uplink's acknowledgements then
+// queue behind them: the uplink's one-way delay grows whatever the frames' bitrate, and a
+// controller that only cuts the uplink cuts it to its floor (docs/links.md, round three).
 //
 // The in-flight window is what keeps latency bounded while the encoder catches up (a step down,
 // an outage): a frame past the window waits in the sender, where DELIVERY_LATEST replaces it with
 // a newer one, instead of queueing behind the link in TCP's buffers. It holds the target's bytes
 // for one minimum round trip (all of it: serialization and the server's time included) plus
-// twice the target delay, rounded up, at least `min_frames_in_flight`.
+// twice the target delay, rounded up, at least `min_frames_in_flight`; and, once the downlink
+// limits the replies, no more than the replies' bitrate carries back in that time (replies the
+// server cannot shrink to their cap would otherwise queue on the way back).
 #pragma once
 
 #include <chrono>
@@ -57,6 +67,11 @@ struct RateControlOptions {
   int min_frames_in_flight = 2;
   int max_frames_in_flight = 8;
   std::chrono::seconds min_rtt_window{10};
+  // The replies follow the downlink: the stream core caps each reply's cloud
+  // (DracoConfig.max_cloud_bytes, at most the cap the stream's own config sets) at the replies'
+  // bitrate over the frame rate, once the downlink has shown overuse. Off: replies take what
+  // they take.
+  bool cap_replies = true;
 };
 
 // What the controller knows now (the library's results, cloudcast-load's report).
@@ -68,6 +83,54 @@ struct RateEstimate {
   double queue_delay_ms = 0;  // smoothed rtt growth over the minimum
   int frames_in_flight = 0;   // the window
   bool overuse = false;       // the last reply saw the delay over its target
+  // The downlink, from the replies: the bitrate they may take (0: no limit, the downlink has not
+  // shown overuse, or the server sends no send time), what came back, and its queueing delay.
+  double reply_target_bps = 0;
+  double reply_delivered_bps = 0;
+  double reply_queue_delay_ms = 0;
+  bool reply_overuse = false;
+  // The cap on each reply's cloud the stream core asked for (ReplyCapFollower; 0: none).
+  std::uint64_t reply_cap_bytes = 0;
+};
+
+// One direction of the link: its queueing delay, its delivered rate and the bitrate that keeps
+// its queue under the target delay (RateController's rules). Times in, no clock of its own.
+class DirectionRate {
+ public:
+  using Clock = std::chrono::steady_clock;
+
+  DirectionRate(const RateControlOptions& options, double start_bps);
+
+  // The far end's count of this direction's bytes (cumulative) at `at_ns` on its clock.
+  void AddDelivered(std::int64_t at_ns, std::uint64_t cumulative_bytes);
+  // One message's one-way delay (any constant offset), seen at `now`.
+  void AddDelay(Clock::time_point now, double one_way_ms);
+  // Overuse or growth after a message seen at `now`; cuts at most once per `rtt_ms`.
+  void Control(Clock::time_point now, double rtt_ms);
+  // A new call (another replica perhaps): byte counts and the delay's minimum start again.
+  void Restart();
+
+  double target_bps() const { return target_bps_; }
+  double delivered_bps() const { return delivered_bps_; }
+  double queue_delay_ms() const { return queue_delay_ms_; }
+  bool overuse() const { return overuse_; }
+  bool seen_overuse() const { return seen_overuse_; }
+
+ private:
+  RateControlOptions options_;
+  double target_bps_;
+  double delivered_bps_ = 0;
+  double queue_delay_ms_ = 0;     // smoothed
+  double last_queue_sample_ = 0;  // the last message's delay over the minimum, ms
+  bool overuse_ = false;
+  int over_streak_ = 0;  // messages in a row that saw overuse
+  // Windowed minimum of the one-way delay (ascending in value, oldest first).
+  std::deque<std::pair<Clock::time_point, double>> delays_;
+  std::deque<std::pair<std::int64_t, std::uint64_t>> delivered_;  // far end's time, bytes
+  std::optional<Clock::time_point> last_update_;
+  std::optional<Clock::time_point> last_decrease_;
+  bool seen_overuse_ = false;
+  double capacity_bps_ = 0;  // delivered at the last overuse (0: none yet)
 };
 
 class RateController {
@@ -89,6 +152,8 @@ class RateController {
     std::int64_t server_receive_unix_ns = 0;
     std::int64_t server_send_unix_ns = 0;
     std::uint64_t stream_bytes_received = 0;
+    // The reply's own bytes (the downlink's count); 0: not counted.
+    std::size_t reply_bytes = 0;
   };
   void OnReply(const Reply& reply);
   // A new call: the server's byte count starts again.
@@ -98,27 +163,23 @@ class RateController {
   int frames_in_flight() const { return estimate_.frames_in_flight; }
   // The bytes a frame may take at `fps` frames a second.
   std::size_t FrameBudgetBytes(double fps) const;
+  // The bytes a reply may take at `fps` replies a second; 0: no limit.
+  std::size_t ReplyBudgetBytes(double fps) const;
 
  private:
   void UpdateWindow();
 
   const RateControlOptions options_;
   RateEstimate estimate_;
+  DirectionRate up_;
+  DirectionRate down_;
   double mean_frame_bytes_ = 0;
-  // Windowed minima (deques ascending in value, oldest first): of the frames' one-way delay
-  // (server receive time less write time, plus the clocks' constant offset), which measures
-  // queueing, and of the whole round trip, which sizes the window (a frame in flight spends all
-  // of it).
-  std::deque<std::pair<Clock::time_point, double>> delays_;
+  double mean_reply_bytes_ = 0;
+  // Windowed minimum of the whole round trip, which sizes the window (a frame in flight spends
+  // all of it).
   std::deque<std::pair<Clock::time_point, double>> round_trips_;
-  bool server_clock_ = false;     // replies carry the server's receive time
-  double last_queue_sample_ = 0;  // the last reply's delay over the minimum, ms
-  int over_streak_ = 0;           // replies in a row that saw overuse
-  std::deque<std::pair<std::int64_t, std::uint64_t>> delivered_;  // server time, bytes
-  std::optional<Clock::time_point> last_update_;
-  std::optional<Clock::time_point> last_decrease_;
-  bool seen_overuse_ = false;
-  double capacity_bps_ = 0;  // delivered at the last overuse (0: none yet)
+  bool server_clock_ = false;           // replies carry the server's receive time
+  std::uint64_t reply_bytes_total_ = 0;  // the downlink's count, this call
 };
 
 // An encoder quality (JPEG's 1..100, or any scale where higher means more bytes) that follows a

@@ -15,7 +15,8 @@
 // Rate control plugs in at the sink: OnWrite tells when and how many bytes went out, OnReply
 // when the answer came back and for which frame (its write time); the bitrate it decides is
 // applied where frames are made (the library's Stream::Send, the load generator's FrameStore),
-// before Submit. Frames that must not be replaced once made (video pictures) are made at
+// before Submit. The replies' bitrate it decides the core applies itself: it writes the
+// owner's config again with a new cap on each reply's cloud (reply_cap.h). Frames that must not be replaced once made (video pictures) are made at
 // dispatch: the owner asks WantRoom, keeps the raw frame while there is none, and makes and
 // submits it on OnRoom (the core still never looks inside).
 #pragma once
@@ -38,6 +39,7 @@
 
 #include "absl/status/status.h"
 #include "cloudcast/client/rate_controller.h"
+#include "cloudcast/client/reply_cap.h"
 #include "cloudcast/client/stream_machine.h"
 #include "cloudcast/v1/cloudcast.pb.h"
 
@@ -204,6 +206,8 @@ class StreamCore : public std::enable_shared_from_this<StreamCore> {
   void RunOps();
   void DeliverEvents();
   void KickLocked(Clock::time_point at);
+  // The owner's config with the replies' cap in force, as bytes to write.
+  grpc::ByteBuffer ConfigWithReplyCapLocked() const;
 
   // Reactor callbacks (stream_core.cc's Call forwards them).
   void OnWriteDone(Call* call, bool ok);
@@ -219,6 +223,10 @@ class StreamCore : public std::enable_shared_from_this<StreamCore> {
   std::condition_variable changed_;  // queue space, the end
   CoreMachine machine_;
   std::optional<RateController> rate_;
+  // The replies' cap (RateControlOptions::cap_replies): the owner's config, parsed, which every
+  // cap change is written into.
+  std::optional<ReplyCapFollower> reply_cap_;
+  v1::StreamRequest stream_config_;
   std::deque<std::pair<std::uint64_t, std::size_t>> written_bytes_;  // sequence, bytes (rate_)
   std::deque<Op> ops_;
   bool running_ops_ = false;

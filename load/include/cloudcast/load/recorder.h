@@ -15,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include "cloudcast/client/rate_controller.h"
 #include "cloudcast/load/histogram.h"
 
 namespace cloudcast::load {
@@ -24,6 +25,10 @@ struct RateSummary {
   std::uint64_t samples = 0;
   double target_bps = 0;  // summed over streams (the mean per stream times the streams seen)
   double rtt_ms = 0, queue_delay_ms = 0, window = 0, frame_bytes = 0;  // means
+  // The downlink: the replies' bitrate (summed as target_bps; 0 while no stream limits it), the
+  // cap the streams asked each reply for (mean over samples, uncapped ones counting 0), and the
+  // replies' queueing delay (mean).
+  double reply_target_bps = 0, reply_cap_bytes = 0, reply_queue_delay_ms = 0;
 };
 
 // One second of the run (or the last, partial one).
@@ -119,10 +124,10 @@ class Recorder {
   void ReconnectAttempt();
   void Reconnected();
   void GaveUp();
-  // An adaptive stream's controller after a reply: its target, round trip and queueing delay,
-  // window (frames in flight), and the request bytes of the frame answered.
-  void RateSample(int stream, double target_bps, double rtt_ms, double queue_delay_ms, int window,
-                  std::size_t frame_bytes);
+  // An adaptive stream's controller after a reply (its target, round trip and queueing delay,
+  // window, and the downlink's: the replies' bitrate, cap and queueing delay), and the request
+  // bytes of the frame answered.
+  void RateSample(int stream, const client::RateEstimate& rate, std::size_t frame_bytes);
 
   // Closes the interval ending at `t_end_s` (seconds since the start) and starts the next.
   SecondStats CloseInterval(double t_end_s, int open_streams);
@@ -150,8 +155,9 @@ class Recorder {
   // Rate samples: sums over the interval and the run, and each stream's last target.
   struct RateSums {
     std::uint64_t n = 0;
-    double rtt = 0, queue = 0, window = 0, bytes = 0;
+    double rtt = 0, queue = 0, window = 0, bytes = 0, reply_cap = 0, reply_queue = 0;
     std::map<int, double> target_sum;  // per stream
+    std::map<int, double> reply_target_sum;  // per stream
     std::map<int, std::uint64_t> target_n;
     RateSummary Summary() const;
   };
