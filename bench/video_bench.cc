@@ -728,7 +728,7 @@ int Main(int argc, char** argv) {
     }
     for (double c : plan.crfs) {
       if (!(c > 0 && c <= info->max_crf)) {
-        Die("--" + key + "-crfs: " + std::to_string(c) + " is outside 1 to " +
+        Die((info->codec == Codec::kH264 ? std::string("--crfs") : "--" + key + "-crfs") + ": " + std::to_string(c) + " is outside 1 to " +
             std::to_string(static_cast<int>(info->max_crf)) + " for " + std::string(info->label));
       }
     }
