@@ -36,7 +36,7 @@ const std::vector<CodecInfo>& Table() {
       {Codec::kHevc, "hevc", "HEVC", "libx265", "hevc",
        "x265 preset: ultrafast, superfast, veryfast, faster, fast, medium", 51, true, true, true},
       {Codec::kVp9, "vp9", "VP9", "libvpx-vp9", "vp9",
-       "libvpx cpu-used in realtime mode, 5 (slowest) to 9 (fastest)", 63, true, false, true},
+       "libvpx cpu-used in realtime mode, 5 (slowest) to 8 (fastest: FFmpeg 5.1's limit)", 63, true, false, true},
       {Codec::kAv1, "av1", "AV1", "libaom-av1", "libdav1d",
        "libaom cpu-used in realtime mode, 7 (slowest) to 10 (fastest)", 63, false, true, true},
   };
@@ -95,7 +95,7 @@ absl::Status ConfigureHevc(const EncoderOptions& o, AVCodecContext* ctx, Dict* d
 
 absl::Status ConfigureVp9(const EncoderOptions& o, AVCodecContext* ctx, Dict* d) {
   int speed = 0;
-  if (absl::Status s = ParsePreset(o, 5, 9, &speed); !s.ok()) return s;
+  if (absl::Status s = ParsePreset(o, 5, 8, &speed); !s.ok()) return s;
   av_dict_set(d, "deadline", "realtime", 0);
   av_dict_set_int(d, "cpu-used", speed, 0);
   av_dict_set_int(d, "lag-in-frames", 0, 0);  // no lookahead, no alt-ref: each picture at once

@@ -5,7 +5,7 @@
 //   codec  encoder      preset (what it means)            rate: crf scale    decoder
 //   h264   libx264      x264 preset (ultrafast...)        crf 1..51, qp 0    h264 (libavcodec's)
 //   hevc   libx265      x265 preset, tune zerolatency     crf 1..51, lossless hevc (libavcodec's)
-//   vp9    libvpx-vp9   cpu-used 5..9, deadline realtime  crf 1..63, lossless vp9  (libavcodec's)
+//   vp9    libvpx-vp9   cpu-used 5..8, deadline realtime  crf 1..63, lossless vp9  (libavcodec's)
 //   av1    libaom-av1   cpu-used 7..10, usage realtime    crf 1..63          libdav1d
 //
 // For measurement (cloudcast-video-bench) and tests only: the contract carries H.264, and the
