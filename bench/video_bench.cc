@@ -1029,8 +1029,12 @@ int Main(int argc, char** argv) {
             continue;
           }
           if (r.rate.crf <= 0) continue;
-          PlotSeries& s = series[std::string(Key(r.layout)) + " " + r.preset];
-          s.label = std::string(Key(r.layout)) + " " + r.preset;
+          // With other codecs beside it, H.264's series say so too.
+          const std::string label = std::string(Key(r.layout)) + " " +
+                                    (plans.size() > 1 && r.codec == Codec::kH264 ? "h264 " : "") +
+                                    r.preset;
+          PlotSeries& s = series[label];
+          s.label = label;
           s.dashed = r.layout == Layout::kSideBySide;
           s.x.push_back(r.mbps);
           s.y.push_back(tsukuba ? r.ours_gt1 : r.ours_gt);
