@@ -406,8 +406,8 @@ struct ColourRow {
   double bytes_per_frame = 0, mbps = 0, psnr = 0, ssim = 0, encode_ms = 0, decode_ms = 0;
 };
 
-ColourRow RunColourVideo(Codec codec, const Dataset& d, PictureKind kind,
-                         const std::string& preset, const Rate& rate, int fps, int keyint) {
+ColourRow RunColourVideo(Codec codec, const Dataset& d, PictureKind kind, const std::string& preset,
+                         const Rate& rate, int fps, int keyint) {
   const Clock clock = ClockFor(codec);
   ColourRow row;
   row.dataset = d.name;
@@ -710,7 +710,8 @@ int Main(int argc, char** argv) {
           std::string(info->decoder) + " decoder (" + key + ")");
     }
     CodecPlan plan{info->codec, Words(presets), Words(colour_presets),
-                   ParseList<double>(crfs, "--crfs"), ParseList<double>(colour_crfs, "--colour-crfs")};
+                   ParseList<double>(crfs, "--crfs"),
+                   ParseList<double>(colour_crfs, "--colour-crfs")};
     for (const CodecFlags& f : codec_flags) {
       if (f.codec != info->codec) continue;
       plan.presets = Words(f.presets);
@@ -728,7 +729,8 @@ int Main(int argc, char** argv) {
     }
     for (double c : plan.crfs) {
       if (!(c > 0 && c <= info->max_crf)) {
-        Die((info->codec == Codec::kH264 ? std::string("--crfs") : "--" + key + "-crfs") + ": " + std::to_string(c) + " is outside 1 to " +
+        Die((info->codec == Codec::kH264 ? std::string("--crfs") : "--" + key + "-crfs") + ": " +
+            std::to_string(c) + " is outside 1 to " +
             std::to_string(static_cast<int>(info->max_crf)) + " for " + std::string(info->label));
       }
     }
@@ -794,9 +796,8 @@ int Main(int argc, char** argv) {
           lossless.ours.Bad(2, 0), lossless.ours.Bad(2, 1), no_sgbm ? NAN : lossless.sgbm.Bad(2, 0),
           no_sgbm ? NAN : lossless.sgbm.Bad(2, 1));
       std::printf("%-16s %-*s %-16s %9s %8s %8s %8s %8s %8s %8s %8s %7s %7s\n", "layout",
-                  preset_width, "preset",
-                  "rate", "KB/pair", "Mbit/s", "ours GT", "ours+1", "d ours", "d ours+1", "SGBM GT",
-                  "SGBM+1", "enc ms", "dec ms");
+                  preset_width, "preset", "rate", "KB/pair", "Mbit/s", "ours GT", "ours+1",
+                  "d ours", "d ours+1", "SGBM GT", "SGBM+1", "enc ms", "dec ms");
       out["stereo_lossless"][d.name] = {
           {"ours_bad2_gt", lossless.ours.Bad(2, 0)},
           {"ours_bad2_gt_plus_1", lossless.ours.Bad(2, 1)},
@@ -824,8 +825,8 @@ int Main(int argc, char** argv) {
                   "%-16s %-*s %-16s %9.1f %8.2f %7.2f%% %7.2f%% %+8.2f %+8.2f %7.2f%% "
                   "%7.2f%% %7.2f %7.2f\n",
                   Name(layout), preset_width, r.preset.c_str(), rate.Label().c_str(),
-                  r.bytes_per_pair / 1000, r.mbps, r.ours_gt, r.ours_gt1, r.d_ours_gt,
-                  r.d_ours_gt1, r.sgbm_gt, r.sgbm_gt1, r.encode_ms, r.decode_ms);
+                  r.bytes_per_pair / 1000, r.mbps, r.ours_gt, r.ours_gt1, r.d_ours_gt, r.d_ours_gt1,
+                  r.sgbm_gt, r.sgbm_gt1, r.encode_ms, r.decode_ms);
               std::fflush(stdout);
               stereo_rows.push_back(r);
             }
@@ -913,12 +914,11 @@ int Main(int argc, char** argv) {
           "channels' mean)\n",
           d.name.c_str(), d.colour.size(), d.colour[0].width, d.colour[0].height);
       std::printf("%-*s %-12s %9s %8s %7s %7s %7s %7s\n", codec_width, "codec", "setting",
-                  "KB/frame", "Mbit/s",
-                  "PSNR", "SSIM", "enc ms", "dec ms");
+                  "KB/frame", "Mbit/s", "PSNR", "SSIM", "enc ms", "dec ms");
       auto print = [&](const ColourRow& r) {
-        std::printf("%-*s %-12s %9.1f %8.2f %7.2f %7.4f %7.2f %7.2f\n", codec_width, r.codec.c_str(),
-                    r.setting.c_str(), r.bytes_per_frame / 1000, r.mbps, r.psnr, r.ssim,
-                    r.encode_ms, r.decode_ms);
+        std::printf("%-*s %-12s %9.1f %8.2f %7.2f %7.4f %7.2f %7.2f\n", codec_width,
+                    r.codec.c_str(), r.setting.c_str(), r.bytes_per_frame / 1000, r.mbps, r.psnr,
+                    r.ssim, r.encode_ms, r.decode_ms);
         std::fflush(stdout);
         colour_rows.push_back(r);
       };

@@ -19,7 +19,8 @@ namespace {
 
 constexpr std::uint32_t kW = 192, kH = 128;
 
-// Picture `f` of a scene that moves: a smooth gradient, a textured square sliding right, noise-free.
+// Picture `f` of a scene that moves: a smooth gradient, a textured square sliding right,
+// noise-free.
 std::vector<std::uint8_t> Grey(int f) {
   std::vector<std::uint8_t> p(std::size_t{kW} * kH);
   for (std::uint32_t y = 0; y < kH; ++y) {
@@ -89,8 +90,8 @@ class CodecsTest : public ::testing::TestWithParam<std::string> {
 };
 
 TEST_P(CodecsTest, GreySequenceRoundTripsPictureByPicture) {
-  auto stream = CodecStream::Open(info_->codec, Options(*info_, PictureKind::kGrey),
-                                  ColorEncoding::kMono8);
+  auto stream =
+      CodecStream::Open(info_->codec, Options(*info_, PictureKind::kGrey), ColorEncoding::kMono8);
   ASSERT_TRUE(stream.ok()) << stream.status();
   std::string bytes;
   std::size_t total = 0;
@@ -178,8 +179,7 @@ TEST_P(CodecsTest, RefusesWrongOptionsNamingTheField) {
   o.crf = info_->max_crf + 1;
   s = CodecStream::Open(info_->codec, o, ColorEncoding::kMono8);
   ASSERT_FALSE(s.ok());
-  EXPECT_NE(std::string(s.status().message()).find("options.crf"), std::string::npos)
-      << s.status();
+  EXPECT_NE(std::string(s.status().message()).find("options.crf"), std::string::npos) << s.status();
   o = Options(*info_, PictureKind::kGrey);
   o.width = 191;
   s = CodecStream::Open(info_->codec, o, ColorEncoding::kMono8);
@@ -191,8 +191,8 @@ TEST_P(CodecsTest, RefusesWrongOptionsNamingTheField) {
 // The server decodes H.264 alone: another codec's first picture is refused, never decoded.
 TEST_P(CodecsTest, TheServersDecoderRefusesOtherCodecs) {
   if (info_->codec == Codec::kH264) GTEST_SKIP() << "H.264 is the contract's codec";
-  auto stream = CodecStream::Open(info_->codec, Options(*info_, PictureKind::kGrey),
-                                  ColorEncoding::kMono8);
+  auto stream =
+      CodecStream::Open(info_->codec, Options(*info_, PictureKind::kGrey), ColorEncoding::kMono8);
   ASSERT_TRUE(stream.ok()) << stream.status();
   std::string bytes;
   const std::vector<std::uint8_t> img = Grey(0);

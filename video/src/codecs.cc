@@ -36,7 +36,8 @@ const std::vector<CodecInfo>& Table() {
       {Codec::kHevc, "hevc", "HEVC", "libx265", "hevc",
        "x265 preset: ultrafast, superfast, veryfast, faster, fast, medium", 51, true, true, true},
       {Codec::kVp9, "vp9", "VP9", "libvpx-vp9", "vp9",
-       "libvpx cpu-used in realtime mode, 5 (slowest) to 8 (fastest: FFmpeg 5.1's limit)", 63, true, false, true},
+       "libvpx cpu-used in realtime mode, 5 (slowest) to 8 (fastest: FFmpeg 5.1's limit)", 63, true,
+       false, true},
       {Codec::kAv1, "av1", "AV1", "libaom-av1", "libdav1d",
        "libaom cpu-used in realtime mode, 7 (slowest) to 10 (fastest)", 63, false, true, true},
   };
@@ -63,18 +64,17 @@ absl::Status ParsePreset(const EncoderOptions& o, int lo, int hi, int* value) {
 }
 
 absl::Status ConfigureHevc(const EncoderOptions& o, AVCodecContext* ctx, Dict* d) {
-  static constexpr std::array<std::string_view, 6> kPresets = {
-      "ultrafast", "superfast", "veryfast", "faster", "fast", "medium"};
+  static constexpr std::array<std::string_view, 6> kPresets = {"ultrafast", "superfast", "veryfast",
+                                                               "faster",    "fast",      "medium"};
   if (std::find(kPresets.begin(), kPresets.end(), o.preset) == kPresets.end()) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "options.preset is '", o.preset, "'; x265's ultrafast, superfast, veryfast, faster, fast "
-                                          "or medium"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("options.preset is '", o.preset,
+                     "'; x265's ultrafast, superfast, veryfast, faster, fast or medium"));
   }
   (void)ctx;  // the rate is in the context already
   av_dict_set(d, "preset", o.preset.c_str(), 0);
   av_dict_set(d, "tune", "zerolatency", 0);
   av_dict_set(d, "forced-idr", "1", 0);
-  if (o.qp > 0) av_dict_set_int(d, "qp", o.qp, 0);
   if (o.qp < 0 && o.crf > 0) av_dict_set(d, "crf", std::to_string(o.crf).c_str(), 0);
   // pools=none: no worker pool (no wavefront threads); frame-threads=1: one picture at a time.
   // x265 still runs that picture on a thread of its own while the caller waits: one core busy.
@@ -83,8 +83,7 @@ absl::Status ConfigureHevc(const EncoderOptions& o, AVCodecContext* ctx, Dict* d
       "open-gop=0:log-level=error";
   if (o.qp == 0) absl::StrAppend(&params, ":lossless=1");
   if (o.keyframe_interval > 0) {
-    absl::StrAppend(&params, ":keyint=", o.keyframe_interval,
-                    ":min-keyint=", o.keyframe_interval);
+    absl::StrAppend(&params, ":keyint=", o.keyframe_interval, ":min-keyint=", o.keyframe_interval);
   } else {
     absl::StrAppend(&params, ":keyint=-1");  // x265: infinite
   }
@@ -119,8 +118,9 @@ absl::Status ConfigureAv1(const EncoderOptions& o, AVCodecContext* ctx, Dict* d)
   int speed = 0;
   if (absl::Status s = ParsePreset(o, 7, 10, &speed); !s.ok()) return s;
   // libaom's real-time mode (what WebRTC's AV1 uses). Not SVT-AV1: FFmpeg 5.1's libsvtav1
-  // wrapper fetches a picture's packet only when the next picture is sent (docs/video.md), a
-  // frame of latency that "one picture in, its bytes out" rules out.
+  // wrapper fetches a packet only when a picture is sent, and SVT-AV1 1.4 in low delay gave each
+  // picture's three pictures later (docs/video.md): latency "one picture in, its bytes out"
+  // rules out.
   av_dict_set(d, "usage", "realtime", 0);
   // FFmpeg 5.1's own cpu-used option stops at 8; libaom's real-time speeds go to 10.
   av_dict_set(d, "aom-params", absl::StrCat("cpu-used=", speed).c_str(), 0);
@@ -181,17 +181,17 @@ absl::Status CheckOptions(const CodecInfo& info, const EncoderOptions& o) {
                      " and neither qp nor crf is set: at least 1000 bits a frame are needed"));
   }
   if (o.qp < 0 && o.crf > 0 && o.bitrate_bps > 0) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "options.bitrate_bps is ", o.bitrate_bps, " with crf ", o.crf,
-        ": a bitrate cap on constant quality is H.264's only here; 0 with crf"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("options.bitrate_bps is ", o.bitrate_bps, " with crf ", o.crf,
+                     ": a bitrate cap on constant quality is H.264's only here; 0 with crf"));
   }
   if (absl::Status s = check::InRange("options.keyframe_interval", o.keyframe_interval, 0, 100000);
       !s.ok()) {
     return s;
   }
   if (o.threads != 1) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "options.threads is ", o.threads, "; ", info.label, " is measured on one thread only"));
+    return absl::InvalidArgumentError(absl::StrCat("options.threads is ", o.threads, "; ",
+                                                   info.label, " is measured on one thread only"));
   }
   if (absl::Status s = check::InRange("options.refs", o.refs, 0, 16); !s.ok()) return s;
   if (!o.x264_params.empty()) {
@@ -226,8 +226,7 @@ class H264Stream final : public CodecStream {
  public:
   H264Stream(std::unique_ptr<Encoder> encoder, ColorEncoding decoded)
       : encoder_(std::move(encoder)), decoder_(DecoderOptions(decoded)) {}
-  absl::Status Encode(const ColorView& image, std::string_view field,
-                      std::string* bytes) override {
+  absl::Status Encode(const ColorView& image, std::string_view field, std::string* bytes) override {
     if (absl::Status s = encoder_->Encode(image, {}, field, &picture_); !s.ok()) return s;
     bytes->swap(picture_.bytes);
     return absl::OkStatus();
@@ -286,8 +285,8 @@ class LibavStream final : public CodecStream {
     }
     enc_->width = static_cast<int>(o.width);
     enc_->height = static_cast<int>(o.height);
-    enc_->pix_fmt = o.kind == PictureKind::kGrey        ? (info.grey ? AV_PIX_FMT_GRAY8
-                                                                     : AV_PIX_FMT_YUV420P)
+    enc_->pix_fmt = o.kind == PictureKind::kGrey
+                        ? (info.grey ? AV_PIX_FMT_GRAY8 : AV_PIX_FMT_YUV420P)
                     : o.kind == PictureKind::kColour444 ? AV_PIX_FMT_YUV444P
                                                         : AV_PIX_FMT_YUV420P;
     enc_->time_base = AVRational{1, o.fps};
@@ -322,12 +321,12 @@ class LibavStream final : public CodecStream {
     if (rc < 0) {
       const std::string why = internal::TakeLibavMessage();
       return absl::InvalidArgumentError(absl::StrCat(info.encoder, " refused the options (preset '",
-                                                      o.preset, "'): ", LibavError(rc),
-                                                      why.empty() ? "" : " (" + why + ")"));
+                                                     o.preset, "'): ", LibavError(rc),
+                                                     why.empty() ? "" : " (" + why + ")"));
     }
     if (!unused.empty()) {
-      return absl::InternalError(absl::StrCat(info.encoder, " did not take the option '", unused,
-                                              "'"));
+      return absl::InternalError(
+          absl::StrCat(info.encoder, " did not take the option '", unused, "'"));
     }
     // The wrappers warn of a *-params entry their library cannot parse, and open anyway.
     if (const std::string why = internal::TakeLibavWarning();
@@ -350,8 +349,7 @@ class LibavStream final : public CodecStream {
     return absl::OkStatus();
   }
 
-  absl::Status Encode(const ColorView& image, std::string_view field,
-                      std::string* bytes) override {
+  absl::Status Encode(const ColorView& image, std::string_view field, std::string* bytes) override {
     const EncoderOptions& o = options_;
     if (absl::Status s = ValidateView(image, o.limits, field); !s.ok()) return s;
     if (image.width != o.width || image.height != o.height) {
@@ -405,9 +403,8 @@ class LibavStream final : public CodecStream {
                                               " held the picture instead of coding it at once"));
     }
     if (rc < 0) {
-      return absl::InternalError(absl::StrCat(S(field), ": ", info_->encoder,
-                                              " failed: ", LibavError(rc), " ",
-                                              internal::TakeLibavMessage()));
+      return absl::InternalError(absl::StrCat(S(field), ": ", info_->encoder, " failed: ",
+                                              LibavError(rc), " ", internal::TakeLibavMessage()));
     }
     bytes->assign(reinterpret_cast<const char*>(packet_->data),
                   static_cast<std::size_t>(packet_->size));
@@ -425,20 +422,18 @@ class LibavStream final : public CodecStream {
     packet_->data = nullptr;
     packet_->size = 0;
     if (rc < 0) {
-      return absl::InvalidArgumentError(absl::StrCat(S(field), ": ", info_->decoder, ": ",
-                                                     LibavError(rc), " ",
-                                                     internal::TakeLibavMessage()));
+      return absl::InvalidArgumentError(absl::StrCat(
+          S(field), ": ", info_->decoder, ": ", LibavError(rc), " ", internal::TakeLibavMessage()));
     }
     av_frame_unref(decoded_);
     rc = avcodec_receive_frame(dec_, decoded_);
     if (rc == AVERROR(EAGAIN)) {
-      return absl::InternalError(absl::StrCat(S(field), ": the ", info_->decoder,
-                                              " decoder held the picture back"));
+      return absl::InternalError(
+          absl::StrCat(S(field), ": the ", info_->decoder, " decoder held the picture back"));
     }
     if (rc < 0) {
-      return absl::InvalidArgumentError(absl::StrCat(S(field), ": ", info_->decoder, ": ",
-                                                     LibavError(rc), " ",
-                                                     internal::TakeLibavMessage()));
+      return absl::InvalidArgumentError(absl::StrCat(
+          S(field), ": ", info_->decoder, ": ", LibavError(rc), " ", internal::TakeLibavMessage()));
     }
     const AVFrame* f = decoded_;
     if (static_cast<std::uint32_t>(f->width) != options_.width ||
@@ -457,9 +452,9 @@ class LibavStream final : public CodecStream {
       const AVPixelFormat to = decoded_encoding_ == ColorEncoding::kRGB8    ? AV_PIX_FMT_RGB24
                                : decoded_encoding_ == ColorEncoding::kRGBA8 ? AV_PIX_FMT_RGBA
                                                                             : AV_PIX_FMT_BGR24;
-      dec_sws_ = sws_getCachedContext(dec_sws_, f->width, f->height,
-                                      static_cast<AVPixelFormat>(f->format), f->width, f->height,
-                                      to, SWS_BILINEAR, nullptr, nullptr, nullptr);
+      dec_sws_ =
+          sws_getCachedContext(dec_sws_, f->width, f->height, static_cast<AVPixelFormat>(f->format),
+                               f->width, f->height, to, SWS_BILINEAR, nullptr, nullptr, nullptr);
       if (dec_sws_ == nullptr) return absl::InternalError("swscale cannot convert the picture");
       std::uint8_t* planes[1] = {output_.data()};
       const int strides[1] = {static_cast<int>(row)};
@@ -520,8 +515,8 @@ bool Available(Codec codec) {
 }
 
 absl::StatusOr<std::unique_ptr<CodecStream>> CodecStream::Open(Codec codec,
-                                                              const EncoderOptions& options,
-                                                              ColorEncoding decoded) {
+                                                               const EncoderOptions& options,
+                                                               ColorEncoding decoded) {
   if (decoded != ColorEncoding::kMono8 && decoded != ColorEncoding::kBGR8 &&
       decoded != ColorEncoding::kRGB8) {
     return absl::InvalidArgumentError("decoded: mono8, bgr8 or rgb8");

@@ -36,10 +36,10 @@ struct CodecInfo {
   const char* encoder;      // libavcodec's name of the encoder
   const char* decoder;      // and of the decoder
   const char* preset_rule;  // what EncoderOptions::preset means for it
-  double max_crf;                // EncoderOptions::crf in (0, max_crf]
-  bool lossless;                 // has a lossless mode (EncoderOptions::qp = 0)
-  bool grey;        // codes grey as 4:0:0; otherwise as 4:2:0 with flat (128) chroma
-  bool colour444;   // codes PictureKind::kColour444
+  double max_crf;           // EncoderOptions::crf in (0, max_crf]
+  bool lossless;            // has a lossless mode (EncoderOptions::qp = 0)
+  bool grey;                // codes grey as 4:0:0; otherwise as 4:2:0 with flat (128) chroma
+  bool colour444;           // codes PictureKind::kColour444
 };
 
 // Every codec, H.264 first.
