@@ -5,7 +5,11 @@
 //            Tsukuba; bad-2.0 of our matcher and OpenCV's StereoSGBM against the truth and the
 //            truth + 1 px, beside the same matchers on the lossless pairs, against Mbit/s at --fps;
 //   colour   colour PSNR and SSIM against Mbit/s, H.264 4:2:0 and 4:4:4 beside JPEG;
-//   time     encode and decode thread-CPU ms per image on one thread (medians).
+//   time     encode and decode thread-CPU ms per image on one thread (medians);
+//   codecs   --codecs h264,hevc,vp9,av1: the same rows for x265, libvpx-vp9 and libaom-av1 at
+//            low-latency settings (video/codecs.h), each with its own presets and CRF steps
+//            (--hevc-presets, --vp9-crfs, ...), the bitrate rows at the same targets; their times
+//            are process CPU (x265 codes on a thread of its own).
 // Tables on stdout, --json for the numbers, --plots DIR for PNG charts (docs/video.md).
 #include <time.h>
 
@@ -29,7 +33,7 @@
 #include "cloudcast/stereo/evaluation.h"
 #include "cloudcast/stereo/grey.h"
 #include "cloudcast/stereo/matcher.h"
-#include "cloudcast/video/decoder.h"
+#include "cloudcast/video/codecs.h"
 #include "cloudcast/video/encoder.h"
 #include "cloudcast/video/rvl.h"
 #include "line_plot.h"
@@ -41,8 +45,8 @@ namespace {
 using stereo::DisparityMap16;
 using stereo::DisparityScore;
 using stereo::GreyImage;
-using video::Decoder;
-using video::EncodedPicture;
+using video::Codec;
+using video::CodecStream;
 using video::Encoder;
 using video::EncoderOptions;
 using video::PictureKind;
@@ -51,6 +55,21 @@ double ThreadCpuMs() {
   timespec ts{};
   clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
   return static_cast<double>(ts.tv_sec) * 1e3 + static_cast<double>(ts.tv_nsec) * 1e-6;
+}
+// The whole process's CPU: x265 codes each picture on a thread of its own while the caller waits.
+double ProcessCpuMs() {
+  timespec ts{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return static_cast<double>(ts.tv_sec) * 1e3 + static_cast<double>(ts.tv_nsec) * 1e-6;
+}
+// The clock a codec's rows are timed with: H.264's as before (x264 runs in the calling thread).
+using Clock = double (*)();
+Clock ClockFor(Codec c) { return c == Codec::kH264 ? ThreadCpuMs : ProcessCpuMs; }
+
+// What a row's "preset" column says: x264's preset alone (as before --codecs), else the codec's
+// key and its preset ("hevc ultrafast", "vp9 8": libvpx's cpu-used).
+std::string SettingLabel(Codec c, const std::string& preset) {
+  return c == Codec::kH264 ? preset : std::string(video::Info(c).key) + " " + preset;
 }
 
 [[noreturn]] void Die(const std::string& what) {
@@ -173,7 +192,8 @@ struct Scores {
 };
 
 struct StereoRow {
-  std::string dataset, preset;
+  Codec codec = Codec::kH264;
+  std::string dataset, preset;  // preset: SettingLabel
   Layout layout;
   Rate rate;
   double bytes_per_pair = 0, mbps = 0;
@@ -268,17 +288,19 @@ EncoderOptions StreamOptions(PictureKind kind, std::uint32_t w, std::uint32_t h,
 }
 
 // Encodes and decodes the dataset's pairs in `layout`, then scores the decoded pairs.
-StereoRow RunStereo(const Dataset& d, Layout layout, const std::string& preset, const Rate& rate,
-                    int fps, int keyint, int interleaved_refs, const std::string& x264_params,
-                    Matchers& m, bool with_sgbm, const Scores& lossless) {
+StereoRow RunStereo(Codec codec, const Dataset& d, Layout layout, const std::string& preset,
+                    const Rate& rate, int fps, int keyint, int interleaved_refs,
+                    const std::string& x264_params, Matchers& m, bool with_sgbm,
+                    const Scores& lossless) {
   const std::uint32_t w = d.pairs[0].left.width, h = d.pairs[0].left.height;
+  const Clock clock = ClockFor(codec);
   StereoRow row;
+  row.codec = codec;
   row.dataset = d.name;
-  row.preset = preset;
+  row.preset = SettingLabel(codec, preset);
   row.layout = layout;
   row.rate = rate;
-  std::vector<std::unique_ptr<Encoder>> enc;
-  std::vector<std::unique_ptr<Decoder>> dec;
+  std::vector<std::unique_ptr<CodecStream>> coded;
   const int streams = layout == Layout::kIndependent ? 2 : 1;
   for (int s = 0; s < streams; ++s) {
     EncoderOptions o =
@@ -288,25 +310,24 @@ StereoRow RunStereo(const Dataset& d, Layout layout, const std::string& preset, 
             ? StreamOptions(PictureKind::kGrey, w, h, preset, rate, fps, 1, 2, keyint)
             : StreamOptions(PictureKind::kGrey, w, h, preset, rate, fps, 2, 1, keyint);
     if (layout == Layout::kInterleaved) o.refs = interleaved_refs;
-    o.x264_params = x264_params;
-    enc.push_back(Check(Encoder::Make(o), "encoder"));
-    dec.push_back(std::make_unique<Decoder>(Decoder::Options{}));
+    if (codec == Codec::kH264) o.x264_params = x264_params;
+    coded.push_back(Check(CodecStream::Open(codec, o, ColorEncoding::kMono8), "encoder"));
   }
   std::vector<double> enc_ms, dec_ms;
   std::uint64_t bytes = 0;
   Scores scores;
   bool exact = true;
-  EncodedPicture pic;
+  std::string pic;
   // One image through stream `s`; `images` is how many 640x480 images it holds (for the times).
   auto code = [&](int s, const GreyImage& img, int images) {
-    double t0 = ThreadCpuMs();
-    Check(enc[s]->Encode(img.view(), {}, "image", &pic), "encode");
-    enc_ms.push_back((ThreadCpuMs() - t0) / images);
-    bytes += pic.bytes.size();
+    double t0 = clock();
+    Check(coded[s]->Encode(img.view(), "image", &pic), "encode");
+    enc_ms.push_back((clock() - t0) / images);
+    bytes += pic.size();
     ColorView out;
-    t0 = ThreadCpuMs();
-    Check(dec[s]->Decode(pic.bytes, "access_unit", &out), "decode");
-    dec_ms.push_back((ThreadCpuMs() - t0) / images);
+    t0 = clock();
+    Check(coded[s]->Decode(pic, "access_unit", &out), "decode");
+    dec_ms.push_back((clock() - t0) / images);
     return View(out);
   };
   for (const Pair& p : d.pairs) {
@@ -385,31 +406,33 @@ struct ColourRow {
   double bytes_per_frame = 0, mbps = 0, psnr = 0, ssim = 0, encode_ms = 0, decode_ms = 0;
 };
 
-ColourRow RunColourVideo(const Dataset& d, PictureKind kind, const std::string& preset,
+ColourRow RunColourVideo(Codec codec, const Dataset& d, PictureKind kind, const std::string& preset,
                          const Rate& rate, int fps, int keyint) {
+  const Clock clock = ClockFor(codec);
   ColourRow row;
   row.dataset = d.name;
-  row.codec =
-      std::string("H.264 ") + (kind == PictureKind::kColour444 ? "4:4:4 " : "4:2:0 ") + preset;
+  const std::string preset_label =
+      codec == Codec::kH264 || codec == Codec::kHevc ? preset : "cpu-used " + preset;
+  row.codec = std::string(video::Info(codec).label) + " " +
+              (kind == PictureKind::kColour444 ? "4:4:4 " : "4:2:0 ") + preset_label;
   row.setting = rate.Label();
-  auto enc = Check(Encoder::Make(StreamOptions(kind, d.colour[0].width, d.colour[0].height, preset,
-                                               rate, fps, 1, 1, keyint)),
+  auto enc = Check(CodecStream::Open(codec,
+                                     StreamOptions(kind, d.colour[0].width, d.colour[0].height,
+                                                   preset, rate, fps, 1, 1, keyint),
+                                     ColorEncoding::kBGR8),
                    "encoder");
-  Decoder::Options dopt;
-  dopt.output = ColorEncoding::kBGR8;
-  Decoder dec(dopt);
   std::vector<double> enc_ms, dec_ms, psnr, ssim;
   std::uint64_t bytes = 0;
-  EncodedPicture pic;
+  std::string pic;
   for (const OwnedColor& c : d.colour) {
-    double t0 = ThreadCpuMs();
-    Check(enc->Encode(c.view(), {}, "colour", &pic), "encode");
-    enc_ms.push_back(ThreadCpuMs() - t0);
-    bytes += pic.bytes.size();
+    double t0 = clock();
+    Check(enc->Encode(c.view(), "colour", &pic), "encode");
+    enc_ms.push_back(clock() - t0);
+    bytes += pic.size();
     ColorView out;
-    t0 = ThreadCpuMs();
-    Check(dec.Decode(pic.bytes, "access_unit", &out), "decode");
-    dec_ms.push_back(ThreadCpuMs() - t0);
+    t0 = clock();
+    Check(enc->Decode(pic, "access_unit", &out), "decode");
+    dec_ms.push_back(clock() - t0);
     const cv::Mat orig = AsMat(c.view()), got = AsMat(out);
     psnr.push_back(Psnr(orig, got));
     ssim.push_back(Ssim(orig, got));
@@ -564,6 +587,19 @@ int Main(int argc, char** argv) {
   std::string stereo_x264, capped, colour_capped;
   bool lossless_every_preset = false;
   int depth_rounds = 5;
+  std::string codecs = "h264";
+  // The other codecs' presets and CRF steps, on their own scales (x265's CRF is x264's scale; VP9's
+  // and AV1's run 0 to 63). --presets, --crfs, --colour-presets and --colour-crfs are H.264's.
+  struct CodecFlags {
+    Codec codec;
+    std::string presets, crfs, colour_presets, colour_crfs;
+  };
+  std::vector<CodecFlags> codec_flags = {
+      {Codec::kHevc, "ultrafast,veryfast", "10,14,18,22,26", "ultrafast,veryfast",
+       "14,18,22,26,30,34"},
+      {Codec::kVp9, "8", "12,20,28,36,44", "8", "16,24,32,40,48,56"},
+      {Codec::kAv1, "9", "12,20,28,36,44", "9", "16,24,32,40,48,56"},
+  };
   app.add_option("--data", data_dir,
                  "New Tsukuba folder (default: $CLOUDCAST_DATA or the build's)");
   app.add_option("--datasets", datasets, "synthetic, tsukuba")->capture_default_str();
@@ -611,6 +647,23 @@ int Main(int argc, char** argv) {
   app.add_option("--depth-rounds", depth_rounds, "timed rounds of the depth table")
       ->check(CLI::Range(1, 1000))
       ->capture_default_str();
+  app.add_option("--codecs", codecs,
+                 "codecs to measure: h264, hevc (libx265), vp9 (libvpx-vp9), av1 (libaom-av1, "
+                 "real-time), each at low-latency settings on one thread")
+      ->capture_default_str();
+  for (CodecFlags& f : codec_flags) {
+    const video::CodecInfo& info = video::Info(f.codec);
+    const std::string key(info.key);
+    app.add_option("--" + key + "-presets", f.presets,
+                   std::string(info.label) + " presets for the stereo table (" +
+                       std::string(info.preset_rule) + ")")
+        ->capture_default_str();
+    app.add_option("--" + key + "-crfs", f.crfs,
+                   std::string(info.label) + " CRF values for the stereo table")
+        ->capture_default_str();
+    app.add_option("--" + key + "-colour-presets", f.colour_presets)->capture_default_str();
+    app.add_option("--" + key + "-colour-crfs", f.colour_crfs)->capture_default_str();
+  }
   app.add_option("--json", json_path, "write every row as JSON");
   app.add_option("--plots", plots_dir, "write PNG charts into this folder");
   CLI11_PARSE(app, argc, argv);
@@ -627,7 +680,7 @@ int Main(int argc, char** argv) {
       Die("--layouts: unknown layout '" + l + "' (independent, interleaved, side-by-side)");
   }
   std::vector<Rate> rates;
-  for (double c : ParseList<double>(crfs, "--crfs")) rates.push_back(Rate{c, 0, false});
+  // The CRF steps are each codec's own (CodecPlan); these are the rows every codec shares.
   for (double b : ParseList<double>(bitrates, "--bitrates")) rates.push_back(Rate{0, b, false});
   auto parse_capped = [](const std::string& list, const char* flag) {
     std::vector<Rate> out;
@@ -642,14 +695,51 @@ int Main(int argc, char** argv) {
   };
   for (const Rate& r : parse_capped(capped, "--capped-crfs")) rates.push_back(r);
   const std::vector<Rate> colour_capped_rates = parse_capped(colour_capped, "--colour-capped-crfs");
-  const std::vector<std::string> preset_list = Words(presets);
-  for (const std::string& p : preset_list) {  // a wrong preset fails before any work
-    EncoderOptions o;
-    o.width = 64;
-    o.height = 64;
-    o.preset = p;
-    Check(Encoder::Make(o), "--presets");
+  // Per codec: its presets and CRF steps (stereo, colour).
+  struct CodecPlan {
+    Codec codec;
+    std::vector<std::string> presets, colour_presets;
+    std::vector<double> crfs, colour_crfs;
+  };
+  std::vector<CodecPlan> plans;
+  for (const std::string& key : Words(codecs)) {
+    const video::CodecInfo* info = video::FindCodec(key);
+    if (info == nullptr) Die("--codecs: unknown codec '" + key + "' (h264, hevc, vp9, av1)");
+    if (!video::Available(info->codec)) {
+      Die("--codecs: this FFmpeg build has no " + std::string(info->encoder) + " encoder or no " +
+          std::string(info->decoder) + " decoder (" + key + ")");
+    }
+    CodecPlan plan{info->codec, Words(presets), Words(colour_presets),
+                   ParseList<double>(crfs, "--crfs"),
+                   ParseList<double>(colour_crfs, "--colour-crfs")};
+    for (const CodecFlags& f : codec_flags) {
+      if (f.codec != info->codec) continue;
+      plan.presets = Words(f.presets);
+      plan.colour_presets = Words(f.colour_presets);
+      plan.crfs = ParseList<double>(f.crfs, ("--" + key + "-crfs").c_str());
+      plan.colour_crfs = ParseList<double>(f.colour_crfs, ("--" + key + "-colour-crfs").c_str());
+    }
+    const std::string flag = info->codec == Codec::kH264 ? "--presets" : "--" + key + "-presets";
+    for (const std::string& p : plan.presets) {  // a wrong preset fails before any work
+      EncoderOptions o;
+      o.width = 64;
+      o.height = 64;
+      o.preset = p;
+      Check(CodecStream::Open(info->codec, o, ColorEncoding::kMono8), flag);
+    }
+    for (double c : plan.crfs) {
+      if (!(c > 0 && c <= info->max_crf)) {
+        Die((info->codec == Codec::kH264 ? std::string("--crfs") : "--" + key + "-crfs") + ": " +
+            std::to_string(c) + " is outside 1 to " +
+            std::to_string(static_cast<int>(info->max_crf)) + " for " + std::string(info->label));
+      }
+    }
+    if (info->codec != Codec::kH264 && g_intra_refresh) {
+      Die("--intra-refresh: H.264 only (--codecs has " + key + ")");
+    }
+    plans.push_back(std::move(plan));
   }
+  if (plans.empty()) Die("--codecs: no codec");
   std::vector<Dataset> sets;
   for (const std::string& name : Words(datasets)) {
     if (name == "synthetic")
@@ -677,7 +767,23 @@ int Main(int argc, char** argv) {
   out["keyint"] = keyint;
   out["intra_refresh"] = g_intra_refresh;
   out["stereo_x264_params"] = stereo_x264;
+  out["codecs"] = Words(codecs);
+  if (codecs != "h264") {
+    std::printf(
+        "codecs: %s; x265 (tune zerolatency, pools=none, frame-threads 1), libvpx-vp9 (deadline "
+        "realtime, lag-in-frames 0) and libaom-av1 (usage realtime, lag-in-frames 0) timed in "
+        "process CPU ms\n",
+        codecs.c_str());
+  }
 
+  // Column widths: as before with H.264 alone; wider for "hevc veryfast", "HEVC 4:4:4 veryfast".
+  int preset_width = 10, codec_width = 24;
+  for (const CodecPlan& plan : plans) {
+    for (const std::string& p : plan.presets) {
+      preset_width = std::max(preset_width, static_cast<int>(SettingLabel(plan.codec, p).size()));
+    }
+    if (plan.codec != Codec::kH264) codec_width = 26;
+  }
   std::vector<StereoRow> stereo_rows;
   if (!no_stereo) {
     for (const Dataset& d : sets) {
@@ -689,30 +795,41 @@ int Main(int argc, char** argv) {
           d.name.c_str(), d.pairs.size(), d.pairs[0].left.width, d.pairs[0].left.height,
           lossless.ours.Bad(2, 0), lossless.ours.Bad(2, 1), no_sgbm ? NAN : lossless.sgbm.Bad(2, 0),
           no_sgbm ? NAN : lossless.sgbm.Bad(2, 1));
-      std::printf("%-16s %-10s %-16s %9s %8s %8s %8s %8s %8s %8s %8s %7s %7s\n", "layout", "preset",
-                  "rate", "KB/pair", "Mbit/s", "ours GT", "ours+1", "d ours", "d ours+1", "SGBM GT",
-                  "SGBM+1", "enc ms", "dec ms");
+      std::printf("%-16s %-*s %-16s %9s %8s %8s %8s %8s %8s %8s %8s %7s %7s\n", "layout",
+                  preset_width, "preset", "rate", "KB/pair", "Mbit/s", "ours GT", "ours+1",
+                  "d ours", "d ours+1", "SGBM GT", "SGBM+1", "enc ms", "dec ms");
       out["stereo_lossless"][d.name] = {
           {"ours_bad2_gt", lossless.ours.Bad(2, 0)},
           {"ours_bad2_gt_plus_1", lossless.ours.Bad(2, 1)},
           {"sgbm_bad2_gt", no_sgbm ? NAN : lossless.sgbm.Bad(2, 0)},
           {"sgbm_bad2_gt_plus_1", no_sgbm ? NAN : lossless.sgbm.Bad(2, 1)}};
       for (Layout layout : layout_list) {
-        std::vector<Rate> with_lossless = {Rate{0, 0, true}};
-        with_lossless.insert(with_lossless.end(), rates.begin(), rates.end());
-        for (const std::string& preset : preset_list) {
-          for (const Rate& rate : with_lossless) {
-            if (rate.lossless && preset != preset_list.front() && !lossless_every_preset) continue;
-            StereoRow r = RunStereo(d, layout, preset, rate, fps, keyint, interleaved_refs,
-                                    stereo_x264, m, !no_sgbm, lossless);
-            std::printf(
-                "%-16s %-10s %-16s %9.1f %8.2f %7.2f%% %7.2f%% %+8.2f %+8.2f %7.2f%% "
-                "%7.2f%% %7.2f %7.2f\n",
-                Name(layout), preset.c_str(), rate.Label().c_str(), r.bytes_per_pair / 1000, r.mbps,
-                r.ours_gt, r.ours_gt1, r.d_ours_gt, r.d_ours_gt1, r.sgbm_gt, r.sgbm_gt1,
-                r.encode_ms, r.decode_ms);
-            std::fflush(stdout);
-            stereo_rows.push_back(r);
+        for (const CodecPlan& plan : plans) {
+          const video::CodecInfo& info = video::Info(plan.codec);
+          const bool h264 = plan.codec == Codec::kH264;
+          std::vector<Rate> codec_rates;
+          if (info.lossless) codec_rates.push_back(Rate{0, 0, true});
+          for (double c : plan.crfs) codec_rates.push_back(Rate{c, 0, false});
+          for (const Rate& r : rates) {
+            if (r.crf > 0 && !h264) continue;  // capped CRF: H.264's only
+            codec_rates.push_back(r);
+          }
+          for (const std::string& preset : plan.presets) {
+            for (const Rate& rate : codec_rates) {
+              if (rate.lossless && preset != plan.presets.front() && !lossless_every_preset) {
+                continue;
+              }
+              StereoRow r = RunStereo(plan.codec, d, layout, preset, rate, fps, keyint,
+                                      interleaved_refs, stereo_x264, m, !no_sgbm, lossless);
+              std::printf(
+                  "%-16s %-*s %-16s %9.1f %8.2f %7.2f%% %7.2f%% %+8.2f %+8.2f %7.2f%% "
+                  "%7.2f%% %7.2f %7.2f\n",
+                  Name(layout), preset_width, r.preset.c_str(), rate.Label().c_str(),
+                  r.bytes_per_pair / 1000, r.mbps, r.ours_gt, r.ours_gt1, r.d_ours_gt, r.d_ours_gt1,
+                  r.sgbm_gt, r.sgbm_gt1, r.encode_ms, r.decode_ms);
+              std::fflush(stdout);
+              stereo_rows.push_back(r);
+            }
           }
         }
       }
@@ -720,6 +837,7 @@ int Main(int argc, char** argv) {
     nlohmann::json rows = nlohmann::json::array();
     for (const StereoRow& r : stereo_rows) {
       rows.push_back({{"dataset", r.dataset},
+                      {"codec", std::string(video::Info(r.codec).key)},
                       {"layout", Key(r.layout)},
                       {"preset", r.preset},
                       {"rate", r.rate.Label()},
@@ -795,25 +913,28 @@ int Main(int argc, char** argv) {
           "\ncolour, %s: %zu frames of %ux%u (BGR; PSNR over the three channels, SSIM the "
           "channels' mean)\n",
           d.name.c_str(), d.colour.size(), d.colour[0].width, d.colour[0].height);
-      std::printf("%-24s %-12s %9s %8s %7s %7s %7s %7s\n", "codec", "setting", "KB/frame", "Mbit/s",
-                  "PSNR", "SSIM", "enc ms", "dec ms");
+      std::printf("%-*s %-12s %9s %8s %7s %7s %7s %7s\n", codec_width, "codec", "setting",
+                  "KB/frame", "Mbit/s", "PSNR", "SSIM", "enc ms", "dec ms");
       auto print = [&](const ColourRow& r) {
-        std::printf("%-24s %-12s %9.1f %8.2f %7.2f %7.4f %7.2f %7.2f\n", r.codec.c_str(),
-                    r.setting.c_str(), r.bytes_per_frame / 1000, r.mbps, r.psnr, r.ssim,
-                    r.encode_ms, r.decode_ms);
+        std::printf("%-*s %-12s %9.1f %8.2f %7.2f %7.4f %7.2f %7.2f\n", codec_width,
+                    r.codec.c_str(), r.setting.c_str(), r.bytes_per_frame / 1000, r.mbps, r.psnr,
+                    r.ssim, r.encode_ms, r.decode_ms);
         std::fflush(stdout);
         colour_rows.push_back(r);
       };
       for (PictureKind kind : {PictureKind::kColour, PictureKind::kColour444}) {
-        for (const std::string& preset : Words(colour_presets)) {
-          for (double crf : ParseList<double>(colour_crfs, "--colour-crfs")) {
-            print(RunColourVideo(d, kind, preset, Rate{crf, 0, false}, fps, keyint));
-          }
-          for (double mbps : ParseList<double>(colour_bitrates, "--colour-bitrates")) {
-            print(RunColourVideo(d, kind, preset, Rate{0, mbps, false}, fps, keyint));
-          }
-          for (const Rate& r : colour_capped_rates) {
-            print(RunColourVideo(d, kind, preset, r, fps, keyint));
+        for (const CodecPlan& plan : plans) {
+          for (const std::string& preset : plan.colour_presets) {
+            for (double crf : plan.colour_crfs) {
+              print(RunColourVideo(plan.codec, d, kind, preset, Rate{crf, 0, false}, fps, keyint));
+            }
+            for (double mbps : ParseList<double>(colour_bitrates, "--colour-bitrates")) {
+              print(RunColourVideo(plan.codec, d, kind, preset, Rate{0, mbps, false}, fps, keyint));
+            }
+            if (plan.codec != Codec::kH264) continue;  // capped CRF: H.264's only
+            for (const Rate& r : colour_capped_rates) {
+              print(RunColourVideo(plan.codec, d, kind, preset, r, fps, keyint));
+            }
           }
         }
       }
@@ -908,8 +1029,12 @@ int Main(int argc, char** argv) {
             continue;
           }
           if (r.rate.crf <= 0) continue;
-          PlotSeries& s = series[std::string(Key(r.layout)) + " " + r.preset];
-          s.label = std::string(Key(r.layout)) + " " + r.preset;
+          // With other codecs beside it, H.264's series say so too.
+          const std::string label = std::string(Key(r.layout)) + " " +
+                                    (plans.size() > 1 && r.codec == Codec::kH264 ? "h264 " : "") +
+                                    r.preset;
+          PlotSeries& s = series[label];
+          s.label = label;
           s.dashed = r.layout == Layout::kSideBySide;
           s.x.push_back(r.mbps);
           s.y.push_back(tsukuba ? r.ours_gt1 : r.ours_gt);
