@@ -207,6 +207,7 @@ TEST_F(LoadCliTest, HtmlReportRendersItsChartsInHeadlessChromium) {
   ASSERT_EQ(r.code, 0) << r;
   const std::string html = ReadText(Path("r.html"));
   EXPECT_EQ(html.find("<script"), std::string::npos);
+  EXPECT_NE(html.find("<svg id=\"downlink-chart\""), std::string::npos);  // the replies
   // Nothing from the network: the only address is the SVG namespace, which is no download.
   std::string rest = html;
   for (std::size_t at;

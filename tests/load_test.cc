@@ -420,6 +420,11 @@ TEST_F(FleetTest, GhzJsonHasGhzFieldsAndTheExtraOnes) {
   EXPECT_EQ(j["framesPerReplica"]["null-1"], 40);
   ASSERT_TRUE(j["timeSeries"].is_array());
   EXPECT_FALSE(j["timeSeries"].empty());
+  // Each second's reply bytes add up to the run's.
+  std::uint64_t replies = 0;
+  for (const auto& s : j["timeSeries"]) replies += s["bytesReceived"].get<std::uint64_t>();
+  EXPECT_EQ(replies, j["frames"]["bytesReceived"].get<std::uint64_t>());
+  EXPECT_GT(replies, 0u);
 }
 
 TEST_F(FleetTest, UnreachableServerIsAClearError) {

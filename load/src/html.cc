@@ -312,6 +312,33 @@ std::string Html(const Report& r) {
     page += LineChart("rate-chart", "Rate control: target bitrate, queueing delay, frame size", "",
                       rx, {target, queue, kb});
   }
+  {
+    // The way back: what the replies took, and (--rate-control) the bitrate the senders let them
+    // take and the cap that asked the server for it.
+    std::vector<double> dx;
+    Line reply_kb{"KB per reply", "#54a24b", {}};
+    Line reply_mbps{"replies (Mbit/s, all streams)", "#4c78a8", {}};
+    Line allowed{"replies' bitrate allowed (Mbit/s, all streams)", "#f58518", {}, true};
+    Line cap{"cap (KB per reply)", "#e45756", {}, true};
+    bool capped = false;
+    for (const SecondStats& s : r.series) {
+      if (s.duration_s < 0.05) continue;
+      dx.push_back(s.t_end_s);
+      reply_kb.y.push_back(s.answered > 0 ? static_cast<double>(s.bytes_received) /
+                                                static_cast<double>(s.answered) / 1e3
+                                          : 0);
+      reply_mbps.y.push_back(static_cast<double>(s.bytes_received) * 8 / s.duration_s / 1e6);
+      allowed.y.push_back(s.rate.reply_target_bps / 1e6);
+      cap.y.push_back(s.rate.reply_cap_bytes / 1e3);
+      capped = capped || s.rate.reply_target_bps > 0;
+    }
+    std::vector<Line> lines = {reply_kb, reply_mbps};
+    if (capped) {
+      lines.push_back(allowed);
+      lines.push_back(cap);
+    }
+    page += LineChart("downlink-chart", "Downlink: the replies", "", dx, lines);
+  }
   if (!r.memory.empty()) {
     std::vector<double> mx;
     Line rss{"RSS", "#b279a2", {}};

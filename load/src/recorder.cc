@@ -21,6 +21,7 @@ void Recorder::Answered(std::int64_t latency_ns, std::int64_t service_ns,
   ++totals_.answered;
   ++interval_.answered;
   totals_.bytes_received += bytes;
+  interval_.bytes_received += bytes;
   latency_.Record(latency_ns);
   service_.Record(service_ns);
   interval_latency_.Record(latency_ns);

@@ -371,6 +371,7 @@ nlohmann::json GhzJson(const Report& r) {
                       {"resent", s.resent},
                       {"reconnects", s.reconnects},
                       {"openStreams", s.open_streams},
+                      {"bytesReceived", s.bytes_received},
                       {"p50", s.p50},
                       {"p90", s.p90},
                       {"p99", s.p99},

@@ -42,6 +42,7 @@ struct SecondStats {
   std::uint64_t late = 0;      // sends that went after their intended time
   std::uint64_t resent = 0;    // frames written again on a new call
   std::uint64_t reconnects = 0;
+  std::uint64_t bytes_received = 0;  // the replies of the frames answered in it
   int open_streams = 0;
   // Latency from the intended time and service time of the frames answered in it, ns.
   std::int64_t p50 = 0, p90 = 0, p99 = 0, max = 0;
