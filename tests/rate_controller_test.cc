@@ -87,9 +87,9 @@ class LinkSimulation {
             reply_ms = reply_bytes * 8 / 10e6 * 1000;
           }
           if (realism_.downlink_bps > 0) {
-            reply_bytes = realism_.reply_bytes *
-                           (1 + realism_.reply_spread *
-                                    (static_cast<double>(completed_ * 7 % 11) / 5 - 1));
+            reply_bytes =
+                realism_.reply_bytes *
+                (1 + realism_.reply_spread * (static_cast<double>(completed_ * 7 % 11) / 5 - 1));
             if (f.reply_cap > 0) reply_bytes = std::min(reply_bytes, f.reply_cap);
             reply_bytes = std::max(reply_bytes, realism_.reply_floor_bytes);
             reply_ms = reply_bytes * 8 / realism_.downlink_bps * 1000;
@@ -97,8 +97,8 @@ class LinkSimulation {
           const double sent = std::max(arrival + in_server, server_sent_ms_);
           server_sent_ms_ = sent;
           downlink_free_ms_ = std::max(downlink_free_ms_, sent) + reply_ms;
-          replies_.push_back({downlink_free_ms_ + one_way_ms_, f.written_ms, f.captured_ms,
-                              arrival, f.bytes, server_bytes_, sent, reply_bytes});
+          replies_.push_back({downlink_free_ms_ + one_way_ms_, f.written_ms, f.captured_ms, arrival,
+                              f.bytes, server_bytes_, sent, reply_bytes});
           link_.pop_front();
         }
       }
@@ -129,8 +129,8 @@ class LinkSimulation {
             static_cast<double>(controller_.FrameBudgetBytes(fps)) * content,
             realism_.floor_bytes, 60'000);
         controller_.OnFrameWritten(static_cast<std::size_t>(bytes));
-        link_.push_back({bytes, bytes, t, *waiting_,
-                         static_cast<double>(controller_.ReplyBudgetBytes(fps))});
+        link_.push_back(
+            {bytes, bytes, t, *waiting_, static_cast<double>(controller_.ReplyBudgetBytes(fps))});
         ++in_flight_;
         waiting_.reset();
       }
@@ -280,8 +280,8 @@ TEST(RateControllerTest, RepliesOfVaryingSizeOnADownlinkThatCarriesThemAreNotAQu
   EXPECT_GE(late.size(), 29u * 15);
   for (const Sample& x : late) {
     // No cap, or one the replies' 2.2 Mbit/s fits under.
-    EXPECT_TRUE(x.reply_target_bps == 0 || x.reply_target_bps > 2.4e6) << x.t_ms << " "
-                                                                         << x.reply_target_bps;
+    EXPECT_TRUE(x.reply_target_bps == 0 || x.reply_target_bps > 2.4e6)
+        << x.t_ms << " " << x.reply_target_bps;
     EXPECT_LT(x.latency_ms, 250) << x.t_ms;
   }
 }

@@ -71,8 +71,9 @@ TEST(RateFlagsTest, ErrorsNameTheFlag) {
   EXPECT_NE(Parsed({"--rate-control", "--rate-min-mbps", "5", "--rate-max-mbps", "2"})
                 .error.find("--rate-min-mbps (5) is over --rate-max-mbps (2)"),
             std::string::npos);
-  EXPECT_NE(Parsed({"--rate-reply-cap", "false"}).error.find("--rate-reply-cap needs --rate-control"),
-            std::string::npos);
+  EXPECT_NE(
+      Parsed({"--rate-reply-cap", "false"}).error.find("--rate-reply-cap needs --rate-control"),
+      std::string::npos);
   EXPECT_NE(Parsed({"--rate-control", "--rate-reply-cap", "maybe"}).error.find("--rate-reply-cap"),
             std::string::npos);
   EXPECT_NE(Parsed({"--rate-control", "--rate-start-mbps", "200"})

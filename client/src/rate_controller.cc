@@ -34,7 +34,8 @@ void DirectionRate::Restart() {
 void DirectionRate::AddDelivered(std::int64_t at_ns, std::uint64_t cumulative_bytes) {
   if (at_ns <= 0 || cumulative_bytes == 0) return;
   delivered_.emplace_back(at_ns, cumulative_bytes);
-  while (delivered_.size() > 2 && delivered_.back().first - delivered_[1].first >= kDeliveredSpanNs) {
+  while (delivered_.size() > 2 &&
+         delivered_.back().first - delivered_[1].first >= kDeliveredSpanNs) {
     delivered_.pop_front();
   }
   const std::int64_t span = delivered_.back().first - delivered_.front().first;
@@ -86,8 +87,7 @@ void DirectionRate::Control(Clock::time_point now, double rtt_ms) {
     // window sees no queueing delay, so the delay alone would let the target drift up (GCC caps
     // its estimate at 1.5 times the received rate for the same reason).
     const double grown = target_bps_ * (1 + growth * dt);
-    const double cap =
-        delivered_bps_ > 0 ? options_.max_over_delivered * delivered_bps_ : grown;
+    const double cap = delivered_bps_ > 0 ? options_.max_over_delivered * delivered_bps_ : grown;
     target_bps_ = std::max(target_bps_, std::min(grown, cap));
   }
   target_bps_ = std::clamp(target_bps_, options_.min_bps, options_.max_bps);
@@ -152,10 +152,10 @@ void RateController::OnReply(const Reply& reply) {
   // A reply without the server's clock (an error) has no one-way delay to add; an older server
   // that never sends it leaves the round trip less the server's time as the measure.
   if (server_clock || !server_clock_) {
-    up_.AddDelay(received, server_clock ? static_cast<double>(reply.server_receive_unix_ns -
-                                                              Ns(reply.written)) /
-                                              1e6
-                                        : std::max(0.0, rtt - in_server));
+    up_.AddDelay(received,
+                 server_clock
+                     ? static_cast<double>(reply.server_receive_unix_ns - Ns(reply.written)) / 1e6
+                     : std::max(0.0, rtt - in_server));
   }
   up_.Control(received, estimate_.rtt_ms);
 
@@ -166,8 +166,7 @@ void RateController::OnReply(const Reply& reply) {
     const double b = static_cast<double>(reply.reply_bytes);
     mean_reply_bytes_ = mean_reply_bytes_ == 0 ? b : 0.8 * mean_reply_bytes_ + 0.2 * b;
     down_.AddDelivered(Ns(received), reply_bytes_total_);
-    down_.AddDelay(received,
-                   static_cast<double>(Ns(received) - reply.server_send_unix_ns) / 1e6);
+    down_.AddDelay(received, static_cast<double>(Ns(received) - reply.server_send_unix_ns) / 1e6);
     down_.Control(received, estimate_.rtt_ms);
   }
 

@@ -35,10 +35,14 @@ std::string Rfc3339(std::chrono::system_clock::time_point t) {
 }
 
 nlohmann::json RateJson(const RateSummary& r) {
-  return {{"samples", r.samples}, {"targetBps", r.target_bps},
-          {"rttMs", r.rtt_ms},    {"queueDelayMs", r.queue_delay_ms},
-          {"window", r.window},   {"frameBytes", r.frame_bytes},
-          {"replyTargetBps", r.reply_target_bps}, {"replyCapBytes", r.reply_cap_bytes},
+  return {{"samples", r.samples},
+          {"targetBps", r.target_bps},
+          {"rttMs", r.rtt_ms},
+          {"queueDelayMs", r.queue_delay_ms},
+          {"window", r.window},
+          {"frameBytes", r.frame_bytes},
+          {"replyTargetBps", r.reply_target_bps},
+          {"replyCapBytes", r.reply_cap_bytes},
           {"replyQueueDelayMs", r.reply_queue_delay_ms}};
 }
 

@@ -164,6 +164,13 @@ std::string StreamStats::ProgressLine() {
       line += fmt::format(", JPEG quality {} at {} resolution", jpeg_quality_,
                           s.resolution_divisor == 2 ? "half" : "full");
     }
+    if (rate_->reply_target_bps > 0) {
+      // The downlink limits the replies (RateControlOptions::cap_replies).
+      line += fmt::format(
+          " | replies {:.1f} Mbit/s allowed, capped at {:.1f} KB, queueing {:.0f} ms",
+          rate_->reply_target_bps / 1e6, static_cast<double>(rate_->reply_cap_bytes) / 1000.0,
+          rate_->reply_queue_delay_ms);
+    }
   }
   return line;
 }

@@ -1,7 +1,7 @@
 // The rate controller's settings (client::RateControlOptions), defined once for the programs
 // that send frames under --rate-control (cloudcast-client, cloudcast-load): --rate-target-delay-ms,
-// --rate-start-mbps, --rate-min-mbps, --rate-max-mbps, --rate-reply-cap. Defaults are the library's; bad values are
-// refused by the parser with the flag's name.
+// --rate-start-mbps, --rate-min-mbps, --rate-max-mbps, --rate-reply-cap. Defaults are the
+// library's; bad values are refused by the parser with the flag's name.
 //
 //   cloudcast::cli::RateFlags rate(app, "Rate control");
 //   app.parse(argc, argv);

@@ -178,7 +178,7 @@ class RateController {
   // Windowed minimum of the whole round trip, which sizes the window (a frame in flight spends
   // all of it).
   std::deque<std::pair<Clock::time_point, double>> round_trips_;
-  bool server_clock_ = false;           // replies carry the server's receive time
+  bool server_clock_ = false;            // replies carry the server's receive time
   std::uint64_t reply_bytes_total_ = 0;  // the downlink's count, this call
 };
 

@@ -16,9 +16,10 @@
 // when the answer came back and for which frame (its write time); the bitrate it decides is
 // applied where frames are made (the library's Stream::Send, the load generator's FrameStore),
 // before Submit. The replies' bitrate it decides the core applies itself: it writes the
-// owner's config again with a new cap on each reply's cloud (reply_cap.h). Frames that must not be replaced once made (video pictures) are made at
-// dispatch: the owner asks WantRoom, keeps the raw frame while there is none, and makes and
-// submits it on OnRoom (the core still never looks inside).
+// owner's config again with a new cap on each reply's cloud (reply_cap.h). Frames that must not be
+// replaced once made (video pictures) are made at dispatch: the owner asks WantRoom, keeps the raw
+// frame while there is none, and makes and submits it on OnRoom (the core still never looks
+// inside).
 #pragma once
 
 #include <grpcpp/alarm.h>
