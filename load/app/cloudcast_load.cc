@@ -560,6 +560,18 @@ int main(int argc, char** argv) {
   if (!store.ok()) return usage(std::string(store.status().message()));
   const double prepare_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - t_prepare).count();
+  if (const auto& n = store->near_lossless();
+      n && n->geometry_bytes >= n->geometry_bytes_lossless && !f.quiet) {
+    // e.g. New Tsukuba's whole-pixel disparity (a step moves a point further than the bound), or
+    // a float map sent as TIFF (uncompressed) by --encoding png and jpeg.
+    std::fprintf(stderr,
+                 "cloudcast-load: note: --max-point-error %g saved nothing on these frames (%s "
+                 "%.1f KB a frame either way, %.0f%% of its values changed)\n",
+                 n->max_point_error, n->geometry.c_str(), n->geometry_bytes / 1024,
+                 n->values > 0 ? 100.0 * static_cast<double>(n->changed) /
+                                     static_cast<double>(n->values)
+                               : 0.0);
+  }
 
   // The StreamConfig: the stage flags given, the stream's camera (made with the frames), the
   // delivery mode.
