@@ -63,6 +63,12 @@ TEST_F(LoadCliTest, BadFlagsExitTwoNamingTheFlag) {
       {{"--input", "stereo", "--colour-glob", "c/*.png"}, "needs --right-glob"},
       {{"--rate-target-delay-ms", "15"}, "--rate-target-delay-ms needs --rate-control"},
       {{"--rate-control", "--rate-max-mbps", "inf"}, "--rate-max-mbps"},
+      {{"--max-point-error", "-0.01"}, "--max-point-error"},
+      {{"--max-point-error", "nan"}, "--max-point-error"},
+      {{"--max-point-error", "inf"}, "--max-point-error"},
+      {{"--max-point-error", "0.01"}, "--max-point-error needs an encoding that compresses"},
+      {{"--max-point-error", "0.01", "--input", "stereo", "--encoding", "zstd"},
+       "--max-point-error applies to disparity and depth frames"},
   };
   for (const auto& [args, flag] : cases) {
     std::vector<std::string> full = {"--server", null_->address(), "--synthetic", "64x48"};
@@ -72,6 +78,23 @@ TEST_F(LoadCliTest, BadFlagsExitTwoNamingTheFlag) {
     EXPECT_FALSE(r.crashed()) << r;
     EXPECT_NE(r.code, 0) << args[0] << "\n" << r;
     EXPECT_NE((r.out + r.err).find(flag), std::string::npos) << args[0] << "\n" << r;
+  }
+}
+
+// --max-point-error explains its unit, what it bounds and its lossless value.
+TEST_F(LoadCliTest, HelpExplainsTheMaxPointError) {
+  const RunResult r = Run({"--help"});
+  ASSERT_EQ(r.code, 0) << r;
+  const std::size_t at = r.out.find("--max-point-error");
+  ASSERT_NE(at, std::string::npos) << r;
+  // The description as one line (the help wraps it).
+  std::string text;
+  for (char c : r.out.substr(at, 1400)) {
+    const bool space = c == ' ' || c == '\n';
+    if (!space || (!text.empty() && text.back() != ' ')) text += space ? ' ' : c;
+  }
+  for (const char* words : {"metres", "per point", "half-resolution", "0 = lossless", "stereo"}) {
+    EXPECT_NE(text.find(words), std::string::npos) << words << "\n" << text;
   }
 }
 

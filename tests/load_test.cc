@@ -220,7 +220,7 @@ TEST_F(FleetTest, HalfResolutionLevelsMakeTheSameSurface) {
   config.mutable_camera()->clear_cx();  // the image's centre, at either resolution
   config.mutable_camera()->clear_cy();
   config.mutable_passthrough()->set_enabled(false);  // the whole scene
-  store.SetStreamCamera(config.camera());
+  ASSERT_TRUE(store.SetStreamCamera(config.camera()).ok());
   EXPECT_LT(store.MeanRequestBytes(1), store.MeanRequestBytes(0) / 2);
   auto stub = v1::CloudCast::NewStub(
       grpc::CreateChannel(server->address(), grpc::InsecureChannelCredentials()));

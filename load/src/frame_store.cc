@@ -4,12 +4,14 @@
 #include <time.h>
 
 #include <algorithm>
+#include <cmath>
 #include <variant>
 
 #include <opencv2/core/mat.hpp>
 
 #include "absl/status/status.h"
 #include "cloudcast/client/half_resolution.h"
+#include "cloudcast/proto/convert.h"
 
 namespace cloudcast::load {
 namespace {
@@ -116,10 +118,99 @@ std::string VideoSettings(const video::FrameEncoderOptions& v, sources::FrameKin
   return fmt::format("{} {}, {}, {}", e.preset, rate, pictures, keyframes);
 }
 
+// The serialized size of a frame's disparity or depth field.
+double GeometryBytes(const v1::Frame& f) {
+  return static_cast<double>(f.has_depth() ? f.depth().ByteSizeLong()
+                                           : f.disparity().ByteSizeLong());
+}
+
+// The near-lossless bound against what the frames are and how they travel.
+absl::Status CheckNearLossless(const FrameSourceOptions& o) {
+  const double bound = o.uplink.max_point_error;
+  if (bound == 0) return absl::OkStatus();
+  if (!std::isfinite(bound) || bound < 0) {
+    return absl::InvalidArgumentError(fmt::format(
+        "--max-point-error is {}: it must be a finite distance in metres >= 0 (0 = lossless)",
+        bound));
+  }
+  if (o.kind == sources::FrameKind::kStereo) {
+    return absl::InvalidArgumentError(
+        "--max-point-error applies to disparity and depth frames (--input disparity or depth): "
+        "a stereo pair carries no disparity to quantize (the server matches the pair)");
+  }
+  if (o.jpeg_ladder.empty() && !o.video && o.uplink.encoding == sources::Uplink::kRaw) {
+    return absl::InvalidArgumentError(
+        "--max-point-error needs an encoding that compresses the disparity or depth (--encoding "
+        "zstd, png, jpeg or h264, or --rate-control): raw frames carry every value's bytes as "
+        "they are, so the bound would save nothing");
+  }
+  if (!o.stream_camera) {
+    return absl::InvalidArgumentError(
+        "--max-point-error needs the stream's camera (FrameSourceOptions::stream_camera): each "
+        "frame is quantized with the camera the server processes it with");
+  }
+  return absl::OkStatus();
+}
+
 }  // namespace
 
-absl::Status FrameStore::PrepareVideo(const FrameSourceOptions& o, sources::FrameSource& source,
-                                      std::uint64_t frames) {
+// What the bound saved, frame by frame: the frame just encoded with the bound (the quantizer's
+// counts are still that frame's) beside the same frame encoded without it.
+struct FrameStore::Savings {
+  double bytes[2] = {}, lossless[2] = {};  // [0] full resolution, [1] half
+  std::size_t frames[2] = {};
+  std::uint64_t values = 0, changed = 0;
+
+  absl::Status Add(const sources::SourceFrame& from, sources::UplinkOptions options,
+                   const v1::Frame& bounded, sources::UplinkFrame* uplink, bool half) {
+    values += uplink->quantize_stats().valid;
+    changed += uplink->quantize_stats().changed;
+    options.max_point_error = 0;
+    v1::Frame lossless_frame;
+    if (absl::Status s = uplink->Encode(from, options); !s.ok()) return s;
+    if (absl::Status s = uplink->ToProto(&lossless_frame); !s.ok()) return s;
+    bytes[half] += GeometryBytes(bounded);
+    lossless[half] += GeometryBytes(lossless_frame);
+    ++frames[half];
+    return absl::OkStatus();
+  }
+
+  NearLosslessSummary Summary(double bound, sources::FrameKind kind,
+                              double request_bytes) const {
+    auto mean = [&](const double* sum, int i) {
+      return frames[i] > 0 ? sum[i] / static_cast<double>(frames[i]) : 0.0;
+    };
+    NearLosslessSummary n;
+    n.max_point_error = bound;
+    n.geometry = kind == sources::FrameKind::kDepth ? "depth" : "disparity";
+    n.geometry_bytes = mean(bytes, 0);
+    n.geometry_bytes_lossless = mean(lossless, 0);
+    n.request_bytes = request_bytes;
+    n.request_bytes_lossless = request_bytes + n.geometry_bytes_lossless - n.geometry_bytes;
+    n.half_geometry_bytes = mean(bytes, 1);
+    n.half_geometry_bytes_lossless = mean(lossless, 1);
+    n.values = values;
+    n.changed = changed;
+    return n;
+  }
+};
+
+std::string Describe(const NearLosslessSummary& n) {
+  return fmt::format(
+      "near-lossless <= {:g} m a point: {} {:.1f} KB a frame (lossless {:.1f} KB), {:.0f}% of "
+      "its values changed",
+      n.max_point_error, n.geometry, n.geometry_bytes / 1024, n.geometry_bytes_lossless / 1024,
+      n.values > 0 ? 100.0 * static_cast<double>(n.changed) / static_cast<double>(n.values) : 0.0);
+}
+
+v1::CameraModel FrameStore::HalfCamera() const {
+  return client::HalfResolutionCamera(*stream_camera_, kind_ == sources::FrameKind::kDisparity);
+}
+
+absl::Status FrameStore::PrepareVideo(const FrameSourceOptions& o,
+                                      const sources::UplinkOptions& uplink_options,
+                                      sources::FrameSource& source, std::uint64_t frames,
+                                      Savings* savings) {
   // The source's frames, kept (cloned: a source may reuse its buffers) to be cycled.
   std::vector<sources::SourceFrame> originals;
   sources::SourceFrame frame;
@@ -144,10 +235,12 @@ absl::Status FrameStore::PrepareVideo(const FrameSourceOptions& o, sources::Fram
   sequence.source_frames = n;
   sequence.settings = VideoSettings(*o.video, o.kind);
   video::FrameEncoder encoder(*o.video);
-  // The encoder takes raw views; disparity and depth go lossless and compressed (zstd), as a
-  // robot whose uplink is thin enough to want video sends them.
-  sources::UplinkOptions raw = o.uplink, zstd = o.uplink;
+  // The encoder takes raw views (of the colour: the geometry is left unquantized there);
+  // disparity and depth go compressed (zstd), lossless or within the bound, as a robot whose
+  // uplink is thin enough to want video sends them.
+  sources::UplinkOptions raw = uplink_options, zstd = uplink_options;
   raw.encoding = sources::Uplink::kRaw;
+  raw.max_point_error = 0;
   zstd.encoding = sources::Uplink::kZstd;
   sources::UplinkFrame uplink, geometry;
   std::vector<double> encode_ms;
@@ -166,6 +259,9 @@ absl::Status FrameStore::PrepareVideo(const FrameSourceOptions& o, sources::Fram
     f.set_frame_id(original.name);
     if (absl::Status s = geometry.Encode(original, zstd); !s.ok()) return s;
     if (absl::Status s = geometry.ToProto(&f); !s.ok()) return s;
+    if (zstd.max_point_error > 0) {
+      if (absl::Status s = savings->Add(original, zstd, f, &geometry, false); !s.ok()) return s;
+    }
     if (absl::Status s = PutPictures(*coded, &f); !s.ok()) return s;
     sequence.keyframe.push_back(f.color().video().keyframe());
     video_bytes += static_cast<double>(encoder.last_bytes());
@@ -186,6 +282,7 @@ absl::Status FrameStore::PrepareVideo(const FrameSourceOptions& o, sources::Fram
 }
 
 absl::StatusOr<FrameStore> FrameStore::Prepare(const FrameSourceOptions& o) {
+  if (absl::Status s = CheckNearLossless(o); !s.ok()) return s;
   sources::SourceSpec spec = o.source;
   spec.synthetic_encoding = DisparityEncoding::kU16;
   sources::SourceOptions options;
@@ -200,11 +297,41 @@ absl::StatusOr<FrameStore> FrameStore::Prepare(const FrameSourceOptions& o) {
   FrameStore store;
   store.camera_ = info.camera;
   store.kind_ = o.kind;
+  if (o.stream_camera) {
+    auto stream = o.stream_camera(info.camera);
+    if (!stream.ok()) return stream.status();
+    store.stream_camera_ = *std::move(stream);
+  }
+  // How full- and half-resolution frames travel. With a bound, each is quantized with the camera
+  // the server processes it with: the stream's, and the half levels' own (Frame.camera, halved)
+  // over it, as the server applies it; both resolved for the frame's size by the quantizer.
+  const double bound = o.uplink.max_point_error;
+  sources::UplinkOptions full = o.uplink, half = o.uplink;
+  if (bound > 0) {
+    full.camera = FrameSettings{};
+    if (absl::Status s = convert::ApplyCamera(*store.stream_camera_, "config.camera", &full.camera);
+        !s.ok()) {
+      return s;
+    }
+    half.camera = full.camera;
+    if (absl::Status s = convert::ApplyCamera(store.HalfCamera(), "frame.camera", &half.camera);
+        !s.ok()) {
+      return s;
+    }
+  }
+  Savings savings;
+  auto summarize = [&] {
+    if (bound == 0) return;
+    store.near_lossless_ = savings.Summary(bound, o.kind, store.MeanRequestBytes(0));
+    store.description_ += ", " + Describe(*store.near_lossless_);
+  };
   if (o.video) {
     if (!o.jpeg_ladder.empty()) {
       return absl::InvalidArgumentError("--encoding h264 has no JPEG ladder (--rate-control)");
     }
-    if (absl::Status s = store.PrepareVideo(o, **source, frames); !s.ok()) return s;
+    if (absl::Status s = store.PrepareVideo(o, full, **source, frames, &savings); !s.ok()) {
+      return s;
+    }
     store.encoding_ = std::string(video::kH264);
     store.description_ = fmt::format(
         "{} ({} {} frames, {}x{}), h264 ({}; a sequence of {} frames, {:.1f} KB of pictures a "
@@ -212,6 +339,7 @@ absl::StatusOr<FrameStore> FrameStore::Prepare(const FrameSourceOptions& o) {
         Label(info), store.video_->source_frames, sources::Name(o.kind), info.width, info.height,
         store.video_->settings, store.video_->length, store.video_->video_bytes_mean / 1024,
         store.video_->encode_ms_median, store.MeanRequestBytes() / 1024);
+    summarize();
     return store;
   }
   store.encoding_ = o.jpeg_ladder.empty() ? sources::Name(o.uplink.encoding) : "adaptive";
@@ -229,25 +357,29 @@ absl::StatusOr<FrameStore> FrameStore::Prepare(const FrameSourceOptions& o) {
     f->set_frame_id(from.name);
     return uplink.ToProto(f);
   };
-  auto encode = [&](const sources::UplinkOptions& options, v1::Frame* f) {
-    return encode_frame(frame, options, f);
-  };
   // The frame at every quality of `ladder`, from level `first`: the colour as JPEG, the
-  // geometry lossless (encoded once).
+  // geometry compressed (zstd; encoded once), lossless or within the bound. Half-resolution
+  // frames carry their camera once the stream's is known (else SetStreamCamera sets it).
   auto add_ladder = [&](const sources::SourceFrame& from, const std::vector<int>& ladder,
-                        std::size_t first) -> absl::Status {
-    sources::UplinkOptions lossless = o.uplink;
-    lossless.encoding = sources::Uplink::kZstd;
+                        std::size_t first, bool is_half) -> absl::Status {
+    const sources::UplinkOptions& options = is_half ? half : full;
+    sources::UplinkOptions zstd = options;
+    zstd.encoding = sources::Uplink::kZstd;
     v1::Frame geometry;
-    if (absl::Status s = encode_frame(from, lossless, &geometry); !s.ok()) return s;
+    if (absl::Status s = encode_frame(from, zstd, &geometry); !s.ok()) return s;
+    if (bound > 0) {
+      if (absl::Status s = savings.Add(from, zstd, geometry, &uplink, is_half); !s.ok()) return s;
+    }
     for (std::size_t level = 0; level < ladder.size(); ++level) {
-      sources::UplinkOptions jpeg = o.uplink;
+      sources::UplinkOptions jpeg = options;
       jpeg.encoding = sources::Uplink::kJpeg;
       jpeg.jpeg_quality = ladder[level];
+      jpeg.max_point_error = 0;  // its geometry is replaced by the one above
       v1::Frame f;
       if (absl::Status s = encode_frame(from, jpeg, &f); !s.ok()) return s;
       if (geometry.has_disparity()) *f.mutable_disparity() = geometry.disparity();
       if (geometry.has_depth()) *f.mutable_depth() = geometry.depth();
+      if (is_half && store.stream_camera_) *f.mutable_camera() = store.HalfCamera();
       store.AddTail(f, first + level);
     }
     return absl::OkStatus();
@@ -259,14 +391,17 @@ absl::StatusOr<FrameStore> FrameStore::Prepare(const FrameSourceOptions& o) {
     if (!*got) break;
     if (o.jpeg_ladder.empty()) {
       v1::Frame f;
-      if (absl::Status s = encode(o.uplink, &f); !s.ok()) return s;
+      if (absl::Status s = encode_frame(frame, full, &f); !s.ok()) return s;
+      if (bound > 0) {
+        if (absl::Status s = savings.Add(frame, full, f, &uplink, false); !s.ok()) return s;
+      }
       store.AddTail(f);
       continue;
     }
-    if (absl::Status s = add_ladder(frame, o.jpeg_ladder, 0); !s.ok()) return s;
+    if (absl::Status s = add_ladder(frame, o.jpeg_ladder, 0, false); !s.ok()) return s;
     if (halves) {
-      if (absl::Status s =
-              add_ladder(HalfResolution(frame), o.half_resolution_ladder, o.jpeg_ladder.size());
+      if (absl::Status s = add_ladder(HalfResolution(frame), o.half_resolution_ladder,
+                                      o.jpeg_ladder.size(), true);
           !s.ok()) {
         return s;
       }
@@ -279,15 +414,16 @@ absl::StatusOr<FrameStore> FrameStore::Prepare(const FrameSourceOptions& o) {
                     sources::Name(o.uplink.encoding), store.MeanRequestBytes() / 1024);
   } else {
     store.description_ = fmt::format(
-        "{} ({} {} frames, {}x{}), adaptive: lossless geometry, JPEG colour at quality {} to {}{}, "
+        "{} ({} {} frames, {}x{}), adaptive: {} geometry, JPEG colour at quality {} to {}{}, "
         "{:.0f} to {:.0f} KB per frame",
         Label(info), store.size(), sources::Name(o.kind), info.width, info.height,
-        o.jpeg_ladder.front(), o.jpeg_ladder.back(),
+        bound > 0 ? "near-lossless" : "lossless", o.jpeg_ladder.front(), o.jpeg_ladder.back(),
         halves ? fmt::format(", then at half resolution, {} to {}",
                              o.half_resolution_ladder.front(), o.half_resolution_ladder.back())
                : "",
         store.MeanRequestBytes(0) / 1024, store.MeanRequestBytes(store.levels() - 1) / 1024);
   }
+  summarize();
   return store;
 }
 
@@ -300,10 +436,19 @@ FrameStore FrameStore::FromFrames(const std::vector<v1::Frame>& frames, const Ca
   return store;
 }
 
-void FrameStore::SetStreamCamera(const v1::CameraModel& stream) {
-  if (first_half_level_ == 0) return;
-  const v1::CameraModel half =
-      client::HalfResolutionCamera(stream, kind_ == sources::FrameKind::kDisparity);
+absl::Status FrameStore::SetStreamCamera(const v1::CameraModel& stream) {
+  if (stream_camera_) {
+    if (stream_camera_->SerializeAsString() == stream.SerializeAsString()) {
+      return absl::OkStatus();
+    }
+    return absl::FailedPreconditionError(
+        "the frames were prepared for the stream camera { " + stream_camera_->ShortDebugString() +
+        " } (their half-resolution camera and any --max-point-error quantization), not { " +
+        stream.ShortDebugString() + " }");
+  }
+  stream_camera_ = stream;
+  if (first_half_level_ == 0) return absl::OkStatus();
+  const v1::CameraModel half = HalfCamera();
   for (std::size_t level = first_half_level_; level < levels_.size(); ++level) {
     for (std::shared_ptr<const std::string>& tail : levels_[level]) {
       v1::Frame frame;
@@ -312,6 +457,7 @@ void FrameStore::SetStreamCamera(const v1::CameraModel& stream) {
       tail = std::make_shared<const std::string>(frame.SerializeAsString());
     }
   }
+  return absl::OkStatus();
 }
 
 absl::StatusOr<FrameStore> FrameStore::FromVideoFrames(const std::vector<v1::Frame>& frames,

@@ -227,6 +227,12 @@ std::string Html(const Report& r) {
   page += Row("encoding",
               fmt::format("{}, {:.1f} KB sent a frame", r.encoding.empty() ? "?" : r.encoding,
                           r.bytes_per_frame() / 1024));
+  if (r.near_lossless) {
+    page += Row("near-lossless",
+                fmt::format("{}; {:.1f} KB a request (lossless {:.1f} KB)",
+                            Describe(*r.near_lossless), r.near_lossless->request_bytes / 1024,
+                            r.near_lossless->request_bytes_lossless / 1024));
+  }
   if (r.video) {
     page += Row("video", fmt::format("{}; a sequence of {} frames, {:.1f} KB of pictures a frame, "
                                      "encoded once in {:.2f} ms a frame",

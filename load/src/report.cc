@@ -155,6 +155,12 @@ std::string FormatTable(const Report& r) {
     out += fmt::format("  downlink  Draco colour bits {} (median of the clouds), {} over the cap\n",
                        t.color_bits_median(), t.over_cap);
   }
+  if (r.near_lossless) {
+    const NearLosslessSummary& n = *r.near_lossless;
+    out += fmt::format(
+        "  bound     {}; {:.1f} KB a request (lossless {:.1f} KB)\n", Describe(n),
+        n.request_bytes / 1024, n.request_bytes_lossless / 1024);
+  }
   if (r.video) {
     out += fmt::format(
         "  video     IDRs sent {} ({} asked for)  replies asking for an IDR {}  skipped before "
@@ -302,6 +308,20 @@ nlohmann::json GhzJson(const Report& r) {
                               {"keyframesAskedFor", t.keyframe_restarts},
                               {"repliesAskingForKeyframe", t.keyframe_needed},
                               {"skippedBeforeEncoding", t.skipped}};
+  }
+  if (r.near_lossless) {
+    const NearLosslessSummary& n = *r.near_lossless;
+    j["encoding"]["nearLossless"] = {{"maxPointErrorM", n.max_point_error},
+                                     {"geometry", n.geometry},
+                                     {"geometryBytesPerFrame", n.geometry_bytes},
+                                     {"geometryBytesPerFrameLossless", n.geometry_bytes_lossless},
+                                     {"requestBytesPerFrame", n.request_bytes},
+                                     {"requestBytesPerFrameLossless", n.request_bytes_lossless},
+                                     {"halfGeometryBytesPerFrame", n.half_geometry_bytes},
+                                     {"halfGeometryBytesPerFrameLossless",
+                                      n.half_geometry_bytes_lossless},
+                                     {"valuesValid", n.values},
+                                     {"valuesChanged", n.changed}};
   }
   json color_bits = json::object();
   for (const auto& [bits, clouds] : t.color_bits) color_bits[std::to_string(bits)] = clouds;

@@ -20,6 +20,7 @@
 #include <grpcpp/support/slice.h>
 
 #include <cstdint>
+#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
@@ -44,7 +45,18 @@ struct FrameSourceOptions {
   double focal = sources::SourceOptions{}.focal;
   double baseline = sources::SourceOptions{}.baseline;
   int synthetic_frames = 10;  // distinct synthetic frames (the camera moves from one to the next)
+  // How the images travel. uplink.max_point_error (--max-point-error, metres, 0 = lossless)
+  // quantizes each frame's disparity or depth (core/near_lossless.h) with the camera the server
+  // will process that frame with: the stream's (stream_camera, required then), and for the
+  // half-resolution levels their own, halved (client::HalfResolutionCamera over the stream's, as
+  // the server applies Frame.camera). uplink.camera is filled from stream_camera here. The bound
+  // needs disparity or depth frames and an encoding that compresses them (zstd, png, jpeg,
+  // h264, the ladder); anything else is an InvalidArgument error naming --max-point-error.
   sources::UplinkOptions uplink;
+  // The stream's camera as its StreamConfig will send it, made from the source's camera (the
+  // flags over it). Given, Prepare calls it once the source is open and the store keeps it
+  // (stream_camera()): the half-resolution levels get their camera from it at once.
+  std::function<absl::StatusOr<v1::CameraModel>(const CameraModel& source)> stream_camera;
   // The adaptive sender's ladder (--rate-control): every frame also at each of these JPEG
   // qualities for its colour images (best first), its disparity or depth lossless (zstd with
   // row deltas). The stream picks a level per frame from its rate controller's target.
@@ -78,6 +90,22 @@ struct VideoSequence {
 };
 inline constexpr std::size_t kMaxVideoSequence = 300;
 
+// What --max-point-error saved, measured when the store was prepared: each frame's disparity or
+// depth was also encoded without the bound. Bytes are means per distinct frame.
+struct NearLosslessSummary {
+  double max_point_error = 0;  // metres
+  std::string geometry;        // "disparity" or "depth"
+  // The geometry's bytes in a full-resolution frame (the field as serialized), with the bound
+  // and without; and the whole request's (level 0 of a ladder), with and without.
+  double geometry_bytes = 0, geometry_bytes_lossless = 0;
+  double request_bytes = 0, request_bytes_lossless = 0;
+  // The half-resolution levels' geometry, with and without (0: no such levels).
+  double half_geometry_bytes = 0, half_geometry_bytes_lossless = 0;
+  // Over every quantized map (each resolution): pixels that give a point, and of those, the
+  // values the quantizer replaced.
+  std::uint64_t values = 0, changed = 0;
+};
+
 class FrameStore {
  public:
   // Loads, encodes and serializes every frame. Errors name the flag or the file.
@@ -110,8 +138,14 @@ class FrameStore {
   // The camera the frames were made with (the StreamConfig's camera section).
   const CameraModel& camera() const { return camera_; }
   // The stream's camera as the config sends it: the half-resolution levels (if any) get it
-  // halved as their frames' own camera. Call before the first Request.
-  void SetStreamCamera(const v1::CameraModel& stream);
+  // halved as their frames' own camera. Call before the first Request, or give
+  // FrameSourceOptions::stream_camera instead. A store prepared with a stream camera takes only
+  // that one again (its near-lossless frames were quantized for it): FailedPrecondition.
+  absl::Status SetStreamCamera(const v1::CameraModel& stream);
+  // The stream camera given (FrameSourceOptions::stream_camera or SetStreamCamera), if any.
+  const std::optional<v1::CameraModel>& stream_camera() const { return stream_camera_; }
+  // With uplink.max_point_error > 0: what the bound saved.
+  const std::optional<NearLosslessSummary>& near_lossless() const { return near_lossless_; }
   // What the frames hold.
   sources::FrameKind kind() const { return kind_; }
   // A video store (FrameSourceOptions::video): frame i is picture i of the sequence, to be sent
@@ -123,10 +157,15 @@ class FrameStore {
   const std::string& description() const { return description_; }
 
  private:
+  struct Savings;  // what the bound saved, added up while preparing
+
   FrameStore() = default;
   void AddTail(const v1::Frame& frame, std::size_t level = 0);
-  absl::Status PrepareVideo(const FrameSourceOptions& options, sources::FrameSource& source,
-                            std::uint64_t frames);
+  absl::Status PrepareVideo(const FrameSourceOptions& options,
+                            const sources::UplinkOptions& uplink, sources::FrameSource& source,
+                            std::uint64_t frames, Savings* savings);
+  // The half-resolution levels' own camera: the stream camera's, halved (needs stream_camera_).
+  v1::CameraModel HalfCamera() const;
 
   // Per level, owned strings, so their slices can be static (no refcount, no copy) for the
   // store's life.
@@ -137,7 +176,13 @@ class FrameStore {
   std::string description_;
   std::string encoding_;
   std::optional<VideoSequence> video_;
+  std::optional<v1::CameraModel> stream_camera_;
+  std::optional<NearLosslessSummary> near_lossless_;
 };
+
+// e.g. "near-lossless <= 0.03 m a point: disparity 9.1 KB a frame (lossless 14.0 KB), 61% of
+// its values changed".
+std::string Describe(const NearLosslessSummary& summary);
 
 // The wire bytes of a StreamRequest holding `config` (the first message of every stream).
 grpc::ByteBuffer SerializeConfig(const v1::StreamConfig& config);

@@ -68,6 +68,9 @@ class UplinkFrame {
 
   // A float disparity or depth went as TIFF (kPng and kJpeg), worth a note to the user once.
   bool float_disparity_as_tiff() const { return float_as_tiff_; }
+  // What the near-lossless quantizer did to the disparity or depth of the last Encode whose
+  // options had max_point_error > 0 (cloudcast-load's report of what the bound changed).
+  const QuantizeStats& quantize_stats() const { return quantizer_.stats(); }
 
  private:
   FrameKind kind_ = FrameKind::kDisparity;
