@@ -632,9 +632,30 @@ TEST_F(Ros2BridgeTest, JpegUnderRateControlSendsFewerBytesThanZstdWithTheSameGeo
     }
     return out;
   };
+  // A stream may start at the half-resolution floor (at 20 frames/s the controller's 4 Mbit/s
+  // start is under the lossless 32FC1 disparity map) and comes back to full resolution as the
+  // target grows on loopback (about a second): the run goes on until full-resolution clouds
+  // come after any half-resolution ones.
+  const auto full_at_the_end = [&] {
+    std::size_t full_run = 0;  // full-resolution clouds since the last half-resolution one
+    for (std::size_t c = 1; c < r.clouds.size(); ++c) {
+      const auto& got = r.clouds[c]->as<sensor_msgs_msg_dds__PointCloud2_>();
+      const int k = got.header.stamp.sec - 1000;
+      const bool full =
+          k >= 0 && got.width == expected[static_cast<std::size_t>(k) % expected.size()].width;
+      full_run = full ? full_run + 1 : 0;
+    }
+    return full_run >= 3;
+  };
   ASSERT_TRUE(PublishUntil(
-      w, &r, [&] { return r.clouds.size() >= samples_.size() + 4 && reports().size() >= 2; }, 40))
-      << r.clouds.size() << " clouds, " << reports().size() << " reports with uplink bytes\n"
+      w, &r,
+      [&] {
+        return r.clouds.size() >= samples_.size() + 4 && reports().size() >= 2 &&
+               full_at_the_end();
+      },
+      40))
+      << r.clouds.size() << " clouds, the last ones at full resolution: " << full_at_the_end()
+      << ", " << reports().size() << " reports with uplink bytes\n"
       << bridge_->Log();
   double most = 0;
   for (const auto& v : reports()) {
