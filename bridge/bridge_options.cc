@@ -58,8 +58,11 @@ const std::vector<ParamDoc>& Docs() {
       {"encoding", "string", "raw",
        "how the images travel: raw; zstd (lossless: row deltas + zstd, about a third of the "
        "bytes); h264 (the colour image, or both views of a stereo pair, as H.264 video, about "
-       "a tenth; a disparity or depth map stays lossless, zstd; the h264/ parameters). For a "
-       "thin uplink (Wi-Fi, LTE), with rate_control"},
+       "a tenth; a disparity or depth map stays lossless, zstd; the h264/ parameters); jpeg "
+       "(the colour image, or both views of a pair, as JPEG; a disparity or depth map stays "
+       "lossless, zstd; with rate_control the quality follows the controller's target frame by "
+       "frame, then disparity and depth frames go at half resolution; the jpeg/ parameters). "
+       "For a thin uplink (Wi-Fi, LTE), h264 or jpeg with rate_control"},
       {"compress", "bool", "false",
        "deprecated: true is encoding zstd (kept for existing launch files; refused beside "
        "another encoding)"},
@@ -87,6 +90,22 @@ const std::vector<ParamDoc>& Docs() {
       {"h264/separate_stereo", "bool", "false",
        "encoding h264, input stereo: a bitstream per view instead of the right view "
        "interleaved after the left (the measured best)"},
+      {"jpeg/quality", "int", "90",
+       "encoding jpeg: the JPEG quality, 1..100. Without rate_control every frame's (fixed, at "
+       "full resolution); with it, the quality a stream starts at"},
+      {"jpeg/min_quality", "int", "10",
+       "encoding jpeg with rate_control: the lowest quality the controller's target may bring, "
+       "1..100; below it, the half-resolution floor"},
+      {"jpeg/max_quality", "int", "95",
+       "encoding jpeg with rate_control: the highest quality a roomy target may bring, 1..100"},
+      {"jpeg/half_resolution", "bool", "true",
+       "encoding jpeg with rate_control, input disparity or depth: when even jpeg/min_quality "
+       "(or the lossless disparity or depth alone) is over the target's bytes per frame, send "
+       "frames at half width and height, each with its camera halved, until the target carries "
+       "a full-resolution frame again"},
+      {"jpeg/fps", "double", "30",
+       "encoding jpeg with rate_control: the camera's frame rate; the target over it is a "
+       "frame's budget in bytes, 1..1000"},
       {"passthrough/enabled", "bool", "(server's)", "keep only points with z in [min, max]"},
       {"passthrough/min", "double", "(server's)",
        "passthrough lower bound on z, in the camera's unit (metres for a baseline T in metres)"},
@@ -290,6 +309,65 @@ absl::Status ReadConnection(const ParamReader& p, BridgeOptions* o) {
   return absl::OkStatus();
 }
 
+// ~encoding jpeg: the ~jpeg/* settings of client::AdaptiveJpegCoder. Without rate_control the
+// coder has no target to follow and every frame goes at ~jpeg/quality, full resolution, so the
+// settings of the follower (min and max quality, the half-resolution floor, the frame rate that
+// makes a frame's budget) are refused there rather than ignored.
+absl::Status ReadJpeg(const ParamReader& p, BridgeOptions* o) {
+  if (!HasJpegEncoder()) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        p.Display("encoding"), " is 'jpeg' but this bridge was built without the JPEG coder "
+        "(cloudcast_client_opencv, OpenCV); use raw or zstd"));
+  }
+  JpegSettings& j = o->jpeg;
+  const std::pair<const char*, int*> qualities[] = {{"jpeg/quality", &j.quality},
+                                                    {"jpeg/min_quality", &j.min_quality},
+                                                    {"jpeg/max_quality", &j.max_quality}};
+  for (const auto& [name, out] : qualities) {
+    CLOUDCAST_ASSIGN_OR_RETURN(q, p.Int(name));
+    if (!q) continue;
+    if (std::string(name) != "jpeg/quality" && !o->rate_control) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          p.Display(name), " needs ", p.Display("rate_control"), " true (without it every frame "
+          "goes at ", p.Display("jpeg/quality"), ")"));
+    }
+    if (*q < 1 || *q > 100) return OutOfRange(p, name, *q, "in 1..100");
+    *out = *q;
+  }
+  CLOUDCAST_ASSIGN_OR_RETURN(half, p.Bool("jpeg/half_resolution"));
+  if (half) {
+    if (!o->rate_control) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          p.Display("jpeg/half_resolution"), " needs ", p.Display("rate_control"), " true"));
+    }
+    if (o->input == InputKind::kStereo) {
+      // A pair's calibration is the server's (its rectification): no half floor for pairs.
+      return absl::InvalidArgumentError(absl::StrCat(
+          p.Display("jpeg/half_resolution"), " is set but ", p.Display("input"),
+          " is 'stereo'; the half-resolution floor is for disparity and depth frames only"));
+    }
+    j.half_resolution = *half;
+  }
+  CLOUDCAST_ASSIGN_OR_RETURN(fps, p.Double("jpeg/fps"));
+  if (fps) {
+    if (!o->rate_control) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(p.Display("jpeg/fps"), " needs ", p.Display("rate_control"), " true"));
+    }
+    if (!(std::isfinite(*fps) && *fps >= 1 && *fps <= 1000)) {
+      return OutOfRange(p, "jpeg/fps", *fps, "in [1, 1000] frames a second");
+    }
+    j.fps = *fps;
+  }
+  if (o->rate_control && !(j.min_quality <= j.quality && j.quality <= j.max_quality)) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        p.Display("jpeg/min_quality"), " <= ", p.Display("jpeg/quality"), " <= ",
+        p.Display("jpeg/max_quality"), " must hold with ", p.Display("rate_control"),
+        "; they are ", j.min_quality, ", ", j.quality, ", ", j.max_quality));
+  }
+  return absl::OkStatus();
+}
+
 // ~encoding (and ~compress, its old name for zstd) and, with h264, the ~h264/* settings, by the
 // rules of the programs' --h264-* flags (video::H264Settings).
 absl::Status ReadUplink(const ParamReader& p, BridgeOptions* o) {
@@ -301,9 +379,11 @@ absl::Status ReadUplink(const ParamReader& p, BridgeOptions* o) {
       o->uplink = Uplink::kZstd;
     } else if (*encoding == "h264") {
       o->uplink = Uplink::kH264;
+    } else if (*encoding == "jpeg") {
+      o->uplink = Uplink::kJpeg;
     } else {
       return absl::InvalidArgumentError(absl::StrCat(p.Display("encoding"), " is '", *encoding,
-                                                     "'; must be raw, zstd or h264"));
+                                                     "'; must be raw, zstd, h264 or jpeg"));
     }
   }
   CLOUDCAST_ASSIGN_OR_RETURN(compress, p.Bool("compress"));
@@ -316,15 +396,20 @@ absl::Status ReadUplink(const ParamReader& p, BridgeOptions* o) {
     }
     o->uplink = Uplink::kZstd;
   }
-  if (o->uplink != Uplink::kH264) {
+  // Each encoding's own parameters are refused with another, so that none is silently ignored.
+  for (const auto& [uplink, prefix] : {std::pair{Uplink::kH264, std::string("h264/")},
+                                       std::pair{Uplink::kJpeg, std::string("jpeg/")}}) {
+    if (o->uplink == uplink) continue;
     for (const std::string& name : p.Names()) {
-      if (name.rfind("h264/", 0) != 0) continue;
+      if (name.rfind(prefix, 0) != 0) continue;
       return absl::InvalidArgumentError(absl::StrCat(
           p.Display(name), " is set but ", p.Display("encoding"), " is '",
-          std::string(Name(o->uplink)), "'; it applies to ", p.Display("encoding"), " h264 only"));
+          std::string(Name(o->uplink)), "'; it applies to ", p.Display("encoding"), " ",
+          std::string(Name(uplink)), " only"));
     }
-    return absl::OkStatus();
   }
+  if (o->uplink == Uplink::kJpeg) return ReadJpeg(p, o);
+  if (o->uplink != Uplink::kH264) return absl::OkStatus();
   if (!HasVideoEncoder()) {
     return absl::InvalidArgumentError(absl::StrCat(
         p.Display("encoding"), " is 'h264' but this bridge was built without the video encoder "
@@ -635,12 +720,22 @@ std::string_view Name(Uplink uplink) {
       return "zstd";
     case Uplink::kH264:
       return "h264";
+    case Uplink::kJpeg:
+      return "jpeg";
   }
   return "?";
 }
 
 bool HasVideoEncoder() {
 #ifdef CLOUDCAST_BRIDGE_VIDEO
+  return true;
+#else
+  return false;
+#endif
+}
+
+bool HasJpegEncoder() {
+#ifdef CLOUDCAST_BRIDGE_JPEG
   return true;
 #else
   return false;

@@ -22,14 +22,31 @@ enum class InputKind { kDisparity, kDepth, kStereo };
 std::string_view Name(InputKind kind);  // "disparity", "depth", "stereo"
 
 // How the images travel to the server (~encoding; the programs' --encoding): raw pixels, zstd
-// (lossless: row deltas + zstd, about a third of raw) or h264 (the colour image, or both views of
+// (lossless: row deltas + zstd, about a third of raw), h264 (the colour image, or both views of
 // a stereo pair, as H.264 pictures of one encoder per bitstream kept across frames; a disparity or
-// depth map stays lossless and goes zstd-compressed).
-enum class Uplink { kRaw, kZstd, kH264 };
-std::string_view Name(Uplink uplink);  // "raw", "zstd", "h264"
+// depth map stays lossless and goes zstd-compressed) or jpeg (the colour image, or both views of
+// a pair, as JPEG through client::AdaptiveJpegCoder: at ~jpeg/quality, or under ~rate_control at
+// the quality the controller's target carries, with a half-resolution floor; a disparity or depth
+// map stays lossless, zstd).
+enum class Uplink { kRaw, kZstd, kH264, kJpeg };
+std::string_view Name(Uplink uplink);  // "raw", "zstd", "h264", "jpeg"
 // Whether this build has the video encoder (cloudcast_video_frames: FFmpeg); without it (the
 // client-only arm64 build) ~encoding h264 is refused.
 bool HasVideoEncoder();
+// Whether this build has the JPEG coder (cloudcast_client_opencv: OpenCV); without it ~encoding
+// jpeg is refused.
+bool HasJpegEncoder();
+
+// ~encoding jpeg: client::AdaptiveJpegOptions as parameters (~jpeg/*). Without ~rate_control
+// every frame goes at `quality`, full resolution (the coder has no target to follow); with it,
+// `quality` is where a stream starts and the rest is the controller's.
+struct JpegSettings {
+  int quality = 90;         // ~jpeg/quality, 1..100 (cloudcast-client's --jpeg-quality)
+  int min_quality = 10;     // ~jpeg/min_quality, rate_control only
+  int max_quality = 95;     // ~jpeg/max_quality, rate_control only
+  bool half_resolution = true;  // ~jpeg/half_resolution, rate_control only, not for stereo
+  double fps = 30;          // ~jpeg/fps: the camera's rate (a frame's budget), rate_control only
+};
 
 // How the input topics are paired into frames (message_filters).
 struct SyncOptions {
@@ -63,6 +80,9 @@ struct BridgeOptions {
   // frames at ~h264/fps.
   video::H264Settings h264;
   double h264_fps = 30;
+  // ~encoding jpeg: the coder's settings (~jpeg/*), made into the stream's coder with the
+  // stream's camera (StreamOptionsFor in cloud_link.h).
+  JpegSettings jpeg;
   double diagnostics_period_s = 1.0;
 };
 

@@ -8,6 +8,9 @@
 #ifdef CLOUDCAST_BRIDGE_VIDEO
 #include "cloudcast/video/frame_encoder.h"
 #endif
+#ifdef CLOUDCAST_BRIDGE_JPEG
+#include "cloudcast/client/adaptive_jpeg_coder.h"
+#endif
 
 namespace cloudcast::ros_bridge {
 
@@ -29,7 +32,8 @@ bool SameCamera(const CameraModel& a, const CameraModel& b) {
          a.invalid_disparities == b.invalid_disparities && a.depth_scale == b.depth_scale;
 }
 
-absl::StatusOr<client::StreamOptions> StreamOptionsFor(const BridgeOptions& options) {
+absl::StatusOr<client::StreamOptions> StreamOptionsFor(const BridgeOptions& options,
+                                                       const CameraModel& camera) {
   client::StreamOptions so;
   so.resilient = options.resilient;
   so.reconnect_timeout = options.reconnect_timeout;
@@ -46,6 +50,25 @@ absl::StatusOr<client::StreamOptions> StreamOptionsFor(const BridgeOptions& opti
     return absl::InvalidArgumentError("encoding h264: this bridge was built without video");
 #endif
   }
+  if (options.uplink == Uplink::kJpeg) {
+#ifdef CLOUDCAST_BRIDGE_JPEG
+    // A new coder per stream (as cloudcast-client --rate-control --encoding jpeg makes it): with
+    // delivery latest a raw frame is encoded only once the stream can send it, at the quality the
+    // controller's target carries then. Without rate_control it never gets a target and keeps
+    // its start quality at full resolution.
+    client::AdaptiveJpegOptions jpeg;
+    jpeg.fps = options.jpeg.fps;
+    jpeg.start_quality = options.jpeg.quality;
+    jpeg.min_quality = options.jpeg.min_quality;
+    jpeg.max_quality = options.jpeg.max_quality;
+    jpeg.half_resolution_floor = options.jpeg.half_resolution;
+    jpeg.stream_camera = CameraProto(camera);
+    so.coder = std::make_shared<client::AdaptiveJpegCoder>(std::move(jpeg));
+#else
+    (void)camera;
+    return absl::InvalidArgumentError("encoding jpeg: this bridge was built without OpenCV");
+#endif
+  }
   return so;
 }
 
@@ -53,7 +76,8 @@ namespace {
 
 // The frame as ~encoding sends it. zstd: every raw image compressed (losslessly). h264: the
 // disparity or depth map compressed losslessly, the colour images left raw for the stream's
-// video coder.
+// video coder. jpeg: every image raw, for the stream's AdaptiveJpegCoder (it compresses the
+// disparity or depth itself, and halves the raw images at its floor).
 client::FrameInput ForUplink(const client::FrameInput& images, Uplink uplink) {
   switch (uplink) {
     case Uplink::kRaw:
@@ -62,6 +86,8 @@ client::FrameInput ForUplink(const client::FrameInput& images, Uplink uplink) {
       return client::CompressRaw(images);
     case Uplink::kH264:
       return client::CompressGeometry(images);
+    case Uplink::kJpeg:
+      return images;
   }
   return images;
 }
@@ -133,9 +159,12 @@ absl::Status CloudLink::EnsureStream(const CameraModel& camera) {
     return absl::UnavailableError("no stream to the server (retrying once a second)");
   }
   last_open_attempt_ = now;
-  absl::StatusOr<client::StreamOptions> made = StreamOptionsFor(options_);
+  absl::StatusOr<client::StreamOptions> made = StreamOptionsFor(options_, camera);
   if (!made.ok()) return made.status();
   client::StreamOptions so = *std::move(made);
+#ifdef CLOUDCAST_BRIDGE_JPEG
+  jpeg_ = std::dynamic_pointer_cast<client::AdaptiveJpegCoder>(so.coder);
+#endif
   so.on_result = [this](client::Result&& r) { OnResult(std::move(r)); };
   so.on_reconnect = [this](const client::Reconnect& r) {
     stats_->Reconnected();
@@ -180,10 +209,12 @@ void CloudLink::CloseStream(const absl::Status& why) {
   }
   stats_->StreamClosed();
   stream_.reset();
+  jpeg_.reset();
   camera_.reset();
 }
 
 void CloudLink::Send(const OutgoingFrame& frame) {
+  const bool camera_changed = stream_ != nullptr && camera_ && !SameCamera(*camera_, frame.camera);
   if (absl::Status s = EnsureStream(frame.camera); !s.ok()) {
     stats_->NotSent(s);
     LogThrottled(kNotSent, LogLevel::kWarn, absl::StrCat("frame not sent: ", s.message()));
@@ -196,6 +227,12 @@ void CloudLink::Send(const OutgoingFrame& frame) {
   // applies it to this frame alone, so a frame resent after a reconnect, or one queued while the
   // camera changed, is never reprojected with another frame's camera.
   meta.camera = CameraProto(frame.camera);
+#ifdef CLOUDCAST_BRIDGE_JPEG
+  // A half-resolution frame carries the coder's camera, halved: from this frame on, this one's.
+  if (camera_changed && jpeg_ != nullptr) jpeg_->SetCamera(*meta.sequence, *meta.camera);
+#else
+  (void)camera_changed;
+#endif
   {
     std::lock_guard<std::mutex> lock(sent_mu_);
     sent_[*meta.sequence] = {frame.header, frame.camera};  // before Send: the reply may come first
@@ -250,6 +287,9 @@ void CloudLink::OnResult(client::Result&& result) {
   }
   stats_->StreamDropped(result.frames_dropped + result.frames_replaced);
   stats_->Reply(result);
+#ifdef CLOUDCAST_BRIDGE_JPEG
+  if (jpeg_ != nullptr) stats_->JpegCoded(jpeg_->last_quality(), jpeg_->last_half());
+#endif
   if (!result.ok()) {
     LogThrottled(kFrameFailed, LogLevel::kWarn,
                  absl::StrCat("frame ", result.sequence, ": ", result.status.message()));

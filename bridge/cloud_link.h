@@ -26,6 +26,10 @@
 #include "input_source.h"
 #include "message_views.h"
 
+namespace cloudcast::client {
+class AdaptiveJpegCoder;  // cloudcast/client/adaptive_jpeg_coder.h (~encoding jpeg)
+}  // namespace cloudcast::client
+
 namespace cloudcast::ros_bridge {
 
 // What the bridge keeps of a frame it sent, for its reply.
@@ -78,6 +82,9 @@ class CloudLink {
   std::unique_ptr<client::Client> client_;
   std::unique_ptr<client::Stream> stream_;
   std::optional<CameraModel> camera_;  // the last frame's (the stream's config has the first's)
+  // ~encoding jpeg: the stream's coder, for /diagnostics (its last quality and resolution) and
+  // for a camera that changes mid-stream (the half-resolution frames' camera).
+  std::shared_ptr<client::AdaptiveJpegCoder> jpeg_;
   v1::DeliveryMode server_delivery_ = v1::DELIVERY_UNSPECIFIED;  // GetInfo's default
   std::chrono::steady_clock::time_point last_open_attempt_{};
   std::uint64_t next_sequence_ = 0;  // across streams, so that headers are never confused
@@ -86,11 +93,16 @@ class CloudLink {
   std::map<std::uint64_t, SentFrame> sent_;  // frames sent and not answered
 };
 
-// The stream's options as the link opens it: resilience, the rate controller (~rate_control)
-// and, with ~encoding h264, a new video::FrameEncoder as its coder (under ~rate_control the
-// controller sets the encoder's bitrate frame by frame, at most ~h264/mbps). on_result and
-// on_reconnect are the link's to set. INVALID_ARGUMENT for h264 in a build without video.
-absl::StatusOr<client::StreamOptions> StreamOptionsFor(const BridgeOptions& options);
+// The stream's options as the link opens it for frames of `camera` (the first frame's):
+// resilience, the rate controller (~rate_control) and its coder. With ~encoding h264, a new
+// video::FrameEncoder (under ~rate_control the controller sets the encoder's bitrate frame by
+// frame, at most ~h264/mbps). With ~encoding jpeg, a new client::AdaptiveJpegCoder of ~jpeg/*
+// with `camera` as its stream_camera (what a half-resolution frame's camera is halved from):
+// under ~rate_control its quality, then the half-resolution floor, follow the controller's
+// target; without, every frame goes at ~jpeg/quality. on_result and on_reconnect are the link's
+// to set. INVALID_ARGUMENT for an encoding this build lacks.
+absl::StatusOr<client::StreamOptions> StreamOptionsFor(const BridgeOptions& options,
+                                                       const CameraModel& camera);
 
 // The stream config a frame with `camera` is sent under: `base` (the parameters) plus the camera.
 client::StreamConfig ConfigFor(const client::StreamConfig& base, const CameraModel& camera);

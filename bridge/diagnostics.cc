@@ -81,6 +81,12 @@ void BridgeStats::Reply(const client::Result& r) {
   color_bits_ = r.reply.color_bits();
   if (r.reply.has_over_cap()) ++over_cap_;
   if (r.rate) rate_ = *r.rate;
+  if (r.resolution_divisor > 1) ++half_resolution_clouds_;
+}
+
+void BridgeStats::JpegCoded(int quality, bool half_resolution) {
+  std::lock_guard<std::mutex> lock(mu_);
+  jpeg_ = std::make_pair(quality, half_resolution);
 }
 
 void BridgeStats::StreamDropped(std::uint64_t frames_dropped) {
@@ -170,6 +176,13 @@ DiagnosticReport BridgeStats::Report(double now_s, const std::string& name,
     Add(&s, "delivered_kbps", Fixed(rate_->delivered_bps / 1000.0, 0));
     Add(&s, "rtt_ms", Fixed(rate_->rtt_ms));
     Add(&s, "queue_delay_ms", Fixed(rate_->queue_delay_ms));
+  }
+  if (jpeg_) {
+    // What the JPEG coder made last (under rate_control, what the target carried), and how
+    // many clouds came from frames at half resolution (a point per 2x2 block of the camera's).
+    Add(&s, "jpeg_quality", std::to_string(jpeg_->first));
+    Add(&s, "half_resolution", jpeg_->second ? "true" : "false");
+    Add(&s, "half_resolution_clouds", std::to_string(half_resolution_clouds_));
   }
   if (!last_error_.empty()) Add(&s, "last_error", last_error_);
 

@@ -39,6 +39,9 @@ class BridgeStats {
   void StreamDropped(std::uint64_t frames_dropped);
   void Reconnected();
   void StreamClosed();  // the stream ended: its drops are added to those of the streams before
+  // ~encoding jpeg: the coder's last frame after a reply (its JPEG quality, and whether it went
+  // at half resolution).
+  void JpegCoded(int quality, bool half_resolution);
   void Published();     // a PointCloud2 went out
   void PublishError(const absl::Status& s);  // a reply's extra (the disparity map) was unusable
 
@@ -78,6 +81,10 @@ class BridgeStats {
   // rate_control: the rate controller's estimate after the last reply (its target is what the
   // video encoder follows).
   std::optional<client::RateEstimate> rate_;
+  // ~encoding jpeg: the coder's last quality and resolution (unset before a reply), and the
+  // clouds made from half-resolution frames (Result::resolution_divisor), in total.
+  std::optional<std::pair<int, bool>> jpeg_;
+  std::uint64_t half_resolution_clouds_ = 0;
   double period_start_s_ = -1;  // none yet
 };
 

@@ -33,7 +33,13 @@ const View* RawGeometry(const Input& input, const convert::Compression& fallback
 AdaptiveJpegCoder::AdaptiveJpegCoder(AdaptiveJpegOptions options)
     : options_(std::move(options)),
       full_(options_.start_quality, options_.min_quality, options_.max_quality),
-      half_(options_.min_quality, options_.min_quality, options_.max_quality) {}
+      half_(options_.min_quality, options_.min_quality, options_.max_quality),
+      camera_(options_.stream_camera) {}
+
+void AdaptiveJpegCoder::SetCamera(std::uint64_t from_sequence, v1::CameraModel camera) {
+  std::lock_guard<std::mutex> lock(cameras_mu_);
+  cameras_.emplace_back(from_sequence, std::move(camera));
+}
 
 void AdaptiveJpegCoder::SetStreamBitrate(std::int64_t stream_bps,
                                          std::size_t /*other_bytes_per_frame*/) {
@@ -45,7 +51,7 @@ FrameCoder::Resolution AdaptiveJpegCoder::last_resolution() const {
   Resolution r;
   if (last_half_.load()) {
     r.divisor = 2;
-    r.camera = HalfResolutionCamera(options_.stream_camera, disparity_frame_);
+    r.camera = HalfResolutionCamera(camera_, disparity_frame_);
   }
   return r;
 }
@@ -117,7 +123,17 @@ absl::Status AdaptiveJpegCoder::EncodeColour(const ColorInput& colour, const cha
 }
 
 absl::StatusOr<FrameInput> AdaptiveJpegCoder::Encode(const FrameInput& raw,
-                                                     std::uint64_t /*sequence*/) {
+                                                     std::uint64_t sequence) {
+  {
+    // The newest camera due by this frame (SetCamera's, in the order given).
+    std::lock_guard<std::mutex> lock(cameras_mu_);
+    for (const auto& [from, camera] : cameras_) {
+      if (from <= sequence) camera_ = camera;
+    }
+    cameras_.erase(std::remove_if(cameras_.begin(), cameras_.end(),
+                                  [&](const auto& c) { return c.first <= sequence; }),
+                   cameras_.end());
+  }
   const bool halvable = !std::holds_alternative<StereoFrame>(raw);
   disparity_frame_ = std::holds_alternative<DisparityFrame>(raw);
   Follow(halvable);

@@ -582,6 +582,37 @@ TEST(BridgeStats, ReportsTheUplinkTheCapsBitsAndTheRateTarget) {
   EXPECT_EQ(v.count("target_kbps"), 0u);
 }
 
+// ~encoding jpeg: the coder's last quality and resolution after a reply, and the clouds made from
+// half-resolution frames; nothing of it without the coder.
+TEST(BridgeStats, ReportsTheJpegCodersQualityAndHalfResolution) {
+  BridgeStats stats;
+  client::Result full;
+  stats.Reply(full);
+  stats.JpegCoded(55, false);
+  client::Result half;
+  half.resolution_divisor = 2;
+  stats.Reply(half);
+  stats.JpegCoded(10, true);
+  std::map<std::string, std::string> v;
+  for (const auto& [key, value] : stats.Report(1.0, "bridge", "x").values) v[key] = value;
+  EXPECT_EQ(v["jpeg_quality"], "10");
+  EXPECT_EQ(v["half_resolution"], "true");
+  EXPECT_EQ(v["half_resolution_clouds"], "1");
+  stats.Reply(full);
+  stats.JpegCoded(40, false);
+  v.clear();
+  for (const auto& [key, value] : stats.Report(2.0, "bridge", "x").values) v[key] = value;
+  EXPECT_EQ(v["jpeg_quality"], "40");
+  EXPECT_EQ(v["half_resolution"], "false");
+  EXPECT_EQ(v["half_resolution_clouds"], "1");  // a total, as clouds
+  BridgeStats plain;
+  plain.Reply(full);
+  v.clear();
+  for (const auto& [key, value] : plain.Report(1.0, "bridge", "x").values) v[key] = value;
+  EXPECT_EQ(v.count("jpeg_quality"), 0u);
+  EXPECT_EQ(v.count("half_resolution"), 0u);
+}
+
 // A refusal of the bridge's first call (a wrong token) is reported before any frame comes.
 TEST(BridgeStats, ALinkDownFromTheStartIsAnErrorNamingWhy) {
   BridgeStats stats;
@@ -668,7 +699,7 @@ std::string ErrorOf(const MapParams& p) {
 TEST(BridgeParams, UplinkAndCapErrorsNameTheRos1Parameter) {
   MapParams p;
   p.Set("encoding", std::string("jpeg2000"));
-  EXPECT_EQ(ErrorOf(p), "~encoding is 'jpeg2000'; must be raw, zstd or h264");
+  EXPECT_EQ(ErrorOf(p), "~encoding is 'jpeg2000'; must be raw, zstd, h264 or jpeg");
   p.values.clear();
   p.Set("h264/preset", std::string("ultrafast"));
   EXPECT_EQ(ErrorOf(p),
@@ -715,7 +746,7 @@ TEST(BridgeParams, H264AndTheCapReachTheStream) {
   EXPECT_TRUE(o->h264.grey);
   EXPECT_EQ(o->config.draco().max_cloud_bytes(), 30000u);
   EXPECT_EQ(o->config.delivery(), v1::DELIVERY_LATEST);
-  auto so = StreamOptionsFor(*o);
+  auto so = StreamOptionsFor(*o, CameraModel{});
   ASSERT_TRUE(so.ok()) << so.status();
   EXPECT_NE(so->coder, nullptr);
   EXPECT_TRUE(so->rate_control.has_value());
@@ -732,7 +763,7 @@ TEST(BridgeParams, RateSettingsReachTheStreamsController) {
   p.Set("rate/max_mbps", 12.0);
   auto o = ReadBridgeOptions(p, "cloudcast-ros-bridge");
   ASSERT_TRUE(o.ok()) << o.status();
-  auto so = StreamOptionsFor(*o);
+  auto so = StreamOptionsFor(*o, CameraModel{});
   ASSERT_TRUE(so.ok()) << so.status();
   ASSERT_TRUE(so->rate_control.has_value());
   EXPECT_EQ(so->rate_control->target_delay, std::chrono::milliseconds(15));
@@ -753,6 +784,67 @@ TEST(BridgeParams, RateSettingsReachTheStreamsController) {
   EXPECT_NE(ErrorOf(p).find("~rate/min_mbps <= ~rate/start_mbps <= ~rate/max_mbps must hold"),
             std::string::npos)
       << ErrorOf(p);
+}
+
+// ~encoding jpeg with ROS 1's spelling: the ~jpeg/* settings, each error naming the parameter, and
+// the stream's coder (client::AdaptiveJpegCoder, cloudcast-client --encoding jpeg's).
+TEST(BridgeParams, JpegSettingsAreNamedAndReachTheStreamsCoder) {
+  MapParams p;
+  p.Set("jpeg/quality", 80);
+  EXPECT_EQ(ErrorOf(p),
+            "~jpeg/quality is set but ~encoding is 'raw'; it applies to ~encoding jpeg only");
+  if (!HasJpegEncoder()) {
+    p.values.clear();
+    p.Set("encoding", std::string("jpeg"));
+    EXPECT_NE(ErrorOf(p).find("built without the JPEG coder"), std::string::npos);
+    GTEST_SKIP() << "this build has no JPEG coder (OpenCV)";
+  }
+  p.values.clear();
+  p.Set("encoding", std::string("jpeg"));
+  p.Set("jpeg/min_quality", 20);
+  EXPECT_EQ(ErrorOf(p),
+            "~jpeg/min_quality needs ~rate_control true (without it every frame goes at "
+            "~jpeg/quality)");
+  p.values.clear();
+  p.Set("encoding", std::string("jpeg"));
+  p.Set("jpeg/half_resolution", false);
+  EXPECT_EQ(ErrorOf(p), "~jpeg/half_resolution needs ~rate_control true");
+  p.Set("rate_control", true);
+  p.Set("jpeg/quality", 150);
+  EXPECT_EQ(ErrorOf(p), "~jpeg/quality is 150; must be in 1..100");
+  p.Set("jpeg/quality", 50);
+  p.Set("jpeg/max_quality", 40);
+  EXPECT_EQ(ErrorOf(p),
+            "~jpeg/min_quality <= ~jpeg/quality <= ~jpeg/max_quality must hold with "
+            "~rate_control; they are 10, 50, 40");
+  p.values.erase("jpeg/max_quality");
+  p.Set("jpeg/fps", 2000.0);
+  EXPECT_EQ(ErrorOf(p), "~jpeg/fps is 2000; must be in [1, 1000] frames a second");
+  p.Set("jpeg/fps", 15);  // an integer, as a launch file may write it
+
+  auto o = ReadBridgeOptions(p, "cloudcast-ros-bridge");
+  ASSERT_TRUE(o.ok()) << o.status();
+  EXPECT_EQ(o->uplink, Uplink::kJpeg);
+  EXPECT_EQ(o->jpeg.quality, 50);
+  EXPECT_FALSE(o->jpeg.half_resolution);
+  EXPECT_EQ(o->jpeg.fps, 15.0);
+  EXPECT_EQ(o->config.delivery(), v1::DELIVERY_LATEST);
+  auto so = StreamOptionsFor(*o, CameraModel{});
+  ASSERT_TRUE(so.ok()) << so.status();
+  EXPECT_NE(so->coder, nullptr);
+  EXPECT_TRUE(so->rate_control.has_value());
+
+  // Without ~rate_control: fixed quality (~jpeg/quality), the coder without a controller.
+  p.values.clear();
+  p.Set("encoding", std::string("jpeg"));
+  p.Set("jpeg/quality", 75);
+  o = ReadBridgeOptions(p, "cloudcast-ros-bridge");
+  ASSERT_TRUE(o.ok()) << o.status();
+  EXPECT_EQ(o->jpeg.quality, 75);
+  so = StreamOptionsFor(*o, CameraModel{});
+  ASSERT_TRUE(so.ok()) << so.status();
+  EXPECT_NE(so->coder, nullptr);
+  EXPECT_FALSE(so->rate_control.has_value());
 }
 
 }  // namespace

@@ -12,12 +12,16 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <functional>
+#include <limits>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -265,8 +269,10 @@ class Ros2BridgeTest : public ::testing::Test {
   // What the ROS 1 bridge publishes for frame i: its link to the server (CloudLink, the same
   // options) and its PointCloud2 conversion.
   // `extra`: the bridge's parameters beyond server, passthrough and voxel grid ("name:=value").
-  std::vector<sensor_msgs::PointCloud2> Ros1Clouds(Input input = Input::kDisparity,
-                                                  const std::vector<std::string>& extra = {}) {
+  // `report`: the link's /diagnostics values after the frames (uplink_bytes_per_cloud, ...).
+  std::vector<sensor_msgs::PointCloud2> Ros1Clouds(
+      Input input = Input::kDisparity, const std::vector<std::string>& extra = {},
+      std::map<std::string, std::string>* report_values = nullptr) {
     // The bridge's parameters (kUnfiltered): the whole cloud, not what the server's default
     // passthrough and voxel grid leave.
     std::map<std::string, ParamValue> params;
@@ -326,6 +332,7 @@ class Ros2BridgeTest : public ::testing::Test {
     const auto report = stats.Report(0, "reference", "");
     for (const auto& [key, value] : report.values) {
       if (key == "last_error") ADD_FAILURE() << "the reference link: " << value;
+      if (report_values != nullptr) (*report_values)[key] = value;
     }
     std::vector<sensor_msgs::PointCloud2> out;
     for (std::size_t i = 0; i < samples_.size(); ++i) out.push_back(clouds[i]);
@@ -572,6 +579,180 @@ TEST_F(Ros2BridgeTest, H264UplinkGivesTheRawGeometryAndNearlyItsColours) {
   std::fprintf(stderr, "H.264 uplink: %zu clouds, mean colour error %.2f levels per channel\n",
                r.clouds.size() - 1, mean);
   EXPECT_NE(bridge_->Log().find("encoding h264"), std::string::npos) << bridge_->Log();
+}
+
+// ---- encoding jpeg (client::AdaptiveJpegCoder as the stream's coder, bridge/cloud_link.cc).
+
+// x, y and z of each of `n` points `step` bytes apart (a PointCloud2's data: xyz first).
+std::vector<std::array<float, 3>> Points(const std::uint8_t* data, std::size_t n,
+                                         std::size_t step) {
+  std::vector<std::array<float, 3>> out(n);
+  for (std::size_t i = 0; i < n; ++i) std::memcpy(out[i].data(), data + step * i, 12);
+  return out;
+}
+
+// The smallest and largest x, y and z of `points`.
+std::array<std::array<float, 3>, 2> Bounds(const std::vector<std::array<float, 3>>& points) {
+  std::array<std::array<float, 3>, 2> b;
+  for (int a = 0; a < 3; ++a) {
+    b[0][a] = std::numeric_limits<float>::infinity();
+    b[1][a] = -std::numeric_limits<float>::infinity();
+  }
+  for (const auto& p : points) {
+    for (int a = 0; a < 3; ++a) {
+      if (!std::isfinite(p[a])) continue;
+      b[0][a] = std::min(b[0][a], p[a]);
+      b[1][a] = std::max(b[1][a], p[a]);
+    }
+  }
+  return b;
+}
+
+// The bridge with encoding jpeg under rate_control on loopback: its clouds come back, each
+// frame costs the uplink fewer bytes than the zstd encoding's (the server's count, on
+// /diagnostics), the disparity stays lossless (a full-resolution cloud's points are the raw
+// uplink's exactly) and /diagnostics carries the coder's quality and resolution.
+TEST_F(Ros2BridgeTest, JpegUnderRateControlSendsFewerBytesThanZstdWithTheSameGeometry) {
+  std::map<std::string, std::string> zstd_report;
+  const std::vector<sensor_msgs::PointCloud2> expected =
+      Ros1Clouds(Input::kDisparity, {"encoding:=zstd"}, &zstd_report);
+  ASSERT_EQ(expected.size(), samples_.size());
+  const double zstd_bytes = std::stod(zstd_report.at("uplink_bytes_per_cloud"));
+  ASSERT_GT(zstd_bytes, 100000) << "a lossless 640x480 disparity + colour frame";
+  StartBridge({"passthrough.enabled:=false", "voxel.enabled:=false", "input_qos:=default",
+               "encoding:=jpeg", "rate_control:=true", "jpeg.fps:=20.0"});
+  const CameraWriters w = Camera();
+  Received r;
+  // The reports of periods with clouds: their uplink bytes and the coder's state.
+  const auto reports = [&] {
+    std::vector<std::map<std::string, std::string>> out;
+    for (const auto& v : r.values) {
+      auto it = v.find("uplink_bytes_per_cloud");
+      if (it != v.end() && std::stod(it->second) > 0 && v.count("jpeg_quality")) out.push_back(v);
+    }
+    return out;
+  };
+  // A stream may start at the half-resolution floor (at 20 frames/s the controller's 4 Mbit/s
+  // start is under the lossless 32FC1 disparity map) and comes back to full resolution as the
+  // target grows on loopback (about a second): the run goes on until full-resolution clouds
+  // come after any half-resolution ones.
+  const auto full_at_the_end = [&] {
+    std::size_t full_run = 0;  // full-resolution clouds since the last half-resolution one
+    for (std::size_t c = 1; c < r.clouds.size(); ++c) {
+      const auto& got = r.clouds[c]->as<sensor_msgs_msg_dds__PointCloud2_>();
+      const int k = got.header.stamp.sec - 1000;
+      const bool full =
+          k >= 0 && got.width == expected[static_cast<std::size_t>(k) % expected.size()].width;
+      full_run = full ? full_run + 1 : 0;
+    }
+    return full_run >= 3;
+  };
+  ASSERT_TRUE(PublishUntil(
+      w, &r,
+      [&] {
+        return r.clouds.size() >= samples_.size() + 4 && reports().size() >= 2 &&
+               full_at_the_end();
+      },
+      40))
+      << r.clouds.size() << " clouds, the last ones at full resolution: " << full_at_the_end()
+      << ", " << reports().size() << " reports with uplink bytes\n"
+      << bridge_->Log();
+  double most = 0;
+  for (const auto& v : reports()) {
+    const double bytes = std::stod(v.at("uplink_bytes_per_cloud"));
+    most = std::max(most, bytes);
+    EXPECT_LT(bytes, zstd_bytes) << "uplink bytes per cloud, jpeg against zstd";
+    const int quality = std::stoi(v.at("jpeg_quality"));
+    EXPECT_GE(quality, 10);
+    EXPECT_LE(quality, 95);
+    EXPECT_TRUE(v.at("half_resolution") == "true" || v.at("half_resolution") == "false");
+    EXPECT_GT(std::stod(v.at("target_kbps")), 0);
+  }
+  std::size_t full = 0, half = 0;
+  for (std::size_t c = 1; c < r.clouds.size(); ++c) {
+    const auto& got = r.clouds[c]->as<sensor_msgs_msg_dds__PointCloud2_>();
+    const int k = got.header.stamp.sec - 1000;
+    ASSERT_GE(k, 0);
+    const sensor_msgs::PointCloud2& want = expected[static_cast<std::size_t>(k) % expected.size()];
+    ASSERT_GT(want.width, 100000u);
+    ASSERT_EQ(got.point_step, 16u);
+    if (got.width != want.width) {
+      // A half-resolution frame (the coder's floor): a quarter of the pixels.
+      EXPECT_LT(got.width, want.width / 3) << "cloud of stamp " << got.header.stamp.sec;
+      ++half;
+      continue;
+    }
+    ++full;
+    std::size_t xyz_off = 0;
+    for (std::size_t i = 0; i < got.width; ++i) {
+      if (std::memcmp(got.data._buffer + 16 * i, want.data.data() + 16 * i, 12) != 0) ++xyz_off;
+    }
+    EXPECT_EQ(xyz_off, 0u) << "cloud of stamp " << got.header.stamp.sec;
+  }
+  EXPECT_GT(full, 0u) << "on loopback the target carries full-resolution frames";
+  std::fprintf(stderr,
+               "JPEG uplink under rate control (loopback): %zu clouds (%zu at full resolution, "
+               "%zu at half), at most %.0f bytes a cloud against zstd's %.0f\n",
+               full + half, full, half, most, zstd_bytes);
+  EXPECT_NE(bridge_->Log().find("encoding jpeg"), std::string::npos) << bridge_->Log();
+}
+
+// The coder's floor: a target too low for even the lossless disparity map at full resolution
+// (rate.max_mbps 0.5 at 20 frames/s: about 3 KB a frame) sends frames at half resolution, each
+// with its camera halved, so the cloud covers the same scene with a quarter of the points;
+// /diagnostics says so.
+TEST_F(Ros2BridgeTest, JpegFloorSendsHalfResolutionFramesWithTheirCameraHalved) {
+  const std::vector<sensor_msgs::PointCloud2> expected = Ros1Clouds();
+  ASSERT_EQ(expected.size(), samples_.size());
+  StartBridge({"passthrough.enabled:=false", "voxel.enabled:=false", "input_qos:=default",
+               "encoding:=jpeg", "rate_control:=true", "jpeg.fps:=20.0", "rate.start_mbps:=0.3",
+               "rate.max_mbps:=0.5"});
+  const CameraWriters w = Camera();
+  Received r;
+  const auto half_reported = [&] {
+    for (const auto& v : r.values) {
+      auto it = v.find("half_resolution_clouds");
+      if (it != v.end() && std::stoul(it->second) > 0 && v.at("half_resolution") == "true") {
+        return true;
+      }
+    }
+    return false;
+  };
+  const auto half_clouds = [&] {
+    std::size_t n = 0;
+    for (std::size_t c = 1; c < r.clouds.size(); ++c) {
+      const auto& got = r.clouds[c]->as<sensor_msgs_msg_dds__PointCloud2_>();
+      if (got.width < expected[0].width / 3) ++n;
+    }
+    return n;
+  };
+  ASSERT_TRUE(PublishUntil(w, &r, [&] { return half_reported() && half_clouds() >= 3; }, 40))
+      << r.clouds.size() << " clouds, " << half_clouds() << " at half resolution; reported: "
+      << half_reported() << "\n"
+      << bridge_->Log();
+  std::size_t checked = 0;
+  for (std::size_t c = 1; c < r.clouds.size(); ++c) {
+    const auto& got = r.clouds[c]->as<sensor_msgs_msg_dds__PointCloud2_>();
+    const int k = got.header.stamp.sec - 1000;
+    ASSERT_GE(k, 0);
+    const sensor_msgs::PointCloud2& want = expected[static_cast<std::size_t>(k) % expected.size()];
+    if (got.width >= want.width / 3) continue;
+    ASSERT_GT(got.width, want.width / 5) << "a quarter of the pixels, about";
+    // The same scene: with the full camera on the half image, x and y would span half the
+    // width and height, and off-centre; with the camera halved the bounds agree.
+    const auto a = Bounds(Points(got.data._buffer, std::size_t{got.width} * got.height,
+                                 got.point_step));
+    const auto b = Bounds(Points(want.data.data(), std::size_t{want.width} * want.height,
+                                 want.point_step));
+    for (int axis = 0; axis < 3; ++axis) {
+      const float extent = b[1][axis] - b[0][axis];
+      ASSERT_GT(extent, 0.0f);
+      EXPECT_NEAR(a[0][axis], b[0][axis], 0.05f * extent) << "axis " << axis << ", stamp " << k;
+      EXPECT_NEAR(a[1][axis], b[1][axis], 0.05f * extent) << "axis " << axis << ", stamp " << k;
+    }
+    ++checked;
+  }
+  EXPECT_GE(checked, 3u);
 }
 
 // draco.max_reply_kb and draco.min_color_bits reach the server through the bridges' link: each

@@ -4,8 +4,10 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cstdint>
 #include <set>
 #include <string>
+#include <variant>
 #include <vector>
 
 #include "bridge_options.h"
@@ -16,6 +18,9 @@
 #include "sample_views.h"
 #ifdef CLOUDCAST_BRIDGE_VIDEO
 #include "cloudcast/video/frame_encoder.h"
+#endif
+#ifdef CLOUDCAST_BRIDGE_JPEG
+#include "cloudcast/client/adaptive_jpeg_coder.h"
 #endif
 
 namespace cloudcast::ros2_bridge {
@@ -271,7 +276,7 @@ TEST(BridgeUplink, EncodingTakesRawZstdAndH264AndNamesABadOne) {
   EXPECT_EQ(Read({"encoding:=zstd"})->uplink, ros_bridge::Uplink::kZstd);
   EXPECT_EQ(Read({"encoding:=raw"})->uplink, ros_bridge::Uplink::kRaw);
   EXPECT_EQ(Read({"encoding:=zstd", "compress:=true"})->uplink, ros_bridge::Uplink::kZstd);
-  EXPECT_EQ(ErrorOf({"encoding:=vp9"}), "encoding is 'vp9'; must be raw, zstd or h264");
+  EXPECT_EQ(ErrorOf({"encoding:=vp9"}), "encoding is 'vp9'; must be raw, zstd, h264 or jpeg");
   EXPECT_EQ(ErrorOf({"encoding:=h264", "compress:=true"}),
             "compress is true (the old name of encoding zstd) but encoding is 'h264'; drop "
             "compress");
@@ -340,19 +345,19 @@ TEST(BridgeUplink, H264SettingsReachTheStreamsEncoder) {
   EXPECT_FALSE(e.interleave_stereo);
   EXPECT_FALSE(e.grey);
   // The stream the link opens: the encoder as its coder, and the rate controller driving it.
-  auto so = ros_bridge::StreamOptionsFor(*o);
+  auto so = ros_bridge::StreamOptionsFor(*o, CameraModel{});
   ASSERT_TRUE(so.ok()) << so.status();
   ASSERT_NE(so->coder, nullptr);
   EXPECT_NE(dynamic_cast<video::FrameEncoder*>(so->coder.get()), nullptr);
   EXPECT_TRUE(so->rate_control.has_value());
   EXPECT_EQ(o->config.delivery(), v1::DELIVERY_LATEST);
   // Each stream its own encoder (a new stream starts at an IDR).
-  EXPECT_NE(ros_bridge::StreamOptionsFor(*o)->coder, so->coder);
+  EXPECT_NE(ros_bridge::StreamOptionsFor(*o, CameraModel{})->coder, so->coder);
 #endif
   // Without h264 there is no coder.
   auto raw = Read({"encoding:=zstd"});
   ASSERT_TRUE(raw.ok());
-  auto plain = ros_bridge::StreamOptionsFor(*raw);
+  auto plain = ros_bridge::StreamOptionsFor(*raw, CameraModel{});
   ASSERT_TRUE(plain.ok());
   EXPECT_EQ(plain->coder, nullptr);
   EXPECT_FALSE(plain->rate_control.has_value());
@@ -401,10 +406,183 @@ TEST(BridgeUplink, ParamDocsListTheUplinkAndCapParameters) {
   for (const char* name :
        {"encoding", "compress", "h264/preset", "h264/crf", "h264/mbps", "h264/fps",
         "h264/keyframe_interval", "h264/threads", "h264/colour_444", "h264/grey",
-        "h264/separate_stereo", "draco/max_reply_kb", "draco/min_color_bits"}) {
+        "h264/separate_stereo", "draco/max_reply_kb", "draco/min_color_bits", "jpeg/quality",
+        "jpeg/min_quality", "jpeg/max_quality", "jpeg/half_resolution", "jpeg/fps"}) {
     EXPECT_EQ(names.count(name), 1u) << name;
   }
 }
+
+// ---- encoding jpeg: client::AdaptiveJpegCoder as the stream's coder (jpeg.*), shared with the
+// ROS 1 bridge (bridge/bridge_options.cc, bridge/cloud_link.cc).
+
+TEST(BridgeJpeg, SettingsAreCheckedNamingTheParameter) {
+  if (!ros_bridge::HasJpegEncoder()) {
+    EXPECT_NE(ErrorOf({"encoding:=jpeg"}).find("built without the JPEG coder"), std::string::npos);
+    GTEST_SKIP() << "this build has no JPEG coder (OpenCV)";
+  }
+  const std::vector<std::pair<std::vector<std::string>, std::string>> bad = {
+      // A jpeg setting with another encoding would be silently ignored.
+      {{"jpeg.quality:=80"},
+       "jpeg.quality is set but encoding is 'raw'; it applies to encoding jpeg only"},
+      {{"encoding:=h264", "jpeg.fps:=15.0"},
+       "jpeg.fps is set but encoding is 'h264'; it applies to encoding jpeg only"},
+      {{"encoding:=jpeg", "h264.crf:=20.0"},
+       "h264.crf is set but encoding is 'jpeg'; it applies to encoding h264 only"},
+      // The follower's settings without rate_control: every frame goes at jpeg.quality.
+      {{"encoding:=jpeg", "jpeg.min_quality:=20"},
+       "jpeg.min_quality needs rate_control true (without it every frame goes at jpeg.quality)"},
+      {{"encoding:=jpeg", "jpeg.max_quality:=90"},
+       "jpeg.max_quality needs rate_control true (without it every frame goes at jpeg.quality)"},
+      {{"encoding:=jpeg", "jpeg.half_resolution:=false"},
+       "jpeg.half_resolution needs rate_control true"},
+      {{"encoding:=jpeg", "jpeg.fps:=15.0"}, "jpeg.fps needs rate_control true"},
+      // Ranges and types.
+      {{"encoding:=jpeg", "jpeg.quality:=0"}, "jpeg.quality is 0; must be in 1..100"},
+      {{"encoding:=jpeg", "jpeg.quality:=101"}, "jpeg.quality is 101; must be in 1..100"},
+      {{"encoding:=jpeg", "jpeg.quality:=high"}, "jpeg.quality is 'high'; must be an integer"},
+      {{"encoding:=jpeg", "rate_control:=true", "jpeg.min_quality:=-3"},
+       "jpeg.min_quality is -3; must be in 1..100"},
+      {{"encoding:=jpeg", "rate_control:=true", "jpeg.fps:=0.5"},
+       "jpeg.fps is 0.5; must be in [1, 1000] frames a second"},
+      {{"encoding:=jpeg", "rate_control:=true", "jpeg.min_quality:=50", "jpeg.quality:=40"},
+       "jpeg.min_quality <= jpeg.quality <= jpeg.max_quality must hold with rate_control; they "
+       "are 50, 40, 95"},
+      {{"encoding:=jpeg", "rate_control:=true", "jpeg.max_quality:=80"},
+       "jpeg.min_quality <= jpeg.quality <= jpeg.max_quality must hold with rate_control; they "
+       "are 10, 90, 80"},
+      // A pair's calibration is the server's: no half-resolution floor for pairs.
+      {{"encoding:=jpeg", "rate_control:=true", "input:=stereo", "jpeg.half_resolution:=true"},
+       "jpeg.half_resolution is set but input is 'stereo'; the half-resolution floor is for "
+       "disparity and depth frames only"},
+  };
+  for (const auto& [params, message] : bad) {
+    EXPECT_EQ(ErrorOf(params), message) << params.back();
+  }
+}
+
+TEST(BridgeJpeg, SettingsAndTheCameraReachTheStreamsCoder) {
+  if (!ros_bridge::HasJpegEncoder()) GTEST_SKIP() << "this build has no JPEG coder (OpenCV)";
+  auto o = Read({"encoding:=jpeg", "rate_control:=true", "jpeg.quality:=70",
+                 "jpeg.min_quality:=25", "jpeg.max_quality:=85", "jpeg.half_resolution:=false",
+                 "jpeg.fps:=15"});  // an integer, as YAML writes it
+  ASSERT_TRUE(o.ok()) << o.status();
+  EXPECT_EQ(o->uplink, ros_bridge::Uplink::kJpeg);
+  EXPECT_EQ(o->jpeg.quality, 70);
+  EXPECT_EQ(o->jpeg.min_quality, 25);
+  EXPECT_EQ(o->jpeg.max_quality, 85);
+  EXPECT_FALSE(o->jpeg.half_resolution);
+  EXPECT_EQ(o->jpeg.fps, 15.0);
+  EXPECT_EQ(o->config.delivery(), v1::DELIVERY_LATEST);
+  // Unset: AdaptiveJpegOptions' defaults (cloudcast-client's).
+  auto d = Read({"encoding:=jpeg", "rate_control:=true"});
+  ASSERT_TRUE(d.ok()) << d.status();
+#ifdef CLOUDCAST_BRIDGE_JPEG
+  const client::AdaptiveJpegOptions lib;
+  EXPECT_EQ(d->jpeg.quality, lib.start_quality);
+  EXPECT_EQ(d->jpeg.min_quality, lib.min_quality);
+  EXPECT_EQ(d->jpeg.max_quality, lib.max_quality);
+  EXPECT_EQ(d->jpeg.half_resolution, lib.half_resolution_floor);
+  EXPECT_EQ(d->jpeg.fps, lib.fps);
+
+  CameraModel camera;
+  camera.fx = 600;
+  camera.fy = 590;
+  camera.cx = 300;
+  camera.cy = 200;
+  camera.baseline = 0.1;
+  auto so = ros_bridge::StreamOptionsFor(*o, camera);
+  ASSERT_TRUE(so.ok()) << so.status();
+  ASSERT_TRUE(so->rate_control.has_value());
+  auto* coder = dynamic_cast<client::AdaptiveJpegCoder*>(so->coder.get());
+  ASSERT_NE(coder, nullptr);
+  // Each stream its own coder.
+  EXPECT_NE(ros_bridge::StreamOptionsFor(*o, camera)->coder, so->coder);
+
+  // The coder at work on a 4x2 disparity + colour frame: without a target it keeps the start
+  // quality (jpeg.quality), the colour as a JPEG, the disparity lossless.
+  std::vector<float> disparity(8, 20.0f);
+  std::vector<std::uint8_t> colour(4 * 2 * 3, 128);
+  DisparityView dv;
+  dv.data = disparity.data();
+  dv.width = 4;
+  dv.height = 2;
+  dv.stride_bytes = 4 * sizeof(float);
+  dv.size_bytes = disparity.size() * sizeof(float);
+  dv.encoding = DisparityEncoding::kF32;
+  ColorView cv;
+  cv.data = colour.data();
+  cv.width = 4;
+  cv.height = 2;
+  cv.stride_bytes = 4 * 3;
+  cv.size_bytes = colour.size();
+  cv.encoding = ColorEncoding::kBGR8;
+  auto coded = coder->Encode(client::DisparityFrame{dv, cv}, 0);
+  ASSERT_TRUE(coded.ok()) << coded.status();
+  EXPECT_EQ(coder->last_quality(), 70);
+  EXPECT_FALSE(coder->last_half());
+  const auto* frame = std::get_if<client::DisparityFrame>(&*coded);
+  ASSERT_NE(frame, nullptr);
+  EXPECT_TRUE(std::holds_alternative<client::EncodedImage>(frame->colour));
+  EXPECT_EQ(coder->last_resolution().divisor, 1);
+#endif
+
+  // Without rate_control: jpeg.quality alone, a coder without a controller (fixed quality).
+  auto fixed = Read({"encoding:=jpeg", "jpeg.quality:=60"});
+  ASSERT_TRUE(fixed.ok()) << fixed.status();
+  EXPECT_EQ(fixed->jpeg.quality, 60);
+  auto fso = ros_bridge::StreamOptionsFor(*fixed, CameraModel{});
+  ASSERT_TRUE(fso.ok()) << fso.status();
+  EXPECT_NE(fso->coder, nullptr);
+  EXPECT_FALSE(fso->rate_control.has_value());
+}
+
+#ifdef CLOUDCAST_BRIDGE_JPEG
+// A camera that changes mid-stream (a new CameraInfo): the link hands it to the coder from that
+// frame on (AdaptiveJpegCoder::SetCamera), and a half-resolution frame carries it halved.
+TEST(BridgeJpeg, AHalfResolutionFrameCarriesItsOwnCameraHalved) {
+  auto o = Read({"encoding:=jpeg", "rate_control:=true", "jpeg.quality:=10"});
+  ASSERT_TRUE(o.ok()) << o.status();
+  CameraModel first;
+  first.fx = first.fy = 600;
+  auto so = ros_bridge::StreamOptionsFor(*o, first);
+  ASSERT_TRUE(so.ok()) << so.status();
+  auto* coder = dynamic_cast<client::AdaptiveJpegCoder*>(so->coder.get());
+  ASSERT_NE(coder, nullptr);
+  CameraModel second = first;
+  second.fx = second.fy = 1200;
+  coder->SetCamera(3, ros_bridge::CameraProto(second));
+
+  std::vector<float> disparity(8, 20.0f);
+  std::vector<std::uint8_t> colour(4 * 2 * 3, 128);
+  DisparityView dv;
+  dv.data = disparity.data();
+  dv.size_bytes = disparity.size() * sizeof(float);
+  dv.width = 4;
+  dv.height = 2;
+  dv.stride_bytes = 4 * sizeof(float);
+  dv.encoding = DisparityEncoding::kF32;
+  ColorView cv;
+  cv.data = colour.data();
+  cv.size_bytes = colour.size();
+  cv.width = 4;
+  cv.height = 2;
+  cv.stride_bytes = 4 * 3;
+  cv.encoding = ColorEncoding::kBGR8;
+  std::vector<double> fx;  // each frame's camera fx (0: the caller's, full resolution)
+  for (std::uint64_t seq = 0; seq < 5; ++seq) {
+    // A target far under any frame: at the lowest quality, the floor.
+    coder->SetStreamBitrate(1000, 0);
+    ASSERT_TRUE(coder->Encode(client::DisparityFrame{dv, cv}, seq).ok());
+    const client::FrameCoder::Resolution r = coder->last_resolution();
+    fx.push_back(r.camera ? r.camera->fx() : 0.0);
+    if (r.camera) {
+      EXPECT_EQ(r.divisor, 2);
+    }
+  }
+  // Frame 0 has no target yet; then half resolution, the first camera's fx halved until frame 3.
+  EXPECT_EQ(fx, (std::vector<double>{0, 300, 300, 600, 600}));
+}
+#endif
 
 }  // namespace
 }  // namespace cloudcast::ros2_bridge

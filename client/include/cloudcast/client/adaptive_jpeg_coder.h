@@ -17,7 +17,10 @@
 #include <atomic>
 #include <cstddef>
 #include <cstdint>
+#include <mutex>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "absl/status/statusor.h"
 #include "cloudcast/client/frame_coder.h"
@@ -55,6 +58,11 @@ class AdaptiveJpegCoder : public FrameCoder {
   void SetStreamBitrate(std::int64_t stream_bps, std::size_t other_bytes_per_frame) override;
   Resolution last_resolution() const override;
 
+  // A camera that changes mid-stream (a ROS CameraInfo may; any thread): frames numbered
+  // `from_sequence` and later are halved from `camera` instead of stream_camera, so that a
+  // half-resolution frame always carries its own camera halved. Never called: stream_camera.
+  void SetCamera(std::uint64_t from_sequence, v1::CameraModel camera);
+
   // The last frame made (any thread): its JPEG quality, whether it was at half resolution, and
   // its image bytes (all of them: the coder makes every image).
   int last_quality() const { return last_quality_.load(); }
@@ -76,6 +84,9 @@ class AdaptiveJpegCoder : public FrameCoder {
   bool made_ = false;                 // a frame was made (last_* are set)
   std::size_t full_floor_bytes_ = 0;  // the last full-resolution frame at min_quality
   HalfResolutionFrame halved_;
+  v1::CameraModel camera_;  // the camera of the frame being made (stream_camera until SetCamera)
+  std::mutex cameras_mu_;
+  std::vector<std::pair<std::uint64_t, v1::CameraModel>> cameras_;  // SetCamera's, not yet due
   std::string colour_jpeg_, right_jpeg_;
   v1::CompressedDisparity disparity_;
   v1::CompressedDepth depth_;
