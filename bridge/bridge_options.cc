@@ -48,13 +48,18 @@ const std::vector<ParamDoc>& Docs() {
       {"rate/target_delay_ms", "double",
        absl::StrCat(client::RateControlOptions{}.target_delay.count()),
        "with rate_control: the queueing delay (ms) over which the link counts as full, 1..1000; "
-       "lower keeps latency lower at the cost of bytes per frame (docs/links.md measures 15)"},
+       "lower keeps latency lower at the cost of bytes per frame (docs/links.md measures 15 and "
+       "30)"},
       {"rate/start_mbps", "double", absl::StrCat(client::RateControlOptions{}.start_bps / 1e6),
        "with rate_control: the bitrate a stream starts at, Mbit/s, 0.01..10000"},
       {"rate/min_mbps", "double", absl::StrCat(client::RateControlOptions{}.min_bps / 1e6),
        "with rate_control: the least the controller sets, Mbit/s, 0.01..10000"},
       {"rate/max_mbps", "double", absl::StrCat(client::RateControlOptions{}.max_bps / 1e6),
        "with rate_control: the most the controller sets, Mbit/s, 0.01..10000"},
+      {"rate/reply_cap", "bool", "true",
+       "with rate_control: the replies follow the downlink too, each reply's cloud capped at "
+       "the bitrate the downlink carries (never above draco/max_reply_kb); false: replies take "
+       "what they take"},
       {"encoding", "string", "raw",
        "how the images travel: raw; zstd (lossless: row deltas + zstd, about a third of the "
        "bytes); h264 (the colour image, or both views of a stereo pair, as H.264 video, about "
@@ -239,6 +244,14 @@ absl::Status ReadRateSettings(const ParamReader& p, BridgeOptions* o) {
   o->rate.start_bps = values[1] * 1e6;
   o->rate.min_bps = values[2] * 1e6;
   o->rate.max_bps = values[3] * 1e6;
+  CLOUDCAST_ASSIGN_OR_RETURN(reply_cap, p.Bool("rate/reply_cap"));
+  if (reply_cap) {
+    if (!o->rate_control) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(p.Display("rate/reply_cap"), " needs ", p.Display("rate_control"), " true"));
+    }
+    o->rate.cap_replies = *reply_cap;
+  }
   return absl::OkStatus();
 }
 
@@ -315,9 +328,10 @@ absl::Status ReadConnection(const ParamReader& p, BridgeOptions* o) {
 // makes a frame's budget) are refused there rather than ignored.
 absl::Status ReadJpeg(const ParamReader& p, BridgeOptions* o) {
   if (!HasJpegEncoder()) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        p.Display("encoding"), " is 'jpeg' but this bridge was built without the JPEG coder "
-        "(cloudcast_client_opencv, OpenCV); use raw or zstd"));
+    return absl::InvalidArgumentError(
+        absl::StrCat(p.Display("encoding"),
+                     " is 'jpeg' but this bridge was built without the JPEG coder "
+                     "(cloudcast_client_opencv, OpenCV); use raw or zstd"));
   }
   JpegSettings& j = o->jpeg;
   const std::pair<const char*, int*> qualities[] = {{"jpeg/quality", &j.quality},
@@ -327,9 +341,11 @@ absl::Status ReadJpeg(const ParamReader& p, BridgeOptions* o) {
     CLOUDCAST_ASSIGN_OR_RETURN(q, p.Int(name));
     if (!q) continue;
     if (std::string(name) != "jpeg/quality" && !o->rate_control) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          p.Display(name), " needs ", p.Display("rate_control"), " true (without it every frame "
-          "goes at ", p.Display("jpeg/quality"), ")"));
+      return absl::InvalidArgumentError(absl::StrCat(p.Display(name), " needs ",
+                                                     p.Display("rate_control"),
+                                                     " true (without it every frame "
+                                                     "goes at ",
+                                                     p.Display("jpeg/quality"), ")"));
     }
     if (*q < 1 || *q > 100) return OutOfRange(p, name, *q, "in 1..100");
     *out = *q;
@@ -337,8 +353,8 @@ absl::Status ReadJpeg(const ParamReader& p, BridgeOptions* o) {
   CLOUDCAST_ASSIGN_OR_RETURN(half, p.Bool("jpeg/half_resolution"));
   if (half) {
     if (!o->rate_control) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          p.Display("jpeg/half_resolution"), " needs ", p.Display("rate_control"), " true"));
+      return absl::InvalidArgumentError(absl::StrCat(p.Display("jpeg/half_resolution"), " needs ",
+                                                     p.Display("rate_control"), " true"));
     }
     if (o->input == InputKind::kStereo) {
       // A pair's calibration is the server's (its rectification): no half floor for pairs.
@@ -361,8 +377,8 @@ absl::Status ReadJpeg(const ParamReader& p, BridgeOptions* o) {
   }
   if (o->rate_control && !(j.min_quality <= j.quality && j.quality <= j.max_quality)) {
     return absl::InvalidArgumentError(absl::StrCat(
-        p.Display("jpeg/min_quality"), " <= ", p.Display("jpeg/quality"), " <= ",
-        p.Display("jpeg/max_quality"), " must hold with ", p.Display("rate_control"),
+        p.Display("jpeg/min_quality"), " <= ", p.Display("jpeg/quality"),
+        " <= ", p.Display("jpeg/max_quality"), " must hold with ", p.Display("rate_control"),
         "; they are ", j.min_quality, ", ", j.quality, ", ", j.max_quality));
   }
   return absl::OkStatus();
@@ -402,10 +418,10 @@ absl::Status ReadUplink(const ParamReader& p, BridgeOptions* o) {
     if (o->uplink == uplink) continue;
     for (const std::string& name : p.Names()) {
       if (name.rfind(prefix, 0) != 0) continue;
-      return absl::InvalidArgumentError(absl::StrCat(
-          p.Display(name), " is set but ", p.Display("encoding"), " is '",
-          std::string(Name(o->uplink)), "'; it applies to ", p.Display("encoding"), " ",
-          std::string(Name(uplink)), " only"));
+      return absl::InvalidArgumentError(
+          absl::StrCat(p.Display(name), " is set but ", p.Display("encoding"), " is '",
+                       std::string(Name(o->uplink)), "'; it applies to ", p.Display("encoding"),
+                       " ", std::string(Name(uplink)), " only"));
     }
   }
   if (o->uplink == Uplink::kJpeg) return ReadJpeg(p, o);

@@ -211,9 +211,11 @@ TEST(RateControllerTest, ALossyLinkWithVaryingRepliesIsNotTakenForAFullOne) {
   const std::vector<Sample> late = Between(s, 5000, 20000, Any);
   // The camera's 30 frames a second come back (at least 28 a second over the last 15 s).
   EXPECT_GE(late.size(), 28u * 15);
+  // It uses the link: the target averages over half its rate (5.8 Mbit/s at the default 15 ms
+  // target delay, 6.9 at 30: the lower target delay trades bytes for latency).
   double sum = 0;
   for (const Sample& x : late) sum += x.target_bps;
-  EXPECT_GT(sum / static_cast<double>(late.size()), 6.5e6);
+  EXPECT_GT(sum / static_cast<double>(late.size()), 5e6);
   for (const Sample& x : late) EXPECT_LT(x.latency_ms, 250) << x.t_ms;
 }
 
@@ -221,12 +223,14 @@ TEST(RateControllerTest, AStepDownIsFollowedWithinASecondAndAStepUpIsTaken) {
   // 10 Mbit/s, 3 from 5 s, 10 again from 10 s.
   LinkSimulation sim([](double t) { return t >= 5000 && t < 10000 ? 3e6 : 10e6; }, 20);
   const std::vector<Sample> s = sim.Run(20);
-  // Within 500 ms of the step down the target is under the new rate. Later it probes a little
-  // above it now and then (that is how it would learn that the rate is back), so over the step
-  // its median stays within the probe's margin (max_over_delivered, 25 %) of the link's rate.
+  // Within 500 ms of the step down the target is within a tenth of the new rate (it cuts to a
+  // fraction of what was delivered over the last 400 ms, which straddles the step). Later it
+  // probes a little above it now and then (that is how it would learn that the rate is back), so
+  // over the step its median stays within the probe's margin (max_over_delivered, 25 %) of the
+  // link's rate.
   const std::vector<Sample> after_step = Between(s, 5500, 10000, Any);
   ASSERT_FALSE(after_step.empty());
-  EXPECT_LT(after_step.front().target_bps, 3e6) << after_step.front().t_ms;
+  EXPECT_LT(after_step.front().target_bps, 3.3e6) << after_step.front().t_ms;
   std::vector<double> targets;
   for (const Sample& x : Between(s, 5500, 10000, Any)) targets.push_back(x.target_bps);
   std::nth_element(targets.begin(), targets.begin() + targets.size() / 2, targets.end());
@@ -267,9 +271,10 @@ TEST(RateControllerTest, TheRepliesFollowADownlinkTheyWouldFill) {
 }
 
 // Replies of 2 to 16 KB (mean 9 KB, 2.2 Mbit/s at 30 fps) over a 3 Mbit/s downlink that carries
-// them: a 16 KB reply takes 43 ms to cross, a 2 KB one 5 ms. The smoothed delay and the two
-// replies in a row that overuse needs keep the large ones from being taken for a full downlink:
-// no cap below what the replies need, and the camera's frames all come back.
+// them: a 16 KB reply takes 43 ms to cross, a 2 KB one 5 ms. The replies' own target delay
+// (reply_target_delay, 30 ms: at the frames' 15 ms the cap fell to 1.5 Mbit/s here), the smoothed
+// delay and the two replies in a row that overuse needs keep the large ones from being taken for
+// a full downlink: no cap under what the replies need, and the camera's frames all come back.
 TEST(RateControllerTest, RepliesOfVaryingSizeOnADownlinkThatCarriesThemAreNotAQueue) {
   Realism realism;
   realism.downlink_bps = 3e6;

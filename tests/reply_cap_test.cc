@@ -13,9 +13,9 @@ using std::chrono::milliseconds;
 
 Clock::time_point At(int ms) { return Clock::time_point(milliseconds(ms)); }
 
-// 30 frames a second written from `from_ms` for `count` frames.
+// The camera's 30 frames a second from `from_ms`, `count` frames.
 void Write30(ReplyCapFollower& f, int from_ms, int count) {
-  for (int i = 0; i < count; ++i) f.OnFrameWritten(At(from_ms + i * 1000 / 30));
+  for (int i = 0; i < count; ++i) f.OnFrame(At(from_ms + i * 1000 / 30));
 }
 
 RateEstimate WithReplyTarget(double bps) {
@@ -76,7 +76,7 @@ TEST(ReplyCapTest, NeverAboveTheStreamsOwnCapAndNeverBelowTheFloor) {
   EXPECT_EQ(f.cap(), 900u);
 }
 
-TEST(ReplyCapTest, WithoutFramesWrittenThereIsNoRateAndNoCap) {
+TEST(ReplyCapTest, WithoutFramesThereIsNoRateAndNoCap) {
   ReplyCapFollower f;
   EXPECT_EQ(f.frame_rate(), 0);
   EXPECT_FALSE(f.Update(WithReplyTarget(3e6), At(0)));

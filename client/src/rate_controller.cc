@@ -98,6 +98,7 @@ void DirectionRate::Control(Clock::time_point now, double rtt_ms) {
 // overuse the downlink shows.
 static RateControlOptions DownlinkOptions(RateControlOptions options) {
   options.max_bps = std::numeric_limits<double>::max();
+  options.target_delay = options.reply_target_delay;
   return options;
 }
 

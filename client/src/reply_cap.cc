@@ -12,9 +12,9 @@ constexpr double kGrowAbove = 1.2;  // a cap this much larger waits for kGrowEve
 
 }  // namespace
 
-void ReplyCapFollower::OnFrameWritten(Clock::time_point now) {
-  writes_.push_back(now);
-  while (now - writes_.front() > kRateWindow) writes_.pop_front();
+void ReplyCapFollower::OnFrame(Clock::time_point now) {
+  frames_.push_back(now);
+  while (now - frames_.front() > kRateWindow) frames_.pop_front();
 }
 
 std::uint64_t ReplyCapFollower::cap() const {
@@ -23,9 +23,9 @@ std::uint64_t ReplyCapFollower::cap() const {
 }
 
 double ReplyCapFollower::frame_rate() const {
-  if (writes_.size() < 2) return 0;
-  const double span = std::chrono::duration<double>(writes_.back() - writes_.front()).count();
-  return span > 0 ? static_cast<double>(writes_.size() - 1) / span : 0;
+  if (frames_.size() < 2) return 0;
+  const double span = std::chrono::duration<double>(frames_.back() - frames_.front()).count();
+  return span > 0 ? static_cast<double>(frames_.size() - 1) / span : 0;
 }
 
 std::optional<std::uint64_t> ReplyCapFollower::Update(const RateEstimate& estimate,

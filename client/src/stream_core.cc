@@ -160,7 +160,6 @@ void StreamCore::CollectLocked(Clock::time_point now) {
     if (rate_ && e.write->is_frame && !e.write->resend) {
       rate_->OnFrameWritten(e.write->payload.Length());
       written_bytes_.emplace_back(e.write->sequence, e.write->payload.Length());
-      if (reply_cap_) reply_cap_->OnFrameWritten(now);
     }
     Event ev{Event::kWrite};
     ev.write = WriteEvent{e.write->is_frame, e.write->resend, e.write->sequence,
@@ -349,6 +348,7 @@ CoreMachine::Submitted StreamCore::Submit(std::uint64_t sequence, grpc::ByteBuff
   {
     std::lock_guard<std::mutex> lock(mu_);
     const Clock::time_point now = Clock::now();
+    if (reply_cap_) reply_cap_->OnFrame(now);
     result = machine_.Submit(sequence, std::move(bytes), std::move(record), now);
     CollectLocked(now);
   }
@@ -367,6 +367,7 @@ CoreMachine::Submitted StreamCore::SubmitWaiting(std::uint64_t sequence, grpc::B
       // The machine copies nothing until it accepts the frame.
       result = machine_.Submit(sequence, bytes, record, now);
       if (result != CoreMachine::Submitted::kFull) {
+        if (reply_cap_) reply_cap_->OnFrame(now);
         CollectLocked(now);
         break;
       }
@@ -389,6 +390,7 @@ void StreamCore::Unmade(FrameFate fate, std::uint64_t sequence, FrameRecord reco
   {
     std::lock_guard<std::mutex> lock(mu_);
     const Clock::time_point now = Clock::now();
+    if (reply_cap_) reply_cap_->OnFrame(now);  // the camera made it: its reply was due too
     machine_.Unmade(fate, sequence, std::move(record), now, std::move(why));
     CollectLocked(now);
   }

@@ -770,7 +770,15 @@ TEST(BridgeParams, RateSettingsReachTheStreamsController) {
   EXPECT_EQ(so->rate_control->start_bps, 2e6);
   EXPECT_EQ(so->rate_control->max_bps, 12e6);
   EXPECT_EQ(so->rate_control->min_bps, client::RateControlOptions{}.min_bps);
+  EXPECT_TRUE(so->rate_control->cap_replies);  // the replies follow the downlink by default
+  p.Set("rate/reply_cap", false);
+  auto off = ReadBridgeOptions(p, "cloudcast-ros-bridge");
+  ASSERT_TRUE(off.ok()) << off.status();
+  EXPECT_FALSE(StreamOptionsFor(*off, CameraModel{})->rate_control->cap_replies);
 
+  p.values.clear();
+  p.Set("rate/reply_cap", false);
+  EXPECT_EQ(ErrorOf(p), "~rate/reply_cap needs ~rate_control true");
   p.values.clear();
   p.Set("rate/target_delay_ms", 15.0);
   EXPECT_EQ(ErrorOf(p), "~rate/target_delay_ms needs ~rate_control true");

@@ -43,8 +43,17 @@ struct RateControlOptions {
   double start_bps = 4e6;
   double min_bps = 0.25e6;
   double max_bps = 100e6;
-  // Queueing delay over which the link counts as overused.
-  std::chrono::milliseconds target_delay{30};
+  // Queueing delay over which the link counts as overused. 15 ms: on the emulated 10 Mbit/s,
+  // 40 ms link it keeps latency at p50 69 ms and p99 125 to 141 ms where 30 ms gave 84 to 96 and
+  // 169 to 193, at the same camera rate; its cost is bytes per frame, and a slower climb back
+  // after a link recovers (docs/links.md, round four).
+  std::chrono::milliseconds target_delay{15};
+  // The same for the downlink (the replies). Longer: a reply's size is the scene's, not ours (a
+  // near scene's cloud is eight times a far one's, 5 to 43 ms apart on a 3 Mbit/s downlink), so
+  // its one-way delay varies more than a frame's, whose size the encoder sets; at 15 ms the
+  // replies' bitrate fell to two thirds of what they needed on a downlink that carried them
+  // (rate_controller_test).
+  std::chrono::milliseconds reply_target_delay{30};
   // The bitrate grows while the queueing delay is under this fraction of target_delay, and holds
   // between it and target_delay. Frames in flight queue behind one another by design (a 23 KB
   // frame is 18 ms at 10 Mbit/s, its reply takes the downlink's time): a narrow band would hold
