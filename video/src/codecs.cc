@@ -28,6 +28,7 @@ namespace {
 std::string S(std::string_view v) { return std::string(v); }
 
 using internal::LibavError;
+using internal::PackedFormat;
 
 const std::vector<CodecInfo>& Table() {
   static const std::vector<CodecInfo> table = {
@@ -205,20 +206,6 @@ absl::Status CheckOptions(const CodecInfo& info, const EncoderOptions& o) {
         absl::StrCat("options.kind is colour444, which ", info.encoder, " does not code"));
   }
   return absl::OkStatus();
-}
-
-AVPixelFormat PackedFormat(ColorEncoding e) {
-  switch (e) {
-    case ColorEncoding::kBGR8:
-      return AV_PIX_FMT_BGR24;
-    case ColorEncoding::kRGB8:
-      return AV_PIX_FMT_RGB24;
-    case ColorEncoding::kRGBA8:
-      return AV_PIX_FMT_RGBA;
-    case ColorEncoding::kMono8:
-      return AV_PIX_FMT_GRAY8;
-  }
-  return AV_PIX_FMT_NONE;
 }
 
 // H.264: the uplink's own encoder and the server's decoder, as they are.

@@ -24,6 +24,7 @@ std::string S(std::string_view v) { return std::string(v); }
 }  // namespace
 
 using internal::LibavError;
+using internal::PackedFormat;
 
 std::string_view Name(PictureKind kind) {
   switch (kind) {
@@ -103,20 +104,6 @@ absl::Status CheckOptions(const EncoderOptions& o) {
   if (absl::Status s = check::InRange("options.refs", o.refs, 0, 16); !s.ok()) return s;
   if (o.preset.empty()) return absl::InvalidArgumentError("options.preset is empty");
   return absl::OkStatus();
-}
-
-AVPixelFormat PackedFormat(ColorEncoding e) {
-  switch (e) {
-    case ColorEncoding::kBGR8:
-      return AV_PIX_FMT_BGR24;
-    case ColorEncoding::kRGB8:
-      return AV_PIX_FMT_RGB24;
-    case ColorEncoding::kRGBA8:
-      return AV_PIX_FMT_RGBA;
-    case ColorEncoding::kMono8:
-      return AV_PIX_FMT_GRAY8;
-  }
-  return AV_PIX_FMT_NONE;
 }
 
 // Whether an Annex B access unit holds an IDR slice (nal_unit_type 5): a look at the byte after

@@ -54,6 +54,20 @@ void ClearLibavMessage() {
   t_warning.clear();
 }
 
+AVPixelFormat PackedFormat(ColorEncoding e) {
+  switch (e) {
+    case ColorEncoding::kBGR8:
+      return AV_PIX_FMT_BGR24;
+    case ColorEncoding::kRGB8:
+      return AV_PIX_FMT_RGB24;
+    case ColorEncoding::kRGBA8:
+      return AV_PIX_FMT_RGBA;
+    case ColorEncoding::kMono8:
+      return AV_PIX_FMT_GRAY8;
+  }
+  return AV_PIX_FMT_NONE;
+}
+
 std::string LibavError(int code) {
   char buf[AV_ERROR_MAX_STRING_SIZE] = {0};
   av_strerror(code, buf, sizeof(buf));

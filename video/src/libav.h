@@ -1,8 +1,14 @@
-// What encoder.cc and decoder.cc share of FFmpeg: its error text, and its log routed into the
-// error of the call that caused it instead of stderr.
+// What encoder.cc, decoder.cc and codecs.cc share of FFmpeg: its error text, its log routed into
+// the error of the call that caused it instead of stderr, and our packed pixels' formats.
 #pragma once
 
 #include <string>
+
+#include "cloudcast/core/image.h"
+
+extern "C" {
+#include <libavutil/pixfmt.h>
+}
 
 namespace cloudcast::video::internal {
 
@@ -17,5 +23,7 @@ std::string TakeLibavWarning();
 void ClearLibavMessage();
 // av_strerror's text for an AVERROR code.
 std::string LibavError(int code);
+// The libav pixel format of a packed image of ours (AV_PIX_FMT_NONE for none).
+AVPixelFormat PackedFormat(ColorEncoding e);
 
 }  // namespace cloudcast::video::internal
