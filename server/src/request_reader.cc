@@ -59,23 +59,56 @@ enum class Role {
   kClears,   // a oneof sibling of the path: setting it clears what the path set
 };
 
-Role RoleOf(Level level, std::uint64_t number, int oneof_sibling) {
-  switch (level) {
-    case Level::kRequest:
-      if (number == v1::StreamRequest::kFrameFieldNumber) return Role::kDescend;
-      return static_cast<int>(number) == oneof_sibling ? Role::kClears : Role::kOther;
-    case Level::kFrame:
-      return PlaneOf(number) != Plane::kNone ? Role::kDescend : Role::kOther;
-    case Level::kImage:
-      if (number == v1::DisparityImage::kRawFieldNumber) return Role::kDescend;
-      return number == v1::DisparityImage::kEncodedFieldNumber ||
-                     number == v1::DisparityImage::kCompressedFieldNumber
-                 ? Role::kClears
-                 : Role::kOther;
-    case Level::kRaw:
-      return number == v1::RawDisparity::kPixelsFieldNumber ? Role::kPixels : Role::kOther;
+// The numbers of the fields that share `field`'s oneof, `field` excepted (none when it is in no
+// oneof).
+std::vector<std::uint64_t> OneofSiblings(const google::protobuf::FieldDescriptor* field) {
+  std::vector<std::uint64_t> out;
+  const google::protobuf::OneofDescriptor* oneof = field->containing_oneof();
+  for (int i = 0; oneof != nullptr && i < oneof->field_count(); ++i) {
+    if (oneof->field(i) != field)
+      out.push_back(static_cast<std::uint64_t>(oneof->field(i)->number()));
   }
-  return Role::kOther;
+  return out;
+}
+
+bool Contains(const std::vector<std::uint64_t>& numbers, std::uint64_t number) {
+  return std::find(numbers.begin(), numbers.end(), number) != numbers.end();
+}
+
+// Which fields replace the path's, read from the descriptors once: the proto's oneofs, not a
+// list kept beside them (a hand-kept list missed ColorImage.video when contract revision 3 added
+// it, and the walk kept pixels that protobuf's parse clears).
+struct PathOneofs {
+  std::vector<std::uint64_t> stream_request;  // StreamRequest.frame's siblings (config)
+  std::vector<std::uint64_t> process_request;
+  // Per plane (indexed by Plane): the siblings of its image's raw, and the planes its frame field
+  // shares a oneof with (Frame.geometry: disparity, depth and right).
+  std::vector<std::uint64_t> raw[5];
+  std::vector<Plane> geometry[5];
+
+  PathOneofs() {
+    const auto frame_field = [](const google::protobuf::Descriptor* d) {
+      return d->FindFieldByNumber(v1::StreamRequest::kFrameFieldNumber);
+    };
+    stream_request = OneofSiblings(frame_field(v1::StreamRequest::descriptor()));
+    process_request = OneofSiblings(frame_field(v1::ProcessRequest::descriptor()));
+    const google::protobuf::Descriptor* frame = v1::Frame::descriptor();
+    for (const int number : {v1::Frame::kDisparityFieldNumber, v1::Frame::kDepthFieldNumber,
+                             v1::Frame::kColorFieldNumber, v1::Frame::kRightFieldNumber}) {
+      const google::protobuf::FieldDescriptor* field = frame->FindFieldByNumber(number);
+      const auto plane = static_cast<int>(PlaneOf(static_cast<std::uint64_t>(number)));
+      raw[plane] = OneofSiblings(
+          field->message_type()->FindFieldByNumber(v1::DisparityImage::kRawFieldNumber));
+      for (const std::uint64_t sibling : OneofSiblings(field)) {
+        geometry[plane].push_back(PlaneOf(sibling));
+      }
+    }
+  }
+};
+
+const PathOneofs& Oneofs() {
+  static const PathOneofs oneofs;
+  return oneofs;
 }
 
 // Reads a message from pieces, for protobuf.
@@ -138,8 +171,9 @@ class PiecesInput final : public google::protobuf::io::ZeroCopyInputStream {
 // so that a `raw` holding only pixels is still set (its oneof case chosen, in order).
 class RequestReader::Walk {
  public:
-  Walk(const std::vector<grpc::Slice>& slices, int oneof_sibling, RequestReader* reader)
-      : oneof_sibling_(oneof_sibling),
+  Walk(const std::vector<grpc::Slice>& slices, const std::vector<std::uint64_t>& frame_siblings,
+       RequestReader* reader)
+      : frame_siblings_(frame_siblings),
         reader_(reader),
         views_(reader->slice_views_),
         starts_(reader->slice_starts_),
@@ -226,7 +260,7 @@ class RequestReader::Walk {
       if (!Varint(&pos, to, &tag)) return false;
       const int wire = static_cast<int>(tag & 7);
       const std::uint64_t number = tag >> 3;
-      const Role role = RoleOf(level, number, oneof_sibling_);
+      const Role role = RoleOf(level, plane, number);
       if (role == Role::kDescend || role == Role::kPixels) {
         std::uint64_t len;
         if (wire != kWireLen || !Varint(&pos, to, &len) || len > to - pos) return false;
@@ -239,11 +273,11 @@ class RequestReader::Walk {
           Emit(pos, pos, true);  // the path's message is set here, even if nothing else is
           const Level next = static_cast<Level>(static_cast<int>(level) + 1);
           const Plane child = level == Level::kFrame ? PlaneOf(number) : plane;
-          // disparity, depth and right are one oneof (Frame.geometry): setting one clears the
-          // others, as protobuf's parse does.
-          if (child != Plane::kNone && child != Plane::kColour) {
-            for (Plane other : {Plane::kDisparity, Plane::kDepth, Plane::kRight}) {
-              if (other != child) Pixels(other)->Clear();
+          // Entering a frame field clears the planes of its oneof (disparity, depth and right are
+          // Frame.geometry), as protobuf's parse does.
+          if (level == Level::kFrame) {
+            for (const Plane other : Oneofs().geometry[static_cast<int>(child)]) {
+              Pixels(other)->Clear();
             }
           }
           if (!Fields(next, child, pos, pos + len)) return false;
@@ -254,8 +288,8 @@ class RequestReader::Walk {
         continue;
       }
       if (role == Role::kClears && wire == kWireLen) {
-        // Another member of the oneof replaces what the path set: the request's frame (both
-        // planes) or an image's raw (its plane). (All those members are messages or bytes; with
+        // Another member of the oneof replaces what the path set: the request's frame (every
+        // plane) or an image's raw (its plane). (All those members are messages or bytes; with
         // another wire type the field is unknown to protobuf and replaces nothing.)
         if (plane == Plane::kNone) {
           reader_->pixels_.Clear();
@@ -267,6 +301,23 @@ class RequestReader::Walk {
     }
     Emit(run, to, false);
     return true;
+  }
+
+  Role RoleOf(Level level, Plane plane, std::uint64_t number) const {
+    switch (level) {
+      case Level::kRequest:
+        if (number == v1::StreamRequest::kFrameFieldNumber) return Role::kDescend;
+        return Contains(frame_siblings_, number) ? Role::kClears : Role::kOther;
+      case Level::kFrame:
+        return PlaneOf(number) != Plane::kNone ? Role::kDescend : Role::kOther;
+      case Level::kImage:
+        if (number == v1::DisparityImage::kRawFieldNumber) return Role::kDescend;
+        return Contains(Oneofs().raw[static_cast<int>(plane)], number) ? Role::kClears
+                                                                       : Role::kOther;
+      case Level::kRaw:
+        return number == v1::RawDisparity::kPixelsFieldNumber ? Role::kPixels : Role::kOther;
+    }
+    return Role::kOther;
   }
 
   ScatteredBytes* Pixels(Plane plane) {
@@ -313,7 +364,7 @@ class RequestReader::Walk {
     }
   }
 
-  const int oneof_sibling_;
+  const std::vector<std::uint64_t>& frame_siblings_;  // the request's oneof around its frame
   RequestReader* const reader_;
   std::vector<std::string_view>& views_;
   std::vector<std::size_t>& starts_;  // of each slice, and the message's end
@@ -324,11 +375,11 @@ class RequestReader::Walk {
 };
 
 bool RequestReader::Parse(grpc::ByteBuffer* bytes, v1::StreamRequest* message) {
-  return ParseWith(bytes, message, v1::StreamRequest::kConfigFieldNumber);
+  return ParseWith(bytes, message, Oneofs().stream_request);
 }
 
 bool RequestReader::Parse(grpc::ByteBuffer* bytes, v1::ProcessRequest* message) {
-  return ParseWith(bytes, message, /*oneof_sibling=*/0);  // its frame is in no oneof
+  return ParseWith(bytes, message, Oneofs().process_request);
 }
 
 namespace {
@@ -364,10 +415,10 @@ void RequestReader::Clear() {
 }
 
 bool RequestReader::ParseWith(grpc::ByteBuffer* bytes, google::protobuf::Message* message,
-                              int oneof_sibling) {
+                              const std::vector<std::uint64_t>& frame_siblings) {
   Clear();
   if (bytes->Valid() && bytes->Dump(&slices_).ok()) {
-    Walk walk(slices_, oneof_sibling, this);
+    Walk walk(slices_, frame_siblings, this);
     if (walk.Run()) {
       PiecesInput input(rest_);
       walked_ = true;

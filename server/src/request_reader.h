@@ -10,6 +10,7 @@
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -76,7 +77,9 @@ class RequestReader {
 
  private:
   class Walk;
-  bool ParseWith(grpc::ByteBuffer* bytes, google::protobuf::Message* message, int oneof_sibling);
+  // `frame_siblings`: the fields that share the request's oneof with its frame.
+  bool ParseWith(grpc::ByteBuffer* bytes, google::protobuf::Message* message,
+                 const std::vector<std::uint64_t>& frame_siblings);
 
   std::vector<grpc::Slice> slices_;
   InPlacePixels pixels_;
