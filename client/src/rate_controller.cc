@@ -19,10 +19,6 @@ std::int64_t Ns(RateController::Clock::time_point t) {
 // span below, so that two messages back to back do not make a rate of their own).
 constexpr std::int64_t kDeliveredSpanNs = 400'000'000;
 constexpr std::int64_t kMinDeliveredSpanNs = 150'000'000;
-// The time a byte takes is read from messages at least this much larger than the window's
-// fastest (8 KB: 6.5 ms at 10 Mbit/s, over the delay's jitter), from the latest kMaxSized.
-constexpr std::size_t kMinSpreadBytes = 8'000;
-constexpr std::size_t kMaxSized = 512;
 
 }  // namespace
 
@@ -32,7 +28,6 @@ DirectionRate::DirectionRate(const RateControlOptions& options, double start_bps
 void DirectionRate::Restart() {
   delivered_.clear();
   delays_.clear();
-  sized_.clear();
   over_streak_ = 0;
 }
 
@@ -50,32 +45,11 @@ void DirectionRate::AddDelivered(std::int64_t at_ns, std::uint64_t cumulative_by
   }
 }
 
-void DirectionRate::AddDelay(Clock::time_point now, double one_way_ms, std::size_t bytes) {
-  while (!delays_.empty() && delays_.back().one_way_ms >= one_way_ms) delays_.pop_back();
-  delays_.push_back({now, one_way_ms, bytes});
-  while (now - delays_.front().at > options_.min_rtt_window) delays_.pop_front();
-  const Delay& least = delays_.front();
-  double sample = one_way_ms - least.one_way_ms;
-  if (bytes > 0) {
-    sized_.push_back({now, one_way_ms, bytes});
-    while (now - sized_.front().at > options_.min_rtt_window || sized_.size() > kMaxSized) {
-      sized_.pop_front();
-    }
-    // The least time a byte over the window's fastest message: the slope of the delay's lower
-    // envelope against size, from messages at least kMinSpreadBytes larger (a smaller spread is
-    // lost in the delay's jitter). A queue that delays every message raises the envelope's slope
-    // only over the large ones, so the small ones still show it.
-    double ms_per_byte = -1;
-    for (const Delay& d : sized_) {
-      if (d.bytes < least.bytes + kMinSpreadBytes) continue;
-      const double slope =
-          (d.one_way_ms - least.one_way_ms) / static_cast<double>(d.bytes - least.bytes);
-      if (ms_per_byte < 0 || slope < ms_per_byte) ms_per_byte = slope;
-    }
-    if (ms_per_byte > 0 && bytes > least.bytes) {
-      sample = std::max(0.0, sample - static_cast<double>(bytes - least.bytes) * ms_per_byte);
-    }
-  }
+void DirectionRate::AddDelay(Clock::time_point now, double one_way_ms) {
+  while (!delays_.empty() && delays_.back().second >= one_way_ms) delays_.pop_back();
+  delays_.emplace_back(now, one_way_ms);
+  while (now - delays_.front().first > options_.min_rtt_window) delays_.pop_front();
+  const double sample = one_way_ms - delays_.front().second;
   queue_delay_ms_ = 0.7 * queue_delay_ms_ + 0.3 * sample;
   last_queue_sample_ = sample;
 }
@@ -193,8 +167,7 @@ void RateController::OnReply(const Reply& reply) {
     const double b = static_cast<double>(reply.reply_bytes);
     mean_reply_bytes_ = mean_reply_bytes_ == 0 ? b : 0.8 * mean_reply_bytes_ + 0.2 * b;
     down_.AddDelivered(Ns(received), reply_bytes_total_);
-    down_.AddDelay(received, static_cast<double>(Ns(received) - reply.server_send_unix_ns) / 1e6,
-                   reply.reply_bytes);
+    down_.AddDelay(received, static_cast<double>(Ns(received) - reply.server_send_unix_ns) / 1e6);
     down_.Control(received, estimate_.rtt_ms);
   }
 

@@ -112,12 +112,8 @@ class DirectionRate {
 
   // The far end's count of this direction's bytes (cumulative) at `at_ns` on its clock.
   void AddDelivered(std::int64_t at_ns, std::uint64_t cumulative_bytes);
-  // One message's one-way delay (any constant offset), seen at `now`. With its `bytes` (the
-  // downlink's replies), the message's own crossing time is not counted as queueing: at the
-  // fastest time a byte the direction has shown, the extra delay of a larger message over a
-  // smaller one in the window (their lower envelope). A reply's size is the scene's, and a near
-  // scene's cloud takes 100 ms on a 10 Mbit/s link without anything queueing behind it.
-  void AddDelay(Clock::time_point now, double one_way_ms, std::size_t bytes = 0);
+  // One message's one-way delay (any constant offset), seen at `now`.
+  void AddDelay(Clock::time_point now, double one_way_ms);
   // Overuse or growth after a message seen at `now`; cuts at most once per `rtt_ms`.
   void Control(Clock::time_point now, double rtt_ms);
   // A new call (another replica perhaps): byte counts and the delay's minimum start again.
@@ -137,15 +133,8 @@ class DirectionRate {
   double last_queue_sample_ = 0;  // the last message's delay over the minimum, ms
   bool overuse_ = false;
   int over_streak_ = 0;  // messages in a row that saw overuse
-  struct Delay {
-    Clock::time_point at;
-    double one_way_ms;
-    std::size_t bytes;
-  };
-  // Windowed minimum of the one-way delay (ascending in value, oldest first), and the messages of
-  // the window with their sizes (for the time a byte), the newest last.
-  std::deque<Delay> delays_;
-  std::deque<Delay> sized_;
+  // Windowed minimum of the one-way delay (ascending in value, oldest first).
+  std::deque<std::pair<Clock::time_point, double>> delays_;
   std::deque<std::pair<std::int64_t, std::uint64_t>> delivered_;  // far end's time, bytes
   std::optional<Clock::time_point> last_update_;
   std::optional<Clock::time_point> last_decrease_;
