@@ -113,16 +113,6 @@ TEST_F(LoadNearLosslessServerTest, TheRateControlledLadderWithTheBoundIsAnswered
       << n;
 }
 
-// The stream camera cloudcast-load sends for a source camera without flags (principal point
-// unset: each frame's centre).
-absl::StatusOr<v1::CameraModel> StreamCamera(const CameraModel& camera) {
-  v1::StreamConfig config;
-  convert::SetCamera(camera, &config);
-  config.mutable_camera()->clear_cx();
-  config.mutable_camera()->clear_cy();
-  return config.camera();
-}
-
 load::FrameStore Store(sources::FrameKind kind, double bound) {
   load::FrameSourceOptions o;
   o.source.synthetic_width = 320;
@@ -130,7 +120,7 @@ load::FrameStore Store(sources::FrameKind kind, double bound) {
   o.synthetic_frames = 4;
   o.kind = kind;
   o.uplink.max_point_error = bound;
-  o.stream_camera = StreamCamera;
+  o.stream_camera = LoadStreamCamera;
   o.jpeg_ladder = {90};
   o.half_resolution_ladder = {90};
   auto store = load::FrameStore::Prepare(o);

@@ -29,16 +29,6 @@ namespace {
 
 constexpr double kLeaf = 0.03;  // the server's default voxel leaf, metres
 
-// The stream camera as cloudcast-load sends it for a source camera without flags: the source's,
-// principal point unset (each frame's centre).
-absl::StatusOr<v1::CameraModel> StreamCamera(const CameraModel& camera) {
-  v1::StreamConfig config;
-  convert::SetCamera(camera, &config);
-  config.mutable_camera()->clear_cx();
-  config.mutable_camera()->clear_cy();
-  return config.camera();
-}
-
 FrameSourceOptions Synthetic(sources::FrameKind kind, double bound,
                              sources::Uplink encoding = sources::Uplink::kZstd) {
   FrameSourceOptions o;
@@ -48,7 +38,7 @@ FrameSourceOptions Synthetic(sources::FrameKind kind, double bound,
   o.kind = kind;
   o.uplink.encoding = encoding;
   o.uplink.max_point_error = bound;
-  o.stream_camera = StreamCamera;
+  o.stream_camera = testing::LoadStreamCamera;
   return o;
 }
 
@@ -308,7 +298,7 @@ TEST(LoadNearLossless, FramesTheBoundCannotApplyToAreRefusedNamingTheFlag) {
   cases.push_back(no_camera);
   Case bad_camera{"bad camera", Synthetic(sources::FrameKind::kDisparity, kLeaf), "config.camera.fx"};
   bad_camera.options.stream_camera = [](const CameraModel& c) -> absl::StatusOr<v1::CameraModel> {
-    v1::CameraModel m = StreamCamera(c).value();
+    v1::CameraModel m = testing::LoadStreamCamera(c).value();
     m.set_fx(-1);
     return m;
   };

@@ -9,7 +9,10 @@
 #include <string>
 #include <vector>
 
+#include "absl/status/statusor.h"
+#include "cloudcast/core/camera.h"
 #include "cloudcast/load/frame_store.h"
+#include "cloudcast/proto/convert.h"
 #include "cloudcast/v1/cloudcast.pb.h"
 
 namespace cloudcast::testing {
@@ -27,6 +30,16 @@ inline v1::StreamRequest ParsedRequest(const load::FrameStore& store, std::size_
   v1::StreamRequest request;
   EXPECT_TRUE(request.ParseFromString(bytes)) << "frame " << index << " level " << level;
   return request;
+}
+
+// The stream camera cloudcast-load sends for a source camera without flags: the source's,
+// principal point unset (each frame's centre).
+inline absl::StatusOr<v1::CameraModel> LoadStreamCamera(const CameraModel& camera) {
+  v1::StreamConfig config;
+  convert::SetCamera(camera, &config);
+  config.mutable_camera()->clear_cx();
+  config.mutable_camera()->clear_cy();
+  return config.camera();
 }
 
 }  // namespace cloudcast::testing
