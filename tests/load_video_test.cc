@@ -78,6 +78,56 @@ TEST(VideoFrameStoreTest, StereoPairsAreOneInterleavedBitstream) {
   }
 }
 
+// Live video (--encoding h264 --rate-control): the store keeps the raw frames for each stream's
+// encoder and sends each frame's geometry alone as its tail; the pictures a stream's encoder
+// makes are appended per send and the whole parses as one Frame.
+TEST(VideoFrameStoreTest, LiveVideoKeepsTheRawFramesAndSendsThePicturesBesideTheGeometry) {
+  for (const sources::FrameKind kind :
+       {sources::FrameKind::kDisparity, sources::FrameKind::kStereo}) {
+    SCOPED_TRACE(sources::Name(kind));
+    FrameSourceOptions o = SyntheticVideo(64, 48, 3, kind, 60);
+    o.live_video = true;
+    FrameStore store = FrameStore::Prepare(o).value();
+    ASSERT_TRUE(store.live_video().has_value());
+    EXPECT_FALSE(store.video().has_value());
+    EXPECT_EQ(store.encoding(), "h264");
+    EXPECT_NE(store.description().find("encoded live"), std::string::npos) << store.description();
+    ASSERT_EQ(store.live_video()->originals.size(), 3u);
+    EXPECT_EQ(store.size(), 3u);
+    video::FrameEncoder encoder(store.live_video()->encoder);
+    sources::UplinkFrame uplink;
+    for (std::size_t i = 0; i < store.size(); ++i) {
+      const v1::Frame tail = Parsed(store, i).frame();
+      EXPECT_FALSE(tail.has_color()) << i;
+      EXPECT_FALSE(tail.has_right()) << i;
+      EXPECT_EQ(tail.has_disparity(), kind == sources::FrameKind::kDisparity);
+      ASSERT_TRUE(uplink.Encode(store.live_video()->originals[i], store.live_video()->raw).ok());
+      auto coded = encoder.Encode(uplink.input(), i + 1);
+      ASSERT_TRUE(coded.ok()) << coded.status();
+      auto pictures = PictureFields(*coded);
+      ASSERT_TRUE(pictures.ok()) << pictures.status();
+      grpc::ByteBuffer bytes = store.RequestWith(i, i + 1, 77, *pictures);
+      std::vector<grpc::Slice> slices;
+      ASSERT_TRUE(bytes.Dump(&slices).ok());
+      std::string joined;
+      for (auto& sl : slices) joined.append(reinterpret_cast<const char*>(sl.begin()), sl.size());
+      v1::StreamRequest request;
+      ASSERT_TRUE(request.ParseFromString(joined));
+      const v1::Frame& f = request.frame();
+      EXPECT_EQ(f.sequence(), i + 1);
+      EXPECT_EQ(f.capture_time_unix_ns(), 77);
+      EXPECT_EQ(f.frame_id(), tail.frame_id());
+      ASSERT_TRUE(f.color().has_video()) << i;
+      EXPECT_EQ(f.color().video().keyframe(), i == 0);
+      if (kind == sources::FrameKind::kStereo) {
+        ASSERT_TRUE(f.right().has_video()) << i;
+      } else {
+        EXPECT_TRUE(f.disparity().has_compressed()) << "disparity lossless, zstd";
+      }
+    }
+  }
+}
+
 // ---------------------------------------------------------------------------------------------
 
 class VideoFleetTest : public ::testing::Test {
@@ -153,6 +203,46 @@ TEST_F(VideoFleetTest, OverloadUnderLatestNeverBreaksTheBitstream) {
   EXPECT_EQ(t.keyframe_needed, 0u);
   EXPECT_EQ(t.answered + t.drops + t.lost, t.sent);
   EXPECT_GT(t.answered, 0u);
+}
+
+// Live video under rate control against a real server: each stream's encoder follows its
+// controller's target (a stream held to 0.5 Mbit/s sends far smaller pictures than one allowed
+// 8), every frame due is accounted for (answered, replaced raw while the stream had no room, or
+// unsent at the end), and no picture is lost to a replacement (no reply asks for an IDR).
+TEST_F(VideoFleetTest, LiveVideoFollowsEachStreamsRateController) {
+  auto server = testing::StartTestServer();
+  ASSERT_NE(server, nullptr);
+  FrameSourceOptions so = SyntheticVideo(640, 480, 4, sources::FrameKind::kDisparity, 60);
+  so.live_video = true;
+  FrameStore store = FrameStore::Prepare(so).value();
+  auto run = [&](double mbps) {
+    FleetOptions o = Options(server->address(), 30, 60, false);
+    o.streams = 2;
+    client::RateControlOptions rc;
+    rc.start_bps = mbps * 1e6;
+    rc.max_bps = mbps * 1e6;
+    o.rate_control = rc;
+    return Run(o, store);
+  };
+  const Report low = run(0.5);
+  const Report high = run(8);
+  for (const Report* r : {&low, &high}) {
+    const Totals& t = r->totals;
+    EXPECT_EQ(t.frame_errors, 0u) << json(r->errors).dump();
+    EXPECT_EQ(t.keyframe_needed, 0u);
+    EXPECT_EQ(t.lost, 0u);
+    EXPECT_EQ(t.sent + t.replaced + t.unsent, 60u);
+    EXPECT_EQ(t.answered + t.drops, t.sent);
+    EXPECT_GT(t.answered, 30u);
+  }
+  // The pictures' bytes: what went out over the geometry each frame carries anyway.
+  const auto pictures = [&](const Report& r) {
+    return static_cast<double>(r.totals.bytes_sent) / static_cast<double>(r.totals.sent) -
+           store.MeanRequestBytes();
+  };
+  EXPECT_LT(pictures(low), 0.6 * pictures(high))
+      << pictures(low) << " against " << pictures(high) << " (geometry " << store.MeanRequestBytes()
+      << ")";
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -253,6 +343,50 @@ TEST_F(LoadVideoCliTest, EveryFrameIsAnsweredWithoutKeyframeRequests) {
   }
 }
 
+// --encoding h264 --rate-control: each stream encodes live; the report says so (text, JSON,
+// HTML) and carries the controller's figures; every frame sent is answered without a keyframe
+// request.
+TEST_F(LoadVideoCliTest, RateControlWithH264EncodesLivePerStream) {
+  auto server = testing::StartTestServer();
+  ASSERT_NE(server, nullptr);
+  std::vector<std::string> args = {"--server",
+                                   server->address(),
+                                   "--encoding",
+                                   "h264",
+                                   "--rate-control",
+                                   "--streams",
+                                   "2",
+                                   "--fps",
+                                   "30",
+                                   "--frames",
+                                   "40",
+                                   "--json",
+                                   Path("live.json"),
+                                   "--html",
+                                   Path("live.html")};
+  const std::vector<std::string> source = Source();
+  args.insert(args.end(), source.begin(), source.end());
+  const RunResult r = Run(args);
+  ASSERT_EQ(r.code, 0) << r;
+  EXPECT_NE(r.out.find("encoded live per stream"), std::string::npos) << r;
+  const json j = json::parse(testing::ReadText(Path("live.json")));
+  const json& video = j["encoding"]["video"];
+  EXPECT_EQ(video["live"], true) << video;
+  EXPECT_EQ(video["repliesAskingForKeyframe"], 0) << video;
+  EXPECT_GE(video["keyframesSent"].get<int>(), 2) << video;  // each stream starts at an IDR
+  EXPECT_EQ(j["encoding"]["name"], "h264");
+  EXPECT_TRUE(j.contains("rateControl")) << j.dump().substr(0, 2000);
+  const json& frames = j["frames"];
+  EXPECT_EQ(frames["frameErrors"], 0) << j["errorDistribution"];
+  EXPECT_EQ(frames["lost"], 0) << frames;
+  EXPECT_EQ(frames["answered"].get<std::uint64_t>() + frames["dropped"].get<std::uint64_t>(),
+            frames["sent"].get<std::uint64_t>())
+      << frames;
+  EXPECT_GT(frames["answered"].get<std::uint64_t>(), 20u) << frames;
+  const std::string html = testing::ReadText(Path("live.html"));
+  EXPECT_NE(html.find("encoded live by each stream"), std::string::npos);
+}
+
 TEST_F(LoadVideoCliTest, BadH264FlagsExitTwoNamingTheFlag) {
   auto null = NullServer::Start("127.0.0.1:0", "null").value();
   const std::vector<std::pair<std::vector<std::string>, std::string>> cases = {
@@ -278,7 +412,7 @@ TEST_F(LoadVideoCliTest, BadH264FlagsExitTwoNamingTheFlag) {
       {{"--h264-crf", "18"}, "--h264-crf needs --encoding h264"},
       {{"--encoding", "zstd", "--h264-grey"}, "--h264-grey needs --encoding h264"},
       {{"--encoding", "h264", "--resilient"}, "--resilient does not take --encoding h264"},
-      {{"--encoding", "h264", "--rate-control"}, "--rate-control"},
+      {{"--encoding", "zstd", "--rate-control"}, "--rate-control chooses the encoding"},
   };
   for (const auto& [args, message] : misuse) {
     std::vector<std::string> full = {"--server", null->address(), "--synthetic",

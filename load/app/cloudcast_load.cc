@@ -278,8 +278,9 @@ std::unique_ptr<cloudcast::cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
                  "the server); png (lossless: PNG, float disparities and depths TIFF); jpeg "
                  "(colour images JPEG, disparity and depth as png); h264 (the colour image, or "
                  "both views of a stereo pair, as H.264 video, encoded once before the run into "
-                 "a picture sequence each stream plays in order from an IDR; disparity and depth "
-                 "lossless, zstd; --h264-* flags)")
+                 "a picture sequence each stream plays in order from an IDR, or with "
+                 "--rate-control live by each stream; disparity and depth lossless, zstd; "
+                 "--h264-* flags)")
       ->check(CLI::IsMember(encodings))
       ->capture_default_str()
       ->group(frames);
@@ -306,7 +307,10 @@ std::unique_ptr<cloudcast::cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
                "controller (delay-based, from the replies' timing and the server's byte count) "
                "sets how many frames may be in flight and the bitrate each frame is made at: "
                "disparity and depth lossless (zstd), colour JPEG at the best quality of a ladder "
-               "(95 to 10) that fits the target. Replaces --encoding and --jpeg-quality")
+               "(95 to 10) that fits the target. Replaces --encoding and --jpeg-quality, "
+               "except --encoding h264: then each stream encodes its frames live at its "
+               "controller's bitrate (an encoder per stream, as a robot runs: for a few streams, "
+               "the encoders' CPU is the generator's)")
       ->group(frames);
   f.rate = std::make_unique<cloudcast::cli::RateFlags>(app, frames);
   app.add_flag("--lossless", f.lossless,
@@ -457,12 +461,13 @@ int main(int argc, char** argv) {
   if (absl::Status s = f.rate->Check(f.rate_control); !s.ok()) {
     return usage(std::string(s.message()));
   }
-  if (f.rate_control && (app.count("--encoding") || app.count("--jpeg-quality"))) {
-    return usage(
-        "--rate-control chooses the encoding itself; leave out --encoding and "
-        "--jpeg-quality");
-  }
   const bool h264 = f.encoding == cloudcast::video::kH264;
+  if (f.rate_control && ((app.count("--encoding") && !h264) || app.count("--jpeg-quality"))) {
+    return usage(
+        "--rate-control chooses the encoding itself (a JPEG ladder), or encodes H.264 live with "
+        "--encoding h264; leave out --encoding " +
+        f.encoding + " and --jpeg-quality");
+  }
   if (!h264 && f.h264->AnyGiven()) {
     return usage(f.h264->GivenFlags().front() + " needs --encoding h264");
   }
@@ -517,7 +522,9 @@ int main(int argc, char** argv) {
       config.mutable_camera()->clear_cy();
     return config.camera();
   };
-  if (f.rate_control) {
+  if (f.rate_control && h264) {
+    source.live_video = true;  // each stream encodes at its controller's bitrate
+  } else if (f.rate_control) {
     source.jpeg_ladder = {95, 90, 80, 70, 60, 50, 40, 30, 20, 10};
     source.half_resolution_ladder = {90, 70, 50, 30, 10};
   }
@@ -678,6 +685,7 @@ int main(int argc, char** argv) {
       load::MakeReport(**fleet, result, store->description(), schedule_text, options);
   report.encoding = store->encoding();
   report.video = store->video();
+  if (store->live_video()) report.live_video = store->live_video()->settings;
   report.near_lossless = store->near_lossless();
   if (memory) {
     report.memory_url = f.watch_memory;

@@ -12,9 +12,11 @@
 #include <thread>
 
 #include "absl/status/status.h"
+#include "absl/strings/str_cat.h"
 #include "cloudcast/client/stream_core.h"
 #include "cloudcast/proto/convert.h"
 #include "cloudcast/v1/cloudcast.grpc.pb.h"
+#include "cloudcast/video/frame_encoder.h"
 
 namespace cloudcast::load {
 namespace {
@@ -118,6 +120,14 @@ class Fleet::Driver : public client::StreamSink {
       o.machine.latest = false;
       if (!ctx_->lossless && !ctx_->closed_loop) o.machine.max_queued = 1;
     }
+    if (const auto& live = ctx_->store->live_video()) {
+      // Encoded when the stream has room (WantRoom, OnRoom), as the client library's coder is:
+      // a frame due meanwhile waits raw, and a newer one replaces it; a picture made is sent.
+      encoder_ = std::make_unique<video::FrameEncoder>(live->encoder);
+      next_picture_ = static_cast<std::size_t>(index_);  // streams start on different frames
+      o.machine.replace_queued = false;
+      o.machine.max_queued = 1;
+    }
     o.machine.resilient = ctx_->resilient;
     o.machine.reconnect_timeout = std::chrono::nanoseconds(ctx_->reconnect_timeout_ns);
     if (config_ != nullptr) o.config = *config_;
@@ -149,6 +159,15 @@ class Fleet::Driver : public client::StreamSink {
       std::lock_guard<std::mutex> lock(mu_);
       if (no_more_) return;
       no_more_ = true;
+    }
+    if (encoder_ != nullptr) {
+      // A live video frame still waiting raw for room is not made any more.
+      std::lock_guard<std::mutex> order(submit_mu_);
+      if (kept_) {
+        core_->Unmade(client::FrameFate::kUnsent, kept_->sequence, kept_->record,
+                      absl::CancelledError("the run ended before the stream had room for it"));
+        kept_.reset();
+      }
     }
     core_->CloseSend(discard);
   }
@@ -217,7 +236,7 @@ class Fleet::Driver : public client::StreamSink {
         ctx_->recorder->FrameError("INTERNAL", "a reply to a frame not in flight", instance);
         return;
       }
-      if (ctx_->video != nullptr) {
+      if (ctx_->video != nullptr || encoder_ != nullptr) {
         const int needed = reply.has_cloud() ? reply.cloud().keyframe_needed_size()
                                              : reply.error().keyframe_needed_size();
         if (needed > 0) {
@@ -249,6 +268,16 @@ class Fleet::Driver : public client::StreamSink {
   void OnRate(const client::RateEstimate& estimate) override {
     std::lock_guard<std::mutex> lock(mu_);
     rate_ = estimate;
+  }
+
+  // Live video: the stream has room again; the frame that waited raw is encoded and sent now
+  // (on this gRPC thread).
+  void OnRoom() override {
+    std::lock_guard<std::mutex> order(submit_mu_);
+    if (!kept_) return;
+    const Kept k = std::move(*kept_);
+    kept_.reset();
+    EncodeAndSubmit(k.sequence, k.record, k.scheduler_late);
   }
 
   void OnSettled(client::SettledFrame& s) override {
@@ -330,6 +359,10 @@ class Fleet::Driver : public client::StreamSink {
       SubmitPicture(seq, intended, scheduler_late);
       return;
     }
+    if (encoder_ != nullptr) {
+      SubmitLive(seq, intended, scheduler_late);
+      return;
+    }
     // The same bytes for every send of a frame: a new 20-byte header before the shared image.
     const std::size_t frame_index = static_cast<std::size_t>(index_) + seq - 1;
     std::size_t level = 0;
@@ -382,6 +415,82 @@ class Fleet::Driver : public client::StreamSink {
       return;
     }
     Account(submitted, scheduler_late);
+  }
+
+  // A live video stream's frame `seq`: encoded and sent now if the stream has room, else kept
+  // raw (a newer one replaces it) until OnRoom.
+  void SubmitLive(std::uint64_t seq, std::int64_t intended, bool scheduler_late) {
+    std::lock_guard<std::mutex> order(submit_mu_);
+    client::FrameRecord record;
+    record.intended_ns = intended;
+    if (kept_) {
+      core_->Unmade(client::FrameFate::kReplaced, kept_->sequence, kept_->record);
+      kept_.reset();
+    }
+    if (core_->WantRoom()) {
+      EncodeAndSubmit(seq, record, scheduler_late);
+    } else {
+      kept_ = Kept{seq, record, scheduler_late};
+    }
+  }
+
+  // Under submit_mu_: the stream's next frame of the source, its colour (a pair's both views)
+  // encoded at the rate controller's bitrate, submitted.
+  void EncodeAndSubmit(std::uint64_t seq, client::FrameRecord record, bool scheduler_late) {
+    const LiveVideo& live = *ctx_->store->live_video();
+    const std::size_t position = next_picture_++ % live.originals.size();
+    bool asked;
+    double target;
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      asked = restart_;
+      target = rate_ ? rate_->target_bps : ctx_->rate_control ? ctx_->rate_control->start_bps : 0;
+    }
+    if (asked) encoder_->RequestKeyframe();
+    if (target > 0) {
+      encoder_->SetStreamBitrate(static_cast<std::int64_t>(target),
+                                 ctx_->store->RequestBytes(position));
+    }
+    absl::Status status = uplink_.Encode(live.originals[position], live.raw);
+    absl::StatusOr<client::FrameInput> coded = absl::UnknownError("");
+    if (status.ok()) {
+      coded = encoder_->Encode(uplink_.input(), seq);
+      status = coded.status();
+    }
+    absl::StatusOr<std::string> pictures = absl::UnknownError("");
+    if (status.ok()) {
+      pictures = PictureFields(*coded);
+      status = pictures.status();
+    }
+    if (!status.ok()) {
+      core_->Unmade(
+          client::FrameFate::kUnsent, seq, std::move(record),
+          absl::Status(status.code(), absl::StrCat("could not be encoded: ", status.message())));
+      return;
+    }
+    const bool keyframe = IsKeyframe(*coded);
+    grpc::ByteBuffer bytes = ctx_->store->RequestWith(
+        position, seq, ctx_->t0_unix_ns + (record.intended_ns - ctx_->t0_steady_ns), *pictures);
+    record.image_bytes = bytes.Length();
+    const auto submitted = core_->Submit(seq, std::move(bytes), std::move(record));
+    if (keyframe && (submitted == client::CoreMachine::Submitted::kWriting ||
+                     submitted == client::CoreMachine::Submitted::kQueued)) {
+      std::lock_guard<std::mutex> lock(mu_);
+      idr_sequence_ = seq;
+      restart_ = false;
+      ctx_->recorder->KeyframeSent(asked);
+    }
+    Account(submitted, scheduler_late);
+  }
+
+  static bool IsKeyframe(const client::FrameInput& coded) {
+    const auto picture = [](const client::ColorInput& image) {
+      const auto* v = std::get_if<client::PrecodedVideo>(&image);
+      return v != nullptr && v->message != nullptr && v->message->keyframe();
+    };
+    if (const auto* d = std::get_if<client::DisparityFrame>(&coded)) return picture(d->colour);
+    if (const auto* d = std::get_if<client::DepthFrame>(&coded)) return picture(d->colour);
+    return picture(std::get<client::StereoFrame>(coded).left);
   }
 
   // What became of a Submit, counted.
@@ -439,6 +548,15 @@ class Fleet::Driver : public client::StreamSink {
   std::shared_ptr<client::StreamCore> core_;
   std::optional<client::RateEstimate> rate_;  // the controller's, after the latest reply
   std::mutex submit_mu_;  // video: a picture's choice and its Submit, one frame at a time
+  // Live video: the stream's encoder and its raw views; the frame waiting raw for room.
+  struct Kept {
+    std::uint64_t sequence;
+    client::FrameRecord record;
+    bool scheduler_late;
+  };
+  std::unique_ptr<video::FrameEncoder> encoder_;
+  sources::UplinkFrame uplink_;
+  std::optional<Kept> kept_;
 
   std::mutex mu_;
   bool no_more_ = false;

@@ -40,6 +40,29 @@ std::size_t VarintSize(std::uint64_t v) {
   return n;
 }
 
+// A StreamRequest{frame} on the wire: a few header bytes (the request's tag and length, then
+// Frame.sequence and Frame.capture_time_unix_ns), the shared `tail` as it is, then `fields` (more
+// of the Frame's fields; null: none), copied.
+grpc::ByteBuffer Framed(const std::string& tail, std::uint64_t sequence,
+                        std::int64_t capture_time_unix_ns, const std::string* fields) {
+  const auto time = static_cast<std::uint64_t>(capture_time_unix_ns);  // int64 as varint
+  const std::size_t extra = fields != nullptr ? fields->size() : 0;
+  const std::size_t frame_bytes =
+      1 + VarintSize(sequence) + 1 + VarintSize(time) + tail.size() + extra;
+  std::uint8_t header[1 + 10 + 1 + 10 + 1 + 10];
+  std::size_t n = 0;
+  header[n++] = kRequestFrameTag;
+  n += PutVarint(frame_bytes, header + n);
+  header[n++] = kSequenceTag;
+  n += PutVarint(sequence, header + n);
+  header[n++] = kCaptureTimeTag;
+  n += PutVarint(time, header + n);
+  grpc::Slice slices[3] = {grpc::Slice(header, n),
+                           grpc::Slice(tail.data(), tail.size(), grpc::Slice::STATIC_SLICE),
+                           extra > 0 ? grpc::Slice(fields->data(), extra) : grpc::Slice()};
+  return grpc::ByteBuffer(slices, extra > 0 ? 3 : 2);
+}
+
 // A short name of the source for the description.
 std::string Label(const sources::SourceInfo& info) {
   if (info.kind == "tsukuba") return "New Tsukuba";
@@ -207,11 +230,11 @@ v1::CameraModel FrameStore::HalfCamera() const {
   return client::HalfResolutionCamera(*stream_camera_, kind_ == sources::FrameKind::kDisparity);
 }
 
-absl::Status FrameStore::PrepareVideo(const FrameSourceOptions& o,
-                                      const sources::UplinkOptions& uplink_options,
-                                      sources::FrameSource& source, std::uint64_t frames,
-                                      Savings* savings) {
-  // The source's frames, kept (cloned: a source may reuse its buffers) to be cycled.
+namespace {
+
+// Up to `frames` of the source's frames, kept (cloned: a source may reuse its buffers).
+absl::StatusOr<std::vector<sources::SourceFrame>> KeepFrames(sources::FrameSource& source,
+                                                             std::uint64_t frames) {
   std::vector<sources::SourceFrame> originals;
   sources::SourceFrame frame;
   for (std::uint64_t i = 0; i < frames; ++i) {
@@ -224,6 +247,53 @@ absl::Status FrameStore::PrepareVideo(const FrameSourceOptions& o,
     originals.push_back(std::move(copy));
   }
   if (originals.empty()) return absl::InvalidArgumentError("the source gave no frames");
+  return originals;
+}
+
+}  // namespace
+
+absl::Status FrameStore::PrepareLiveVideo(const FrameSourceOptions& o,
+                                          const sources::UplinkOptions& uplink_options,
+                                          sources::FrameSource& source, std::uint64_t frames,
+                                          Savings* savings) {
+  auto originals = KeepFrames(source, frames);
+  if (!originals.ok()) return originals.status();
+  // Each frame's tail: its geometry as PrepareVideo sends it (zstd, lossless or within the
+  // bound), its colour images left out for the pictures each send appends.
+  sources::UplinkOptions zstd = uplink_options;
+  zstd.encoding = sources::Uplink::kZstd;
+  sources::UplinkFrame geometry;
+  for (const sources::SourceFrame& original : *originals) {
+    v1::Frame f;
+    f.set_frame_id(original.name);
+    if (absl::Status s = geometry.Encode(original, zstd); !s.ok()) return s;
+    if (absl::Status s = geometry.ToProto(&f); !s.ok()) return s;
+    if (zstd.max_point_error > 0) {
+      if (absl::Status s = savings->Add(original, zstd, f, &geometry, false); !s.ok()) return s;
+    }
+    f.clear_color();
+    if (f.has_right()) f.clear_right();
+    AddTail(f);
+  }
+  LiveVideo live;
+  live.originals = *std::move(originals);
+  live.raw = uplink_options;
+  live.raw.encoding = sources::Uplink::kRaw;
+  live.raw.max_point_error = 0;
+  live.encoder = *o.video;
+  live.settings = VideoSettings(*o.video, o.kind);
+  live_video_ = std::move(live);
+  return absl::OkStatus();
+}
+
+absl::Status FrameStore::PrepareVideo(const FrameSourceOptions& o,
+                                      const sources::UplinkOptions& uplink_options,
+                                      sources::FrameSource& source, std::uint64_t frames,
+                                      Savings* savings) {
+  // The source's frames, kept to be cycled.
+  auto kept = KeepFrames(source, frames);
+  if (!kept.ok()) return kept.status();
+  const std::vector<sources::SourceFrame>& originals = *kept;
   const int interval =
       o.video->encoder.keyframe_interval > 0 ? o.video->encoder.keyframe_interval : 60;
   const std::size_t n = originals.size();
@@ -325,6 +395,22 @@ absl::StatusOr<FrameStore> FrameStore::Prepare(const FrameSourceOptions& o) {
     store.near_lossless_ = savings.Summary(bound, o.kind, store.MeanRequestBytes(0));
     store.description_ += ", " + Describe(*store.near_lossless_);
   };
+  if (o.video && o.live_video) {
+    if (!o.jpeg_ladder.empty()) {
+      return absl::InvalidArgumentError("--encoding h264 has no JPEG ladder (--rate-control)");
+    }
+    if (absl::Status s = store.PrepareLiveVideo(o, full, **source, frames, &savings); !s.ok()) {
+      return s;
+    }
+    store.encoding_ = std::string(video::kH264);
+    store.description_ = fmt::format(
+        "{} ({} {} frames, {}x{}), h264 encoded live per stream at its rate controller's "
+        "bitrate ({}), {:.1f} KB of geometry per frame",
+        Label(info), store.size(), sources::Name(o.kind), info.width, info.height,
+        store.live_video_->settings, store.MeanRequestBytes() / 1024);
+    summarize();
+    return store;
+  }
   if (o.video) {
     if (!o.jpeg_ladder.empty()) {
       return absl::InvalidArgumentError("--encoding h264 has no JPEG ladder (--rate-control)");
@@ -485,20 +571,14 @@ void FrameStore::AddTail(const v1::Frame& frame, std::size_t level) {
 grpc::ByteBuffer FrameStore::Request(std::size_t index, std::uint64_t sequence,
                                      std::int64_t capture_time_unix_ns, std::size_t level) const {
   const auto& tails = levels_[std::min(level, levels_.size() - 1)];
-  const std::string& tail = *tails[index % tails.size()];
-  const auto time = static_cast<std::uint64_t>(capture_time_unix_ns);  // int64 as varint
-  const std::size_t frame_bytes = 1 + VarintSize(sequence) + 1 + VarintSize(time) + tail.size();
-  std::uint8_t header[1 + 10 + 1 + 10 + 1 + 10];
-  std::size_t n = 0;
-  header[n++] = kRequestFrameTag;
-  n += PutVarint(frame_bytes, header + n);
-  header[n++] = kSequenceTag;
-  n += PutVarint(sequence, header + n);
-  header[n++] = kCaptureTimeTag;
-  n += PutVarint(time, header + n);
-  grpc::Slice slices[2] = {grpc::Slice(header, n),
-                           grpc::Slice(tail.data(), tail.size(), grpc::Slice::STATIC_SLICE)};
-  return grpc::ByteBuffer(slices, 2);
+  return Framed(*tails[index % tails.size()], sequence, capture_time_unix_ns, nullptr);
+}
+
+grpc::ByteBuffer FrameStore::RequestWith(std::size_t index, std::uint64_t sequence,
+                                         std::int64_t capture_time_unix_ns,
+                                         const std::string& fields) const {
+  const auto& tails = levels_.front();
+  return Framed(*tails[index % tails.size()], sequence, capture_time_unix_ns, &fields);
 }
 
 std::size_t FrameStore::RequestBytes(std::size_t index) const {
@@ -528,6 +608,12 @@ grpc::ByteBuffer SerializeConfig(const v1::StreamConfig& config) {
   const std::string bytes = request.SerializeAsString();
   grpc::Slice slice(bytes.data(), bytes.size());
   return grpc::ByteBuffer(&slice, 1);
+}
+
+absl::StatusOr<std::string> PictureFields(const client::FrameInput& coded) {
+  v1::Frame pictures;
+  if (absl::Status s = PutPictures(coded, &pictures); !s.ok()) return s;
+  return pictures.SerializeAsString();
 }
 
 }  // namespace cloudcast::load

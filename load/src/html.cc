@@ -242,6 +242,14 @@ std::string Html(const Report& r) {
                 fmt::format("{} ({}) / {} / {}", t.keyframes_sent, t.keyframe_restarts,
                             t.keyframe_needed, t.skipped));
   }
+  if (r.live_video) {
+    page += Row("video", fmt::format("{}; encoded live by each stream at its rate controller's "
+                                     "bitrate",
+                                     *r.live_video));
+    page +=
+        Row("IDRs sent (asked for) / replies asking",
+            fmt::format("{} ({}) / {}", t.keyframes_sent, t.keyframe_restarts, t.keyframe_needed));
+  }
   page += Row("generator CPU", fmt::format("{:.2f} s, {:.3f} ms a frame sent", r.result.cpu_s,
                                            r.generator_ms_per_frame()));
   page += Row("frame errors / lost / unsent",

@@ -155,6 +155,10 @@ std::string FormatTable(const Report& r) {
     out += fmt::format("  downlink  Draco colour bits {} (median of the clouds), {} over the cap\n",
                        t.color_bits_median(), t.over_cap);
   }
+  if (r.live_video) {
+    out += fmt::format("  video     {}, encoded live per stream; {} IDRs ({} asked for)\n",
+                       *r.live_video, t.keyframes_sent, t.keyframe_restarts);
+  }
   if (r.near_lossless) {
     const NearLosslessSummary& n = *r.near_lossless;
     out += fmt::format(
@@ -308,6 +312,14 @@ nlohmann::json GhzJson(const Report& r) {
                               {"keyframesAskedFor", t.keyframe_restarts},
                               {"repliesAskingForKeyframe", t.keyframe_needed},
                               {"skippedBeforeEncoding", t.skipped}};
+  }
+  if (r.live_video) {
+    j["encoding"]["video"] = {{"codec", "h264"},
+                              {"live", true},
+                              {"settings", *r.live_video},
+                              {"keyframesSent", t.keyframes_sent},
+                              {"keyframesAskedFor", t.keyframe_restarts},
+                              {"repliesAskingForKeyframe", t.keyframe_needed}};
   }
   if (r.near_lossless) {
     const NearLosslessSummary& n = *r.near_lossless;

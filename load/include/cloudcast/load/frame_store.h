@@ -14,6 +14,13 @@
 // (an IDR) when it loops or when the server asks for a keyframe. Encoding live, per stream, would
 // cost the generator an encoder's time for every frame of every stream (docs/load-testing.md
 // measures both); the replay costs what a raw frame's does.
+//
+// Live video (--encoding h264 --rate-control): a replayed sequence cannot follow a rate
+// controller's target, so each stream encodes its frames when it sends them, at its controller's
+// bitrate (the fleet's driver owns a FrameEncoder per stream, as a robot does). The store then
+// holds the raw frames for the encoders and each frame's lossless geometry as its tail; a send
+// appends the pictures' fields to the tail (RequestWith). For a few robots: the encoders' time
+// is the generator's.
 #pragma once
 
 #include <grpcpp/support/byte_buffer.h>
@@ -72,6 +79,16 @@ struct FrameSourceOptions {
   // sequence encoded before the run (the class comment); disparity and depth go lossless with
   // zstd (row deltas), `uplink`'s other settings apply.
   std::optional<video::FrameEncoderOptions> video;
+  // With `video`: encode live, per stream (the class comment; --rate-control --encoding h264).
+  bool live_video = false;
+};
+
+// A live video store's raw material (FrameSourceOptions::live_video).
+struct LiveVideo {
+  std::vector<sources::SourceFrame> originals;  // the source's frames, owned
+  sources::UplinkOptions raw;                   // how the encoder takes them (raw images)
+  video::FrameEncoderOptions encoder;           // each stream's encoder
+  std::string settings;  // e.g. "veryfast crf 18 <= 8 Mbit/s, colour 4:2:0, IDR every 60"
 };
 
 // The picture sequence of a video store.
@@ -126,6 +143,10 @@ class FrameStore {
   // new; the image bytes are shared with every other send of that frame.
   grpc::ByteBuffer Request(std::size_t index, std::uint64_t sequence,
                            std::int64_t capture_time_unix_ns, std::size_t level = 0) const;
+  // The same with `fields` after the tail: more of the Frame's fields, serialized (a live video
+  // frame's pictures), which the wire format merges into the one Frame.
+  grpc::ByteBuffer RequestWith(std::size_t index, std::uint64_t sequence,
+                               std::int64_t capture_time_unix_ns, const std::string& fields) const;
   // The ladder: its levels (1 without one), and the best level whose frames average at most
   // `budget_bytes` (the last, smallest, when none does).
   std::size_t levels() const { return levels_.size(); }
@@ -151,6 +172,9 @@ class FrameStore {
   // A video store (FrameSourceOptions::video): frame i is picture i of the sequence, to be sent
   // in order from 0 (an IDR) on each stream. None: any frame may go at any time.
   const std::optional<VideoSequence>& video() const { return video_; }
+  // A live video store (FrameSourceOptions::live_video): frame i's raw images are
+  // live_video()->originals[i], its tail (RequestBytes) the geometry sent beside the pictures.
+  const std::optional<LiveVideo>& live_video() const { return live_video_; }
   // The encoding's name: "raw", "zstd", "png", "jpeg", "h264", "adaptive" (the JPEG ladder).
   const std::string& encoding() const { return encoding_; }
   // e.g. "New Tsukuba (10 stereo frames, 640x480), raw, 1200 KB per frame".
@@ -164,6 +188,9 @@ class FrameStore {
   absl::Status PrepareVideo(const FrameSourceOptions& options,
                             const sources::UplinkOptions& uplink, sources::FrameSource& source,
                             std::uint64_t frames, Savings* savings);
+  absl::Status PrepareLiveVideo(const FrameSourceOptions& options,
+                                const sources::UplinkOptions& uplink, sources::FrameSource& source,
+                                std::uint64_t frames, Savings* savings);
   // The half-resolution levels' own camera: the stream camera's, halved (needs stream_camera_).
   v1::CameraModel HalfCamera() const;
 
@@ -176,6 +203,7 @@ class FrameStore {
   std::string description_;
   std::string encoding_;
   std::optional<VideoSequence> video_;
+  std::optional<LiveVideo> live_video_;
   std::optional<v1::CameraModel> stream_camera_;
   std::optional<NearLosslessSummary> near_lossless_;
 };
@@ -183,6 +211,11 @@ class FrameStore {
 // e.g. "near-lossless <= 0.03 m a point: disparity 9.1 KB a frame (lossless 14.0 KB), 61% of
 // its values changed".
 std::string Describe(const NearLosslessSummary& summary);
+
+// The Frame fields, serialized, that hold the pictures video::FrameEncoder made of a frame
+// (its colour image's, and a stereo pair's right view's): what a live video send appends to the
+// frame's tail (FrameStore::RequestWith).
+absl::StatusOr<std::string> PictureFields(const client::FrameInput& coded);
 
 // The wire bytes of a StreamRequest holding `config` (the first message of every stream).
 grpc::ByteBuffer SerializeConfig(const v1::StreamConfig& config);

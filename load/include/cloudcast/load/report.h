@@ -22,6 +22,8 @@ struct Report {
   std::string frames;    // FrameStore::description()
   std::string encoding;  // FrameStore::encoding(): raw, zstd, png, jpeg, h264, adaptive
   std::optional<VideoSequence> video;  // --encoding h264: the picture sequence the streams sent
+  // --encoding h264 --rate-control: the settings of the encoder each stream ran live.
+  std::optional<std::string> live_video;
   // --max-point-error: what the bound saved (FrameStore::near_lossless()).
   std::optional<NearLosslessSummary> near_lossless;
   std::string schedule;  // e.g. "const 30 fps per stream" or "closed loop, 2 in flight"
