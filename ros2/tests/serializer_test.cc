@@ -3,6 +3,7 @@
 // by node). Each message is filled with values that make every field's alignment and length
 // matter (odd string lengths, empty and non-empty sequences, negative seconds).
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <cstdio>
 #include <cstdlib>
@@ -181,6 +182,9 @@ struct Samples {
 };
 
 // Runs foxglove's writer (installing the pinned npm packages the first time) over `request`.
+// ctest runs this binary's tests as processes side by side: the request and reply files are
+// this process's own (shared ones let one test read the other's reply), and install.sh installs
+// under a lock.
 json RunFoxglove(const json& request) {
   const std::string dir = CLOUDCAST_ROS2_NPM_DIR;
   const std::string install = std::string(CLOUDCAST_ROS2_NPM_INSTALL) + " " + dir;
@@ -188,16 +192,20 @@ json RunFoxglove(const json& request) {
     ADD_FAILURE() << "'" << install << "' failed (node and npm: scripts/setup)";
     return json();
   }
-  const std::string in = dir + "/request.json", out = dir + "/reply.json";
+  const std::string id = std::to_string(getpid());
+  const std::string in = dir + "/request-" + id + ".json", out = dir + "/reply-" + id + ".json";
   std::ofstream(in) << request.dump();
   const std::string cmd = "node " + dir + "/serialize.js < " + in + " > " + out;
-  if (std::system(cmd.c_str()) != 0) {
-    ADD_FAILURE() << "'" << cmd << "' failed";
-    return json();
-  }
+  const int status = std::system(cmd.c_str());
   std::ifstream reply(out);
   std::stringstream ss;
   ss << reply.rdbuf();
+  std::remove(in.c_str());
+  std::remove(out.c_str());
+  if (status != 0) {
+    ADD_FAILURE() << "'" << cmd << "' failed";
+    return json();
+  }
   return json::parse(ss.str());
 }
 

@@ -12,7 +12,13 @@ for c in node npm; do
     { echo "install.sh: $c is not installed (scripts/setup installs nodejs and npm)" >&2; exit 1; }
 done
 mkdir -p "$work"
-cp "$here/package.json" "$here/package-lock.json" "$here/serialize.js" "$work/"
+# One install at a time: the tests run side by side, and npm ci empties node_modules first. A file
+# is copied only when it changed, so a test running serialize.js meanwhile never reads half of it.
+exec 9>"$work/.install.lock"
+flock 9
+for f in package.json package-lock.json serialize.js; do
+  cmp -s "$here/$f" "$work/$f" || cp "$here/$f" "$work/$f"
+done
 if [ ! -d "$work/node_modules" ] || ! cmp -s "$here/package-lock.json" "$work/installed-lock.json"; then
   echo "install.sh: npm ci in $work (node $(node --version), npm $(npm --version))" >&2
   rm -f "$work/installed-lock.json"
