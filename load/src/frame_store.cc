@@ -395,36 +395,31 @@ absl::StatusOr<FrameStore> FrameStore::Prepare(const FrameSourceOptions& o) {
     store.near_lossless_ = savings.Summary(bound, o.kind, store.MeanRequestBytes(0));
     store.description_ += ", " + Describe(*store.near_lossless_);
   };
-  if (o.video && o.live_video) {
-    if (!o.jpeg_ladder.empty()) {
-      return absl::InvalidArgumentError("--encoding h264 has no JPEG ladder (--rate-control)");
-    }
-    if (absl::Status s = store.PrepareLiveVideo(o, full, **source, frames, &savings); !s.ok()) {
-      return s;
-    }
-    store.encoding_ = std::string(video::kH264);
-    store.description_ = fmt::format(
-        "{} ({} {} frames, {}x{}), h264 encoded live per stream at its rate controller's "
-        "bitrate ({}), {:.1f} KB of geometry per frame",
-        Label(info), store.size(), sources::Name(o.kind), info.width, info.height,
-        store.live_video_->settings, store.MeanRequestBytes() / 1024);
-    summarize();
-    return store;
-  }
   if (o.video) {
     if (!o.jpeg_ladder.empty()) {
       return absl::InvalidArgumentError("--encoding h264 has no JPEG ladder (--rate-control)");
     }
-    if (absl::Status s = store.PrepareVideo(o, full, **source, frames, &savings); !s.ok()) {
-      return s;
-    }
+    const absl::Status prepared = o.live_video
+                                      ? store.PrepareLiveVideo(o, full, **source, frames, &savings)
+                                      : store.PrepareVideo(o, full, **source, frames, &savings);
+    if (!prepared.ok()) return prepared;
     store.encoding_ = std::string(video::kH264);
-    store.description_ = fmt::format(
-        "{} ({} {} frames, {}x{}), h264 ({}; a sequence of {} frames, {:.1f} KB of pictures a "
-        "frame, encoded once in {:.2f} ms a frame), {:.0f} KB per frame",
-        Label(info), store.video_->source_frames, sources::Name(o.kind), info.width, info.height,
-        store.video_->settings, store.video_->length, store.video_->video_bytes_mean / 1024,
-        store.video_->encode_ms_median, store.MeanRequestBytes() / 1024);
+    const std::string frames_text =
+        fmt::format("{} ({} {} frames, {}x{})", Label(info),
+                    o.live_video ? store.size() : store.video_->source_frames,
+                    sources::Name(o.kind), info.width, info.height);
+    store.description_ =
+        o.live_video
+            ? fmt::format(
+                  "{}, h264 encoded live per stream at its rate controller's bitrate "
+                  "({}), {:.1f} KB of geometry per frame",
+                  frames_text, store.live_video_->settings, store.MeanRequestBytes() / 1024)
+            : fmt::format(
+                  "{}, h264 ({}; a sequence of {} frames, {:.1f} KB of pictures a frame, "
+                  "encoded once in {:.2f} ms a frame), {:.0f} KB per frame",
+                  frames_text, store.video_->settings, store.video_->length,
+                  store.video_->video_bytes_mean / 1024, store.video_->encode_ms_median,
+                  store.MeanRequestBytes() / 1024);
     summarize();
     return store;
   }
