@@ -21,6 +21,7 @@
 #include <cstring>
 #include <filesystem>
 #include <functional>
+#include <iostream>
 #include <limits>
 #include <map>
 #include <memory>
@@ -31,6 +32,7 @@
 #include <thread>
 #include <vector>
 
+#include "absl/strings/str_join.h"
 #include "bridge_options.h"
 #include "cloud_link.h"
 #include "cloudcast/datasets/tsukuba.h"
@@ -38,13 +40,13 @@
 #include "discovery_info.h"
 #include "frame_conversions.h"
 #include "point_cloud2.h"
-#include "ros_messages.h"
+#include "ros2_harness.h"
 #include "ros2_inputs.h"
 #include "ros_args.h"
+#include "ros_messages.h"
 #include "sample_views.h"
 #include "support/program_support.h"
 #include "support/server_fixture.h"
-#include "ros2_harness.h"
 #include "tsukuba_samples.h"
 
 namespace cloudcast::ros2_bridge {
@@ -141,7 +143,17 @@ class Ros2BridgeTest : public ::testing::Test {
       args.push_back("-p");
       args.push_back(p);
     }
-    args.insert(args.begin(), cloudcast::testing::BinDir() + "/cloudcast-ros2-bridge");
+    // This build's bridge, or another build's (CLOUDCAST_ROS2_BRIDGE: the arm64 cross build)
+    // under an emulator (CLOUDCAST_ROS2_BRIDGE_EMULATOR: qemu-aarch64-static), as
+    // Arm64Client.Ros2BridgeCarriesDdsTrafficUnderQemu runs these tests.
+    const char* program = std::getenv("CLOUDCAST_ROS2_BRIDGE");
+    args.insert(args.begin(), program != nullptr
+                                  ? program
+                                  : cloudcast::testing::BinDir() + "/cloudcast-ros2-bridge");
+    if (const char* emulator = std::getenv("CLOUDCAST_ROS2_BRIDGE_EMULATOR")) {
+      args.insert(args.begin(), emulator);
+    }
+    if (program != nullptr) std::cout << "[ bridge   ] " << absl::StrJoin(args, " ") << "\n";
     bridge_ = std::make_unique<testing::ChildProcess>(args, (scratch_ / "bridge.log").string());
     ASSERT_TRUE(bridge_->started());
   }
