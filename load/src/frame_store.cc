@@ -250,7 +250,29 @@ absl::StatusOr<std::vector<sources::SourceFrame>> KeepFrames(sources::FrameSourc
   return originals;
 }
 
+// How a video frame's images go: the encoder takes raw views of the colour (the geometry left
+// unquantized there); disparity and depth go compressed (zstd), lossless or within the bound, as
+// a robot whose uplink is thin enough to want video sends them.
+struct VideoUplinks {
+  explicit VideoUplinks(const sources::UplinkOptions& options) : raw(options), zstd(options) {
+    raw.encoding = sources::Uplink::kRaw;
+    raw.max_point_error = 0;
+    zstd.encoding = sources::Uplink::kZstd;
+  }
+  sources::UplinkOptions raw, zstd;
+};
+
 }  // namespace
+
+absl::Status FrameStore::VideoGeometry(const sources::SourceFrame& original,
+                                       const sources::UplinkOptions& zstd, Savings* savings,
+                                       sources::UplinkFrame* scratch, v1::Frame* frame) {
+  frame->set_frame_id(original.name);
+  if (absl::Status s = scratch->Encode(original, zstd); !s.ok()) return s;
+  if (absl::Status s = scratch->ToProto(frame); !s.ok()) return s;
+  if (zstd.max_point_error > 0) return savings->Add(original, zstd, *frame, scratch, false);
+  return absl::OkStatus();
+}
 
 absl::Status FrameStore::PrepareLiveVideo(const FrameSourceOptions& o,
                                           const sources::UplinkOptions& uplink_options,
@@ -258,18 +280,14 @@ absl::Status FrameStore::PrepareLiveVideo(const FrameSourceOptions& o,
                                           Savings* savings) {
   auto originals = KeepFrames(source, frames);
   if (!originals.ok()) return originals.status();
-  // Each frame's tail: its geometry as PrepareVideo sends it (zstd, lossless or within the
-  // bound), its colour images left out for the pictures each send appends.
-  sources::UplinkOptions zstd = uplink_options;
-  zstd.encoding = sources::Uplink::kZstd;
+  // Each frame's tail: its geometry as PrepareVideo sends it, its colour images left out for
+  // the pictures each send appends.
+  const VideoUplinks uplinks(uplink_options);
   sources::UplinkFrame geometry;
   for (const sources::SourceFrame& original : *originals) {
     v1::Frame f;
-    f.set_frame_id(original.name);
-    if (absl::Status s = geometry.Encode(original, zstd); !s.ok()) return s;
-    if (absl::Status s = geometry.ToProto(&f); !s.ok()) return s;
-    if (zstd.max_point_error > 0) {
-      if (absl::Status s = savings->Add(original, zstd, f, &geometry, false); !s.ok()) return s;
+    if (absl::Status s = VideoGeometry(original, uplinks.zstd, savings, &geometry, &f); !s.ok()) {
+      return s;
     }
     f.clear_color();
     if (f.has_right()) f.clear_right();
@@ -277,9 +295,7 @@ absl::Status FrameStore::PrepareLiveVideo(const FrameSourceOptions& o,
   }
   LiveVideo live;
   live.originals = *std::move(originals);
-  live.raw = uplink_options;
-  live.raw.encoding = sources::Uplink::kRaw;
-  live.raw.max_point_error = 0;
+  live.raw = uplinks.raw;
   live.encoder = *o.video;
   live.settings = VideoSettings(*o.video, o.kind);
   live_video_ = std::move(live);
@@ -305,19 +321,13 @@ absl::Status FrameStore::PrepareVideo(const FrameSourceOptions& o,
   sequence.source_frames = n;
   sequence.settings = VideoSettings(*o.video, o.kind);
   video::FrameEncoder encoder(*o.video);
-  // The encoder takes raw views (of the colour: the geometry is left unquantized there);
-  // disparity and depth go compressed (zstd), lossless or within the bound, as a robot whose
-  // uplink is thin enough to want video sends them.
-  sources::UplinkOptions raw = uplink_options, zstd = uplink_options;
-  raw.encoding = sources::Uplink::kRaw;
-  raw.max_point_error = 0;
-  zstd.encoding = sources::Uplink::kZstd;
+  const VideoUplinks uplinks(uplink_options);
   sources::UplinkFrame uplink, geometry;
   std::vector<double> encode_ms;
   double video_bytes = 0;
   for (std::size_t i = 0; i < length; ++i) {
     const sources::SourceFrame& original = originals[i % n];
-    if (absl::Status s = uplink.Encode(original, raw); !s.ok()) return s;
+    if (absl::Status s = uplink.Encode(original, uplinks.raw); !s.ok()) return s;
     const double before = ThreadCpuMs();
     auto coded = encoder.Encode(uplink.input(), i);
     encode_ms.push_back(ThreadCpuMs() - before);
@@ -326,11 +336,8 @@ absl::Status FrameStore::PrepareVideo(const FrameSourceOptions& o,
                                         std::string(coded.status().message()));
     }
     v1::Frame f;
-    f.set_frame_id(original.name);
-    if (absl::Status s = geometry.Encode(original, zstd); !s.ok()) return s;
-    if (absl::Status s = geometry.ToProto(&f); !s.ok()) return s;
-    if (zstd.max_point_error > 0) {
-      if (absl::Status s = savings->Add(original, zstd, f, &geometry, false); !s.ok()) return s;
+    if (absl::Status s = VideoGeometry(original, uplinks.zstd, savings, &geometry, &f); !s.ok()) {
+      return s;
     }
     if (absl::Status s = PutPictures(*coded, &f); !s.ok()) return s;
     sequence.keyframe.push_back(f.color().video().keyframe());

@@ -188,6 +188,11 @@ class FrameStore {
   absl::Status PrepareVideo(const FrameSourceOptions& options,
                             const sources::UplinkOptions& uplink, sources::FrameSource& source,
                             std::uint64_t frames, Savings* savings);
+  // A video frame's geometry (zstd, lossless or within the bound: `zstd`'s), its frame id set,
+  // what the bound saved added to `savings`; the pictures go beside it.
+  static absl::Status VideoGeometry(const sources::SourceFrame& original,
+                                    const sources::UplinkOptions& zstd, Savings* savings,
+                                    sources::UplinkFrame* scratch, v1::Frame* frame);
   absl::Status PrepareLiveVideo(const FrameSourceOptions& options,
                                 const sources::UplinkOptions& uplink, sources::FrameSource& source,
                                 std::uint64_t frames, Savings* savings);
