@@ -15,6 +15,7 @@
 #include <unistd.h>
 
 #include <atomic>
+#include <cerrno>
 #include <chrono>
 #include <condition_variable>
 #include <cstdio>
@@ -22,6 +23,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
@@ -148,16 +150,20 @@ TEST(FaultsTest, ClientsVanishingMidFrameLeaveNoStreamAndOthersCarryOn) {
 }
 
 // A network namespace with one end of a veth pair, made by the test and removed after. The
-// server runs inside it; the test talks to it across the pair.
+// server runs inside it; the test talks to it across the pair. Its /30 is one that no route of
+// the host uses: a pair left by a killed run (or anything else on 10.213/16) holding the same
+// subnet would take the test's packets, and the server would never be reached.
 class Namespace {
  public:
   Namespace() {
-    const int tag = static_cast<int>(getpid() % 200) + 20;
+    RemoveStale();
     name_ = "ccfault" + std::to_string(getpid());
     host_if_ = "ccf" + std::to_string(getpid()) + "h";
     ns_if_ = "ccf" + std::to_string(getpid()) + "n";
-    host_ip_ = "10.213." + std::to_string(tag) + ".1";
-    ns_ip_ = "10.213." + std::to_string(tag) + ".2";
+    const int slot = FreeSlot();
+    if (slot < 0) return;
+    host_ip_ = Address(slot, 1);
+    ns_ip_ = Address(slot, 2);
     ok_ = Run("ip netns add " + name_) &&
           Run("ip link add " + host_if_ + " type veth peer name " + ns_if_ + " netns " + name_) &&
           Run("ip addr add " + host_ip_ + "/30 dev " + host_if_) &&
@@ -177,6 +183,15 @@ class Namespace {
   const std::string& ns_ip() const { return ns_ip_; }
   const std::string& ns_if() const { return ns_if_; }
 
+  // What a failure to reach the server needs to be told apart: the routes to the namespace's
+  // address, and what listens inside it.
+  std::string Diagnose() const {
+    return "route to " + ns_ip_ + ": " + Capture("ip -4 route get " + ns_ip_) +
+           "host routes on 10.213/16:\n" + Capture("ip -4 route show | grep '^10\\.213\\.'") +
+           "listening in " + name_ + ":\n" + Capture(Exec("ss -ltn")) +
+           "link: " + Capture("ip -br link show " + host_if_);
+  }
+
   // Every packet in and out of the namespace dropped, or let through again: netem's "loss 100%"
   // where the kernel has netem, else the same with iptables inside the namespace.
   bool Stall(bool on) {
@@ -194,6 +209,46 @@ class Namespace {
   static bool Run(const std::string& command) { return std::system(command.c_str()) == 0; }
 
  private:
+  static std::string Capture(const std::string& command) {
+    std::string out;
+    if (FILE* pipe = popen((command + " 2>&1").c_str(), "r")) {
+      char buffer[512];
+      while (std::fgets(buffer, sizeof buffer, pipe) != nullptr) out += buffer;
+      pclose(pipe);
+    }
+    return out;
+  }
+  // The first /30 in 10.213/16 from this process's own start that no host route holds, as its
+  // slot (10.213.slot/64.(slot%64)*4); -1 when all 16,384 are taken.
+  static int FreeSlot() {
+    const std::string routes = Capture("ip -4 route show");
+    constexpr int kSlots = 16384;
+    for (int i = 0; i < kSlots; ++i) {
+      const int slot = (static_cast<int>(getpid()) + i) % kSlots;
+      if (routes.find(Address(slot, 0) + "/30") == std::string::npos) return slot;
+    }
+    return -1;
+  }
+  static std::string Address(int slot, int host) {
+    return "10.213." + std::to_string(slot / 64) + "." + std::to_string(slot % 64 * 4 + host);
+  }
+  // Namespaces and host ends this test made in a run that was killed before its destructor.
+  static void RemoveStale() {
+    std::istringstream names(Capture("ip netns list | sed -n 's/^ccfault\\([0-9]*\\).*/\\1/p'"));
+    for (std::string pid; std::getline(names, pid);) {
+      if (!pid.empty() && kill(std::stoi(pid), 0) != 0 && errno == ESRCH) {
+        Run("ip netns del ccfault" + pid + " 2>/dev/null");
+      }
+    }
+    std::istringstream links(
+        Capture("ip -o link show | sed -n 's/^[0-9]*: ccf\\([0-9]*\\)h[@:].*/\\1/p'"));
+    for (std::string pid; std::getline(links, pid);) {
+      if (!pid.empty() && kill(std::stoi(pid), 0) != 0 && errno == ESRCH) {
+        Run("ip link del ccf" + pid + "h 2>/dev/null");
+      }
+    }
+  }
+
   std::string name_, host_if_, ns_if_, host_ip_, ns_ip_;
   bool ok_ = false, netem_ = false;
 };
@@ -206,10 +261,14 @@ TEST(FaultsTest, NetworkStallOfSecondsThenRecoveryLosesNothing) {
   }
   Namespace ns;
   if (!ns.ok()) GTEST_SKIP() << "could not make a network namespace with a veth pair here";
-  const std::string address = ns.ns_ip() + ":50051";
-  ServerProcess server(address, "stalled", {}, ::testing::TempDir() + "/stall_server.log", "warn",
-                       "", ns.Prefix());
-  ASSERT_TRUE(server.WaitUntilServing()) << server.log();
+  // Port 0: the server's --ready-file says what it bound, and whether it started at all.
+  ServerProcess server(ns.ns_ip() + ":0", "stalled", {}, ::testing::TempDir() + "/stall_server.log",
+                       "warn", "", ns.Prefix());
+  ASSERT_TRUE(server.WaitUntilServing()) << (server.running() ? "running" : "ended") << ", bound '"
+                                         << server.address() << "'\n--- log:\n"
+                                         << server.log() << "--- network:\n"
+                                         << ns.Diagnose();
+  const std::string address = server.address();
   auto client = Connect(address);
   ASSERT_NE(client, nullptr);
   auto robot = OpenRobot(*client, false);
