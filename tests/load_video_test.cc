@@ -234,7 +234,16 @@ TEST_F(VideoFleetTest, LiveVideoFollowsEachStreamsRateController) {
     EXPECT_EQ(t.sent + t.replaced + t.unsent, 60u);
     EXPECT_EQ(t.answered + t.drops, t.sent);
     EXPECT_GT(t.answered, 30u);
+    // Each frame sent was encoded once, when it was due (one submitted after the run's end is
+    // encoded and then left unsent); the encoder's CPU time was counted.
+    EXPECT_GE(t.live_encoded, t.sent);
+    EXPECT_LE(t.live_encoded, t.sent + t.unsent);
+    EXPECT_GT(r->live_encode_us.Percentile(50), 0);
+    EXPECT_GE(r->live_encode_us.Percentile(99), r->live_encode_us.Percentile(50));
   }
+  // The encoder's own count of the pictures' bytes tells the two rates apart as well.
+  EXPECT_LT(low.live_picture_bytes_per_frame(), 0.6 * high.live_picture_bytes_per_frame())
+      << low.live_picture_bytes_per_frame() << " against " << high.live_picture_bytes_per_frame();
   // The pictures' bytes: what went out over the geometry each frame carries anyway.
   const auto pictures = [&](const Report& r) {
     return static_cast<double>(r.totals.bytes_sent) / static_cast<double>(r.totals.sent) -
@@ -374,6 +383,15 @@ TEST_F(LoadVideoCliTest, RateControlWithH264EncodesLivePerStream) {
   EXPECT_EQ(video["live"], true) << video;
   EXPECT_EQ(video["repliesAskingForKeyframe"], 0) << video;
   EXPECT_GE(video["keyframesSent"].get<int>(), 2) << video;  // each stream starts at an IDR
+  // What encoding live cost the generator's cores, and what it made.
+  EXPECT_GE(video["encodedFrames"].get<std::uint64_t>(), j["frames"]["sent"].get<std::uint64_t>())
+      << video;
+  EXPECT_GT(video["pictureBytesPerFrame"].get<double>(), 0) << video;
+  EXPECT_GT(video["encodeMsPerFrameMedian"].get<double>(), 0) << video;
+  EXPECT_GE(video["encodeMsPerFrameP99"].get<double>(),
+            video["encodeMsPerFrameMedian"].get<double>())
+      << video;
+  EXPECT_NE(r.out.find("encoder CPU"), std::string::npos) << r;
   EXPECT_EQ(j["encoding"]["name"], "h264");
   EXPECT_TRUE(j.contains("rateControl")) << j.dump().substr(0, 2000);
   const json& frames = j["frames"];

@@ -14,6 +14,7 @@
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
 #include "cloudcast/client/stream_core.h"
+#include "cloudcast/load/thread_cpu.h"
 #include "cloudcast/proto/convert.h"
 #include "cloudcast/v1/cloudcast.grpc.pb.h"
 #include "cloudcast/video/frame_encoder.h"
@@ -453,8 +454,11 @@ class Fleet::Driver : public client::StreamSink {
     }
     absl::Status status = uplink_.Encode(live.originals[position], live.raw);
     absl::StatusOr<client::FrameInput> coded = absl::UnknownError("");
+    double encode_ms = 0;
     if (status.ok()) {
+      const double before = ThreadCpuMs();
       coded = encoder_->Encode(uplink_.input(), seq);
+      encode_ms = ThreadCpuMs() - before;
       status = coded.status();
     }
     absl::StatusOr<std::string> pictures = absl::UnknownError("");
@@ -468,6 +472,7 @@ class Fleet::Driver : public client::StreamSink {
           absl::Status(status.code(), absl::StrCat("could not be encoded: ", status.message())));
       return;
     }
+    ctx_->recorder->LiveEncoded(encode_ms, pictures->size());
     const bool keyframe = IsKeyframe(*coded);
     grpc::ByteBuffer bytes = ctx_->store->RequestWith(
         position, seq, ctx_->t0_unix_ns + (record.intended_ns - ctx_->t0_steady_ns), *pictures);

@@ -1,16 +1,15 @@
 #include "cloudcast/load/frame_store.h"
 
 #include <spdlog/fmt/fmt.h>
-#include <time.h>
 
 #include <algorithm>
 #include <cmath>
-#include <variant>
-
 #include <opencv2/core/mat.hpp>
+#include <variant>
 
 #include "absl/status/status.h"
 #include "cloudcast/client/half_resolution.h"
+#include "cloudcast/load/thread_cpu.h"
 #include "cloudcast/proto/convert.h"
 
 namespace cloudcast::load {
@@ -92,13 +91,6 @@ sources::SourceFrame HalfResolution(const sources::SourceFrame& frame) {
     half.images[i] = out;
   }
   return half;
-}
-
-// This thread's CPU time, ms (the encoder's cost, apart from whatever else runs on the machine).
-double ThreadCpuMs() {
-  timespec t{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
-  return static_cast<double>(t.tv_sec) * 1e3 + static_cast<double>(t.tv_nsec) / 1e6;
 }
 
 // The pictures FrameEncoder made of a frame, into the proto frame holding its raw images.

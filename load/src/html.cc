@@ -243,9 +243,13 @@ std::string Html(const Report& r) {
                             t.keyframe_needed, t.skipped));
   }
   if (r.live_video) {
-    page += Row("video", fmt::format("{}; encoded live by each stream at its rate controller's "
-                                     "bitrate",
-                                     *r.live_video));
+    page += Row(
+        "video",
+        fmt::format("{}; encoded live by each stream at its rate controller's bitrate: "
+                    "{} frames, {:.1f} KB of pictures a frame, encoder CPU {:.2f} ms a "
+                    "frame median ({:.2f} p99)",
+                    *r.live_video, r.totals.live_encoded, r.live_picture_bytes_per_frame() / 1024,
+                    r.live_encode_us.Percentile(50) / 1e3, r.live_encode_us.Percentile(99) / 1e3));
     page +=
         Row("IDRs sent (asked for) / replies asking",
             fmt::format("{} ({}) / {}", t.keyframes_sent, t.keyframe_restarts, t.keyframe_needed));

@@ -107,6 +107,13 @@ void Recorder::KeyframeSent(bool asked) {
   if (asked) ++totals_.keyframe_restarts;
 }
 
+void Recorder::LiveEncoded(double encode_ms, std::size_t picture_bytes) {
+  std::lock_guard<std::mutex> lock(mu_);
+  ++totals_.live_encoded;
+  totals_.live_picture_bytes += picture_bytes;
+  live_encode_us_.Record(static_cast<std::int64_t>(encode_ms * 1e3));
+}
+
 void Recorder::CallStatus(const std::string& code) {
   std::lock_guard<std::mutex> lock(mu_);
   ++call_status_[code];
@@ -173,6 +180,10 @@ Histogram Recorder::latency() const {
 Histogram Recorder::service() const {
   std::lock_guard<std::mutex> lock(mu_);
   return service_;
+}
+Histogram Recorder::live_encode() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return live_encode_us_;
 }
 std::map<std::string, std::uint64_t> Recorder::per_instance() const {
   std::lock_guard<std::mutex> lock(mu_);

@@ -90,6 +90,7 @@ Report MakeReport(Fleet& fleet, const FleetResult& result, const std::string& fr
   r.totals = rec.totals();
   r.latency = rec.latency();
   r.service = rec.service();
+  r.live_encode_us = rec.live_encode();
   r.per_instance = rec.per_instance();
   r.status_codes = rec.status_codes();
   r.errors = rec.errors();
@@ -156,8 +157,12 @@ std::string FormatTable(const Report& r) {
                        t.color_bits_median(), t.over_cap);
   }
   if (r.live_video) {
-    out += fmt::format("  video     {}, encoded live per stream; {} IDRs ({} asked for)\n",
-                       *r.live_video, t.keyframes_sent, t.keyframe_restarts);
+    out += fmt::format(
+        "  video     {}, encoded live per stream: {} frames, {:.1f} KB of pictures a frame, "
+        "encoder CPU {:.2f} ms a frame median ({:.2f} p99); {} IDRs ({} asked for)\n",
+        *r.live_video, t.live_encoded, r.live_picture_bytes_per_frame() / 1024,
+        r.live_encode_us.Percentile(50) / 1e3, r.live_encode_us.Percentile(99) / 1e3,
+        t.keyframes_sent, t.keyframe_restarts);
   }
   if (r.near_lossless) {
     const NearLosslessSummary& n = *r.near_lossless;
@@ -317,6 +322,10 @@ nlohmann::json GhzJson(const Report& r) {
     j["encoding"]["video"] = {{"codec", "h264"},
                               {"live", true},
                               {"settings", *r.live_video},
+                              {"encodedFrames", t.live_encoded},
+                              {"pictureBytesPerFrame", r.live_picture_bytes_per_frame()},
+                              {"encodeMsPerFrameMedian", r.live_encode_us.Percentile(50) / 1e3},
+                              {"encodeMsPerFrameP99", r.live_encode_us.Percentile(99) / 1e3},
                               {"keyframesSent", t.keyframes_sent},
                               {"keyframesAskedFor", t.keyframe_restarts},
                               {"repliesAskingForKeyframe", t.keyframe_needed}};

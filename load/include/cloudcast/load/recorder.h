@@ -79,6 +79,9 @@ struct Totals {
   std::uint64_t keyframe_needed = 0;    // replies naming a bitstream that needs an IDR
   std::uint64_t keyframes_sent = 0;     // frames sent whose pictures were IDRs
   std::uint64_t keyframe_restarts = 0;  // IDRs sent because a reply asked (the sequence restarted)
+  // Live video (--encoding h264 --rate-control): frames each stream encoded as it sent them, and
+  // their pictures' bytes.
+  std::uint64_t live_encoded = 0, live_picture_bytes = 0;
   // The downlink (contract revision 4): clouds by the Draco colour bits the server chose
   // (CloudReply.color_bits; 0 from an older server), and those over the stream's cap
   // (CloudReply.over_cap: DracoConfig.max_cloud_bytes could not be met within its bounds).
@@ -116,6 +119,9 @@ class Recorder {
   void Skipped(std::uint64_t frames);
   void KeyframeNeeded();
   void KeyframeSent(bool asked);
+  // Live video: a frame a stream encoded when it was due, the encoder's CPU time on the stream's
+  // thread and the pictures' bytes.
+  void LiveEncoded(double encode_ms, std::size_t picture_bytes);
   void CallStatus(const std::string& code);
   // Resilient streams: a frame written again on a new call; an answer to a sequence already
   // answered; a call opened after a failure; a reconnect that worked (its time is in the
@@ -137,6 +143,7 @@ class Recorder {
   Totals totals() const;
   Histogram latency() const;
   Histogram service() const;
+  Histogram live_encode() const;  // live video: the encoder's CPU time a frame, in µs
   std::map<std::string, std::uint64_t> per_instance() const;
   std::map<std::string, std::uint64_t> status_codes() const;  // per frame: OK, error codes
   std::map<std::string, std::uint64_t> errors() const;        // "CODE: message" -> frames
@@ -148,6 +155,7 @@ class Recorder {
   mutable std::mutex mu_;
   Totals totals_;
   Histogram latency_, service_;
+  Histogram live_encode_us_;
   Histogram interval_latency_, interval_service_;
   SecondStats interval_;
   double interval_start_s_ = 0;

@@ -34,6 +34,7 @@ struct Report {
   FleetResult result;
   Totals totals;
   Histogram latency, service;
+  Histogram live_encode_us;  // --encoding h264 --rate-control: the encoder's CPU time a frame
   std::map<std::string, std::uint64_t> per_instance, status_codes, errors, call_status;
   std::vector<SecondStats> series;
   RateSummary rate;  // --rate-control: the controllers over the run (samples 0: none)
@@ -68,6 +69,12 @@ struct Report {
   // at that cost (0 when nothing was sent).
   double generator_ms_per_frame() const {
     return totals.sent > 0 ? result.cpu_s * 1e3 / static_cast<double>(totals.sent) : 0;
+  }
+  // Live video: the pictures' bytes a frame encoded (0 when none was).
+  double live_picture_bytes_per_frame() const {
+    return totals.live_encoded > 0
+               ? static_cast<double>(totals.live_picture_bytes) / totals.live_encoded
+               : 0;
   }
   double answered_fps() const {
     return result.elapsed_s > 0 ? totals.answered / result.elapsed_s : 0;
