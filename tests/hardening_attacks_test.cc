@@ -284,24 +284,33 @@ class AttackTest : public ::testing::Test {
   void StartProxy(bool unprotected = false) {
     const std::string dir = ::testing::TempDir() + "/attack_proxy_" + std::to_string(getpid());
     std::filesystem::create_directories(dir);
-    const int port = testing::FreeLoopbackPort();
-    proxy_address_ = "127.0.0.1:" + std::to_string(port);
-    std::vector<std::string> argv = {"/usr/sbin/haproxy", "-db"};
-    std::vector<std::string> env = {"CLOUDCAST_PROXY_LISTEN=" + proxy_address_,
-                                    "CLOUDCAST_BACKEND=" + server_->address()};
-    if (unprotected) {
-      std::ofstream(dir + "/unprotected.cfg")
-          << UnprotectedConfig(proxy_address_, server_->address());
-      argv.insert(argv.end(), {"-f", dir + "/unprotected.cfg"});
-    } else {
-      argv.insert(argv.end(),
-                  {"-f", std::string(CLOUDCAST_SOURCE_DIR) + "/docker/haproxy/cloudcast.cfg", "-f",
-                   std::string(CLOUDCAST_SOURCE_DIR) + "/docker/haproxy/backend-local.cfg"});
+    // HAProxy cannot report a port of the kernel's choosing, so one is picked here, free now; if
+    // another test binds it before HAProxy does, HAProxy exits at once ("cannot bind socket")
+    // and another port is tried.
+    for (int attempt = 0; attempt < 4; ++attempt) {
+      proxy_address_ = "127.0.0.1:" + std::to_string(testing::FreeLoopbackPort());
+      std::vector<std::string> argv = {"/usr/sbin/haproxy", "-db"};
+      std::vector<std::string> env = {"CLOUDCAST_PROXY_LISTEN=" + proxy_address_,
+                                      "CLOUDCAST_BACKEND=" + server_->address()};
+      if (unprotected) {
+        std::ofstream(dir + "/unprotected.cfg")
+            << UnprotectedConfig(proxy_address_, server_->address());
+        argv.insert(argv.end(), {"-f", dir + "/unprotected.cfg"});
+      } else {
+        argv.insert(
+            argv.end(),
+            {"-f", std::string(CLOUDCAST_SOURCE_DIR) + "/docker/haproxy/cloudcast.cfg", "-f",
+             std::string(CLOUDCAST_SOURCE_DIR) + "/docker/haproxy/backend-local.cfg"});
+      }
+      proxy_ = std::make_unique<Child>(argv, dir + "/haproxy.log", env);
+      auto channel = grpc::CreateChannel(proxy_address_, grpc::InsecureChannelCredentials());
+      if (channel->WaitForConnected(std::chrono::system_clock::now() + seconds(10))) return;
+      const std::string log = testing::ReadText(dir + "/haproxy.log");
+      if (log.find("cannot bind socket") == std::string::npos) {
+        FAIL() << "HAProxy did not serve " << proxy_address_ << ":\n" << log;
+      }
     }
-    proxy_ = std::make_unique<Child>(argv, dir + "/haproxy.log", env);
-    auto channel = grpc::CreateChannel(proxy_address_, grpc::InsecureChannelCredentials());
-    ASSERT_TRUE(channel->WaitForConnected(std::chrono::system_clock::now() + seconds(10)))
-        << testing::ReadText(dir + "/haproxy.log");
+    FAIL() << "HAProxy found no free port in 4 tries:\n" << testing::ReadText(dir + "/haproxy.log");
   }
 
   static std::string UnprotectedConfig(const std::string& listen, const std::string& backend) {
