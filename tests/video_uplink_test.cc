@@ -257,9 +257,10 @@ TEST_F(VideoUplinkTest, ProcessCallsDecodeAnIdrAndRefuseAPicture) {
 // written on a Stream call by hand.
 class VideoStreamCall {
  public:
-  VideoStreamCall(const std::string& target, const v1::StreamConfig& config)
+  VideoStreamCall(const std::string& target, const v1::StreamConfig& config,
+                  const grpc::ChannelArguments& args = {})
       : stub_(v1::CloudCast::NewStub(
-            grpc::CreateChannel(target, grpc::InsecureChannelCredentials()))),
+            grpc::CreateCustomChannel(target, grpc::InsecureChannelCredentials(), args))),
         call_(stub_->Stream(&context_)) {
     v1::StreamRequest request;
     *request.mutable_config() = config;
@@ -552,34 +553,47 @@ TEST_F(VideoUplinkTest, HostileSequenceHeaderIsRefusedBeforeAllocation) {
 
 // DELIVERY_LATEST with frames sent faster than the server works: frames are replaced unprocessed,
 // yet every picture is decoded, so each frame the server does process decodes from its true
-// reference and no reply is an error.
+// reference and no reply is an error. The replies are read as they come, as a robot reads them:
+// a client that takes none while it sends is one the server stops reading after a few drops
+// (StreamQueue::kMaxDropsPerWrite), and one that only reads once its last write has gone could
+// then wait on the server as the server waits on it (CI saw that: 60 s, then the idle timeout).
 TEST_F(VideoUplinkTest, LatestDeliveryDecodesEveryPictureAndSkipsOnlyProcessing) {
   PipelineOptions options = DisparityOptions();
   options.voxel.SetLeaf(0.001f);  // every pixel its own voxel: slow enough to fall behind
   v1::StreamConfig config = client::MakeStreamConfig(options);
   config.set_delivery(v1::DELIVERY_LATEST);
-  VideoStreamCall call(shared_target(), config);
+  // The client's window stays at HTTP/2's 64 KB (no BDP probing), as on a thin link: a cloud
+  // does not fit in it, so its write waits for this client to read. (Writing every frame before
+  // reading then hangs at once, where with the window grown it hung only now and then.)
+  grpc::ChannelArguments small_window;
+  small_window.SetInt(GRPC_ARG_HTTP2_BDP_PROBE, 0);
+  VideoStreamCall call(shared_target(), config, small_window);
   ColourVideo video(640, 480);
   const int frames = 24;
-  for (int t = 0; t < frames; ++t) {
-    v1::StreamRequest request;
-    *request.mutable_frame() = video.Next(t, t == 0);
-    ASSERT_TRUE(call.call()->Write(request));
-  }
-  call.call()->WritesDone();
   int clouds = 0, errors = 0;
   std::uint64_t dropped = 0;
-  v1::StreamReply r;
-  while (call.call()->Read(&r)) {
-    if (r.has_cloud()) {
-      ++clouds;
-      dropped = r.cloud().frames_dropped();
-      EXPECT_THAT(r.cloud().keyframe_needed(), IsEmpty());
-    } else {
-      ++errors;
-      ADD_FAILURE() << r.error().message();
+  std::thread reader([&] {
+    v1::StreamReply r;
+    while (call.call()->Read(&r)) {
+      if (r.has_cloud()) {
+        ++clouds;
+        dropped = r.cloud().frames_dropped();
+        EXPECT_THAT(r.cloud().keyframe_needed(), IsEmpty());
+      } else {
+        ++errors;
+        ADD_FAILURE() << r.error().message();
+      }
     }
+  });
+  bool written = true;
+  for (int t = 0; t < frames && written; ++t) {
+    v1::StreamRequest request;
+    *request.mutable_frame() = video.Next(t, t == 0);
+    written = call.call()->Write(request);
   }
+  call.call()->WritesDone();
+  reader.join();
+  ASSERT_TRUE(written);
   EXPECT_TRUE(call.call()->Finish().ok());
   EXPECT_EQ(errors, 0);
   EXPECT_GT(dropped, 0u) << "no frame was replaced: the test did not test the skipping";
