@@ -4,8 +4,9 @@
 
 #include <algorithm>
 #include <cmath>
-#include <opencv2/core/mat.hpp>
 #include <variant>
+
+#include <opencv2/core/mat.hpp>
 
 #include "absl/status/status.h"
 #include "cloudcast/client/half_resolution.h"
