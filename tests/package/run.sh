@@ -7,12 +7,19 @@
 set -euo pipefail
 src=$1 scratch=$2 server=$3
 launcher=()
-command -v ccache >/dev/null && launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
+if command -v ccache >/dev/null; then
+  # Paths relative to the checkout, as scripts/setup: a clean clone elsewhere (CI's) finds what
+  # an earlier run compiled (76 s cold, 2 s warm).
+  export CCACHE_BASEDIR=$src CCACHE_NOHASHDIR=1
+  launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
+fi
+werror=OFF
+[ "${CLOUDCAST_WERROR:-0}" = 1 ] && werror=ON  # as scripts/setup: CI's builds judge warnings
 rm -rf "$scratch" && mkdir -p "$scratch"
 
 echo "== client-only build of cloudcast"
 cmake -S "$src" -B "$scratch/cloudcast" -G Ninja -DCMAKE_BUILD_TYPE=Release \
-  -DCLOUDCAST_CLIENT_ONLY=ON "${launcher[@]}" >"$scratch/configure.log" ||
+  -DCLOUDCAST_CLIENT_ONLY=ON -DCLOUDCAST_WERROR=$werror "${launcher[@]}" >"$scratch/configure.log" ||
   { cat "$scratch/configure.log"; exit 1; }
 grep -q "CLOUDCAST_WITH_PCL:BOOL=OFF" "$scratch/cloudcast/CMakeCache.txt"
 cmake --build "$scratch/cloudcast" -j "$(nproc)" >"$scratch/build.log" ||
