@@ -57,20 +57,19 @@ if(_cloudcast_san_flags)
   if(NOT CLOUDCAST_SANITIZE STREQUAL "thread")
     list(APPEND _cloudcast_san_flags -fno-sanitize-recover=undefined)
   endif()
-  # Line tables only, as OSS-Fuzz builds its sanitized targets: reports keep every frame's file
-  # and line, and clang compiles faster (issue 29's cold CI). ASan and the fuzzers also at -O1, as
-  # OSS-Fuzz: server_limits_test.cc 17.8 s against 15.1 s at -O2 -g, pipeline.cc 39.1 against 32.1.
-  # TSan stays at -O2: at -O1 libstdc++'s std::function members that grpcpp's headers call are no
-  # longer inlined into them, so they are instrumented outside tsan.ignorelist's reach and TSan
-  # reports gRPC's own unsynchronised calls as races (seen: ClientTest, 41 of 93 failing).
-  # gcc has no line-tables-only level, and its -g costs it nothing measurable.
-  if(CMAKE_CXX_COMPILER_ID STREQUAL "Clang")
-    set(_cloudcast_san_codegen -gline-tables-only)
-  else()
-    set(_cloudcast_san_codegen -g)
-  endif()
+  # ASan and the fuzzers at -O1 with line tables only, as OSS-Fuzz builds its sanitized targets:
+  # reports keep every frame's file and line, and clang compiles faster (issue 29's cold CI:
+  # server_limits_test.cc 17.8 s against 15.1 at -O2 -g, pipeline.cc 39.1 against 32.1). TSan keeps
+  # -O2 -g: with line tables only (at -O2 or -O1) the std::function members that grpcpp's headers
+  # call are instrumented outside tsan.ignorelist's reach, and TSan reports gRPC's own
+  # unsynchronised calls as races (seen: 42 of ClientTest's 93 tests). gcc has no line-tables-only
+  # level, and its -g costs it nothing measurable.
+  set(_cloudcast_san_codegen -g)
   if(NOT CLOUDCAST_SANITIZE STREQUAL "thread")
     list(APPEND _cloudcast_san_codegen -O1)
+    if(CMAKE_CXX_COMPILER_ID STREQUAL "Clang")
+      set(_cloudcast_san_codegen -O1 -gline-tables-only)
+    endif()
   endif()
   add_compile_options(${_cloudcast_san_flags} -fno-omit-frame-pointer ${_cloudcast_san_codegen})
   add_link_options(${_cloudcast_san_link})
