@@ -957,7 +957,7 @@ TEST_F(Ros2BridgeTest, FastDdsCameraAndSubscriberGetTheRos1BridgesClouds) {
   const auto r = cloudcast::testing::RunProgram(
       cloudcast::testing::BinDir() + "/ros2-fastdds-peer",
       {"--data", tsukuba::DefaultDir(), "--namespace", "/stereo", "--clouds", "6", "--out", out,
-       "--seconds", "40"},
+       "--seconds", "90"},
       scratch_.string());
   ASSERT_TRUE(r.exited && r.code == 0) << r << "\n" << bridge_->Log();
   int compared = 0;
