@@ -240,12 +240,24 @@ class Harness:
         wait_until(serving, 20, "cloudcast-server")
         return address
 
+    def bridge_command(self):
+        """This build's bridge, or another build's (CLOUDCAST_ROS_BRIDGE: the arm64 cross build)
+        under an emulator (CLOUDCAST_ROS_BRIDGE_EMULATOR: qemu-aarch64-static), as
+        tests/arm64_client_test.cc runs these tests."""
+        program = os.environ.get("CLOUDCAST_ROS_BRIDGE") or os.path.join(
+            self.bin_dir, "cloudcast-ros-bridge")
+        emulator = os.environ.get("CLOUDCAST_ROS_BRIDGE_EMULATOR")
+        if not emulator:
+            return [program]
+        print(f"[ bridge ] {emulator} {program}", flush=True)  # what the arm64 test looks for
+        return [emulator, program]
+
     def start_bridge(self, name, params, remaps, namespace="/stereo", log=None):
         """The bridge as node `namespace`/`name`, its private parameters set on the master first."""
         node = f"{namespace}/{name}"
         self.set_params(node, params)
-        argv = [os.path.join(self.bin_dir, "cloudcast-ros-bridge"), f"__name:={name}",
-                f"__ns:={namespace}"] + [f"{a}:={b}" for a, b in remaps.items()]
+        argv = self.bridge_command() + [f"__name:={name}", f"__ns:={namespace}"]
+        argv += [f"{a}:={b}" for a, b in remaps.items()]
         return self.start(log or name, argv), node
 
     def start_nodelet(self, kind, name, namespace, params=None, remaps=None):

@@ -4,8 +4,9 @@
 #  2. those unit tests under qemu-user (ctest uses the toolchain's CMAKE_CROSSCOMPILING_EMULATOR);
 #  3. `cmake --install` into a scratch prefix: an arm64 install tree, without the x86-64 engine;
 #  4. tests/package, a robot's own project, cross-built against it with find_package(cloudcast);
-#  and the ROS 2 bridge, when CycloneDDS's arm64 package is there: built, its unit tests among
-#  those of step 2, its --help run under qemu-user.
+#  and the ROS 2 and ROS 1 bridges, when their arm64 libraries are there (cyclonedds-dev:arm64;
+#  libroscpp4d:arm64 and the rest): built, their unit tests among those of step 2, their --help run
+#  under qemu-user.
 # The test then runs that robot under qemu-user against an amd64 cloudcast-server.
 #   cross_build.sh SOURCE_DIR SCRATCH_DIR
 # Exit 77 (the test skips) when the cross toolchain, qemu-user or the arm64 packages are missing.
@@ -44,7 +45,8 @@ fi
 
 echo "== the client's unit tests under qemu-user"
 grep -ho "qemu-aarch64[a-z-]*" "$scratch"/cloudcast/tests/client_only/*_tests.cmake | sort -u
-ctest --test-dir "$scratch/cloudcast" --output-on-failure --timeout 120 \
+# On every core: the test that runs this is SERIAL, and each unit test is a qemu-user process.
+ctest --test-dir "$scratch/cloudcast" --output-on-failure --timeout 120 -j "$(nproc)" \
   >"$scratch/ctest.log" 2>&1 ||
   { cat "$scratch/ctest.log" >&2; exit 1; }
 grep "tests passed" "$scratch/ctest.log"
@@ -60,6 +62,17 @@ if [ -x "$bridge" ]; then
   echo "ros2 bridge --help under qemu-user: $(qemu-aarch64-static "$bridge" --help 2>&1 | head -1)"
 else
   echo "ros2 bridge: not built (scripts/setup --arm64 installs cyclonedds-dev:arm64)"
+fi
+
+echo "== the ROS 1 bridge, a robot program (built when the arm64 roscpp libraries are installed)"
+bridge="$scratch/cloudcast/bin/cloudcast-ros-bridge"
+if [ -x "$bridge" ]; then
+  echo "ros1 bridge: $(aarch64-linux-gnu-readelf -h "$bridge" | awk '/Machine:/ {print $2}')"
+  echo "ros1 unit tests under qemu-user: $(ctest --test-dir "$scratch/cloudcast" -N -L 'unit/ros_bridge' |
+    sed -n 's/^Total Tests: //p') passed"
+  echo "ros1 bridge --help under qemu-user: $(qemu-aarch64-static "$bridge" --help 2>&1 | head -1)"
+else
+  echo "ros1 bridge: not built (scripts/setup --arm64 installs libroscpp4d:arm64 and the rest)"
 fi
 
 echo "== install, and a robot project finds it with find_package(cloudcast)"
