@@ -95,6 +95,13 @@ const std::vector<ParamDoc>& Docs() {
       {"h264/separate_stereo", "bool", "false",
        "encoding h264, input stereo: a bitstream per view instead of the right view "
        "interleaved after the left (the measured best)"},
+      {"h264/lossless", "bool", "false",
+       "encoding h264: every picture exactly as given (qp 0; not with h264/crf or h264/mbps): "
+       "for rendered, noise-free cameras (a simulator's); a real camera's noise makes it 40 "
+       "Mbit/s and more"},
+      {"h264/x264_params", "string", "",
+       "encoding h264: more x264 options, key=value:key=value, after ours (e.g. "
+       "partitions=all:ref=4; the latency and rate control options are refused)"},
       {"jpeg/quality", "int", "90",
        "encoding jpeg: the JPEG quality, 1..100. Without rate_control every frame's (fixed, at "
        "full resolution); with it, the quality a stream starts at"},
@@ -480,10 +487,26 @@ absl::Status ReadUplink(const ParamReader& p, BridgeOptions* o) {
   }
   const std::pair<const char*, bool*> flags[] = {{"h264/colour_444", &h.colour_444},
                                                  {"h264/grey", &h.grey},
-                                                 {"h264/separate_stereo", &h.separate_stereo}};
+                                                 {"h264/separate_stereo", &h.separate_stereo},
+                                                 {"h264/lossless", &h.lossless}};
   for (const auto& [name, out] : flags) {
     CLOUDCAST_ASSIGN_OR_RETURN(value, p.Bool(name));
     if (value) *out = *value;
+  }
+  if (h.lossless && (crf || mbps)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(p.Display("h264/lossless"), " is true but ",
+                     p.Display(crf ? "h264/crf" : "h264/mbps"),
+                     " is set; a lossless stream has no quality or bitrate to set"));
+  }
+  CLOUDCAST_ASSIGN_OR_RETURN(x264_params, p.String("h264/x264_params"));
+  if (x264_params) {
+    const std::string why = video::H264Settings::X264ParamsProblem(*x264_params);
+    if (!why.empty()) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(p.Display("h264/x264_params"), " '", *x264_params, "': ", why));
+    }
+    h.x264_params = *x264_params;
   }
   // One image to code: the layout of a pair's two would be silently ignored.
   CLOUDCAST_ASSIGN_OR_RETURN(separate, p.Bool("h264/separate_stereo"));

@@ -646,6 +646,8 @@ TEST_F(ClientProgramTest, HelpDocumentsEveryFlagWithDefaults) {
                            "--h264-444",
                            "--h264-grey",
                            "--h264-separate-stereo",
+                           "--h264-lossless",
+                           "--h264-x264-params",
                            "--focal",
                            "--baseline",
                            "--disparity-scale",
@@ -722,6 +724,14 @@ TEST_F(ClientProgramTest, BadFlagsAndFilesGiveClearErrors) {
       {{"--synthetic", "0x5"}, 2, "--synthetic"},
       {{"--encoding", "webp"}, 2, "--encoding"},
       {{"--encoding", "h264", "--h264-preset", "placebo"}, 2, "--h264-preset"},
+      {{"--encoding", "h264", "--h264-x264-params", "ref=4:bframes=3"},
+       2,
+       "--h264-x264-params: 'ref=4:bframes=3': 'bframes' is the encoder's own"},
+      {{"--encoding", "h264", "--h264-x264-params", "ref=4;touch x"},
+       2,
+       "the character ';' is none of x264's"},
+      {{"--encoding", "h264", "--h264-lossless", "--h264-crf", "10"}, 2, "--h264-lossless"},
+      {{"--h264-lossless"}, 2, "--h264-lossless needs --encoding h264"},
       {{"--record-format", "xyz"}, 2, "--record-format"},
       {{"--min", "5", "--max", "1"}, 2, "--min (5) must not exceed --max (1)"},
       {{"--synthetic", "64x48", "--tsukuba", "x"}, 2, "choose one source"},
@@ -802,6 +812,33 @@ TEST_F(ClientProgramTest, StreamsEveryInputKind) {
     // The same z = f * b / d on both sides; float rounding may move a point across a voxel edge.
     EXPECT_NEAR(points["depth"], points["disparity"], 0.01 * points["disparity"]);
   }
+}
+
+// --h264-lossless: stereo pairs coded grey at qp 0 (with x264 options of the user's) reach the
+// server's matcher exactly as the raw pairs' grey: the same disparities, so as many points in
+// every cloud (a near-lossless CRF changes the count).
+TEST_F(ClientProgramTest, LosslessH264StereoPairsGiveTheRawPairsClouds) {
+  std::map<std::string, Json> runs;
+  for (const std::string mode : {"raw", "h264"}) {
+    SCOPED_TRACE(mode);
+    const std::string json = Path("lossless_" + mode + ".json");
+    std::vector<std::string> args = {"--synthetic", "320x240", "--input", "stereo", "--server",
+                                     shared_target(), "--no-window", "--frames", "4", "--lossless",
+                                     "--progress", "0", "--json", json};
+    if (mode == "h264") {
+      args = Join(args, {"--encoding", "h264", "--h264-lossless", "--h264-grey",
+                         "--h264-preset", "superfast", "--h264-x264-params",
+                         "partitions=all:ref=4"});
+    }
+    const RunResult r = Run(args, "env -u DISPLAY");
+    ASSERT_TRUE(r.exited && r.code == 0) << r;
+    EXPECT_NE(r.out.find("frames: sent 4, received 4, dropped 0, errors 0"), std::string::npos)
+        << r;
+    runs[mode] = Json::parse(ReadText(json));
+  }
+  EXPECT_GT(runs["raw"]["mean_points_per_frame"].get<double>(), 1000);
+  // (Their Draco bytes differ: the points are grey.)
+  EXPECT_EQ(runs["h264"]["mean_points_per_frame"], runs["raw"]["mean_points_per_frame"]);
 }
 
 // A stereo pair given as files (a glob per camera), with the matcher tuned and the disparity

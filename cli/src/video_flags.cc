@@ -10,7 +10,8 @@ namespace {
 
 const char* const kFlags[] = {
     "--h264-preset",  "--h264-crf", "--h264-mbps", "--h264-keyframe-interval",
-    "--h264-threads", "--h264-444", "--h264-grey", "--h264-separate-stereo"};
+    "--h264-threads", "--h264-444", "--h264-grey", "--h264-separate-stereo",
+    "--h264-lossless", "--h264-x264-params"};
 
 }  // namespace
 
@@ -57,6 +58,23 @@ VideoFlags::VideoFlags(CLI::App& app, const std::string& group) : app_(app) {
   app.add_flag("--h264-separate-stereo", s_.separate_stereo,
                "A bitstream per view of a stereo pair with --encoding h264, instead of the right "
                "view interleaved after the left (the measured best)")
+      ->group(group);
+  app.add_flag("--h264-lossless", s_.lossless,
+               "Every picture exactly as given with --encoding h264 (qp 0): for rendered, "
+               "noise-free cameras (a simulator's), where it costs less than near-lossless CRFs; "
+               "a real camera's noise makes it 40 Mbit/s and more (docs/video.md)")
+      ->excludes(app.get_option("--h264-crf"))
+      ->excludes(app.get_option("--h264-mbps"))
+      ->group(group);
+  app.add_option("--h264-x264-params", s_.x264_params,
+                 "More x264 options with --encoding h264, key=value:key=value, after ours (e.g. "
+                 "partitions=all:ref=4; the latency and rate control options are refused)")
+      ->check(CLI::Validator(
+          [](std::string& v) -> std::string {
+            const std::string why = video::H264Settings::X264ParamsProblem(v);
+            return why.empty() ? std::string() : "'" + v + "': " + why;
+          },
+          "KEY=VALUE:...", ""))
       ->group(group);
 }
 

@@ -120,8 +120,10 @@ absl::Status PutPictures(const client::FrameInput& coded, v1::Frame* f) {
 
 std::string VideoSettings(const video::FrameEncoderOptions& v, sources::FrameKind kind) {
   const video::EncoderOptions& e = v.encoder;
-  std::string rate = e.crf > 0 ? fmt::format("crf {:g} <= {:g} Mbit/s", e.crf, e.bitrate_bps / 1e6)
-                               : fmt::format("{:g} Mbit/s", e.bitrate_bps / 1e6);
+  std::string rate = e.qp == 0  ? std::string("lossless (qp 0)")
+                     : e.crf > 0 ? fmt::format("crf {:g} <= {:g} Mbit/s", e.crf, e.bitrate_bps / 1e6)
+                                 : fmt::format("{:g} Mbit/s", e.bitrate_bps / 1e6);
+  if (!e.x264_params.empty()) rate += ", x264 " + e.x264_params;
   std::string pictures = v.grey                                            ? "grey 4:0:0"
                          : v.colour_kind == video::PictureKind::kColour444 ? "colour 4:4:4"
                                                                            : "colour 4:2:0";

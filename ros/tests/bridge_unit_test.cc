@@ -25,6 +25,10 @@
 #include "point_cloud2.h"
 #include "ros_params.h"
 #include "stereo_input.h"
+#ifdef CLOUDCAST_BRIDGE_VIDEO
+#include "cloudcast/video/frame_encoder.h"  // ToFrameEncoderOptions's result
+#include "cloudcast/video/h264_settings.h"
+#endif
 
 namespace cloudcast::ros_bridge {
 namespace {
@@ -723,8 +727,40 @@ TEST(BridgeParams, UplinkAndCapErrorsNameTheRos1Parameter) {
     p.Set("encoding", std::string("h264"));
     p.Set("h264/mbps", 2000.0);
     EXPECT_EQ(ErrorOf(p), "~h264/mbps is 2000; must be a bitrate in [0.05, 1000] Mbit/s");
+    p.values.clear();
+    p.Set("encoding", std::string("h264"));
+    p.Set("h264/x264_params", std::string("partitions=all:rc-lookahead=20"));
+    EXPECT_EQ(ErrorOf(p),
+              "~h264/x264_params 'partitions=all:rc-lookahead=20': 'rc-lookahead' is the "
+              "encoder's own (latency and rate control: the --h264-* settings)");
+    p.Set("h264/x264_params", std::string("partitions=all::ref=4"));
+    EXPECT_EQ(ErrorOf(p), "~h264/x264_params 'partitions=all::ref=4': an empty option "
+                          "(key=value:key=value)");
+    p.values.clear();
+    p.Set("encoding", std::string("h264"));
+    p.Set("h264/lossless", true);
+    p.Set("h264/crf", 4.0);
+    EXPECT_EQ(ErrorOf(p), "~h264/lossless is true but ~h264/crf is set; a lossless stream has no "
+                          "quality or bitrate to set");
   }
 }
+
+#ifdef CLOUDCAST_BRIDGE_VIDEO
+// h264/lossless and h264/x264_params reach the encoder: qp 0, the options after ours.
+TEST(BridgeParams, LosslessH264AndX264OptionsReachTheEncoder) {
+  MapParams p;
+  p.Set("encoding", std::string("h264"));
+  p.Set("h264/lossless", true);
+  p.Set("h264/x264_params", std::string("partitions=all:ref=4"));
+  auto o = ReadBridgeOptions(p, "cloudcast-ros-bridge");
+  ASSERT_TRUE(o.ok()) << o.status();
+  EXPECT_TRUE(o->h264.lossless);
+  const video::FrameEncoderOptions e = video::ToFrameEncoderOptions(o->h264, 30);
+  EXPECT_EQ(e.encoder.qp, 0);
+  EXPECT_EQ(e.encoder.crf, 0);
+  EXPECT_EQ(e.encoder.x264_params, "partitions=all:ref=4");
+}
+#endif
 
 TEST(BridgeParams, H264AndTheCapReachTheStream) {
   MapParams p;

@@ -19,6 +19,11 @@ FrameEncoderOptions ToFrameEncoderOptions(const H264Settings& s, double fps) {
   o.colour_kind = s.colour_444 ? PictureKind::kColour444 : PictureKind::kColour;
   o.interleave_stereo = !s.separate_stereo;
   o.grey = s.grey;
+  o.encoder.x264_params = s.x264_params;
+  if (s.lossless) {  // qp 0; the VBV's bitrate stays, unused (a rate controller's target too)
+    o.encoder.qp = 0;
+    o.encoder.crf = 0;
+  }
   return o;
 }
 

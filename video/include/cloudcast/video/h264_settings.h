@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstddef>
 #include <string>
 #include <string_view>
 
@@ -33,6 +34,15 @@ struct H264Settings {
   bool colour_444 = false;       // colour as 4:4:4 (kColour444) instead of 4:2:0
   bool grey = false;             // every image coded grey (4:0:0)
   bool separate_stereo = false;  // a bitstream per view instead of right interleaved after left
+  // Every picture exactly as given (x264's qp 0; crf and mbps unused, and a rate controller
+  // cannot lower it): for rendered, noise-free cameras (a simulator's), where lossless costs less
+  // than the near-lossless CRFs that keep stereo matching whole (docs/video.md). A real camera's
+  // noise makes it 40 Mbit/s and more.
+  bool lossless = false;
+  // More x264 options, "key=value:key=value", after ours (e.g. "partitions=all:ref=4", which
+  // docs/video.md measured a quarter smaller lossless on the synthetic scene). What the encoder
+  // sets for latency and rate control (kX264ParamsOurs) is refused.
+  std::string x264_params;
 
   // The rules, each with the text errors give after "must be ".
   static bool PresetOk(std::string_view p) {
@@ -43,6 +53,40 @@ struct H264Settings {
   static constexpr const char* kCrfRule = "0 or a quality in [1, 51]";
   static bool MbpsOk(double v) { return std::isfinite(v) && v >= 0.05 && v <= 1000; }
   static constexpr const char* kMbpsRule = "a bitrate in [0.05, 1000] Mbit/s";
+  // The x264 options the encoder sets itself: without lookahead, B-frames or frame threads a
+  // picture is coded at once; the rate control is the flags' (crf, mbps, lossless) and the rate
+  // controller's; an IDR repeats the headers for a late joiner.
+  static constexpr std::array<std::string_view, 22> kX264ParamsOurs = {
+      "bframes", "b-adapt",    "b-pyramid", "rc-lookahead", "sync-lookahead", "lookahead-threads",
+      "threads", "sliced-threads", "repeat-headers", "keyint", "min-keyint", "scenecut",
+      "intra-refresh", "qp", "crf", "bitrate", "vbv-maxrate", "vbv-bufsize", "vbv-init", "pass",
+      "stats", "qpmin"};
+  static constexpr std::size_t kMaxX264Params = 256;
+  // "" when `params` may be given, else why not (the text after "'<params>': ").
+  static std::string X264ParamsProblem(std::string_view params) {
+    if (params.size() > kMaxX264Params) {
+      return "longer than " + std::to_string(kMaxX264Params) + " characters";
+    }
+    for (char c : params) {
+      const bool ok = (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') ||
+                      c == '_' || c == '-' || c == '.' || c == ',' || c == '=' || c == ':' ||
+                      c == '+';
+      if (!ok) return std::string("the character '") + c + "' is none of x264's (key=value:...)";
+    }
+    std::size_t at = 0;
+    while (at <= params.size()) {
+      const std::size_t end = std::min(params.find(':', at), params.size());
+      const std::string_view item = params.substr(at, end - at);
+      const std::string_view key = item.substr(0, item.find('='));
+      if (key.empty()) return "an empty option (key=value:key=value)";
+      if (std::find(kX264ParamsOurs.begin(), kX264ParamsOurs.end(), key) != kX264ParamsOurs.end()) {
+        return "'" + std::string(key) +
+               "' is the encoder's own (latency and rate control: the --h264-* settings)";
+      }
+      at = end + 1;
+    }
+    return "";
+  }
   static constexpr int kMaxKeyframeInterval = 100000;
   static constexpr int kMaxThreads = 16;
 };
