@@ -60,29 +60,23 @@ else
 fi
 grep "tests passed" "$scratch/ctest.log"
 
-echo "== the ROS 2 bridge, a robot program (built when cyclonedds-dev:arm64 is installed)"
-bridge="$scratch/cloudcast/bin/cloudcast-ros2-bridge"
-if [ -x "$bridge" ]; then
-  echo "ros2 bridge: $(aarch64-linux-gnu-readelf -h "$bridge" | awk '/Machine:/ {print $2}')"
-  # Every test passed above; these are the bridge's (their label, tests/client_only/).
-  echo "ros2 unit tests under qemu-user: $(ctest --test-dir "$scratch/cloudcast" -N -L 'unit/ros2_' |
+# A ROS bridge, a robot program: AArch64 code, its unit tests among those that passed above (by
+# their label, tests/client_only/), and the program starting under qemu-user (--help).
+#   report_bridge KEY PROGRAM TEST_LABEL WHAT_INSTALLS_IT
+report_bridge() {
+  local key=$1 bridge="$scratch/cloudcast/bin/$2" label=$3 needs=$4
+  echo "== the $key bridge, a robot program (built when $needs is installed)"
+  if [ ! -x "$bridge" ]; then
+    echo "$key bridge: not built (scripts/setup --arm64 installs $needs)"
+    return
+  fi
+  echo "$key bridge: $(aarch64-linux-gnu-readelf -h "$bridge" | awk '/Machine:/ {print $2}')"
+  echo "$key unit tests under qemu-user: $(ctest --test-dir "$scratch/cloudcast" -N -L "$label" |
     sed -n 's/^Total Tests: //p') passed"
-  # The program itself starts under qemu-user and answers --help.
-  echo "ros2 bridge --help under qemu-user: $(qemu-aarch64-static "$bridge" --help 2>&1 | head -1)"
-else
-  echo "ros2 bridge: not built (scripts/setup --arm64 installs cyclonedds-dev:arm64)"
-fi
-
-echo "== the ROS 1 bridge, a robot program (built when the arm64 roscpp libraries are installed)"
-bridge="$scratch/cloudcast/bin/cloudcast-ros-bridge"
-if [ -x "$bridge" ]; then
-  echo "ros1 bridge: $(aarch64-linux-gnu-readelf -h "$bridge" | awk '/Machine:/ {print $2}')"
-  echo "ros1 unit tests under qemu-user: $(ctest --test-dir "$scratch/cloudcast" -N -L 'unit/ros_bridge' |
-    sed -n 's/^Total Tests: //p') passed"
-  echo "ros1 bridge --help under qemu-user: $(qemu-aarch64-static "$bridge" --help 2>&1 | head -1)"
-else
-  echo "ros1 bridge: not built (scripts/setup --arm64 installs libroscpp4d:arm64 and the rest)"
-fi
+  echo "$key bridge --help under qemu-user: $(qemu-aarch64-static "$bridge" --help 2>&1 | head -1)"
+}
+report_bridge ros2 cloudcast-ros2-bridge 'unit/ros2_' "cyclonedds-dev:arm64"
+report_bridge ros1 cloudcast-ros-bridge 'unit/ros_bridge' "libroscpp4d:arm64 (roscpp's runtime)"
 
 echo "== install, and a robot project finds it with find_package(cloudcast)"
 rm -rf "$scratch/prefix" "$scratch/robot"
