@@ -64,6 +64,7 @@ struct H264Settings {
   static constexpr std::size_t kMaxX264Params = 256;
   // "" when `params` may be given, else why not (the text after "'<params>': ").
   static std::string X264ParamsProblem(std::string_view params) {
+    if (params.empty()) return "";  // none
     if (params.size() > kMaxX264Params) {
       return "longer than " + std::to_string(kMaxX264Params) + " characters";
     }
