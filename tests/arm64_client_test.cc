@@ -28,6 +28,9 @@ using testing::ServerProcess;
 // only what changed), and the script that makes them.
 const std::string kScratch = CLOUDCAST_ARM64_SCRATCH_DIR;
 const std::string kSourceDir = CLOUDCAST_SOURCE_DIR;
+// qemu-user as the cross build runs its own tests: with the arm64 libraries scripts/setup
+// unpacked rather than installed (OpenCV's) on the guest's library path (cmake/qemu-wrapper.cmake).
+const std::string kQemu = kScratch + "/cloudcast/qemu-aarch64";
 
 class Arm64Client : public ::testing::Test {
  protected:
@@ -94,8 +97,9 @@ TEST_F(Arm64Client, RosBridgeBuildsAndItsUnitTestsPassUnderQemu) {
 // Debian's stereo_image_proc and depth_image_proc, an amd64 server) with the arm64 bridge in
 // place of this build's (CLOUDCAST_ROS_BRIDGE, CLOUDCAST_ROS_BRIDGE_EMULATOR). A selection, for
 // CI's time: the clouds of a disparity camera against stereo_image_proc's and of a depth camera
-// against depth_image_proc's (point for point), and TLS with a token. Left out: h264 and jpeg (no
-// FFmpeg or OpenCV in the arm64 build, which refuses both by name), the launch files (roslaunch
+// against depth_image_proc's (point for point), and TLS with a token. Left out: h264 (no FFmpeg
+// in the arm64 build, which refuses it by name), jpeg (its coder's unit tests run under qemu-user
+// when OpenCV's arm64 libraries are unpacked), the launch files (roslaunch
 // starts the package's program: this build's), and the rest of the scripts' tests, which passed
 // so by hand on 2026-12-06 (rosbag playback, a bad parameter, stereo pairs; docs/client.md).
 TEST_F(Arm64Client, RosBridgeCarriesRosTrafficUnderQemu) {
@@ -108,7 +112,7 @@ TEST_F(Arm64Client, RosBridgeCarriesRosTrafficUnderQemu) {
     GTEST_SKIP() << "this build has no ROS 1 bridge, so no ROS 1 tests to run it by";
   }
   const std::string env = "CLOUDCAST_ROS_BRIDGE=" + bridge +
-                          " CLOUDCAST_ROS_BRIDGE_EMULATOR=" + CLOUDCAST_QEMU_AARCH64;
+                          " CLOUDCAST_ROS_BRIDGE_EMULATOR=" + kQemu;
   const struct {
     const char* script;
     std::vector<std::string> tests;
@@ -126,7 +130,7 @@ TEST_F(Arm64Client, RosBridgeCarriesRosTrafficUnderQemu) {
     if (r.exited && r.code == 77) GTEST_SKIP() << run.script << " skipped\n" << r;
     EXPECT_EQ(r.code, 0) << run.script << "\n" << r;
     // The bridge it started was the arm64 one, under qemu-user, and every test it ran passed.
-    EXPECT_NE(r.out.find("[ bridge ] " + std::string(CLOUDCAST_QEMU_AARCH64) + " " + bridge),
+    EXPECT_NE(r.out.find("[ bridge ] " + kQemu + " " + bridge),
               std::string::npos)
         << r;
     EXPECT_NE(r.err.find("Ran " + std::to_string(run.tests.size()) + " test"), std::string::npos)
@@ -137,9 +141,9 @@ TEST_F(Arm64Client, RosBridgeCarriesRosTrafficUnderQemu) {
 // The bridge's DDS traffic under qemu-user: ros2_bridge_dds_test (its camera and subscriber in
 // this process, its network namespace, an amd64 server) with the arm64 bridge in place of this
 // build's. qemu-user 7.2 has no IP_MULTICAST_IF, so Cyclone discovers by unicast on loopback
-// (CYCLONEDDS_URI: no multicast, the peer 127.0.0.1), at both ends. Left out: h264 and jpeg (the
-// arm64 build has no FFmpeg or OpenCV and refuses both by name) and the Fast DDS garbage
-// writer, whose discovery needs multicast.
+// (CYCLONEDDS_URI: no multicast, the peer 127.0.0.1), at both ends. Left out: h264 (the arm64
+// build has no FFmpeg and refuses it by name), jpeg (as in the ROS 1 test above) and the Fast DDS
+// garbage writer, whose discovery needs multicast.
 TEST_F(Arm64Client, Ros2BridgeCarriesDdsTrafficUnderQemu) {
   const std::string bridge = kScratch + "/cloudcast/bin/cloudcast-ros2-bridge";
   if (!std::filesystem::exists(bridge)) {
@@ -157,7 +161,7 @@ TEST_F(Arm64Client, Ros2BridgeCarriesDdsTrafficUnderQemu) {
       "<Internal><SocketReceiveBufferSize min=\"default\" max=\"10MB\"/></Internal>"
       "</Domain></CycloneDDS>";
   const std::string env = "CYCLONEDDS_URI='" + uri + "' CLOUDCAST_ROS2_BRIDGE=" + bridge +
-                          " CLOUDCAST_ROS2_BRIDGE_EMULATOR=" + CLOUDCAST_QEMU_AARCH64;
+                          " CLOUDCAST_ROS2_BRIDGE_EMULATOR=" + kQemu;
   const testing::RunResult r = RunProgram(
       dds_test, {"--gtest_filter=Ros2BridgeTest.*-*H264*:*Jpeg*:*NonCdr*"}, kScratch, env);
   if (r.out.find("[  PASSED  ] 0 tests") != std::string::npos &&
@@ -167,7 +171,7 @@ TEST_F(Arm64Client, Ros2BridgeCarriesDdsTrafficUnderQemu) {
   ASSERT_EQ(r.code, 0) << r;
   EXPECT_EQ(r.out.find("FAILED"), std::string::npos) << r;
   // Every bridge it started was the arm64 one, under qemu-user.
-  EXPECT_NE(r.out.find("[ bridge   ] " + std::string(CLOUDCAST_QEMU_AARCH64) + " " + bridge),
+  EXPECT_NE(r.out.find("[ bridge   ] " + kQemu + " " + bridge),
             std::string::npos)
       << r;
   const std::size_t at = r.out.find("[  PASSED  ] ");
@@ -185,7 +189,7 @@ TEST_F(Arm64Client, StreamsToAnAmd64ServerAndDecodesAsAmd64Does) {
   std::filesystem::remove_all(out);
   std::filesystem::create_directories(out);
   const testing::RunResult robot =
-      RunProgram(CLOUDCAST_QEMU_AARCH64, {kScratch + "/robot/robot", server.address(), out}, out);
+      RunProgram(kQemu, {kScratch + "/robot/robot", server.address(), out}, out);
   ASSERT_EQ(robot.code, 0) << robot << "\nserver log:\n" << server.log();
   // Frame 0 raw, frame 1 through the uplink codec (compressed on arm64, decompressed on amd64):
   // the robot checked that both gave the same Draco bytes.
@@ -203,6 +207,56 @@ TEST_F(Arm64Client, StreamsToAnAmd64ServerAndDecodesAsAmd64Does) {
   EXPECT_EQ(std::memcmp(arm64_points.data(), here.points.data(), arm64_points.size()), 0)
       << "the arm64 client decoded a different cloud from the same " << draco.size()
       << " Draco bytes";
+}
+
+// The README's robot example on arm64 (built when scripts/setup unpacked OpenCV's arm64
+// libraries): New Tsukuba's PNG folders read by OpenCV's imgcodecs into cv::Mats, and the synthetic
+// scene as a depth camera, each streamed to an amd64 server: every frame's cloud has the points and
+// the Draco bytes that the amd64 example's same frames get.
+TEST_F(Arm64Client, RobotExampleSendsWhatTheAmd64OneSends) {
+  const std::string example = kScratch + "/cloudcast/bin/cloudcast-robot-example";
+  if (!std::filesystem::exists(example)) {
+    GTEST_SKIP() << "OpenCV's arm64 libraries are not unpacked (scripts/setup --arm64)";
+  }
+  const std::string here = testing::BinDir() + "/cloudcast-robot-example";
+  if (!std::filesystem::exists(here)) GTEST_SKIP() << "this build has no robot example";
+  ServerProcess server("127.0.0.1:0", "amd64-server", {}, kScratch + "/server.log");
+  ASSERT_TRUE(server.WaitUntilServing()) << server.log();
+
+  const std::string data = CLOUDCAST_DEFAULT_DATA_DIR;
+  const struct {
+    std::vector<std::string> args;
+    std::size_t frames;
+  } runs[] = {
+      {{server.address(), "3", data + "/groundtruth/disparity_maps/left",
+        data + "/illumination/daylight/left"},
+       3},
+      {{"--input", "depth", server.address(), "2"}, 2},
+  };
+  // "frame 1: 1873 points, 4124 Draco bytes, latency 3.6 ms": all but the latency.
+  const auto clouds = [](const std::string& out) {
+    std::vector<std::string> lines;
+    for (std::size_t at = out.find("frame "); at != std::string::npos;
+         at = out.find("frame ", at + 1)) {
+      const std::size_t end = out.find(", latency", at);
+      if (end != std::string::npos) lines.push_back(out.substr(at, end - at));
+    }
+    return lines;
+  };
+  for (const auto& run : runs) {
+    SCOPED_TRACE(run.args.front() + " ...");
+    std::vector<std::string> qemu_args = {example};
+    qemu_args.insert(qemu_args.end(), run.args.begin(), run.args.end());
+    const testing::RunResult arm64 = RunProgram(kQemu, qemu_args, kScratch);
+    ASSERT_EQ(arm64.code, 0) << arm64 << "\nserver log:\n" << server.log();
+    const testing::RunResult amd64 = RunProgram(here, run.args, kScratch);
+    ASSERT_EQ(amd64.code, 0) << amd64;
+    EXPECT_NE(arm64.out.find("stream finished: OK"), std::string::npos) << arm64;
+    const std::vector<std::string> got = clouds(arm64.out), want = clouds(amd64.out);
+    ASSERT_EQ(want.size(), run.frames) << amd64;
+    EXPECT_EQ(got, want) << arm64 << amd64;
+    EXPECT_EQ(arm64.out.find(" 0 points"), std::string::npos) << arm64;
+  }
 }
 
 }  // namespace
