@@ -13,7 +13,7 @@ set(_cloudcast_installed cloudcast_core_portable cloudcast_frame_codec cloudcast
   cloudcast_convert cloudcast_client)
 # The engine's stages and encoder exist only where they build (x86-64, core/CMakeLists.txt).
 if(TARGET cloudcast_core)
-  list(PREPEND _cloudcast_installed cloudcast_core)
+  list(PREPEND _cloudcast_installed cloudcast_core cloudcast_draco_encode)
 endif()
 foreach(target ${_cloudcast_installed})
   string(REPLACE "cloudcast_" "" export_name ${target})

@@ -147,7 +147,8 @@ void FillInfo(int bits, float range, float max_abs, std::size_t bytes, DracoEnco
 bool EntropyCoded(int bits) { return bits <= kMaxEntropyCodedBits; }
 
 // Our encoder (draco_sequential_encoder.h), for sequential coding. Sets *done unless the cloud
-// needs libdraco after all; the bytes are libdraco's either way.
+// needs libdraco after all; the bytes are libdraco's either way. Only where it is built (x86-64).
+#if defined(__x86_64__) && defined(__SSE2__)
 absl::Status EncodeWithCloudcast(const PointCloud& cloud, const DracoOptions& options,
                                  std::string* out, DracoEncodeInfo* info, bool* done) {
   *done = false;
@@ -196,6 +197,13 @@ absl::Status EncodeWithCloudcast(const PointCloud& cloud, const DracoOptions& op
   *done = true;
   return absl::OkStatus();
 }
+#else
+absl::Status EncodeWithCloudcast(const PointCloud&, const DracoOptions&, std::string*,
+                                 DracoEncodeInfo*, bool* done) {
+  *done = false;  // libdraco's turn, always
+  return absl::OkStatus();
+}
+#endif
 
 // Draco 1.5.5 crashes when quantizing an attribute with no values (ComputeParameters reads
 // value 0), and fails to decode a 0-point cloud that carries an 8-bit attribute. A 0-point cloud
