@@ -1,6 +1,6 @@
-# OpenCV in the arm64 cross build (scripts/build-arm64), for the robot example: it reads its
-# images with imgcodecs, whose arm64 package cannot be installed beside the host's (it pulls GDAL,
-# whose arm64 dependencies replace the host's). scripts/setup --arm64 unpacks it, its runtime
+# OpenCV in the arm64 cross build (scripts/build-arm64), for the robot example and
+# cloudcast-client: they read images with imgcodecs, whose arm64 package cannot be installed
+# beside the host's (it pulls GDAL, whose arm64 dependencies replace the host's). scripts/setup --arm64 unpacks it, its runtime
 # closure and the arm64 headers into build-arm64-deps/ instead. Imported targets named as
 # OpenCV's own from there; the libraries behind them are found by the linker through
 # -rpath-link, and under qemu-user by the loader through LD_LIBRARY_PATH
@@ -11,7 +11,12 @@ set(_opencv_lib ${CLOUDCAST_ARM64_DEPS}/usr/lib/${CMAKE_LIBRARY_ARCHITECTURE})
 set(OpenCV_INCLUDE_DIRS ${CLOUDCAST_ARM64_DEPS}/usr/include/opencv4
     ${CLOUDCAST_ARM64_DEPS}/usr/include/${CMAKE_LIBRARY_ARCHITECTURE}/opencv4)
 set(OpenCV_LIBS)
-foreach(module core imgproc imgcodecs)
+# videoio (video files) only for cloudcast-client's sources (sources/), unpacked with PCL's.
+set(_opencv_modules core imgproc imgcodecs)
+if(CLOUDCAST_BUILD_VIEWER)
+  list(APPEND _opencv_modules videoio)
+endif()
+foreach(module ${_opencv_modules})
   set(_so ${_opencv_lib}/libopencv_${module}.so.406)  # Debian 12's OpenCV 4.6
   if(NOT EXISTS ${_so})
     message(FATAL_ERROR "${_so} is missing: scripts/setup --arm64 unpacks OpenCV's arm64 "

@@ -97,9 +97,9 @@ TEST_F(Arm64Client, RosBridgeBuildsAndItsUnitTestsPassUnderQemu) {
 // Debian's stereo_image_proc and depth_image_proc, an amd64 server) with the arm64 bridge in
 // place of this build's (CLOUDCAST_ROS_BRIDGE, CLOUDCAST_ROS_BRIDGE_EMULATOR). A selection, for
 // CI's time: the clouds of a disparity camera against stereo_image_proc's and of a depth camera
-// against depth_image_proc's (point for point), and TLS with a token. Left out: h264 (no FFmpeg
-// in the arm64 build, which refuses it by name), jpeg (its coder's unit tests run under qemu-user
-// when OpenCV's arm64 libraries are unpacked), the launch files (roslaunch
+// against depth_image_proc's (point for point), and TLS with a token. Left out: h264 and jpeg
+// (their encoders' unit tests pass under qemu-user above, and cloudcast-client's h264 below), the
+// launch files (roslaunch
 // starts the package's program: this build's), and the rest of the scripts' tests, which passed
 // so by hand on 2026-12-06 (rosbag playback, a bad parameter, stereo pairs; docs/client.md).
 TEST_F(Arm64Client, RosBridgeCarriesRosTrafficUnderQemu) {
@@ -141,9 +141,8 @@ TEST_F(Arm64Client, RosBridgeCarriesRosTrafficUnderQemu) {
 // The bridge's DDS traffic under qemu-user: ros2_bridge_dds_test (its camera and subscriber in
 // this process, its network namespace, an amd64 server) with the arm64 bridge in place of this
 // build's. qemu-user 7.2 has no IP_MULTICAST_IF, so Cyclone discovers by unicast on loopback
-// (CYCLONEDDS_URI: no multicast, the peer 127.0.0.1), at both ends. Left out: h264 (the arm64
-// build has no FFmpeg and refuses it by name), jpeg (as in the ROS 1 test above) and the Fast DDS
-// garbage writer, whose discovery needs multicast.
+// (CYCLONEDDS_URI: no multicast, the peer 127.0.0.1), at both ends. Left out: h264 and jpeg (as
+// in the ROS 1 test above) and the Fast DDS garbage writer, whose discovery needs multicast.
 TEST_F(Arm64Client, Ros2BridgeCarriesDdsTrafficUnderQemu) {
   const std::string bridge = kScratch + "/cloudcast/bin/cloudcast-ros2-bridge";
   if (!std::filesystem::exists(bridge)) {
@@ -257,6 +256,60 @@ TEST_F(Arm64Client, RobotExampleSendsWhatTheAmd64OneSends) {
     EXPECT_EQ(got, want) << arm64 << amd64;
     EXPECT_EQ(arm64.out.find(" 0 points"), std::string::npos) << arm64;
   }
+}
+
+// cloudcast-client on arm64, as a robot runs it (no display: --no-window), built when scripts/setup
+// --arm64 unpacked PCL's and OpenCV's arm64 libraries and installed GLFW's, libepoxy's, FFmpeg's
+// and spdlog's: New Tsukuba's frames recorded as .pcd files equal, byte for byte, what the amd64
+// client records from the same server; and the colour as H.264 (libx264 on arm64, decoded on the
+// amd64 server) answered frame for frame.
+TEST_F(Arm64Client, ClientRecordsWithoutADisplayAsTheAmd64OneDoes) {
+  const std::string client = kScratch + "/cloudcast/bin/cloudcast-client";
+  if (!std::filesystem::exists(client)) {
+    GTEST_SKIP() << "cloudcast-client is not in the arm64 build (scripts/setup --arm64)";
+  }
+  const std::string here = testing::BinDir() + "/cloudcast-client";
+  ServerProcess server("127.0.0.1:0", "amd64-server", {}, kScratch + "/server.log");
+  ASSERT_TRUE(server.WaitUntilServing()) << server.log();
+
+  const std::vector<std::string> common = {
+      "--tsukuba", CLOUDCAST_DEFAULT_DATA_DIR, "--camera-preset", "new_tsukuba",
+      "--server",  server.address(),          "--no-window",     "--frames", "3"};
+  // Records 3 frames as .pcd files into kScratch/client-NAME, with the arm64 client under qemu-user
+  // or with this build's.
+  const auto record = [&](bool on_arm64, const std::string& name, std::vector<std::string> extra) {
+    const std::string dir = kScratch + "/client-" + name;
+    std::filesystem::remove_all(dir);
+    std::vector<std::string> args = common;
+    args.insert(args.end(), extra.begin(), extra.end());
+    args.insert(args.end(), {"--record", dir, "--record-format", "pcd", "--json", dir + ".json"});
+    if (!on_arm64) return RunProgram(here, args, kScratch, "env -u DISPLAY");
+    args.insert(args.begin(), client);
+    return RunProgram(kQemu, args, kScratch, "env -u DISPLAY");
+  };
+  const testing::RunResult arm64 = record(true, "arm64", {});
+  ASSERT_EQ(arm64.code, 0) << arm64 << "\nserver log:\n" << server.log();
+  EXPECT_NE(arm64.out.find("frames: sent 3, received 3, dropped 0, errors 0"), std::string::npos)
+      << arm64;
+  const testing::RunResult amd64 = record(false, "amd64", {});
+  ASSERT_EQ(amd64.code, 0) << amd64;
+  std::vector<std::string> files;
+  for (const auto& entry : std::filesystem::directory_iterator(kScratch + "/client-amd64")) {
+    files.push_back(entry.path().filename());
+  }
+  ASSERT_EQ(files.size(), 3u);
+  for (const std::string& file : files) {
+    SCOPED_TRACE(file);
+    const std::string want = ReadText(kScratch + "/client-amd64/" + file);
+    ASSERT_FALSE(want.empty());
+    EXPECT_TRUE(ReadText(kScratch + "/client-arm64/" + file) == want)
+        << "the arm64 client recorded a different " << file;
+  }
+
+  const testing::RunResult h264 = record(true, "h264", {"--encoding", "h264"});
+  ASSERT_EQ(h264.code, 0) << h264 << "\nserver log:\n" << server.log();
+  EXPECT_NE(h264.out.find("frames: sent 3, received 3, dropped 0, errors 0"), std::string::npos)
+      << h264;
 }
 
 }  // namespace

@@ -32,11 +32,11 @@ start=$SECONDS
 "$src/scripts/build-arm64" "$scratch/cloudcast" >"$scratch/build.log" 2>&1 ||
   { tail -50 "$scratch/build.log" >&2; exit 1; }
 echo "cross build: $((SECONDS - start)) s"
-# Only the client's own dependencies, and none of the x86-64 engine. (OpenCV, when scripts/setup
-# unpacked it, only for the robot example and the bridges' JPEG coder: the installed library is
-# checked below.)
-if grep -qiE "pcl_|open3d|prometheus|CLI11|glfw|epoxy" "$scratch/cloudcast/build.ninja"; then
-  echo "the arm64 client build references PCL, Open3D, prometheus-cpp, CLI11 or GL" >&2
+# None of the server's or the benchmarks' dependencies, and none of the x86-64 engine. (OpenCV,
+# PCL, GL, FFmpeg and CLI11, when scripts/setup provided them, only for the robot example,
+# cloudcast-client and the bridges' encoders: the installed client library is checked below.)
+if grep -qiE "open3d|prometheus" "$scratch/cloudcast/build.ninja"; then
+  echo "the arm64 client build references Open3D or prometheus-cpp" >&2
   exit 1
 fi
 if grep -qE "draco_sequential_encoder|voxel_grid\.cc|pipeline\.cc|filters\.cc" \
@@ -94,9 +94,11 @@ cmake -S "$src/tests/package" -B "$scratch/robot" -G Ninja -DCMAKE_BUILD_TYPE=Re
 cmake --build "$scratch/robot" >"$scratch/robot-build.log" 2>&1 ||
   { cat "$scratch/robot-build.log" >&2; exit 1; }
 echo "robot: $(aarch64-linux-gnu-readelf -h "$scratch/robot/robot" | awk '/Machine:/ {print $2}')"
-if grep -rqi opencv "$scratch/prefix/lib/cmake/cloudcast" ||
-   aarch64-linux-gnu-readelf -d "$scratch/robot/robot" | grep -qi opencv; then
-  echo "the installed arm64 client library's package, or the robot linked against it, needs OpenCV" >&2
+# The client library alone: gRPC, Protobuf, Draco, Abseil and zstd.
+if grep -rqiE "opencv|pcl|glfw|epoxy|avcodec|CLI11|spdlog" "$scratch/prefix/lib/cmake/cloudcast" ||
+   aarch64-linux-gnu-readelf -d "$scratch/robot/robot" | grep -qiE "opencv|pcl|glfw|epoxy|avcodec"; then
+  echo "the installed arm64 client library's package, or the robot linked against it, needs" \
+       "more than the client library's own dependencies" >&2
   exit 1
 fi
 
@@ -109,4 +111,12 @@ if [ -x "$example" ]; then
   echo "robot example --help under qemu-user: $("$qemu" "$example" --help 2>&1 | head -1)"
 else
   echo "robot example: not built (scripts/setup --arm64 unpacks OpenCV's arm64 libraries)"
+fi
+client=$scratch/cloudcast/bin/cloudcast-client
+echo "== cloudcast-client (built when PCL's and OpenCV's arm64 libraries are unpacked)"
+if [ -x "$client" ]; then
+  echo "cloudcast-client: $(aarch64-linux-gnu-readelf -h "$client" | awk '/Machine:/ {print $2}')"
+  echo "cloudcast-client --help under qemu-user: $("$qemu" "$client" --help 2>&1 | head -1)"
+else
+  echo "cloudcast-client: not built (scripts/setup --arm64 provides its arm64 libraries)"
 fi
