@@ -41,19 +41,12 @@ struct DracoCloudExtent {
 };
 
 // Scans `n` points, skipping those with a non-finite coordinate. SSE2 on x86-64
-// (draco_sequential_encoder.cc); ScanForDracoPortable elsewhere.
+// (draco_sequential_encoder.cc); ScanForDracoPortable elsewhere. The encoder below exists on
+// x86-64 only; elsewhere EncodeDraco leaves every cloud to libdraco, whose bytes it reproduces.
 DracoCloudExtent ScanForDraco(const Point* points, std::size_t n);
 // The same scan in plain C++ (draco_scan.cc), for every architecture; the tests hold it equal to
 // ScanForDraco on x86-64.
 DracoCloudExtent ScanForDracoPortable(const Point* points, std::size_t n);
-
-// Whether this build has the encoder below (x86-64); elsewhere EncodeDraco leaves every cloud to
-// libdraco, whose bytes it reproduces.
-#if defined(__x86_64__) && defined(__SSE2__)
-inline constexpr bool kHaveDracoSequentialEncoder = true;
-#else
-inline constexpr bool kHaveDracoSequentialEncoder = false;
-#endif
 
 struct DracoSequentialOptions {
   int position_bits = 10;  // 1..30
