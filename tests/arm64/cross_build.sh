@@ -102,21 +102,19 @@ if grep -rqiE "opencv|pcl|glfw|epoxy|avcodec|CLI11|spdlog" "$scratch/prefix/lib/
   exit 1
 fi
 
-# The README's robot example (cv::Mat frames, PNG folders through OpenCV's imgcodecs), built when
-# scripts/setup unpacked OpenCV's arm64 libraries.
-example=$scratch/cloudcast/bin/cloudcast-robot-example
-echo "== the robot example (built when OpenCV's arm64 libraries are unpacked)"
-if [ -x "$example" ]; then
-  echo "robot example: $(aarch64-linux-gnu-readelf -h "$example" | awk '/Machine:/ {print $2}')"
-  echo "robot example --help under qemu-user: $("$qemu" "$example" --help 2>&1 | head -1)"
-else
-  echo "robot example: not built (scripts/setup --arm64 unpacks OpenCV's arm64 libraries)"
-fi
-client=$scratch/cloudcast/bin/cloudcast-client
-echo "== cloudcast-client (built when PCL's and OpenCV's arm64 libraries are unpacked)"
-if [ -x "$client" ]; then
-  echo "cloudcast-client: $(aarch64-linux-gnu-readelf -h "$client" | awk '/Machine:/ {print $2}')"
-  echo "cloudcast-client --help under qemu-user: $("$qemu" "$client" --help 2>&1 | head -1)"
-else
-  echo "cloudcast-client: not built (scripts/setup --arm64 provides its arm64 libraries)"
-fi
+# A robot program beyond the library: AArch64 code, starting under qemu-user (--help).
+#   report_program KEY PROGRAM WHAT_PROVIDES_ITS_LIBRARIES
+report_program() {
+  local key=$1 program="$scratch/cloudcast/bin/$2" needs=$3
+  echo "== $key (built when $needs)"
+  if [ ! -x "$program" ]; then
+    echo "$key: not built (scripts/setup --arm64 provides its arm64 libraries)"
+    return
+  fi
+  echo "$key: $(aarch64-linux-gnu-readelf -h "$program" | awk '/Machine:/ {print $2}')"
+  echo "$key --help under qemu-user: $("$qemu" "$program" --help 2>&1 | head -1)"
+}
+# The README's robot example (cv::Mat frames, PNG folders through OpenCV's imgcodecs), and
+# cloudcast-client (run without a window on a robot).
+report_program "robot example" cloudcast-robot-example "OpenCV's arm64 libraries are unpacked"
+report_program cloudcast-client cloudcast-client "PCL's and OpenCV's arm64 libraries are unpacked"
