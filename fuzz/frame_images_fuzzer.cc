@@ -1,6 +1,7 @@
 // The image decoders of the encoded-frame path, through PrepareFrameImages as a worker calls it
-// (one DecodeScratch kept from input to input, as a worker keeps it): PNG, JPEG, TIFF, PNM and
-// PFM bytes checked by CheckEncodedImage and decoded by OpenCV, and the zstd uplink
+// (one DecodeScratch kept from input to input, as a worker keeps it): PNG, JPEG, TIFF and PNM
+// bytes checked by CheckEncodedImage and decoded by OpenCV, PFM by io/src/pfm.cc (seed
+// pfm_header_opencv_reads_otherwise: OpenCV left a file in /tmp for it), and the zstd uplink
 // (convert::DecodeCompressed, core/frame_codec's PlaneDecompressor and predictors).
 //
 // Input layout (fuzz/make_seeds.cc writes the seeds in it):

@@ -7,6 +7,10 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <opencv2/imgcodecs.hpp>
 #include <string>
 #include <vector>
 
@@ -110,6 +114,102 @@ TEST_F(ImageIoTest, DisparityKeepsDepthAndValues) {
   auto decoded = DecodeDisparity(ReadText(Path("d16.png")));
   ASSERT_TRUE(decoded.ok()) << decoded.status();
   EXPECT_EQ(decoded->pixels, d16->pixels);
+}
+
+// A PFM in a frame's bytes decodes in memory, as OpenCV reads the same file. OpenCV 4.6 cannot
+// read PFM from memory: imdecode wrote every PFM frame to /tmp first, and left the file there
+// whenever the header read differently from our size check ("# comment" lines, a height of 0 to
+// OpenCV): a CI run of the fuzzers and tests left about 1,000, and any client could fill the
+// server's disk with them, or fail every PFM frame where /tmp is read-only.
+TEST_F(ImageIoTest, PfmBytesDecodeInMemoryAsOpenCvReadsTheFile) {
+  const std::string temp = Path("opencv_temp");
+  std::filesystem::create_directories(temp);
+  ASSERT_EQ(::setenv("OPENCV_TEMP_PATH", temp.c_str(), 1), 0);
+
+  auto floats = [](std::initializer_list<float> v, bool big_endian) {
+    std::string s;
+    for (float f : v) {
+      std::uint32_t u;
+      std::memcpy(&u, &f, 4);
+      if (big_endian) u = __builtin_bswap32(u);
+      s.append(reinterpret_cast<const char*>(&u), 4);
+    }
+    return s;
+  };
+  // Bottom row first, as PFM stores them.
+  const std::vector<std::pair<std::string, std::string>> valid = {
+      {"grey.pfm", "Pf\n3 2\n-1.0\n" + floats({100.0f, -3.0f, 1e6f, 0.0f, 0.5f, 1.25f}, false)},
+      {"big_endian.pfm", "Pf\n2 1\n1\n" + floats({7.5f, -0.25f}, true)},
+      {"scaled.pfm", "Pf\n2 1\n-3\n" + floats({1.0f, 0.7f}, false)},
+      {"fractional_scale.pfm", "Pf\n1 1\n-0.7\n" + floats({1.0f}, false)},
+      {"rgb.pfm", "PF\n2 1\n-1\n" + floats({1, 2, 3, 4, 5, 6}, false)},
+      {"trailing_bytes.pfm", "Pf\n1 1\n-1\n" + floats({2.0f}, false) + "\n"},
+  };
+  for (const auto& [name, bytes] : valid) {
+    SCOPED_TRACE(name);
+    WriteFile(Path(name), bytes);
+    const cv::Mat file = cv::imread(Path(name), cv::IMREAD_UNCHANGED);
+    ASSERT_FALSE(file.empty());
+    const char* format = nullptr;
+    ASSERT_TRUE(CheckEncodedImage(bytes, "frame.disparity.encoded", Limits{}, &format).ok());
+    EXPECT_STREQ(format, "PFM");
+    if (file.channels() == 1) {
+      auto from_bytes = DecodeDisparity(bytes, "frame.disparity.encoded");
+      ASSERT_TRUE(from_bytes.ok()) << from_bytes.status();
+      auto from_file = LoadDisparity(Path(name));
+      ASSERT_TRUE(from_file.ok()) << from_file.status();
+      EXPECT_EQ(from_bytes->width, static_cast<std::uint32_t>(file.cols));
+      EXPECT_EQ(from_bytes->pixels, from_file->pixels);  // bit for bit
+    } else {
+      // Colour from float samples is refused by name alike, from the file or from bytes.
+      auto from_bytes = DecodeColor(bytes, "frame.color.encoded");
+      EXPECT_NE(from_bytes.status().message().find("32-bit float"), std::string::npos)
+          << from_bytes.status();
+    }
+  }
+  EXPECT_EQ(Samples<float>(DecodeDisparity(valid[0].second)->pixels),
+            (std::vector<float>{0.0f, 0.5f, 1.25f, 100.0f, -3.0f, 1e6f}));
+  EXPECT_EQ(Samples<float>(DecodeDisparity(valid[1].second)->pixels),
+            (std::vector<float>{7.5f, -0.25f}));
+
+  // Headers OpenCV reads otherwise than a careful reader, or pixels cut short: refused by
+  // CheckEncodedImage (the server's check before decoding) and by the decoder, naming the field.
+  struct Invalid {
+    std::string bytes;
+    bool header_is_fine;  // CheckEncodedImage reads headers only, so it passes these
+  };
+  const std::vector<Invalid> invalid = {
+      {"Pf\n1 #)\n 2\n1" + std::string("\0\0\xff>eXIf#)\n", 12), false},  // found by fuzzing
+      {"Pf\n# a comment\n1 1\n-1\n" + floats({1.0f}, false), false},
+      {"Pf 1 1\n-1\n" + floats({1.0f}, false), false},  // OpenCV wants a line break after Pf
+      {"Pf\n1  1\n-1\n" + floats({1.0f}, false), false},  // two spaces: OpenCV reads height 0
+      {"Pf\n1 1\n0\n" + floats({1.0f}, false), false},    // scale 0
+      {"Pf\n1 1\nnan\n" + floats({1.0f}, false), false},
+      {"Pf\n1 1\n-1x\n" + floats({1.0f}, false), false},
+      {"Pf\n1 1\n-1", false},
+      {"Pf\n2 2\n-1\n" + floats({1.0f, 2.0f, 3.0f}, false), true},  // a pixel short
+  };
+  for (const auto& [bytes, header_is_fine] : invalid) {
+    SCOPED_TRACE(::testing::PrintToString(bytes.substr(0, 16)));
+    const auto decoded = DecodeDisparity(bytes, "frame.disparity.encoded");
+    EXPECT_EQ(decoded.status().code(), absl::StatusCode::kInvalidArgument) << decoded.status();
+    EXPECT_NE(decoded.status().message().find("frame.disparity.encoded"), std::string::npos)
+        << decoded.status();
+    const absl::Status checked = CheckEncodedImage(bytes, "frame.disparity.encoded", Limits{});
+    EXPECT_EQ(checked.ok(), header_is_fine) << checked;
+    if (!header_is_fine) {
+      EXPECT_NE(checked.message().find("frame.disparity.encoded is a PFM image that"),
+                std::string::npos)
+          << checked;
+    }
+  }
+  std::vector<std::string> left;
+  for (const auto& entry : std::filesystem::directory_iterator(temp)) {
+    left.push_back(entry.path().filename());
+  }
+  EXPECT_TRUE(left.empty()) << left.size() << " temporary files left, the first "
+                            << (left.empty() ? "" : left.front());
+  ::unsetenv("OPENCV_TEMP_PATH");
 }
 
 TEST_F(ImageIoTest, ColourDropsAlphaAndNarrows16Bit) {

@@ -21,6 +21,7 @@
 #include "absl/strings/str_cat.h"
 #include "cloudcast/core/checks.h"
 #include "cloudcast/core/limits.h"
+#include "pfm.h"
 
 namespace cloudcast {
 namespace {
@@ -91,6 +92,12 @@ absl::StatusOr<cv::Mat> DecodeBytes(std::string_view bytes, const std::string& w
   // imdecode only reads the buffer; the const_cast is what cv::Mat's constructor needs.
   const cv::Mat buffer(1, static_cast<int>(bytes.size()), CV_8U, const_cast<char*>(bytes.data()));
   cv::Mat image;
+  if (pfm::LooksLikePfm(bytes)) {  // not through imdecode, which writes PFM bytes to /tmp
+    std::string problem;
+    std::optional<cv::Mat> decoded = pfm::Decode(bytes, &problem);
+    if (!decoded) return absl::InvalidArgumentError(absl::StrCat(what, ": a PFM image that ", problem));
+    return *std::move(decoded);
+  }
   try {
     image = cv::imdecode(buffer, cv::IMREAD_UNCHANGED);
   } catch (const cv::Exception& e) {
@@ -391,8 +398,17 @@ bool SniffImageSize(std::string_view bytes, std::uint32_t* width, std::uint32_t*
     *format = "TIFF";
     return true;
   }
-  if (n >= 3 && p[0] == 'P' && ((p[1] >= '1' && p[1] <= '6') || p[1] == 'f' || p[1] == 'F')) {
-    // Netpbm and PFM: the magic, then width and height in ASCII, with # comments in between.
+  if (pfm::LooksLikePfm(bytes)) {
+    std::string problem;
+    const std::optional<pfm::Header> header = pfm::ReadHeader(bytes, &problem);
+    if (!header) return false;
+    *width = header->width;
+    *height = header->height;
+    *format = "PFM";
+    return true;
+  }
+  if (n >= 3 && p[0] == 'P' && p[1] >= '1' && p[1] <= '6') {
+    // Netpbm: the magic, then width and height in ASCII, with # comments in between.
     std::size_t i = 2;
     auto number = [&](std::uint32_t* out) {
       for (;;) {
@@ -414,7 +430,7 @@ bool SniffImageSize(std::string_view bytes, std::uint32_t* width, std::uint32_t*
     };
     if (!std::isspace(p[2]) && p[2] != '#') return false;
     if (!number(width) || !number(height)) return false;
-    *format = p[1] == 'f' || p[1] == 'F' ? "PFM" : "PNM";
+    *format = "PNM";
     return true;
   }
   return false;
@@ -428,6 +444,9 @@ absl::Status CheckEncodedImage(std::string_view bytes, std::string_view field_na
   }
   std::uint32_t w = 0, h = 0;
   const char* format = nullptr;
+  if (std::string problem; pfm::LooksLikePfm(bytes) && !pfm::ReadHeader(bytes, &problem)) {
+    return absl::InvalidArgumentError(absl::StrCat(field, " is a PFM image that ", problem));
+  }
   if (!SniffImageSize(bytes, &w, &h, &format)) {
     // A decoder would allocate whatever an unchecked header claims (OpenCV allows 2^30 pixels),
     // so only formats whose size is known beforehand are decoded.
