@@ -241,13 +241,19 @@ class AttackTest : public ::testing::Test {
   void TearDown() override {
     proxy_.reset();
     server_.reset();
-    // The server's log is kept for a failed test (its messages quote it); a passing one leaves
-    // nothing in the temporary folder.
-    if (HasFailure()) return;
+    // Kept when the test failed (its messages quote the server's log), gone when it passed.
     std::error_code ignored;
-    if (!log_.empty()) std::filesystem::remove(log_, ignored);
-    std::filesystem::remove_all(::testing::TempDir() + "/attack_proxy_" + std::to_string(getpid()),
-                                ignored);
+    if (!HasFailure()) std::filesystem::remove_all(ScratchDir(), ignored);
+  }
+
+  // Where this test's files go: the server's log, HAProxy's configuration, the attackers'
+  // figures. Each test is a process of its own under ctest, so the pid names it.
+  static std::string ScratchDir() {
+    return ::testing::TempDir() + "/cloudcast_attack_" + std::to_string(getpid());
+  }
+  static std::string Scratch(const std::string& name) {
+    std::filesystem::create_directories(ScratchDir());
+    return ScratchDir() + "/" + name;
   }
 
   // Measuring, not testing: CLOUDCAST_ATTACK_SERVER_BINARY runs another build of the server
@@ -272,7 +278,7 @@ class AttackTest : public ::testing::Test {
       std::istringstream words(extra);
       for (std::string w; words >> w;) args.push_back(w);
     }
-    log_ = ::testing::TempDir() + "/attack_server_" + std::to_string(getpid()) + ".log";
+    log_ = Scratch("server.log");
     // Port 0, which the server reports; another build (from before --ready-file) gets free
     // ports picked here.
     const auto any_port = [&] {
@@ -289,7 +295,7 @@ class AttackTest : public ::testing::Test {
   // backend of the one server, as the Pod's sidecar has it. `unprotected`: the configuration the
   // load test used before issue 18 (no limits in front of the server), for the before figures.
   void StartProxy(bool unprotected = false) {
-    const std::string dir = ::testing::TempDir() + "/attack_proxy_" + std::to_string(getpid());
+    const std::string dir = Scratch("proxy");
     std::filesystem::create_directories(dir);
     // HAProxy cannot report a port of the kernel's choosing, so one is picked here, free now; if
     // another test binds it before HAProxy does, HAProxy exits at once ("cannot bind socket")
@@ -392,8 +398,7 @@ class AttackTest : public ::testing::Test {
       std::vector<std::string> argv = {testing::BinDir() + "/cloudcast-attack"};
       argv.insert(argv.end(), attackers[i].args.begin(), attackers[i].args.end());
       argv.insert(argv.end(), {"--target", Target(), "--seconds", std::to_string(seconds)});
-      outputs.push_back(::testing::TempDir() + "/attacker_" + std::to_string(getpid()) + "_" +
-                        std::to_string(i) + ".json");
+      outputs.push_back(Scratch("attacker_" + std::to_string(i) + ".json"));
       children.push_back(std::make_unique<Child>(argv, outputs.back(), std::vector<std::string>{},
                                                  attackers[i].niceness));
     }
@@ -780,8 +785,7 @@ class ProxyIsolationTest : public AttackTest {
   // at most 1 s, until 4 rounds in a row are served and the server's open streams are 0.
   Figures RunAndWatch(const std::string& name, const std::vector<Attacker>& attackers,
                       Recovery* recovery, double seconds_override = 0) {
-    const std::string out =
-        ::testing::TempDir() + "/attacker_" + std::to_string(getpid()) + "_0.json";
+    const std::string out = Scratch("attacker_0.json");
     std::filesystem::remove(out);  // Run writes it anew; an older one must not count
     std::atomic<bool> give_up{false};
     std::thread watcher([&] {
@@ -1185,7 +1189,7 @@ TEST_F(AttackTest, SigtermDuringARapidResetEndsWithinTheGraceAndLosesNoFrameSent
   SignalledStream paced(server_->address(), 30, 30 * 120);
   ASSERT_TRUE(paced.WaitForAnswers(3, seconds(30))) << "the paced stream got no answer";
 
-  const std::string out = ::testing::TempDir() + "/attacker_" + std::to_string(getpid()) + ".json";
+  const std::string out = Scratch("attacker.json");
   Child attacker({testing::BinDir() + "/cloudcast-attack", "rapid-reset", "--source", "127.0.0.2",
                   "--path", "/cloudcast.v1.CloudCast/Stream", "--target", server_->address(),
                   "--seconds", std::to_string(attack_s)},
