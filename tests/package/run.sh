@@ -3,9 +3,14 @@
 # builds: engine, contract, client; gRPC, Protobuf, Draco and Abseil only), `cmake --install`
 # into a scratch prefix, a separate project that finds it with find_package(cloudcast), and that
 # project's program streaming one frame to a real cloudcast-server on loopback.
-#   run.sh SOURCE_DIR SCRATCH_DIR SERVER_BINARY
+#   run.sh SOURCE_DIR BUILD_DIR SERVER_BINARY
+# BUILD_DIR is the client-only build folder; the install prefix, the robot project and the logs
+# go in its robot-side/. Make it a sibling of the main build folder (ctest passes <build>-package):
+# ccache takes paths relative to the folder a compiler runs in, so at the same depth the client's
+# sources hit the main build's cache entries (a cold CI run compiled them twice).
 set -euo pipefail
-src=$1 scratch=$2 server=$3
+src=$1 build=$2 server=$3
+scratch=$build/robot-side
 launcher=()
 if command -v ccache >/dev/null; then
   # Paths relative to the checkout, as scripts/setup: a clean clone elsewhere (CI's) finds what
@@ -15,20 +20,20 @@ if command -v ccache >/dev/null; then
 fi
 werror=OFF
 [ "${CLOUDCAST_WERROR:-0}" = 1 ] && werror=ON  # as scripts/setup: CI's builds judge warnings
-rm -rf "$scratch" && mkdir -p "$scratch"
+rm -rf "$build" && mkdir -p "$scratch"
 
 echo "== client-only build of cloudcast"
-cmake -S "$src" -B "$scratch/cloudcast" -G Ninja -DCMAKE_BUILD_TYPE=Release \
+cmake -S "$src" -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=Release \
   -DCLOUDCAST_CLIENT_ONLY=ON -DCLOUDCAST_WERROR=$werror "${launcher[@]}" >"$scratch/configure.log" ||
   { cat "$scratch/configure.log"; exit 1; }
-grep -q "CLOUDCAST_WITH_PCL:BOOL=OFF" "$scratch/cloudcast/CMakeCache.txt"
-cmake --build "$scratch/cloudcast" -j "$(nproc)" >"$scratch/build.log" ||
+grep -q "CLOUDCAST_WITH_PCL:BOOL=OFF" "$build/CMakeCache.txt"
+cmake --build "$build" -j "$(nproc)" >"$scratch/build.log" ||
   { tail -50 "$scratch/build.log"; exit 1; }
 # Nothing beyond the client's own dependencies may have been built or linked.
-if grep -qiE "opencv|pcl_|open3d|prometheus|CLI11" "$scratch/cloudcast/build.ninja"; then
+if grep -qiE "opencv|pcl_|open3d|prometheus|CLI11" "$build/build.ninja"; then
   echo "the client-only build references OpenCV, PCL, Open3D, prometheus-cpp or CLI11"; exit 1
 fi
-cmake --install "$scratch/cloudcast" --prefix "$scratch/prefix" >/dev/null
+cmake --install "$build" --prefix "$scratch/prefix" >/dev/null
 
 echo "== a robot project finds it with find_package(cloudcast)"
 cmake -S "$src/tests/package" -B "$scratch/robot" -G Ninja -DCMAKE_BUILD_TYPE=Release \
