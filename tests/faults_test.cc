@@ -110,10 +110,11 @@ class Child {
 // Clients vanish mid-frame: cloudcast-load processes sending 1280x960 frames (1.2 MB raw, many
 // HTTP/2 frames each) are killed while frames are on the wire. Their TCP connections close (or
 // reset) with a message half read. The server ends those streams, frees them, and carries on.
-TEST(FaultsTest, ClientsVanishingMidFrameLeaveNoStreamAndOthersCarryOn) {
-  const std::string dir = ::testing::TempDir();
-  ServerProcess server("127.0.0.1:0", "faults", {}, dir + "/vanish_server.log", "warn",
-                       "127.0.0.1:0");
+// Each test's logs in a folder of its own (ctest runs two of this binary's at once).
+using FaultsTest = testing::ScratchDirTest;
+
+TEST_F(FaultsTest, ClientsVanishingMidFrameLeaveNoStreamAndOthersCarryOn) {
+  ServerProcess server("127.0.0.1:0", "faults", {}, Path("server.log"), "warn", "127.0.0.1:0");
   ASSERT_TRUE(server.WaitUntilServing());
   const int metrics = server.metrics_port();
   auto metric = [&](const std::string& name) {
@@ -255,15 +256,15 @@ class Namespace {
 
 // The network stalls for 3 s mid-stream (no packet passes either way), then recovers. TCP
 // retransmits; the DELIVERY_ALL stream waits and then every frame is answered, on the same call.
-TEST(FaultsTest, NetworkStallOfSecondsThenRecoveryLosesNothing) {
+TEST_F(FaultsTest, NetworkStallOfSecondsThenRecoveryLosesNothing) {
   if (geteuid() != 0 || !Namespace::Run("command -v ip >/dev/null && ip netns list >/dev/null")) {
     GTEST_SKIP() << "needs root and iproute2 to make a network namespace";
   }
   Namespace ns;
   if (!ns.ok()) GTEST_SKIP() << "could not make a network namespace with a veth pair here";
   // Port 0: the server's --ready-file says what it bound, and whether it started at all.
-  ServerProcess server(ns.ns_ip() + ":0", "stalled", {}, ::testing::TempDir() + "/stall_server.log",
-                       "warn", "", ns.Prefix());
+  ServerProcess server(ns.ns_ip() + ":0", "stalled", {}, Path("server.log"), "warn", "",
+                       ns.Prefix());
   ASSERT_TRUE(server.WaitUntilServing()) << (server.running() ? "running" : "ended") << ", bound '"
                                          << server.address() << "'\n--- log:\n"
                                          << server.log() << "--- network:\n"
@@ -296,18 +297,18 @@ TEST(FaultsTest, NetworkStallOfSecondsThenRecoveryLosesNothing) {
 // on the same port, as a supervisor or Kubernetes would. A resilient DELIVERY_ALL stream sees
 // UNAVAILABLE, reconnects once the server is back, sends again every frame not answered, and
 // every frame is answered exactly once.
-class ServerStopTest : public ::testing::TestWithParam<int> {};
+class ServerStopTest : public testing::ScratchDirTest,
+                       public ::testing::WithParamInterface<int> {};
 
 TEST_P(ServerStopTest, ResilientStreamLosesNothingAcrossAServerRestart) {
   const int signal_number = GetParam();
-  const std::string dir = ::testing::TempDir();
   // The second server comes back on the address the first one bound. A loopback address of this
   // test's own: on 127.0.0.1 the port, free again once the first server is gone, was taken
   // meanwhile by another test's server asking for port 0, and the robot reconnected to it.
   const std::string own_ip = "127.88." + std::to_string(getpid() / 250 % 250 + 1) + "." +
                              std::to_string(getpid() % 250 + 1);
   auto server = std::make_unique<ServerProcess>(own_ip + ":0", "first", std::vector<std::string>{},
-                                                dir + "/restart_first.log");
+                                                Path("first.log"));
   ASSERT_TRUE(server->WaitUntilServing());
   const std::string address = server->address();
   auto client = Connect(address);
@@ -321,7 +322,7 @@ TEST_P(ServerStopTest, ResilientStreamLosesNothingAcrossAServerRestart) {
   const std::optional<int> status = server->Wait();
   const std::size_t at_stop = robot->answered();
   server = std::make_unique<ServerProcess>(address, "second", std::vector<std::string>{},
-                                           dir + "/restart_second.log");
+                                           Path("second.log"));
   ASSERT_TRUE(server->WaitUntilServing());
   driver.join();
   std::string took;

@@ -12,6 +12,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cstdio>
 #include <functional>
@@ -59,7 +60,7 @@ class ServerProcess {
       : address_(address), metrics_address_(metrics_listen), instance_(instance),
         log_path_(log_path),
         ready_path_(EndsWith(address, ":0") || EndsWith(metrics_listen, ":0")
-                        ? log_path + ".ready"
+                        ? UniqueReadyPath(log_path)
                         : "") {
     std::vector<std::string> args = prefix;
     for (const std::string& a :
@@ -91,9 +92,18 @@ class ServerProcess {
   ~ServerProcess() {
     if (running()) Signal(SIGKILL);
     Wait();
+    if (!ready_path_.empty()) std::remove(ready_path_.c_str());
   }
   ServerProcess(const ServerProcess&) = delete;
   ServerProcess& operator=(const ServerProcess&) = delete;
+
+  // The --ready-file: this test process's and this server's own, whatever the log is called.
+  // Named after the log alone, two tests of one binary that ctest ran at once (faults_test's
+  // KILL and TERM) read each other's ports, and a robot reconnected to the wrong server.
+  static std::string UniqueReadyPath(const std::string& log_path) {
+    static std::atomic<int> next{0};
+    return log_path + "." + std::to_string(getpid()) + "-" + std::to_string(next++) + ".ready";
+  }
 
   // Waits until the server has bound its ports (its --ready-file), and takes the addresses it
   // bound from there; false when the process ended first or the deadline passed. A server with
