@@ -1,7 +1,12 @@
 # Sanitizer and fuzzer builds. Each lives in its own build folder (scripts/fuzz, scripts/sanitize):
+#   CLOUDCAST_SANITIZE=address  the test suite under ASan + UBSan (gcc or clang).
 #   CLOUDCAST_BUILD_FUZZERS=ON  clang: every target with -fsanitize=fuzzer-no-link,address,undefined,
 #                               the libFuzzer harnesses of fuzz/ linked with -fsanitize=fuzzer.
-#   CLOUDCAST_SANITIZE=address  the test suite under ASan + UBSan (gcc or clang).
+#                               With CLOUDCAST_SANITIZE=address it is the same build: the harnesses
+#                               and the suite share every library object (scripts/sanitize asan and
+#                               scripts/fuzz use one folder, build-asan/, configured as
+#                               scripts/lib/asan-build.sh says: a cold CI run compiled the
+#                               libraries twice, 191 s more).
 #   CLOUDCAST_SANITIZE=thread   the test suite under TSan (build only the server and client tests).
 # Debian's own libraries (gRPC, protobuf, OpenCV, PCL, Draco, zstd) are not instrumented: ASan
 # still checks every access our code makes and intercepts their malloc/free and memcpy; MSan,
@@ -10,9 +15,9 @@ option(CLOUDCAST_BUILD_FUZZERS "Build the libFuzzer harnesses (fuzz/; needs clan
 set(CLOUDCAST_SANITIZE "" CACHE STRING "Sanitize everything: '', 'address' (+undefined), 'thread'")
 set_property(CACHE CLOUDCAST_SANITIZE PROPERTY STRINGS "" address thread)
 
-if(CLOUDCAST_BUILD_FUZZERS AND NOT CLOUDCAST_SANITIZE STREQUAL "")
-  message(FATAL_ERROR "CLOUDCAST_BUILD_FUZZERS=ON already sanitizes (address,undefined): "
-                      "leave CLOUDCAST_SANITIZE empty")
+if(CLOUDCAST_BUILD_FUZZERS AND CLOUDCAST_SANITIZE STREQUAL "thread")
+  message(FATAL_ERROR "CLOUDCAST_BUILD_FUZZERS=ON sanitizes with address,undefined: "
+                      "CLOUDCAST_SANITIZE must be empty or 'address'")
 endif()
 
 set(_cloudcast_san_flags "")
