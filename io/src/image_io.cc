@@ -89,15 +89,17 @@ absl::StatusOr<cv::Mat> DecodeBytes(std::string_view bytes, const std::string& w
     return absl::InvalidArgumentError(
         absl::StrCat(what, ": ", bytes.size(), " bytes is more than OpenCV can decode"));
   }
-  // imdecode only reads the buffer; the const_cast is what cv::Mat's constructor needs.
-  const cv::Mat buffer(1, static_cast<int>(bytes.size()), CV_8U, const_cast<char*>(bytes.data()));
-  cv::Mat image;
   if (pfm::LooksLikePfm(bytes)) {  // not through imdecode, which writes PFM bytes to /tmp
     std::string problem;
     std::optional<cv::Mat> decoded = pfm::Decode(bytes, &problem);
-    if (!decoded) return absl::InvalidArgumentError(absl::StrCat(what, ": a PFM image that ", problem));
+    if (!decoded) {
+      return absl::InvalidArgumentError(absl::StrCat(what, ": a PFM image that ", problem));
+    }
     return *std::move(decoded);
   }
+  // imdecode only reads the buffer; the const_cast is what cv::Mat's constructor needs.
+  const cv::Mat buffer(1, static_cast<int>(bytes.size()), CV_8U, const_cast<char*>(bytes.data()));
+  cv::Mat image;
   try {
     image = cv::imdecode(buffer, cv::IMREAD_UNCHANGED);
   } catch (const cv::Exception& e) {

@@ -103,9 +103,9 @@ std::optional<cv::Mat> Decode(std::string_view bytes, std::string* problem) {
   const std::size_t row_bytes = std::size_t{header->width} * header->channels * sizeof(float);
   const std::size_t need = row_bytes * header->height;
   if (bytes.size() - header->pixels_offset < need) {
-    *problem = absl::StrCat("is cut short: ", header->width, "x", header->height, " pixels need ",
-                            need, " bytes after the header, it has ",
-                            bytes.size() - header->pixels_offset);
+    *problem =
+        absl::StrCat("is cut short: ", header->width, "x", header->height, " pixels need ", need,
+                     " bytes after the header, it has ", bytes.size() - header->pixels_offset);
     return std::nullopt;
   }
   cv::Mat image(static_cast<int>(header->height), static_cast<int>(header->width),
@@ -123,7 +123,8 @@ std::optional<cv::Mat> Decode(std::string_view bytes, std::string* problem) {
   if (image.channels() == 3) cv::cvtColor(image, image, cv::COLOR_RGB2BGR);
   // OpenCV divides by |scale| as `image *= 1.f / fabs(scale)`, in double: so here, so that the
   // bits agree. A scale of +-1 leaves every sample as it is.
-  if (std::fabs(header->scale) != 1.0f) image *= 1.0 / std::fabs(static_cast<double>(header->scale));
+  if (std::fabs(header->scale) != 1.0f)
+    image *= 1.0 / std::fabs(static_cast<double>(header->scale));
   return image;
 }
 

@@ -23,7 +23,7 @@ struct Header {
   int channels = 0;
   std::uint32_t width = 0;
   std::uint32_t height = 0;
-  float scale = 0;               // finite, not 0; pixels are divided by |scale|
+  float scale = 0;                // finite, not 0; pixels are divided by |scale|
   std::size_t pixels_offset = 0;  // where the bottom row starts
 };
 
