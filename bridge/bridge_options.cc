@@ -140,6 +140,10 @@ const std::vector<ParamDoc>& Docs() {
       {"draco/min_color_bits", "int", "(server's)",
        "with draco/max_reply_kb: the fewest colour bits per channel the server may go down to, "
        "1..8 (the server's default: 5)"},
+      {"draco/cap_min_points", "int", "0",
+       "with draco/max_reply_kb or rate_control (whose reply cap is on by default): a cloud still "
+       "over the cap at the fewest bits allowed loses the voxels of fewest points, voxel/min_points "
+       "raised up to this, 0..64 (2: a stereo matcher's lone stray points first); 0: never"},
       {"tls/enabled", "bool", "false",
        "connect with TLS, trusting the system's CAs (implied by every other tls/ parameter)"},
       {"tls/ca", "string", "", "PEM file of the CA certificates to trust for the server"},
@@ -719,6 +723,21 @@ absl::Status ReadStages(const ParamReader& p, BridgeOptions* o) {
           absl::StrCat(p.Display("draco/min_color_bits"), " needs ",
                        p.Display("draco/max_reply_kb"), " (the cap it is the floor of)"));
     }
+  }
+  // The cap's last resort (contract revision 5): only meaningful with a cap, set or controlled.
+  CLOUDCAST_ASSIGN_OR_RETURN(cap_min_points, p.Int("draco/cap_min_points"));
+  if (cap_min_points) {
+    if (*cap_min_points < 0 || *cap_min_points > int{FrameSettings::kMaxCapMinPoints}) {
+      return OutOfRange(p, "draco/cap_min_points", *cap_min_points,
+                        absl::StrCat("in 0..", FrameSettings::kMaxCapMinPoints));
+    }
+    if (*cap_min_points > 0 && cap == 0 && !o->rate_control) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(p.Display("draco/cap_min_points"), " needs ",
+                       p.Display("draco/max_reply_kb"), " or ", p.Display("rate_control"),
+                       " (a cap to meet)"));
+    }
+    c.mutable_draco()->set_cap_min_points_per_voxel(static_cast<std::uint32_t>(*cap_min_points));
   }
   if (cap > 0) {
     if (absl::Status s = client::SetMaxCloudBytes(cap, &c, min_color_bits.value_or(0),

@@ -355,7 +355,7 @@ TEST_F(ContractTest, GetInfoNamesTheRevisionAndAssumesNoCamera) {
   grpc::ClientContext ctx;
   ASSERT_TRUE(stub_->GetInfo(&ctx, v1::GetInfoRequest(), &info).ok());
   EXPECT_EQ(info.contract_revision(), convert::kContractRevision);
-  EXPECT_EQ(info.contract_revision(), "4");
+  EXPECT_EQ(info.contract_revision(), "5");
   EXPECT_FALSE(info.defaults().camera().has_fx());
   EXPECT_FALSE(info.defaults().camera().has_fy());
   EXPECT_FALSE(info.defaults().camera().has_baseline());

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <limits>
 #include <random>
+#include <tuple>
 
 #include "cloudcast/core/camera.h"
 #include "cloudcast/core/filters.h"
@@ -457,6 +458,67 @@ TEST(Pipeline, FallsBackToWideKeys) {
   EXPECT_EQ(counts.valid_points, passed.size());
   EXPECT_TRUE(CloudsMatch(testing::BruteForceVoxelGrid(passed, o.voxel), fused,
                           CloudTolerance::Equivalence(/*colour=*/0)));
+}
+
+// The server's downlink cap drops the voxels of fewest points from a cloud already made
+// (RefilterVoxels): the cloud must be the one a Run with that minimum gives, point for point,
+// on every path (banded and whole, first-seen and key order, 32- and 64-bit keys).
+TEST(Pipeline, RefilterVoxelsEqualsARunWithThatMinimum) {
+  std::mt19937 rng(11);
+  Pipeline pipeline;
+  for (auto de : {DisparityEncoding::kU8, DisparityEncoding::kU16, DisparityEncoding::kF32}) {
+    for (const auto& [w, h, leaf] : {std::tuple{640u, 480u, 0.03f}, std::tuple{53u, 31u, 0.05f},
+                                     std::tuple{64u, 48u, 2e-5f}}) {
+      for (bool key_order : {false, true}) {
+        auto f = RandomFrame(rng, w, h, de, ColorEncoding::kBGR8, 20, 250);
+        PipelineOptions o;
+        o.camera = CameraModel::PclCompatible(w, h, 615);
+        o.passthrough.enabled = leaf > 1e-3f;
+        o.voxel.SetLeaf(leaf);
+        o.voxel.key_order = key_order;
+        o.voxel.min_points_per_voxel = 1;
+        PointCloud all, refiltered, direct;
+        ASSERT_TRUE(pipeline.Run(o, f.disparity, f.colour, &all).ok());
+        for (std::uint32_t k : {2u, 3u, 1u, 5u}) {
+          SCOPED_TRACE(::testing::Message() << w << "x" << h << " leaf " << leaf << " key order "
+                                            << key_order << " min " << k);
+          ASSERT_TRUE(pipeline.RefilterVoxels(k, &refiltered).ok());
+          o.voxel.min_points_per_voxel = k;
+          Pipeline fresh;
+          ASSERT_TRUE(fresh.Run(o, f.disparity, f.colour, &direct).ok());
+          EXPECT_TRUE(CloudsIdentical(direct, refiltered));
+          EXPECT_LE(refiltered.size(), all.size());
+          if (k == 1) {
+            EXPECT_TRUE(CloudsIdentical(all, refiltered));
+          } else if (leaf > 1e-3f && k == 2) {  // some voxels hold one point, some more
+            EXPECT_LT(refiltered.size(), all.size());
+            EXPECT_GT(refiltered.size(), 0u);
+          }
+        }
+        EXPECT_GT(all.size(), 0u);
+      }
+    }
+  }
+}
+
+TEST(Pipeline, RefilterVoxelsNeedsTheLastRunsVoxels) {
+  std::mt19937 rng(3);
+  auto f = RandomFrame(rng, 64, 48, DisparityEncoding::kU8, ColorEncoding::kBGR8, 20, 250);
+  PipelineOptions o;
+  o.camera = CameraModel::PclCompatible(64, 48);
+  Pipeline pipeline;
+  PointCloud out;
+  EXPECT_EQ(pipeline.RefilterVoxels(2, &out).code(), absl::StatusCode::kFailedPrecondition);
+  ASSERT_TRUE(pipeline.Run(o, f.disparity, f.colour, &out).ok());
+  EXPECT_TRUE(pipeline.RefilterVoxels(2, &out).ok());
+  o.voxel.enabled = false;  // a run without the grid holds no voxels
+  ASSERT_TRUE(pipeline.Run(o, f.disparity, f.colour, &out).ok());
+  EXPECT_EQ(pipeline.RefilterVoxels(2, &out).code(), absl::StatusCode::kFailedPrecondition);
+  o.voxel.enabled = true;
+  ASSERT_TRUE(pipeline.Run(o, f.disparity, f.colour, &out).ok());
+  o.camera.fx = -1;  // nor does a run that failed
+  EXPECT_FALSE(pipeline.Run(o, f.disparity, f.colour, &out).ok());
+  EXPECT_EQ(pipeline.RefilterVoxels(2, &out).code(), absl::StatusCode::kFailedPrecondition);
 }
 
 }  // namespace

@@ -31,6 +31,7 @@ namespace {
 
 using ::testing::Contains;
 using ::testing::HasSubstr;
+using ::testing::Not;
 using ::testing::StartsWith;
 
 class DownlinkCapTest : public testing::SharedServerClientTest {
@@ -96,13 +97,15 @@ void ExpectCapKept(const client::Result& r, std::uint64_t cap) {
   }
 }
 
-TEST_F(DownlinkCapTest, GetInfoNamesRevision4AndTheDefaults) {
+TEST_F(DownlinkCapTest, GetInfoNamesRevision5AndTheDefaults) {
   absl::StatusOr<v1::ServerInfo> info = client_->GetInfo();
   ASSERT_TRUE(info.ok()) << info.status();
-  EXPECT_EQ(info->contract_revision(), "4");
+  EXPECT_EQ(info->contract_revision(), "5");
   EXPECT_TRUE(info->defaults().draco().has_max_cloud_bytes());
   EXPECT_EQ(info->defaults().draco().max_cloud_bytes(), 0u);
   EXPECT_EQ(info->defaults().draco().min_color_bits(), 5);
+  EXPECT_TRUE(info->defaults().draco().has_cap_min_points_per_voxel());
+  EXPECT_EQ(info->defaults().draco().cap_min_points_per_voxel(), 0u);
 }
 
 TEST_F(DownlinkCapTest, StreamRepliesStayUnderTheCapOrSaySo) {
@@ -178,6 +181,73 @@ TEST_F(DownlinkCapTest, NoCapIsTodaysReply) {
   ASSERT_TRUE(roomy.ok()) << roomy.status();
   EXPECT_FALSE(roomy->reply.has_over_cap());
   EXPECT_LE(roomy->reply.draco().size(), plain->reply.draco().size());
+}
+
+// Contract revision 5: past the bits, the cap may drop the voxels of fewest points when the
+// client allows it (DracoConfig.cap_min_points_per_voxel), and each cloud is then exactly the
+// voxel grid's with the minimum the reply names.
+TEST_F(DownlinkCapTest, TheCapDropsTheSparsestVoxelsOnlyWhereBitsCannotMeetIt) {
+  REQUIRE_FRAMES();
+  auto with_minimum = [](client::StreamConfig c, std::uint32_t cap_min, std::uint32_t min) {
+    if (cap_min > 0) c.mutable_draco()->set_cap_min_points_per_voxel(cap_min);
+    if (min > 0) c.mutable_voxel_grid()->set_min_points_per_voxel(min);
+    return c;
+  };
+  auto process = [&](const client::StreamConfig& c) {
+    absl::StatusOr<client::Result> r = Process("00001", c);
+    EXPECT_TRUE(r.ok()) << r.status();
+    return r.ok() ? *std::move(r) : client::Result{};
+  };
+  // Frame 00001 takes 33 KB at the floors: over a 30,000-byte cap, under it without its lone
+  // points.
+  const client::Result bits_only = process(Capped(30000));
+  ASSERT_TRUE(bits_only.reply.has_over_cap());
+  EXPECT_EQ(bits_only.reply.min_points_per_voxel(), 0u);
+  const client::Result dropped = process(with_minimum(Capped(30000), 4, 0));
+  ExpectCapKept(dropped, 30000);
+  EXPECT_FALSE(dropped.reply.has_over_cap()) << dropped.reply.over_cap().message();
+  EXPECT_EQ(dropped.reply.min_points_per_voxel(), 2u);  // the first step that fits
+  EXPECT_LT(dropped.reply.point_count(), bits_only.reply.point_count());
+  EXPECT_EQ(dropped.reply.counts().after_voxel_grid(), dropped.reply.point_count());
+  // Exactly the cloud a stream asking for that minimum gets, byte for byte.
+  const client::Result asked = process(with_minimum(Capped(30000), 0, 2));
+  EXPECT_TRUE(asked.reply.draco() == dropped.reply.draco());
+  EXPECT_EQ(asked.reply.min_points_per_voxel(), 2u);
+
+  // Where the bits meet the cap, no voxel goes.
+  const client::Result roomy = process(with_minimum(Capped(100000), 4, 0));
+  EXPECT_FALSE(roomy.reply.has_over_cap());
+  EXPECT_EQ(roomy.reply.min_points_per_voxel(), 0u);
+  EXPECT_EQ(roomy.reply.point_count(), bits_only.reply.point_count());
+
+  // A cap nothing meets: the minimum goes as far as allowed, and the reply names that bound too.
+  const client::Result impossible = process(with_minimum(Capped(64), 3, 0));
+  ExpectCapKept(impossible, 64);
+  ASSERT_TRUE(impossible.reply.has_over_cap());
+  EXPECT_EQ(impossible.reply.min_points_per_voxel(), 3u);
+  EXPECT_THAT(impossible.reply.over_cap().limited_by(),
+              Contains("config.draco.cap_min_points_per_voxel"));
+  EXPECT_THAT(impossible.reply.over_cap().message(),
+              HasSubstr("voxels of at least 3 points (config.draco.cap_min_points_per_voxel)"));
+  EXPECT_TRUE(process(with_minimum(Capped(64), 0, 3)).reply.draco() ==
+              impossible.reply.draco());
+  EXPECT_THAT(bits_only.reply.over_cap().limited_by(),
+              Not(Contains("config.draco.cap_min_points_per_voxel")));
+
+  // Never an empty cloud: a minimum no voxel reaches stops at the last that keeps points.
+  const client::Result most = process(with_minimum(Capped(64), 64, 0));
+  ASSERT_TRUE(most.reply.has_over_cap());
+  EXPECT_GT(most.reply.point_count(), 0u);
+  EXPECT_GT(most.reply.min_points_per_voxel(), 3u);
+  EXPECT_LT(most.reply.min_points_per_voxel(), 64u);
+  EXPECT_FALSE(most.reply.has_empty());
+
+  // Too large a minimum is refused, naming the field.
+  absl::StatusOr<client::Result> bad = Process("00001", with_minimum(Capped(30000), 65, 0));
+  ASSERT_FALSE(bad.ok());
+  EXPECT_EQ(bad.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(std::string(bad.status().message()),
+              HasSubstr("config.draco.cap_min_points_per_voxel is 65"));
 }
 
 TEST_F(DownlinkCapTest, BadValuesGetErrorsNamingTheField) {

@@ -83,7 +83,7 @@ TEST_F(ServerTest, GetInfoReportsLimitsAndDefaults) {
   EXPECT_EQ(info.limits().max_streams_per_client(), 32u);
   EXPECT_EQ(info.limits().max_process_per_client(), 32u);
   EXPECT_EQ(info.limits().shed_quiet_after_ms(), 2000u);
-  EXPECT_EQ(info.contract_revision(), "4");
+  EXPECT_EQ(info.contract_revision(), "5");
   // The suite's server runs with the preset new_tsukuba as its operator's defaults
   // (TestServerOptions); the contract's own, without a camera: contract_test.
   const v1::StreamConfig& d = info.defaults();

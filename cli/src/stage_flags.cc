@@ -38,6 +38,7 @@ StageFlags::StageFlags(CLI::App& app, Groups groups, const FrameSettings& defaul
       no_passthrough_(!defaults.pipeline.passthrough.enabled),
       leaf_(defaults.pipeline.voxel.enabled ? defaults.pipeline.voxel.leaf_x : 0.0f),
       min_points_per_voxel_(defaults.pipeline.voxel.min_points_per_voxel),
+      cap_min_points_per_voxel_(defaults.cap_min_points_per_voxel),
       draco_bits_(defaults.draco.position_bits),
       draco_speed_(defaults.draco.encode_speed) {
   const std::string& cam = groups.camera;
@@ -144,6 +145,14 @@ StageFlags::StageFlags(CLI::App& app, Groups groups, const FrameSettings& defaul
       ->check(CLI::Range(0, 10))
       ->capture_default_str()
       ->group(dr);
+  app.add_option("--cap-min-points-per-voxel", cap_min_points_per_voxel_,
+                 "With a downlink cap (max_cloud_bytes, --max-reply-kb): a cloud still over it "
+                 "at the fewest bits its bounds allow loses the voxels of fewest points, the "
+                 "minimum raised up to N (e.g. 2: a stereo matcher's lone stray points first); "
+                 "0: never")
+      ->check(CLI::Range(0u, FrameSettings::kMaxCapMinPoints))
+      ->capture_default_str()
+      ->group(dr);
 }
 
 bool StageFlags::Given(const std::string& flag) const { return app_.count(flag) > 0; }
@@ -199,6 +208,9 @@ absl::StatusOr<FrameSettings> StageFlags::Apply(FrameSettings base) const {
 
   if (Given("--draco-bits")) base.draco.position_bits = draco_bits_;
   if (Given("--draco-speed")) base.draco.encode_speed = base.draco.decode_speed = draco_speed_;
+  if (Given("--cap-min-points-per-voxel")) {
+    base.cap_min_points_per_voxel = cap_min_points_per_voxel_;
+  }
   // Every flag has its own range check; this catches a bad `base`.
   if (auto s = base.Validate(); !s.ok()) return s;
   return base;
@@ -235,6 +247,9 @@ v1::StreamConfig StageFlags::GivenStageConfig() const {
   if (Given("--draco-speed")) {
     config.mutable_draco()->set_encode_speed(draco_speed_);
     config.mutable_draco()->set_decode_speed(draco_speed_);
+  }
+  if (Given("--cap-min-points-per-voxel")) {
+    config.mutable_draco()->set_cap_min_points_per_voxel(cap_min_points_per_voxel_);
   }
   return config;
 }

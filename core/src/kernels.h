@@ -204,6 +204,10 @@ class VoxelAccumulator {
   bool BeginNarrow(const Bounds& box, const VoxelGridParams& params, std::size_t max_points);
   void AddNarrow(const Point* points, std::size_t n);
   void Finish(const VoxelGridParams& params, PointVector* out);
+  // The last cloud's voxels written again into `out` (replacing what it held), keeping those of
+  // at least `min_points` points, in the order `params` asks: what Run or Finish would have
+  // written with that minimum, without adding the points again.
+  void EmitAgain(const VoxelGridParams& params, std::uint32_t min_points, PointVector* out);
 
   // Sums of one or more points: (x, y), (z, count) in double, colour (b, g, r, a) in 32 bits.
   struct Sums {

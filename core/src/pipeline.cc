@@ -415,6 +415,9 @@ struct Pipeline::Impl {
   PassThroughParams flags_passthrough;
   // The points that pass, before the voxel grid.
   PointVector passed;
+  // The last Run's voxel grid, while the accumulator holds its voxels (for RefilterVoxels).
+  bool voxels_held = false;
+  VoxelGridParams held_voxel;
 
   ScanPlan plan;
   // (z, z, z, z) per 8-bit value, made with the flags; (u - cx, 0, 0, 0) per column.
@@ -565,6 +568,7 @@ absl::Status Pipeline::Impl::RunFused(const PipelineOptions& options, const Dept
                                       PointCloud* out, StageCounts* counts) {
   Tally tally;
   const std::size_t pixels = std::size_t{values.width} * values.height;
+  voxels_held = false;
   if (options.voxel.enabled) {
     if (passed.size() < pixels) passed.resize(pixels);
     PointSink<true> sink{passed.data(), 0, {}};
@@ -582,6 +586,8 @@ absl::Status Pipeline::Impl::RunFused(const PipelineOptions& options, const Dept
       out->width = 0;
       return s;
     }
+    voxels_held = true;
+    held_voxel = options.voxel;
   } else {
     out->points.resize(pixels);
     PointSink<false> sink{out->points.data(), 0, {}};
@@ -615,6 +621,7 @@ absl::Status StartRun(const PipelineOptions& options, PointCloud* out) {
 
 absl::Status Pipeline::Run(const PipelineOptions& options, const DisparityView& disparity,
                            const ColorView& colour, PointCloud* out, StageCounts* counts) {
+  impl_->voxels_held = false;
   if (auto s = StartRun(options, out); !s.ok()) return s;
   if (auto s = ValidateFrame(disparity, colour, options.limits); !s.ok()) return s;
   return impl_->RunFused(options, DepthConstants(options.camera), disparity, colour, out, counts);
@@ -622,10 +629,23 @@ absl::Status Pipeline::Run(const PipelineOptions& options, const DisparityView& 
 
 absl::Status Pipeline::Run(const PipelineOptions& options, const DepthView& depth,
                            const ColorView& colour, PointCloud* out, StageCounts* counts) {
+  impl_->voxels_held = false;
   if (auto s = StartRun(options, out); !s.ok()) return s;
   if (auto s = ValidateFrame(depth, colour, options.limits); !s.ok()) return s;
   return impl_->RunFused(options, DepthConstants::ForDepth(options.camera, depth.encoding), depth,
                          colour, out, counts);
+}
+
+absl::Status Pipeline::RefilterVoxels(std::uint32_t min_points, PointCloud* out) {
+  if (out == nullptr) return absl::InvalidArgumentError("output cloud is null");
+  if (!impl_->voxels_held) {
+    return absl::FailedPreconditionError(
+        "RefilterVoxels: the last Run did not succeed with the voxel grid on");
+  }
+  impl_->accumulator.EmitAgain(impl_->held_voxel, min_points, &out->points);
+  out->width = static_cast<std::uint32_t>(out->points.size());
+  out->height = 1;
+  return absl::OkStatus();
 }
 
 }  // namespace cloudcast

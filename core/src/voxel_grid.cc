@@ -479,6 +479,12 @@ void VoxelAccumulator::Finish(const VoxelGridParams& params, PointVector* out) {
   Emit(params.min_points_per_voxel, params.key_order ? KeyOrder() : nullptr, out);
 }
 
+void VoxelAccumulator::EmitAgain(const VoxelGridParams& params, std::uint32_t min_points,
+                                 PointVector* out) {
+  out->clear();
+  Emit(min_points, params.key_order ? KeyOrder() : nullptr, out);
+}
+
 bool VoxelAccumulator::BeginNarrow(const Bounds& box, const VoxelGridParams& params,
                                    std::size_t max_points) {
   voxel_count_ = 0;

@@ -184,6 +184,15 @@ absl::Status ResolveDraco(const v1::DracoConfig& c, std::string_view p, FrameSet
   if (c.has_decode_speed()) d.decode_speed = c.decode_speed();
   if (c.has_max_cloud_bytes()) d.max_cloud_bytes = c.max_cloud_bytes();
   if (c.has_min_color_bits()) d.min_color_bits = c.min_color_bits();
+  if (c.has_cap_min_points_per_voxel()) {
+    s->cap_min_points_per_voxel = c.cap_min_points_per_voxel();
+    if (s->cap_min_points_per_voxel > FrameSettings::kMaxCapMinPoints) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          Path(p, "cap_min_points_per_voxel"), " is ", c.cap_min_points_per_voxel(),
+          "; it must be in [0, ", FrameSettings::kMaxCapMinPoints,
+          "] (0: the cap never drops voxels)"));
+    }
+  }
   if (c.has_max_position_error()) {
     d.max_position_error = c.max_position_error();
     s->max_position_error = c.max_position_error();
@@ -555,6 +564,7 @@ v1::StreamConfig ToProto(const StreamSettings& settings) {
   // The error bound as it applies with these settings' leaf (GetInfo shows what a client gets).
   SetDraco(f.Draco(), &c);
   c.mutable_draco()->set_max_position_error(f.Draco().max_position_error);
+  c.mutable_draco()->set_cap_min_points_per_voxel(f.cap_min_points_per_voxel);
   c.set_delivery(ToProto(settings.delivery));
   SetStereo(f.stereo, &c);
   return c;

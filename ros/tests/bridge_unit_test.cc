@@ -722,6 +722,13 @@ TEST(BridgeParams, UplinkAndCapErrorsNameTheRos1Parameter) {
   p.Set("draco/max_reply_kb", 30.0);
   p.Set("draco/min_color_bits", 12);
   EXPECT_EQ(ErrorOf(p), "~draco/min_color_bits is 12; must be in 1..8");
+  p.values.clear();
+  p.Set("draco/cap_min_points", 2);
+  EXPECT_EQ(ErrorOf(p),
+            "~draco/cap_min_points needs ~draco/max_reply_kb or ~rate_control (a cap to meet)");
+  p.Set("draco/max_reply_kb", 30.0);
+  p.Set("draco/cap_min_points", 100);
+  EXPECT_EQ(ErrorOf(p), "~draco/cap_min_points is 100; must be in 0..64");
   if (HasVideoEncoder()) {
     p.values.clear();
     p.Set("encoding", std::string("h264"));
@@ -775,8 +782,10 @@ TEST(BridgeParams, H264AndTheCapReachTheStream) {
   p.Set("h264/grey", true);
   p.Set("rate_control", true);
   p.Set("draco/max_reply_kb", 30.0);
+  p.Set("draco/cap_min_points", 2);
   o = ReadBridgeOptions(p, "cloudcast-ros-bridge");
   ASSERT_TRUE(o.ok()) << o.status();
+  EXPECT_EQ(o->config.draco().cap_min_points_per_voxel(), 2u);
   EXPECT_EQ(o->uplink, Uplink::kH264);
   EXPECT_EQ(o->h264.mbps, 3.0);
   EXPECT_TRUE(o->h264.grey);

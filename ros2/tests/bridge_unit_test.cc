@@ -397,6 +397,25 @@ TEST(BridgeDownlinkCap, BadValuesAreRefusedNamingTheParameter) {
             "draco.min_color_bits is 0; must be in 1..8");
   EXPECT_EQ(ErrorOf({"draco.min_color_bits:=4"}),
             "draco.min_color_bits needs draco.max_reply_kb (the cap it is the floor of)");
+  EXPECT_EQ(ErrorOf({"draco.max_reply_kb:=10", "draco.cap_min_points:=65"}),
+            "draco.cap_min_points is 65; must be in 0..64");
+  EXPECT_EQ(ErrorOf({"draco.max_reply_kb:=10", "draco.cap_min_points:=-1"}),
+            "draco.cap_min_points is -1; must be in 0..64");
+  EXPECT_EQ(ErrorOf({"draco.cap_min_points:=2"}),
+            "draco.cap_min_points needs draco.max_reply_kb or rate_control (a cap to meet)");
+}
+
+// Contract revision 5: the cap may drop the sparsest voxels, with a cap set or controlled.
+TEST(BridgeDownlinkCap, CapMinPointsReachesTheStreamConfigWithACap) {
+  auto o = Read({"draco.max_reply_kb:=12.5", "draco.cap_min_points:=2"});
+  ASSERT_TRUE(o.ok()) << o.status();
+  EXPECT_EQ(o->config.draco().cap_min_points_per_voxel(), 2u);
+  o = Read({"rate_control:=true", "draco.cap_min_points:=3"});
+  ASSERT_TRUE(o.ok()) << o.status();
+  EXPECT_EQ(o->config.draco().cap_min_points_per_voxel(), 3u);
+  o = Read({"draco.max_reply_kb:=12.5"});
+  ASSERT_TRUE(o.ok()) << o.status();
+  EXPECT_FALSE(o->config.draco().has_cap_min_points_per_voxel());
 }
 
 // The docs the help prints carry the new parameters (docs/ros.md and docs/ros2.md list them too).
@@ -406,7 +425,8 @@ TEST(BridgeUplink, ParamDocsListTheUplinkAndCapParameters) {
   for (const char* name :
        {"encoding", "compress", "h264/preset", "h264/crf", "h264/mbps", "h264/fps",
         "h264/keyframe_interval", "h264/threads", "h264/colour_444", "h264/grey",
-        "h264/separate_stereo", "draco/max_reply_kb", "draco/min_color_bits", "jpeg/quality",
+        "h264/separate_stereo", "draco/max_reply_kb", "draco/min_color_bits",
+        "draco/cap_min_points", "jpeg/quality",
         "jpeg/min_quality", "jpeg/max_quality", "jpeg/half_resolution", "jpeg/fps"}) {
     EXPECT_EQ(names.count(name), 1u) << name;
   }

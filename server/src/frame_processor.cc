@@ -38,7 +38,8 @@ std::string RangeText(const PassThroughParams& pt) {
 
 // A cloud over config.draco.max_cloud_bytes at the floors of both bit depths: which bounds set
 // those floors, for a client to loosen one (contract revision 4).
-void ExplainOverCap(const DracoOptions& draco, const DracoEncodeInfo& info, v1::OverCap* out) {
+void ExplainOverCap(const DracoOptions& draco, const DracoEncodeInfo& info,
+                    std::uint32_t min_points, bool points_exhausted, v1::OverCap* out) {
   constexpr char kCap[] = "config.draco.max_cloud_bytes";
   out->set_field(kCap);
   out->set_max_cloud_bytes(draco.max_cloud_bytes);
@@ -49,14 +50,19 @@ void ExplainOverCap(const DracoOptions& draco, const DracoEncodeInfo& info, v1::
   const std::string color_bound = draco.min_color_bits < draco.color_bits
                                       ? "config.draco.min_color_bits"
                                       : "config.draco.color_bits";
+  constexpr char kPointsBound[] = "config.draco.cap_min_points_per_voxel";
   out->add_limited_by(position_bound);
   out->add_limited_by(color_bound);
+  if (points_exhausted) out->add_limited_by(kPointsBound);
   out->set_message(absl::StrCat(
       "the cloud takes ", info.bytes, " bytes at ", info.position_bits, " position bits (",
       bounded ? absl::StrCat("the fewest that keep ", position_bound, " ", draco.max_position_error)
               : absl::StrCat(position_bound, "; no error bound"),
-      ") and ", info.color_bits, " colour bits (", color_bound, "), over ", kCap, " ",
-      draco.max_cloud_bytes));
+      ") and ", info.color_bits, " colour bits (", color_bound, ")",
+      points_exhausted ? absl::StrCat(", voxels of at least ", min_points, " points (",
+                                      kPointsBound, ")")
+                       : "",
+      ", over ", kCap, " ", draco.max_cloud_bytes));
 }
 
 }  // namespace
@@ -211,6 +217,12 @@ absl::Status FrameProcessor::ProcessWith(const v1::Frame& frame, const InPlacePi
     // cap (config.draco.max_cloud_bytes) the encoder chooses the bits itself, in 1 to 3 encodes.
     status = EncodeDraco(cloud_, draco, reply->mutable_draco(), &info);
   }
+  std::uint32_t min_points = ran.voxel.enabled ? ran.voxel.min_points_per_voxel : 0;
+  bool points_exhausted = false;
+  if (status.ok() && info.over_cap && ran.voxel.enabled) {
+    status = DropSparseVoxels(settings, draco, &min_points, &points_exhausted, reply, &info);
+    counts.after_voxel = cloud_.size();
+  }
   const double cpu1 = ThreadCpuSeconds();
   const Clock::time_point t3 = Clock::now();
   // The pipeline's time without the matching, which has a stage time of its own.
@@ -240,7 +252,10 @@ absl::Status FrameProcessor::ProcessWith(const v1::Frame& frame, const InPlacePi
   reply->set_position_error_bound(info.position_error_bound);
   reply->set_position_bits(info.position_bits);
   reply->set_color_bits(info.color_bits);
-  if (info.over_cap) ExplainOverCap(draco, info, reply->mutable_over_cap());
+  reply->set_min_points_per_voxel(min_points);
+  if (info.over_cap) {
+    ExplainOverCap(draco, info, min_points, points_exhausted, reply->mutable_over_cap());
+  }
   v1::StageCounts* c = reply->mutable_counts();
   c->set_pixels(counts.pixels);
   c->set_valid_points(counts.valid_points);
@@ -252,6 +267,30 @@ absl::Status FrameProcessor::ProcessWith(const v1::Frame& frame, const InPlacePi
   t->set_encode_us(Micros(costs->encode_seconds));
   t->set_rectify_us(Micros(costs->rectify_seconds));
   t->set_match_us(Micros(costs->match_seconds));
+  return absl::OkStatus();
+}
+
+absl::Status FrameProcessor::DropSparseVoxels(const FrameSettings& settings,
+                                              const DracoOptions& draco,
+                                              std::uint32_t* min_points, bool* exhausted,
+                                              v1::CloudReply* reply, DracoEncodeInfo* info) {
+  const std::uint32_t most = settings.cap_min_points_per_voxel;
+  *exhausted = most > 0;
+  // 0 and 1 both keep every voxel (PCL): the first step that drops any is 2.
+  for (std::uint32_t k = std::max<std::uint32_t>(*min_points, 1) + 1; k <= most; ++k) {
+    if (absl::Status s = pipeline_.RefilterVoxels(k, &sparser_); !s.ok()) return s;
+    // The cloud is what the robot drives by: an over-cap cloud beats none.
+    if (sparser_.size() == 0) return absl::OkStatus();
+    std::swap(cloud_, sparser_);
+    *min_points = k;
+    if (absl::Status s = EncodeDraco(cloud_, draco, reply->mutable_draco(), info); !s.ok()) {
+      return s;
+    }
+    if (!info->over_cap) {
+      *exhausted = false;
+      return absl::OkStatus();
+    }
+  }
   return absl::OkStatus();
 }
 

@@ -62,8 +62,17 @@ class FrameProcessor {
                     const std::function<absl::Status(const PipelineOptions&, PointCloud*)>& rerun,
                     v1::CloudReply* reply);
 
+  // The cap's last resort (FrameSettings::cap_min_points_per_voxel): while cloud_ is over the
+  // cap at the floors, the voxel minimum `*min_points` goes up a point and the cloud is encoded
+  // again into the reply, never to an empty cloud. `*exhausted`: still over the cap with the
+  // minimum as high as the settings (or a non-empty cloud) allow.
+  absl::Status DropSparseVoxels(const FrameSettings& settings, const DracoOptions& draco,
+                                std::uint32_t* min_points, bool* exhausted, v1::CloudReply* reply,
+                                DracoEncodeInfo* info);
+
   Pipeline pipeline_;
   PointCloud cloud_;
+  PointCloud sparser_;  // DropSparseVoxels'
   PointCloud unfiltered_;  // ExplainEmpty's
   // ExplainEmpty measures the range the points spanned on one frame in kRangeEvery emptied by
   // the passthrough (on this worker).

@@ -61,6 +61,7 @@ class StageFlags {
   bool no_passthrough_ = false;
   float leaf_;
   std::uint32_t min_points_per_voxel_;
+  std::uint32_t cap_min_points_per_voxel_;
   int draco_bits_, draco_speed_;
 };
 

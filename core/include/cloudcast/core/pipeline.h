@@ -49,6 +49,13 @@ class Pipeline {
   absl::Status Run(const PipelineOptions& options, const DepthView& depth, const ColorView& colour,
                    PointCloud* out, StageCounts* counts = nullptr);
 
+  // The last successful Run's voxels again, keeping only those of at least `min_points` points:
+  // the cloud that Run gives with voxel.min_points_per_voxel = min_points (PCL's
+  // setMinimumPointsNumberPerVoxel), point for point, without reading the pixels again. For a
+  // reply that must shrink (the server's downlink cap). FAILED_PRECONDITION unless the last Run
+  // succeeded with the voxel grid on; `out` is replaced.
+  absl::Status RefilterVoxels(std::uint32_t min_points, PointCloud* out);
+
  private:
   struct Impl;
   std::unique_ptr<Impl> impl_;

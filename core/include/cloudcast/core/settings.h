@@ -35,6 +35,12 @@ struct FrameSettings {
   // (convert::ContractDefaults clears both); the core's own programs start from a given camera.
   bool focal_given = true;
   bool baseline_given = true;
+  // The downlink cap's last resort (contract revision 5): a cloud still over
+  // draco.max_cloud_bytes at the floors of both bit depths loses the voxels of fewest points,
+  // the voxel grid's minimum raised one point at a time up to this many (never to an empty
+  // cloud). 0: never; every voxel pipeline.voxel keeps comes back. At most kMaxCapMinPoints.
+  std::uint32_t cap_min_points_per_voxel = 0;
+  static constexpr std::uint32_t kMaxCapMinPoints = 64;
 
   // The pipeline options for a width x height frame.
   PipelineOptions PipelineFor(std::uint32_t width, std::uint32_t height) const;

@@ -28,7 +28,7 @@ namespace cloudcast::convert {
 
 // The revision of cloudcast.proto this code speaks (ServerInfo.contract_revision); each one is
 // described in docs/migration.md.
-inline constexpr char kContractRevision[] = "4";
+inline constexpr char kContractRevision[] = "5";
 
 // ---------------------------------------------------------------------------------------------
 // Delivery: how a stream treats frames that arrive faster than they are processed.
