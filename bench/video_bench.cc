@@ -407,7 +407,7 @@ struct ColourRow {
 };
 
 ColourRow RunColourVideo(Codec codec, const Dataset& d, PictureKind kind, const std::string& preset,
-                         const Rate& rate, int fps, int keyint) {
+                         const Rate& rate, int fps, int keyint, const std::string& x264_params) {
   const Clock clock = ClockFor(codec);
   ColourRow row;
   row.dataset = d.name;
@@ -416,11 +416,10 @@ ColourRow RunColourVideo(Codec codec, const Dataset& d, PictureKind kind, const 
   row.codec = std::string(video::Info(codec).label) + " " +
               (kind == PictureKind::kColour444 ? "4:4:4 " : "4:2:0 ") + preset_label;
   row.setting = rate.Label();
-  auto enc = Check(CodecStream::Open(codec,
-                                     StreamOptions(kind, d.colour[0].width, d.colour[0].height,
-                                                   preset, rate, fps, 1, 1, keyint),
-                                     ColorEncoding::kBGR8),
-                   "encoder");
+  EncoderOptions o =
+      StreamOptions(kind, d.colour[0].width, d.colour[0].height, preset, rate, fps, 1, 1, keyint);
+  if (codec == Codec::kH264) o.x264_params = x264_params;
+  auto enc = Check(CodecStream::Open(codec, o, ColorEncoding::kBGR8), "encoder");
   std::vector<double> enc_ms, dec_ms, psnr, ssim;
   std::uint64_t bytes = 0;
   std::string pic;
@@ -584,7 +583,8 @@ int Main(int argc, char** argv) {
               colour_bitrates = "3", jpeg_qualities = "50,70,80,90,95";
   int synthetic_frames = 30, tsukuba_frames = 0, fps = 30, keyint = 60, interleaved_refs = 2;
   bool no_sgbm = false, no_colour = false, no_stereo = false, no_depth = false;
-  std::string stereo_x264, capped, colour_capped;
+  std::string stereo_x264, colour_x264, capped, colour_capped;
+  std::string colour_kinds = "420,444";
   bool lossless_every_preset = false;
   int depth_rounds = 5;
   std::string codecs = "h264";
@@ -639,6 +639,10 @@ int Main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--stereo-x264-params", stereo_x264,
                  "more x264 options for the stereo streams, e.g. aq-mode=3:aq-strength=1.5");
+  app.add_option("--colour-x264-params", colour_x264,
+                 "more x264 options for the colour streams, e.g. no-deblock=1:cabac=0");
+  app.add_option("--colour-kinds", colour_kinds, "colour samplings: 420, 444")
+      ->capture_default_str();
   app.add_flag("--no-sgbm", no_sgbm, "score our matcher only (StereoSGBM takes ~4x its time)");
   app.add_flag("--no-colour", no_colour, "skip the colour table");
   app.add_flag("--no-stereo", no_stereo, "skip the stereo table");
@@ -767,6 +771,7 @@ int Main(int argc, char** argv) {
   out["keyint"] = keyint;
   out["intra_refresh"] = g_intra_refresh;
   out["stereo_x264_params"] = stereo_x264;
+  out["colour_x264_params"] = colour_x264;
   out["codecs"] = Words(codecs);
   if (codecs != "h264") {
     std::printf(
@@ -922,18 +927,25 @@ int Main(int argc, char** argv) {
         std::fflush(stdout);
         colour_rows.push_back(r);
       };
-      for (PictureKind kind : {PictureKind::kColour, PictureKind::kColour444}) {
+      std::vector<PictureKind> kinds;
+      for (const std::string& k : Words(colour_kinds)) {
+        if (k != "420" && k != "444") Die("--colour-kinds takes 420 and 444, got " + k);
+        kinds.push_back(k == "444" ? PictureKind::kColour444 : PictureKind::kColour);
+      }
+      for (PictureKind kind : kinds) {
         for (const CodecPlan& plan : plans) {
           for (const std::string& preset : plan.colour_presets) {
             for (double crf : plan.colour_crfs) {
-              print(RunColourVideo(plan.codec, d, kind, preset, Rate{crf, 0, false}, fps, keyint));
+              print(RunColourVideo(plan.codec, d, kind, preset, Rate{crf, 0, false}, fps, keyint,
+                                  colour_x264));
             }
             for (double mbps : ParseList<double>(colour_bitrates, "--colour-bitrates")) {
-              print(RunColourVideo(plan.codec, d, kind, preset, Rate{0, mbps, false}, fps, keyint));
+              print(RunColourVideo(plan.codec, d, kind, preset, Rate{0, mbps, false}, fps, keyint,
+                                  colour_x264));
             }
             if (plan.codec != Codec::kH264) continue;  // capped CRF: H.264's only
             for (const Rate& r : colour_capped_rates) {
-              print(RunColourVideo(plan.codec, d, kind, preset, r, fps, keyint));
+              print(RunColourVideo(plan.codec, d, kind, preset, r, fps, keyint, colour_x264));
             }
           }
         }

@@ -659,6 +659,7 @@ TEST_F(ClientProgramTest, HelpDocumentsEveryFlagWithDefaults) {
                            "--leaf",
                            "--draco-bits",
                            "--draco-speed",
+                           "--cap-min-points-per-voxel",
                            "--no-window",
                            "--window",
                            "--hidden",

@@ -284,6 +284,11 @@ TEST_F(LoadVideoCliTest, EveryFrameIsAnsweredWithoutKeyframeRequests) {
       {"disparity", {}, false},
       {"stereo", {"--h264-grey", "--h264-preset", "superfast", "--h264-crf", "4"}, true},
       {"stereo", {}, false},
+      // docs/video.md's fast-decode colour setting: 4:4:4, CAVLC, no deblocking.
+      {"disparity",
+       {"--h264-444", "--h264-crf", "23", "--h264-x264-params",
+        "no-deblock=1:cabac=0:no-psy=1:aq-mode=0:partitions=all"},
+       true},
   };
   int n = 0;
   for (const Case& c : cases) {
