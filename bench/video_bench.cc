@@ -937,11 +937,11 @@ int Main(int argc, char** argv) {
           for (const std::string& preset : plan.colour_presets) {
             for (double crf : plan.colour_crfs) {
               print(RunColourVideo(plan.codec, d, kind, preset, Rate{crf, 0, false}, fps, keyint,
-                                  colour_x264));
+                                   colour_x264));
             }
             for (double mbps : ParseList<double>(colour_bitrates, "--colour-bitrates")) {
               print(RunColourVideo(plan.codec, d, kind, preset, Rate{0, mbps, false}, fps, keyint,
-                                  colour_x264));
+                                   colour_x264));
             }
             if (plan.codec != Codec::kH264) continue;  // capped CRF: H.264's only
             for (const Rate& r : colour_capped_rates) {

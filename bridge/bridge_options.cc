@@ -141,9 +141,10 @@ const std::vector<ParamDoc>& Docs() {
        "with draco/max_reply_kb: the fewest colour bits per channel the server may go down to, "
        "1..8 (the server's default: 5)"},
       {"draco/cap_min_points", "int", "0",
-       "with draco/max_reply_kb or rate_control (whose reply cap is on by default): a cloud still "
-       "over the cap at the fewest bits allowed loses the voxels of fewest points, voxel/min_points "
-       "raised up to this, 0..64 (2: a stereo matcher's lone stray points first); 0: never"},
+       "with draco/max_reply_kb or rate_control (whose reply cap is on by default): a cloud "
+       "still over the cap at the fewest bits allowed loses the voxels of fewest points, "
+       "voxel/min_points raised up to this, 0..64 (2: a stereo matcher's lone stray points "
+       "first); 0: never"},
       {"tls/enabled", "bool", "false",
        "connect with TLS, trusting the system's CAs (implied by every other tls/ parameter)"},
       {"tls/ca", "string", "", "PEM file of the CA certificates to trust for the server"},
@@ -732,10 +733,9 @@ absl::Status ReadStages(const ParamReader& p, BridgeOptions* o) {
                         absl::StrCat("in 0..", FrameSettings::kMaxCapMinPoints));
     }
     if (*cap_min_points > 0 && cap == 0 && !o->rate_control) {
-      return absl::InvalidArgumentError(
-          absl::StrCat(p.Display("draco/cap_min_points"), " needs ",
-                       p.Display("draco/max_reply_kb"), " or ", p.Display("rate_control"),
-                       " (a cap to meet)"));
+      return absl::InvalidArgumentError(absl::StrCat(
+          p.Display("draco/cap_min_points"), " needs ", p.Display("draco/max_reply_kb"), " or ",
+          p.Display("rate_control"), " (a cap to meet)"));
     }
     c.mutable_draco()->set_cap_min_points_per_voxel(static_cast<std::uint32_t>(*cap_min_points));
   }

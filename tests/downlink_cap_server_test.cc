@@ -229,8 +229,7 @@ TEST_F(DownlinkCapTest, TheCapDropsTheSparsestVoxelsOnlyWhereBitsCannotMeetIt) {
               Contains("config.draco.cap_min_points_per_voxel"));
   EXPECT_THAT(impossible.reply.over_cap().message(),
               HasSubstr("voxels of at least 3 points (config.draco.cap_min_points_per_voxel)"));
-  EXPECT_TRUE(process(with_minimum(Capped(64), 0, 3)).reply.draco() ==
-              impossible.reply.draco());
+  EXPECT_TRUE(process(with_minimum(Capped(64), 0, 3)).reply.draco() == impossible.reply.draco());
   EXPECT_THAT(bits_only.reply.over_cap().limited_by(),
               Not(Contains("config.draco.cap_min_points_per_voxel")));
 

@@ -187,10 +187,10 @@ absl::Status ResolveDraco(const v1::DracoConfig& c, std::string_view p, FrameSet
   if (c.has_cap_min_points_per_voxel()) {
     s->cap_min_points_per_voxel = c.cap_min_points_per_voxel();
     if (s->cap_min_points_per_voxel > FrameSettings::kMaxCapMinPoints) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          Path(p, "cap_min_points_per_voxel"), " is ", c.cap_min_points_per_voxel(),
-          "; it must be in [0, ", FrameSettings::kMaxCapMinPoints,
-          "] (0: the cap never drops voxels)"));
+      return absl::InvalidArgumentError(
+          absl::StrCat(Path(p, "cap_min_points_per_voxel"), " is ", c.cap_min_points_per_voxel(),
+                       "; it must be in [0, ", FrameSettings::kMaxCapMinPoints,
+                       "] (0: the cap never drops voxels)"));
     }
   }
   if (c.has_max_position_error()) {

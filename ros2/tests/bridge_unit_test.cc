@@ -426,8 +426,8 @@ TEST(BridgeUplink, ParamDocsListTheUplinkAndCapParameters) {
        {"encoding", "compress", "h264/preset", "h264/crf", "h264/mbps", "h264/fps",
         "h264/keyframe_interval", "h264/threads", "h264/colour_444", "h264/grey",
         "h264/separate_stereo", "draco/max_reply_kb", "draco/min_color_bits",
-        "draco/cap_min_points", "jpeg/quality",
-        "jpeg/min_quality", "jpeg/max_quality", "jpeg/half_resolution", "jpeg/fps"}) {
+        "draco/cap_min_points", "jpeg/quality", "jpeg/min_quality", "jpeg/max_quality",
+        "jpeg/half_resolution", "jpeg/fps"}) {
     EXPECT_EQ(names.count(name), 1u) << name;
   }
 }

@@ -59,9 +59,9 @@ void ExplainOverCap(const DracoOptions& draco, const DracoEncodeInfo& info,
       bounded ? absl::StrCat("the fewest that keep ", position_bound, " ", draco.max_position_error)
               : absl::StrCat(position_bound, "; no error bound"),
       ") and ", info.color_bits, " colour bits (", color_bound, ")",
-      points_exhausted ? absl::StrCat(", voxels of at least ", min_points, " points (",
-                                      kPointsBound, ")")
-                       : "",
+      points_exhausted
+          ? absl::StrCat(", voxels of at least ", min_points, " points (", kPointsBound, ")")
+          : "",
       ", over ", kCap, " ", draco.max_cloud_bytes));
 }
 
@@ -271,9 +271,9 @@ absl::Status FrameProcessor::ProcessWith(const v1::Frame& frame, const InPlacePi
 }
 
 absl::Status FrameProcessor::DropSparseVoxels(const FrameSettings& settings,
-                                              const DracoOptions& draco,
-                                              std::uint32_t* min_points, bool* exhausted,
-                                              v1::CloudReply* reply, DracoEncodeInfo* info) {
+                                              const DracoOptions& draco, std::uint32_t* min_points,
+                                              bool* exhausted, v1::CloudReply* reply,
+                                              DracoEncodeInfo* info) {
   const std::uint32_t most = settings.cap_min_points_per_voxel;
   *exhausted = most > 0;
   // 0 and 1 both keep every voxel (PCL): the first step that drops any is 2.

@@ -72,7 +72,7 @@ class FrameProcessor {
 
   Pipeline pipeline_;
   PointCloud cloud_;
-  PointCloud sparser_;  // DropSparseVoxels'
+  PointCloud sparser_;     // DropSparseVoxels'
   PointCloud unfiltered_;  // ExplainEmpty's
   // ExplainEmpty measures the range the points spanned on one frame in kRangeEvery emptied by
   // the passthrough (on this worker).
