@@ -19,6 +19,7 @@
 #include "cloudcast/client/client.h"
 #include "cloudcast/client/config.h"
 #include "cloudcast/datasets/tsukuba.h"
+#include "cloudcast/testing/metrics_scrape.h"
 #include "cloudcast/v1/cloudcast.grpc.pb.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
@@ -247,6 +248,32 @@ TEST_F(DownlinkCapTest, TheCapDropsTheSparsestVoxelsOnlyWhereBitsCannotMeetIt) {
   EXPECT_EQ(bad.status().code(), absl::StatusCode::kInvalidArgument);
   EXPECT_THAT(std::string(bad.status().message()),
               HasSubstr("config.draco.cap_min_points_per_voxel is 65"));
+}
+
+// An operator sees how often the cap binds: clouds over it, clouds it thinned.
+TEST_F(DownlinkCapTest, MetricsCountCloudsOverTheCapAndCloudsItThinned) {
+  REQUIRE_FRAMES();
+  server::ServerOptions options = testing::TestServerOptions();
+  options.metrics_listen = "127.0.0.1:0";
+  std::unique_ptr<server::Server> server = testing::StartTestServer(options);
+  ASSERT_NE(server, nullptr);
+  auto client = client::Client::Connect(server->address());
+  ASSERT_TRUE(client.ok()) << client.status();
+  const tsukuba::Frame& f = Frame("00001");
+  auto send = [&](std::uint64_t cap, std::uint32_t cap_min) {
+    client::StreamConfig c = Capped(cap);
+    if (cap_min > 0) c.mutable_draco()->set_cap_min_points_per_voxel(cap_min);
+    absl::StatusOr<client::Result> r = (*client)->Process(f.disparity.view(), f.colour.view(), c);
+    EXPECT_TRUE(r.ok()) << r.status();
+  };
+  send(100000, 4);  // under the cap at full bits: neither
+  send(30000, 0);   // over at the floors
+  send(30000, 4);   // brought under by minimum 2
+  send(64, 3);      // thinned, and still over
+  const std::string text = server::ScrapeMetrics(server->metrics_port());
+  EXPECT_EQ(server::MetricValue(text, "cloudcast_frames_processed_total"), 4.0);
+  EXPECT_EQ(server::MetricValue(text, "cloudcast_replies_over_cap_total"), 2.0);
+  EXPECT_EQ(server::MetricValue(text, "cloudcast_replies_voxels_dropped_total"), 2.0);
 }
 
 TEST_F(DownlinkCapTest, BadValuesGetErrorsNamingTheField) {

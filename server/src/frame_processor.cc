@@ -220,8 +220,10 @@ absl::Status FrameProcessor::ProcessWith(const v1::Frame& frame, const InPlacePi
   std::uint32_t min_points = ran.voxel.enabled ? ran.voxel.min_points_per_voxel : 0;
   bool points_exhausted = false;
   if (status.ok() && info.over_cap && ran.voxel.enabled) {
+    const std::uint32_t configured = min_points;
     status = DropSparseVoxels(settings, draco, &min_points, &points_exhausted, reply, &info);
     counts.after_voxel = cloud_.size();
+    costs->voxels_dropped = min_points != configured;
   }
   const double cpu1 = ThreadCpuSeconds();
   const Clock::time_point t3 = Clock::now();
@@ -358,6 +360,8 @@ absl::Status FrameRunner::Run(std::size_t worker, const v1::Frame& frame,
     reply->set_stream_bytes_received(arrival.stream_bytes);
     reply->set_server_instance(instance_);
     m.frames_processed.Increment();
+    if (reply->has_over_cap()) m.replies_over_cap.Increment();
+    if (costs.voxels_dropped) m.replies_voxels_dropped.Increment();
     m.pipeline_seconds.Observe(costs.pipeline_seconds);
     m.encode_seconds.Observe(costs.encode_seconds);
     if (costs.decoded) m.decode_seconds.Observe(costs.decode_seconds);

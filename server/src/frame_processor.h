@@ -31,6 +31,7 @@ struct FrameCosts {
   double encode_seconds = 0;    // wall time in EncodeDraco
   double core_cpu_seconds = 0;  // this thread's CPU time in Pipeline::Run + EncodeDraco
   bool decoded = false;
+  bool voxels_dropped = false;  // the downlink cap raised the voxel minimum
 };
 
 // Holds the scratch a frame needs (pipeline tables and voxel accumulator, the cloud, decoded

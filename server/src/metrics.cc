@@ -85,6 +85,12 @@ Metrics::Metrics()
                                 "Serialized size of the requests read")),
       bytes_sent(NewCounter(*registry_, "cloudcast_bytes_sent_total",
                             "Serialized size of the replies written")),
+      replies_over_cap(NewCounter(*registry_, "cloudcast_replies_over_cap_total",
+                                  "Clouds sent over the client's cap (max_cloud_bytes) at the "
+                                  "floors of its bounds")),
+      replies_voxels_dropped(NewCounter(*registry_, "cloudcast_replies_voxels_dropped_total",
+                                        "Clouds the client's cap thinned by raising the voxel "
+                                        "minimum (cap_min_points_per_voxel)")),
       active_streams(prometheus::BuildGauge()
                          .Name("cloudcast_active_streams")
                          .Help("Stream calls open now")

@@ -38,6 +38,11 @@ class Metrics {
   prometheus::Counter& frames_dropped;    // replaced while waiting (DELIVERY_LATEST)
   prometheus::Counter& bytes_received;    // serialized request size of frames and configs
   prometheus::Counter& bytes_sent;        // serialized reply size
+  // The downlink cap (DracoConfig.max_cloud_bytes): clouds sent over it at the floors of the
+  // client's bounds (CloudReply.over_cap), and clouds it thinned by raising the voxel minimum
+  // (DracoConfig.cap_min_points_per_voxel, contract revision 5).
+  prometheus::Counter& replies_over_cap;
+  prometheus::Counter& replies_voxels_dropped;
   prometheus::Gauge& active_streams;
   prometheus::Counter& streams_accepted;
   prometheus::Counter& streams_rejected_limit;     // over --max-streams
