@@ -351,6 +351,27 @@ TEST_F(DownlinkCapTest, ClientProgramFlag) {
   EXPECT_EQ(j["draco_bits"]["position"], 10);
   EXPECT_NE(r.out.find("Draco bits (last cloud)"), std::string::npos) << r;
 
+  // The cap's voxel step from the command line: the clouds the bits could not bring under it
+  // come back thinned, and the JSON counts clouds by the minimum they were made with.
+  const std::string thinned_json = (dir / "thinned.json").string();
+  const testing::RunResult thinned = testing::RunProgram(
+      binary,
+      {"--tsukuba", testing::TsukubaDir(), "--server", shared_target(), "--no-window", "--lossless",
+       "--max-reply-kb", "30", "--cap-min-points-per-voxel", "8", "--json", thinned_json,
+       "--progress", "0"},
+      dir.string(), "env -u DISPLAY");
+  ASSERT_TRUE(thinned.exited && thinned.code == 0) << thinned;
+  const nlohmann::json t = nlohmann::json::parse(testing::ReadText(thinned_json));
+  const nlohmann::json& by_min = t["clouds_by_min_points_per_voxel"];
+  EXPECT_EQ(by_min.value("0", 0), 7) << by_min;  // the seven the bits brought under
+  int thinned_clouds = 0;
+  for (const auto& [min_points, clouds] : by_min.items()) {
+    if (min_points != "0") thinned_clouds += clouds.get<int>();
+  }
+  EXPECT_EQ(thinned_clouds, 3) << by_min;  // 00001, 00400 and 01400
+  EXPECT_LT(t["frames_over_cap"].get<int>(), 3) << t;
+  EXPECT_NE(thinned.out.find("clouds by voxel minimum"), std::string::npos) << thinned;
+
   const testing::RunResult bad = testing::RunProgram(
       binary,
       {"--tsukuba", testing::TsukubaDir(), "--server", shared_target(), "--no-window",

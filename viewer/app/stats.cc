@@ -50,6 +50,7 @@ void StreamStats::RecordResult(const Result& result) {
   position_bits_ = result.reply.position_bits();
   color_bits_ = result.reply.color_bits();
   if (result.reply.has_over_cap()) ++over_cap_;
+  ++clouds_by_min_points_[result.reply.min_points_per_voxel()];
   resolution_divisor_ = result.resolution_divisor;
   if (result.resolution_divisor == 2) ++half_resolution_;
   if (result.capture_time_unix_ns != 0 && result.times.receive_unix_ns != 0) {
@@ -87,6 +88,7 @@ StatsSnapshot StreamStats::Snapshot() const {
   s.position_bits = position_bits_;
   s.color_bits = color_bits_;
   s.over_cap = over_cap_;
+  s.clouds_by_min_points = clouds_by_min_points_;
   s.half_resolution = half_resolution_;
   s.resolution_divisor = resolution_divisor_;
   if (received_ > 0) {
@@ -199,6 +201,13 @@ std::string StreamStats::SummaryText(const StatsSnapshot& s, bool with_display) 
     out += fmt::format("Draco bits (last cloud): {} position, {} colour; {} clouds over the cap\n",
                        s.position_bits, s.color_bits, s.over_cap);
   }
+  if (s.clouds_by_min_points.size() > 1) {  // the cap thinned some clouds
+    std::string by;
+    for (const auto& [min_points, clouds] : s.clouds_by_min_points) {
+      by += fmt::format("{}{} at {}", by.empty() ? "" : ", ", clouds, min_points);
+    }
+    out += fmt::format("clouds by voxel minimum (points a voxel needed): {}\n", by);
+  }
   out += fmt::format(
       "time per cloud (ms): server decode {:.2f}, pipeline {:.2f}, Draco encode "
       "{:.2f}, queue {:.2f}; client Draco decode {:.2f}\n",
@@ -225,6 +234,11 @@ Json StreamStats::ToJson(const StatsSnapshot& s, bool with_display) {
   j["mean_uplink_bytes_per_frame"] = PerFrame(s.uplink_bytes, s.sent);
   j["draco_bits"] = {{"position", s.position_bits}, {"color", s.color_bits}};
   j["frames_over_cap"] = s.over_cap;
+  Json by_min = Json::object();
+  for (const auto& [min_points, clouds] : s.clouds_by_min_points) {
+    by_min[std::to_string(min_points)] = clouds;
+  }
+  j["clouds_by_min_points_per_voxel"] = by_min;
   j["half_resolution_frames"] = s.half_resolution;
   j["mean_us_per_frame"] = {{"server_decode", s.server_decode_us},
                             {"server_pipeline", s.server_pipeline_us},

@@ -6,9 +6,10 @@
 
 #include <chrono>
 #include <cstdint>
+#include <map>
 #include <mutex>
-#include <optional>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -53,6 +54,9 @@ struct StatsSnapshot {
   // clouds it could not bring under the cap (CloudReply.over_cap).
   int position_bits = 0, color_bits = 0;
   std::uint64_t over_cap = 0;
+  // Clouds by the voxel minimum they were made with (CloudReply.min_points_per_voxel): above the
+  // stream's own when the cap thinned them (--cap-min-points-per-voxel, contract revision 5).
+  std::map<std::uint32_t, std::uint64_t> clouds_by_min_points;
   // Clouds of frames sent at half resolution (--rate-control's floor: Result::resolution_divisor
   // 2), and the resolution divisor of the latest (1: the camera's).
   std::uint64_t half_resolution = 0;
@@ -97,6 +101,7 @@ class StreamStats {
   std::uint64_t uplink_bytes_ = 0, points_ = 0, draco_bytes_ = 0;
   int position_bits_ = 0, color_bits_ = 0;
   std::uint64_t over_cap_ = 0;
+  std::map<std::uint32_t, std::uint64_t> clouds_by_min_points_;
   std::uint64_t half_resolution_ = 0;
   int resolution_divisor_ = 1;
   std::vector<double> latencies_ms_;
