@@ -29,12 +29,19 @@ absl::Status FrameSettings::Validate(std::string_view field) const {
   // The principal point is checked as given; an unset one is the centre of a valid frame.
   if (auto s = PipelineFor(2, 2).Validate(field); !s.ok()) return s;
   if (auto s = Draco().Validate(prefix + "draco"); !s.ok()) return s;
-  if (cap_min_points_per_voxel > kMaxCapMinPoints) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        prefix, "draco.cap_min_points_per_voxel is ", cap_min_points_per_voxel,
-        "; it must be in [0, ", kMaxCapMinPoints, "] (0: the cap never drops voxels)"));
+  if (auto s =
+          ValidateCapMinPoints(cap_min_points_per_voxel, prefix + "draco.cap_min_points_per_voxel");
+      !s.ok()) {
+    return s;
   }
   return stereo.Validate(prefix + "stereo");
+}
+
+absl::Status FrameSettings::ValidateCapMinPoints(std::uint32_t value, std::string_view field) {
+  if (value <= kMaxCapMinPoints) return absl::OkStatus();
+  return absl::InvalidArgumentError(absl::StrCat(std::string(field), " is ", value,
+                                                 "; it must be in [0, ", kMaxCapMinPoints,
+                                                 "] (0: the cap never drops voxels)"));
 }
 
 const std::vector<std::string>& PresetNames() {

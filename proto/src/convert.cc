@@ -186,11 +186,10 @@ absl::Status ResolveDraco(const v1::DracoConfig& c, std::string_view p, FrameSet
   if (c.has_min_color_bits()) d.min_color_bits = c.min_color_bits();
   if (c.has_cap_min_points_per_voxel()) {
     s->cap_min_points_per_voxel = c.cap_min_points_per_voxel();
-    if (s->cap_min_points_per_voxel > FrameSettings::kMaxCapMinPoints) {
-      return absl::InvalidArgumentError(
-          absl::StrCat(Path(p, "cap_min_points_per_voxel"), " is ", c.cap_min_points_per_voxel(),
-                       "; it must be in [0, ", FrameSettings::kMaxCapMinPoints,
-                       "] (0: the cap never drops voxels)"));
+    if (auto st = FrameSettings::ValidateCapMinPoints(s->cap_min_points_per_voxel,
+                                                      Path(p, "cap_min_points_per_voxel"));
+        !st.ok()) {
+      return st;
     }
   }
   if (c.has_max_position_error()) {

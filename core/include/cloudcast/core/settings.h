@@ -41,6 +41,9 @@ struct FrameSettings {
   // cloud). 0: never; every voxel pipeline.voxel keeps comes back. At most kMaxCapMinPoints.
   std::uint32_t cap_min_points_per_voxel = 0;
   static constexpr std::uint32_t kMaxCapMinPoints = 64;
+  // The range rule of cap_min_points_per_voxel, for every place that reads it (programs' flags,
+  // the contract's DracoConfig); the error names `field`.
+  static absl::Status ValidateCapMinPoints(std::uint32_t value, std::string_view field);
 
   // The pipeline options for a width x height frame.
   PipelineOptions PipelineFor(std::uint32_t width, std::uint32_t height) const;
