@@ -20,10 +20,17 @@ std::int64_t Ns(RateController::Clock::time_point t) {
 constexpr std::int64_t kDeliveredSpanNs = 400'000'000;
 constexpr std::int64_t kMinDeliveredSpanNs = 150'000'000;
 
+// How far over the delivered rate the replies' bitrate may grow before the downlink first shows
+// overuse (DirectionRate's free start).
+constexpr double kFreeStartOverDelivered = 4;
+
 }  // namespace
 
-DirectionRate::DirectionRate(const RateControlOptions& options, double start_bps)
-    : options_(options), target_bps_(std::clamp(start_bps, options.min_bps, options.max_bps)) {}
+DirectionRate::DirectionRate(const RateControlOptions& options, double start_bps, bool free_start)
+    : options_(options),
+      target_bps_(std::clamp(start_bps, options.min_bps, options.max_bps)),
+      start_bps_(target_bps_),
+      free_start_(free_start) {}
 
 void DirectionRate::Restart() {
   delivered_.clear();
@@ -72,7 +79,12 @@ void DirectionRate::Control(Clock::time_point now, double rtt_ms) {
     const auto once_a_round_trip = std::chrono::duration_cast<Clock::duration>(
         std::chrono::duration<double, std::milli>(std::max(rtt_ms, 100.0)));
     if (since >= once_a_round_trip) {
-      const double cut = delivered_bps_ > 0 ? options_.backoff * delivered_bps_ : 0.5 * target_bps_;
+      double cut = delivered_bps_ > 0 ? options_.backoff * delivered_bps_ : 0.5 * target_bps_;
+      // The replies' first cut stops at their start rate: before it they were capped by the
+      // growing target, so what they delivered says what was allowed, not what the downlink
+      // carries (a fresh connection's first windows queue them too). A downlink under the start
+      // rate shows overuse again a round trip later, and that cut goes below.
+      if (free_start_ && !last_decrease_) cut = std::max(cut, std::min(target_bps_, start_bps_));
       target_bps_ = std::min(target_bps_, cut);
       last_decrease_ = now;
       capacity_bps_ = delivered_bps_;
@@ -86,16 +98,25 @@ void DirectionRate::Control(Clock::time_point now, double rtt_ms) {
     // Never more than a probe's margin over what the link delivered: a sender held back by its
     // window sees no queueing delay, so the delay alone would let the target drift up (GCC caps
     // its estimate at 1.5 times the received rate for the same reason).
+    // The replies before their first overuse grow further, to four times what they delivered:
+    // their size is the scene's, and a near scene's cloud is several times the mean of far ones.
+    const double over_delivered =
+        free_start_ && !seen_overuse_ ? kFreeStartOverDelivered : options_.max_over_delivered;
     const double grown = target_bps_ * (1 + growth * dt);
-    const double cap = delivered_bps_ > 0 ? options_.max_over_delivered * delivered_bps_ : grown;
+    const double cap = delivered_bps_ > 0 ? over_delivered * delivered_bps_ : grown;
     target_bps_ = std::max(target_bps_, std::min(grown, cap));
   }
   target_bps_ = std::clamp(target_bps_, options_.min_bps, options_.max_bps);
 }
 
-// The downlink's bitrate is not the sender's to bound (--rate-max-mbps is the uplink's): the
-// replies start unlimited, their size the server's, and the first limit comes from the first
-// overuse the downlink shows.
+// The downlink's bitrate is not the sender's to bound (--rate-max-mbps is the uplink's). The
+// replies start at the uplink's starting bitrate, a guess as good as any about a link nothing has
+// crossed yet, and grow as fast as the frames' start-up probe until the downlink first shows
+// overuse, to four times the rate they delivered (not the frames' 1.6: a reply's size is the
+// scene's, so that rate says little of what the downlink could carry): on a fat link the cap soon
+// stops binding, growing 2.7 times a second. Whole replies until that first overuse came back late
+// for the stream's first second on a thin link: TCP's first congestion windows and the link's queue
+// took them at once (docs/links.md, round seven).
 static RateControlOptions DownlinkOptions(RateControlOptions options) {
   options.max_bps = std::numeric_limits<double>::max();
   options.target_delay = options.reply_target_delay;
@@ -105,8 +126,10 @@ static RateControlOptions DownlinkOptions(RateControlOptions options) {
 RateController::RateController(RateControlOptions options)
     : options_(options),
       up_(options_, options_.start_bps),
-      down_(DownlinkOptions(options_), std::numeric_limits<double>::max()) {
+      down_(DownlinkOptions(options_), options_.start_bps, /*free_start=*/true) {
   estimate_.target_bps = up_.target_bps();
+  estimate_.reply_target_bps =
+      options_.cap_replies && (reply_clock_ || !reply_without_clock_) ? down_.target_bps() : 0;
   estimate_.frames_in_flight = options_.min_frames_in_flight;
 }
 
@@ -169,6 +192,9 @@ void RateController::OnReply(const Reply& reply) {
     down_.AddDelivered(Ns(received), reply_bytes_total_);
     down_.AddDelay(received, static_cast<double>(Ns(received) - reply.server_send_unix_ns) / 1e6);
     down_.Control(received, estimate_.rtt_ms);
+    reply_clock_ = true;
+  } else {
+    reply_without_clock_ = true;
   }
 
   estimate_.target_bps = up_.target_bps();
@@ -176,7 +202,7 @@ void RateController::OnReply(const Reply& reply) {
   estimate_.queue_delay_ms = up_.queue_delay_ms();
   estimate_.overuse = up_.overuse();
   estimate_.reply_target_bps =
-      options_.cap_replies && down_.seen_overuse() ? down_.target_bps() : 0;
+      options_.cap_replies && (reply_clock_ || !reply_without_clock_) ? down_.target_bps() : 0;
   estimate_.reply_delivered_bps = down_.delivered_bps();
   estimate_.reply_queue_delay_ms = down_.queue_delay_ms();
   estimate_.reply_overuse = down_.overuse();

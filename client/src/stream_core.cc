@@ -125,6 +125,19 @@ StreamCore::StreamCore(grpc::Channel* channel, StreamCoreOptions options, Stream
   }
 }
 
+void StreamCore::FollowReplyCapLocked(Clock::time_point now) {
+  if (reply_cap_->Update(rate_->estimate(), now)) {
+    // Written in order with the frames: the server caps the replies of those after it.
+    machine_.Reconfigure(ConfigWithReplyCapLocked(), now).IgnoreError();
+  }
+}
+
+void StreamCore::CameraFrameLocked(Clock::time_point now) {
+  if (!reply_cap_) return;
+  reply_cap_->OnFrame(now);
+  FollowReplyCapLocked(now);
+}
+
 grpc::ByteBuffer StreamCore::ConfigWithReplyCapLocked() const {
   v1::StreamRequest request = stream_config_;
   const std::uint64_t cap = reply_cap_->cap();
@@ -348,7 +361,7 @@ CoreMachine::Submitted StreamCore::Submit(std::uint64_t sequence, grpc::ByteBuff
   {
     std::lock_guard<std::mutex> lock(mu_);
     const Clock::time_point now = Clock::now();
-    if (reply_cap_) reply_cap_->OnFrame(now);
+    CameraFrameLocked(now);
     result = machine_.Submit(sequence, std::move(bytes), std::move(record), now);
     CollectLocked(now);
   }
@@ -367,7 +380,7 @@ CoreMachine::Submitted StreamCore::SubmitWaiting(std::uint64_t sequence, grpc::B
       // The machine copies nothing until it accepts the frame.
       result = machine_.Submit(sequence, bytes, record, now);
       if (result != CoreMachine::Submitted::kFull) {
-        if (reply_cap_) reply_cap_->OnFrame(now);
+        CameraFrameLocked(now);
         CollectLocked(now);
         break;
       }
@@ -390,7 +403,7 @@ void StreamCore::Unmade(FrameFate fate, std::uint64_t sequence, FrameRecord reco
   {
     std::lock_guard<std::mutex> lock(mu_);
     const Clock::time_point now = Clock::now();
-    if (reply_cap_) reply_cap_->OnFrame(now);  // the camera made it: its reply was due too
+    CameraFrameLocked(now);  // the camera made it: its reply was due too
     machine_.Unmade(fate, sequence, std::move(record), now, std::move(why));
     CollectLocked(now);
   }
@@ -507,10 +520,7 @@ void StreamCore::OnReadDone(Call* call, bool ok) {
       machine_.SetMaxUnanswered(static_cast<std::size_t>(rate_->frames_in_flight()), now);
       ev.rate = rate_->estimate();
       if (reply_cap_) {
-        if (reply_cap_->Update(*ev.rate, now)) {
-          // Written in order with the frames: the server caps the replies of those after it.
-          machine_.Reconfigure(ConfigWithReplyCapLocked(), now).IgnoreError();
-        }
+        FollowReplyCapLocked(now);
         ev.rate->reply_cap_bytes = reply_cap_->cap();
       }
     }

@@ -25,9 +25,9 @@
 // an outage): a frame past the window waits in the sender, where DELIVERY_LATEST replaces it with
 // a newer one, instead of queueing behind the link in TCP's buffers. It holds the target's bytes
 // for one minimum round trip (all of it: serialization and the server's time included) plus
-// twice the target delay, rounded up, at least `min_frames_in_flight`; and, once the downlink
-// limits the replies, no more than the replies' bitrate carries back in that time (replies the
-// server cannot shrink to their cap would otherwise queue on the way back).
+// twice the target delay, rounded up, at least `min_frames_in_flight`; and no more than the
+// replies' bitrate carries back in that time (replies the server cannot shrink to their cap would
+// otherwise queue on the way back).
 #pragma once
 
 #include <chrono>
@@ -78,8 +78,8 @@ struct RateControlOptions {
   std::chrono::seconds min_rtt_window{10};
   // The replies follow the downlink: the stream core caps each reply's cloud
   // (DracoConfig.max_cloud_bytes, at most the cap the stream's own config sets) at the replies'
-  // bitrate over the frame rate, once the downlink has shown overuse. Off: replies take what
-  // they take.
+  // bitrate over the frame rate, from the stream's first frames (the replies start at
+  // start_bps too). Off: replies take what they take.
   bool cap_replies = true;
 };
 
@@ -92,8 +92,8 @@ struct RateEstimate {
   double queue_delay_ms = 0;  // smoothed rtt growth over the minimum
   int frames_in_flight = 0;   // the window
   bool overuse = false;       // the last reply saw the delay over its target
-  // The downlink, from the replies: the bitrate they may take (0: no limit, the downlink has not
-  // shown overuse, or the server sends no send time), what came back, and its queueing delay.
+  // The downlink, from the replies: the bitrate they may take (0: no limit: cap_replies is off,
+  // or the server sends no send time), what came back, and its queueing delay.
   double reply_target_bps = 0;
   double reply_delivered_bps = 0;
   double reply_queue_delay_ms = 0;
@@ -108,7 +108,10 @@ class DirectionRate {
  public:
   using Clock = std::chrono::steady_clock;
 
-  DirectionRate(const RateControlOptions& options, double start_bps);
+  // `free_start` (the replies, whose size is not ours to set: RateController): until the first
+  // overuse the bitrate grows to four times the delivered rate, not max_over_delivered, and the
+  // first cut stops at `start_bps`.
+  DirectionRate(const RateControlOptions& options, double start_bps, bool free_start = false);
 
   // The far end's count of this direction's bytes (cumulative) at `at_ns` on its clock.
   void AddDelivered(std::int64_t at_ns, std::uint64_t cumulative_bytes);
@@ -139,6 +142,8 @@ class DirectionRate {
   std::optional<Clock::time_point> last_update_;
   std::optional<Clock::time_point> last_decrease_;
   bool seen_overuse_ = false;
+  double start_bps_;
+  bool free_start_ = false;
   double capacity_bps_ = 0;  // delivered at the last overuse (0: none yet)
 };
 
@@ -189,6 +194,10 @@ class RateController {
   std::deque<std::pair<Clock::time_point, double>> round_trips_;
   bool server_clock_ = false;            // replies carry the server's receive time
   std::uint64_t reply_bytes_total_ = 0;  // the downlink's count, this call
+  // Whether replies carried the server's send time (the downlink's delay), and whether one came
+  // without it: a server that never sends it leaves the replies uncapped, their rate unknown.
+  bool reply_clock_ = false;
+  bool reply_without_clock_ = false;
 };
 
 // An encoder quality (JPEG's 1..100, or any scale where higher means more bytes) that follows a

@@ -209,6 +209,12 @@ class StreamCore : public std::enable_shared_from_this<StreamCore> {
   void KickLocked(Clock::time_point at);
   // The owner's config with the replies' cap in force, as bytes to write.
   grpc::ByteBuffer ConfigWithReplyCapLocked() const;
+  // Under mu_, with reply_cap_: the cap the controller's estimate asks for, written in order with
+  // the frames when it changed enough (ReplyCapFollower).
+  void FollowReplyCapLocked(Clock::time_point now);
+  // Under mu_: the camera made a frame (sent or not). The cap follows from the stream's second
+  // frame on, before any reply: the replies start at the controller's starting bitrate.
+  void CameraFrameLocked(Clock::time_point now);
 
   // Reactor callbacks (stream_core.cc's Call forwards them).
   void OnWriteDone(Call* call, bool ok);
