@@ -51,7 +51,8 @@ const std::vector<ParamDoc>& Docs() {
        "lower keeps latency lower at the cost of bytes per frame (docs/links.md measures 15 and "
        "30)"},
       {"rate/start_mbps", "double", absl::StrCat(client::RateControlOptions{}.start_bps / 1e6),
-       "with rate_control: the bitrate a stream starts at, Mbit/s, 0.01..10000"},
+       "with rate_control: the bitrate a stream's frames (and replies) start at, Mbit/s, "
+       "0.01..10000"},
       {"rate/min_mbps", "double", absl::StrCat(client::RateControlOptions{}.min_bps / 1e6),
        "with rate_control: the least the controller sets, Mbit/s, 0.01..10000"},
       {"rate/max_mbps", "double", absl::StrCat(client::RateControlOptions{}.max_bps / 1e6),

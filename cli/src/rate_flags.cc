@@ -26,7 +26,8 @@ RateFlags::RateFlags(CLI::App& app, const std::string& group) : app_(app) {
       ->capture_default_str()
       ->group(group);
   app.add_option("--rate-start-mbps", start_mbps_,
-                 "With --rate-control: the bitrate a stream starts at, Mbit/s")
+                 "With --rate-control: the bitrate a stream's frames start at, Mbit/s, and its "
+                 "replies too (with --rate-reply-cap)")
       ->check(kMbps)
       ->capture_default_str()
       ->group(group);

@@ -83,11 +83,14 @@ void DirectionRate::Control(Clock::time_point now, double rtt_ms) {
       // The replies' first cut stops at their start rate: before it they were capped by the
       // growing target, so what they delivered says what was allowed, not what the downlink
       // carries (a fresh connection's first windows queue them too). A downlink under the start
-      // rate shows overuse again a round trip later, and that cut goes below.
-      if (free_start_ && !last_decrease_) cut = std::max(cut, std::min(target_bps_, start_bps_));
+      // rate shows overuse again a round trip later, and that cut goes below. Nor is that
+      // delivered rate the link's capacity, near which growth slows: it held replies that cannot
+      // shrink near the start's rate (docs/links.md, round seven).
+      const bool first_of_free_start = free_start_ && !last_decrease_;
+      if (first_of_free_start) cut = std::max(cut, std::min(target_bps_, start_bps_));
       target_bps_ = std::min(target_bps_, cut);
       last_decrease_ = now;
-      capacity_bps_ = delivered_bps_;
+      capacity_bps_ = first_of_free_start ? 0 : delivered_bps_;
     }
   } else if (queue_delay_ms_ < options_.grow_below * target_delay) {
     const bool near_capacity = capacity_bps_ > 0 && target_bps_ >= 0.95 * capacity_bps_ &&

@@ -40,6 +40,7 @@
 namespace cloudcast::client {
 
 struct RateControlOptions {
+  // Both ways: the frames' bitrate and the replies' (cap_replies) start here.
   double start_bps = 4e6;
   double min_bps = 0.25e6;
   double max_bps = 100e6;
@@ -110,7 +111,7 @@ class DirectionRate {
 
   // `free_start` (the replies, whose size is not ours to set: RateController): until the first
   // overuse the bitrate grows to four times the delivered rate, not max_over_delivered, and the
-  // first cut stops at `start_bps`.
+  // first cut stops at `start_bps` and sets no capacity.
   DirectionRate(const RateControlOptions& options, double start_bps, bool free_start = false);
 
   // The far end's count of this direction's bytes (cumulative) at `at_ns` on its clock.
