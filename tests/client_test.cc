@@ -770,6 +770,40 @@ TEST_F(ClientTest, RateControlReportsItsEstimateAndKeepsItsWindow) {
   EXPECT_GT((*stream)->frames_replaced(), 0u);
 }
 
+// The replies start capped at the controller's starting bitrate over the camera's frame rate,
+// from the camera's second frame, before any reply has come back (docs/links.md, round seven):
+// frames sent as fast as Send returns make a high frame rate, so a cap at the floor
+// (ReplyCapFollower::kMinCapBytes) that these clouds cannot meet; the server says so on each reply
+// after it. Before, no cap came until the downlink showed overuse, which loopback never does.
+TEST_F(ClientTest, RateControlCapsTheRepliesFromTheStart) {
+  const SyntheticFrame f = Render(320, 240, 4);
+  StreamConfig config = MakeStreamConfig(OptionsFor(f.camera, 0.03f));
+  StreamOptions options;
+  options.rate_control = RateControlOptions{};
+  auto stream = client_->OpenStream(config, std::move(options));
+  ASSERT_TRUE(stream.ok()) << stream.status();
+  constexpr int kFrames = 10;
+  std::vector<Result> results;
+  std::thread reader([&] {
+    Result r;
+    while ((*stream)->Read(&r)) results.push_back(std::move(r));
+  });
+  for (int i = 0; i < kFrames; ++i) {
+    EXPECT_TRUE((*stream)->Send(f.disparity_view(), f.colour_view()).ok());
+  }
+  EXPECT_TRUE((*stream)->CloseSend().ok());
+  reader.join();
+  EXPECT_TRUE((*stream)->Finish().ok());
+  int over_cap = 0;
+  for (const Result& r : results) {
+    if (r.fate != FrameFate::kAnswered || r.sequence < 2) continue;
+    ASSERT_TRUE(r.rate.has_value()) << "sequence " << r.sequence;
+    EXPECT_GT(r.rate->reply_target_bps, 0) << "sequence " << r.sequence;
+    if (r.reply.has_over_cap()) ++over_cap;
+  }
+  EXPECT_GT(over_cap, 0) << "no reply after the camera's second frame was capped";
+}
+
 TEST_F(ClientTest, DestroyingAnUnfinishedStreamCancelsIt) {
   const SyntheticFrame f = Render(160, 120, 6);
   std::unique_ptr<Stream> stream = Open(ConfigFor(OptionsFor(f.camera)));

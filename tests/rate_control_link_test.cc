@@ -154,7 +154,12 @@ TEST(RateControlLinkTest, TheRepliesFollowADownlinkTheyWouldFill) {
   EXPECT_LT(cap / seconds, 3e6 / 8 / 30) << report["timeSeries"].dump();
   const nlohmann::json& f = report["frames"];
   replies = f["bytesReceived"].get<double>() / std::max(1.0, f["answered"].get<double>());
-  EXPECT_LT(replies, 15'000) << f;  // full-size clouds: 18.5 to 20.4 KB here
+  // Their queue stayed short: the replies' queueing delay (the controller's mean), 52 to 55 ms
+  // in round four and 90 on a machine whose two cores were busy with a build as well; with
+  // --rate-reply-cap false, 176 to 186. (Their size is no measure since the replies start
+  // capped, round seven: the uplink, no longer queued behind them, keeps full-resolution frames,
+  // whose clouds are larger at the server's floors, 20 to 27 KB, and the window gives the rest.)
+  EXPECT_LT(rc["replyQueueDelayMs"].get<double>(), 130) << rc << " replies of " << replies;
   EXPECT_EQ(f["lost"].get<int>(), 0);
   EXPECT_EQ(f["frameErrors"].get<int>(), 0);
   if (!HasFailure()) std::filesystem::remove_all(dir);

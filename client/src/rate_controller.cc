@@ -131,8 +131,7 @@ RateController::RateController(RateControlOptions options)
       up_(options_, options_.start_bps),
       down_(DownlinkOptions(options_), options_.start_bps, /*free_start=*/true) {
   estimate_.target_bps = up_.target_bps();
-  estimate_.reply_target_bps =
-      options_.cap_replies && (reply_clock_ || !reply_without_clock_) ? down_.target_bps() : 0;
+  estimate_.reply_target_bps = ReplyTargetBps();
   estimate_.frames_in_flight = options_.min_frames_in_flight;
 }
 
@@ -204,12 +203,15 @@ void RateController::OnReply(const Reply& reply) {
   estimate_.delivered_bps = up_.delivered_bps();
   estimate_.queue_delay_ms = up_.queue_delay_ms();
   estimate_.overuse = up_.overuse();
-  estimate_.reply_target_bps =
-      options_.cap_replies && (reply_clock_ || !reply_without_clock_) ? down_.target_bps() : 0;
+  estimate_.reply_target_bps = ReplyTargetBps();
   estimate_.reply_delivered_bps = down_.delivered_bps();
   estimate_.reply_queue_delay_ms = down_.queue_delay_ms();
   estimate_.reply_overuse = down_.overuse();
   UpdateWindow();
+}
+
+double RateController::ReplyTargetBps() const {
+  return options_.cap_replies && (reply_clock_ || !reply_without_clock_) ? down_.target_bps() : 0;
 }
 
 void RateController::UpdateWindow() {

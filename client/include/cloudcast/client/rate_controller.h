@@ -183,6 +183,8 @@ class RateController {
 
  private:
   void UpdateWindow();
+  // The bitrate the replies may take (RateEstimate::reply_target_bps).
+  double ReplyTargetBps() const;
 
   const RateControlOptions options_;
   RateEstimate estimate_;
