@@ -156,6 +156,22 @@ class ClientTest : public testing::SharedServerClientTest {
     EXPECT_TRUE(s.ok()) << s.status();
     return s.ok() ? std::move(s).value() : nullptr;
   }
+  // Sends `frames` copies of `f` as fast as Send returns, reading on another thread, and returns
+  // every result once the stream has finished.
+  static std::vector<Result> SendAll(Stream& stream, const SyntheticFrame& f, int frames) {
+    std::vector<Result> results;
+    std::thread reader([&] {
+      Result r;
+      while (stream.Read(&r)) results.push_back(std::move(r));
+    });
+    for (int i = 0; i < frames; ++i) {
+      EXPECT_TRUE(stream.Send(f.disparity_view(), f.colour_view()).ok());
+    }
+    EXPECT_TRUE(stream.CloseSend().ok());
+    reader.join();
+    EXPECT_TRUE(stream.Finish().ok());
+    return results;
+  }
 };
 
 // ---------------------------------------------------------------------------------------------
@@ -736,20 +752,10 @@ TEST_F(ClientTest, RateControlReportsItsEstimateAndKeepsItsWindow) {
   config.set_delivery(v1::DELIVERY_LATEST);
   StreamOptions options;
   options.rate_control = RateControlOptions{};
-  auto stream = client_->OpenStream(config, std::move(options));
-  ASSERT_TRUE(stream.ok()) << stream.status();
+  std::unique_ptr<Stream> stream = Open(config, std::move(options));
+  ASSERT_NE(stream, nullptr);
   constexpr int kFrames = 40;
-  std::vector<Result> results;
-  std::thread reader([&] {
-    Result r;
-    while ((*stream)->Read(&r)) results.push_back(std::move(r));
-  });
-  for (int i = 0; i < kFrames; ++i) {
-    EXPECT_TRUE((*stream)->Send(f.disparity_view(), f.colour_view()).ok());
-  }
-  EXPECT_TRUE((*stream)->CloseSend().ok());
-  reader.join();
-  EXPECT_TRUE((*stream)->Finish().ok());
+  const std::vector<Result> results = SendAll(*stream, f, kFrames);
   ASSERT_EQ(results.size(), static_cast<std::size_t>(kFrames));
   std::uint64_t previous_bytes = 0;
   int answered = 0;
@@ -765,9 +771,9 @@ TEST_F(ClientTest, RateControlReportsItsEstimateAndKeepsItsWindow) {
     EXPECT_GT(r.reply.receive_time_unix_ns(), 0);
   }
   EXPECT_GT(answered, 0);
-  ASSERT_TRUE((*stream)->rate().has_value());
+  ASSERT_TRUE(stream->rate().has_value());
   // Sent as fast as Send is called: the window held most of them back, replaced.
-  EXPECT_GT((*stream)->frames_replaced(), 0u);
+  EXPECT_GT(stream->frames_replaced(), 0u);
 }
 
 // The replies start capped at the controller's starting bitrate over the camera's frame rate,
@@ -780,20 +786,10 @@ TEST_F(ClientTest, RateControlCapsTheRepliesFromTheStart) {
   StreamConfig config = MakeStreamConfig(OptionsFor(f.camera, 0.03f));
   StreamOptions options;
   options.rate_control = RateControlOptions{};
-  auto stream = client_->OpenStream(config, std::move(options));
-  ASSERT_TRUE(stream.ok()) << stream.status();
+  std::unique_ptr<Stream> stream = Open(config, std::move(options));
+  ASSERT_NE(stream, nullptr);
   constexpr int kFrames = 10;
-  std::vector<Result> results;
-  std::thread reader([&] {
-    Result r;
-    while ((*stream)->Read(&r)) results.push_back(std::move(r));
-  });
-  for (int i = 0; i < kFrames; ++i) {
-    EXPECT_TRUE((*stream)->Send(f.disparity_view(), f.colour_view()).ok());
-  }
-  EXPECT_TRUE((*stream)->CloseSend().ok());
-  reader.join();
-  EXPECT_TRUE((*stream)->Finish().ok());
+  const std::vector<Result> results = SendAll(*stream, f, kFrames);
   int over_cap = 0;
   for (const Result& r : results) {
     if (r.fate != FrameFate::kAnswered || r.sequence < 2) continue;
