@@ -127,7 +127,6 @@ class DirectionRate {
   double delivered_bps() const { return delivered_bps_; }
   double queue_delay_ms() const { return queue_delay_ms_; }
   bool overuse() const { return overuse_; }
-  bool seen_overuse() const { return seen_overuse_; }
 
  private:
   RateControlOptions options_;
