@@ -17,7 +17,7 @@ extern "C" {
 #include <libavutil/dict.h>
 #include <libavutil/frame.h>
 #include <libavutil/opt.h>
-#include <libswscale/swscale.h>
+#include <libavutil/pixdesc.h>
 }
 
 namespace cloudcast::video {
@@ -28,7 +28,6 @@ namespace {
 std::string S(std::string_view v) { return std::string(v); }
 
 using internal::LibavError;
-using internal::PackedFormat;
 
 const std::vector<CodecInfo>& Table() {
   static const std::vector<CodecInfo> table = {
@@ -240,8 +239,6 @@ class H264Stream final : public CodecStream {
 class LibavStream final : public CodecStream {
  public:
   ~LibavStream() override {
-    sws_freeContext(enc_sws_);
-    sws_freeContext(dec_sws_);
     av_packet_free(&packet_);
     av_frame_free(&frame_);
     av_frame_free(&decoded_);
@@ -367,14 +364,14 @@ class LibavStream final : public CodecStream {
         }
       }
     } else {
-      enc_sws_ = sws_getCachedContext(enc_sws_, image.width, image.height,
-                                      PackedFormat(image.encoding), image.width, image.height,
-                                      enc_->pix_fmt, SWS_BILINEAR, nullptr, nullptr, nullptr);
-      if (enc_sws_ == nullptr) return absl::InternalError("swscale cannot convert to YUV");
-      const std::uint8_t* planes[1] = {staging_.data()};
-      const int strides[1] = {static_cast<int>(row_bytes)};
-      sws_scale(enc_sws_, planes, strides, 0, static_cast<int>(image.height), frame_->data,
-                frame_->linesize);
+      internal::YuvPlanes planes;
+      internal::PlanesOf(*frame_, &planes);  // the encoder's own 4:2:0 or 4:4:4
+      if (absl::Status s = to_yuv_.Convert(staging_.data(), static_cast<int>(row_bytes),
+                                           image.encoding, static_cast<int>(image.width),
+                                           static_cast<int>(image.height), planes);
+          !s.ok()) {
+        return s;
+      }
     }
     frame_->pts = next_pts_++;
     internal::ClearLibavMessage();
@@ -430,22 +427,18 @@ class LibavStream final : public CodecStream {
     const std::size_t bpp = BytesPerPixel(decoded_encoding_);
     const std::size_t row = std::size_t{options_.width} * bpp;
     output_.resize(row * options_.height);
-    if (decoded_encoding_ == ColorEncoding::kMono8) {
-      for (std::uint32_t v = 0; v < options_.height; ++v) {
-        std::memcpy(output_.data() + v * row, f->data[0] + std::size_t{v} * f->linesize[0],
-                    options_.width);
-      }
-    } else {
-      const AVPixelFormat to = decoded_encoding_ == ColorEncoding::kRGB8    ? AV_PIX_FMT_RGB24
-                               : decoded_encoding_ == ColorEncoding::kRGBA8 ? AV_PIX_FMT_RGBA
-                                                                            : AV_PIX_FMT_BGR24;
-      dec_sws_ =
-          sws_getCachedContext(dec_sws_, f->width, f->height, static_cast<AVPixelFormat>(f->format),
-                               f->width, f->height, to, SWS_BILINEAR, nullptr, nullptr, nullptr);
-      if (dec_sws_ == nullptr) return absl::InternalError("swscale cannot convert the picture");
-      std::uint8_t* planes[1] = {output_.data()};
-      const int strides[1] = {static_cast<int>(row)};
-      sws_scale(dec_sws_, f->data, f->linesize, 0, f->height, planes, strides);
+    internal::YuvPlanes planes;
+    if (!internal::PlanesOf(*f, &planes)) {
+      const char* format = av_get_pix_fmt_name(static_cast<AVPixelFormat>(f->format));
+      return absl::InternalError(absl::StrCat(S(field), ": decoded a picture in ",
+                                              format != nullptr ? format : "an unknown format",
+                                              ", not 8-bit grey, 4:2:0 or 4:4:4"));
+    }
+    if (absl::Status s = internal::YuvToPacked(planes, static_cast<int>(options_.width),
+                                               static_cast<int>(options_.height), decoded_encoding_,
+                                               output_.data(), static_cast<int>(row));
+        !s.ok()) {
+      return s;
     }
     av_frame_unref(decoded_);
     *out = ColorView{};
@@ -471,8 +464,7 @@ class LibavStream final : public CodecStream {
   AVFrame* frame_ = nullptr;
   AVFrame* decoded_ = nullptr;
   AVPacket* packet_ = nullptr;
-  SwsContext* enc_sws_ = nullptr;
-  SwsContext* dec_sws_ = nullptr;
+  internal::PackedToYuv to_yuv_;
   std::vector<std::uint8_t> staging_, input_, output_;
   std::int64_t next_pts_ = 0;
 };

@@ -1,7 +1,6 @@
 #include "cloudcast/video/decoder.h"
 
 #include <algorithm>
-#include <cstring>
 #include <string>
 #include <vector>
 
@@ -11,7 +10,6 @@
 extern "C" {
 #include <libavcodec/avcodec.h>
 #include <libavutil/frame.h>
-#include <libswscale/swscale.h>
 }
 
 namespace cloudcast::video {
@@ -36,7 +34,7 @@ std::uint64_t DecoderMemoryBytes(const SequenceHeader& sps, ColorEncoding output
   const std::uint64_t pictures = std::max<std::uint64_t>(sps.max_num_ref_frames, 1) + 3;
   const std::uint64_t tables = mbs * 512;  // per-context macroblock state
   const std::uint64_t out = std::uint64_t{sps.width} * sps.height * BytesPerPixel(output);
-  constexpr std::uint64_t kFixed = std::uint64_t{1} << 20;  // contexts, slice state, swscale
+  constexpr std::uint64_t kFixed = std::uint64_t{1} << 20;  // contexts, slice state
   return pictures * picture + tables + out + kFixed;
 }
 
@@ -45,7 +43,6 @@ struct Decoder::Impl {
   AVCodecContext* ctx = nullptr;
   AVPacket* packet = nullptr;
   AVFrame* frame = nullptr;
-  SwsContext* sws = nullptr;
   std::vector<std::uint8_t> input;   // the access unit with libavcodec's zero padding
   std::vector<std::uint8_t> output;  // the converted picture Decode points at
   bool awaiting_idr = true;
@@ -53,7 +50,6 @@ struct Decoder::Impl {
   std::uint64_t charged = 0;
 
   ~Impl() {
-    sws_freeContext(sws);
     av_frame_free(&frame);
     av_packet_free(&packet);
     avcodec_free_context(&ctx);
@@ -191,28 +187,17 @@ absl::Status Decoder::Decode(std::string_view access_unit, std::string_view fiel
                              .c_str(),
                          0);
   }
-  const AVPixelFormat format = static_cast<AVPixelFormat>(f->format);
-  if (format != AV_PIX_FMT_GRAY8 && format != AV_PIX_FMT_YUV420P && format != AV_PIX_FMT_YUVJ420P &&
-      format != AV_PIX_FMT_YUV444P && format != AV_PIX_FMT_YUVJ444P) {
+  internal::YuvPlanes planes;
+  if (!internal::PlanesOf(*f, &planes)) {
     return libav_failure("the picture is not 8-bit 4:0:0, 4:2:0 or 4:4:4", 0);
   }
-  const std::size_t bpp = BytesPerPixel(o.output);
-  const std::size_t row = std::size_t{m.width} * bpp;
+  const std::size_t row = std::size_t{m.width} * BytesPerPixel(o.output);
   m.output.resize(row * m.height);
-  if (o.output == ColorEncoding::kMono8) {
-    for (std::uint32_t v = 0; v < m.height; ++v) {
-      std::memcpy(m.output.data() + v * row, f->data[0] + std::size_t{v} * f->linesize[0], m.width);
-    }
-  } else {
-    const AVPixelFormat to = o.output == ColorEncoding::kRGB8    ? AV_PIX_FMT_RGB24
-                             : o.output == ColorEncoding::kRGBA8 ? AV_PIX_FMT_RGBA
-                                                                 : AV_PIX_FMT_BGR24;
-    m.sws = sws_getCachedContext(m.sws, f->width, f->height, format, f->width, f->height, to,
-                                 SWS_BILINEAR, nullptr, nullptr, nullptr);
-    if (m.sws == nullptr) return m.Fail(absl::InternalError("swscale cannot convert the picture"));
-    std::uint8_t* planes[1] = {m.output.data()};
-    const int strides[1] = {static_cast<int>(row)};
-    sws_scale(m.sws, f->data, f->linesize, 0, f->height, planes, strides);
+  if (absl::Status s =
+          internal::YuvToPacked(planes, static_cast<int>(m.width), static_cast<int>(m.height),
+                                o.output, m.output.data(), static_cast<int>(row));
+      !s.ok()) {
+    return m.Fail(s);
   }
   av_frame_unref(m.frame);
   m.awaiting_idr = false;

@@ -13,7 +13,6 @@ extern "C" {
 #include <libavutil/dict.h>
 #include <libavutil/frame.h>
 #include <libavutil/opt.h>
-#include <libswscale/swscale.h>
 }
 
 namespace cloudcast::video {
@@ -24,7 +23,6 @@ std::string S(std::string_view v) { return std::string(v); }
 }  // namespace
 
 using internal::LibavError;
-using internal::PackedFormat;
 
 std::string_view Name(PictureKind kind) {
   switch (kind) {
@@ -43,14 +41,12 @@ struct Encoder::Impl {
   AVCodecContext* ctx = nullptr;
   AVFrame* frame = nullptr;
   AVPacket* packet = nullptr;
-  SwsContext* sws = nullptr;  // colour: packed RGB/BGR/grey to YUV 4:2:0
-  AVPixelFormat sws_from = AV_PIX_FMT_NONE;
   std::vector<std::uint8_t> staging;  // a view given as separate rows, made contiguous
+  internal::PackedToYuv to_yuv;       // colour
   std::int64_t next_index = 0;
   std::int64_t bitrate = 0;
 
   ~Impl() {
-    sws_freeContext(sws);
     av_packet_free(&packet);
     av_frame_free(&frame);
     avcodec_free_context(&ctx);
@@ -265,13 +261,14 @@ absl::Status Encoder::Encode(const ColorView& image, const FrameControl& control
       std::memcpy(f->data[0] + v * f->linesize[0], src + std::size_t{v} * src_stride, image.width);
     }
   } else {
-    const AVPixelFormat from = PackedFormat(image.encoding);
-    m.sws = sws_getCachedContext(m.sws, image.width, image.height, from, image.width, image.height,
-                                 m.ctx->pix_fmt, SWS_BILINEAR, nullptr, nullptr, nullptr);
-    if (m.sws == nullptr) return absl::InternalError("swscale cannot convert to YUV");
-    const std::uint8_t* planes[1] = {src};
-    const int strides[1] = {src_stride};
-    sws_scale(m.sws, planes, strides, 0, static_cast<int>(image.height), f->data, f->linesize);
+    internal::YuvPlanes planes;
+    internal::PlanesOf(*f, &planes);  // the context's own 4:2:0 or 4:4:4
+    if (absl::Status s =
+            m.to_yuv.Convert(src, src_stride, image.encoding, static_cast<int>(image.width),
+                             static_cast<int>(image.height), planes);
+        !s.ok()) {
+      return s;
+    }
   }
   f->pts = m.next_index;
   f->pict_type = control.keyframe ? AV_PICTURE_TYPE_I : AV_PICTURE_TYPE_NONE;

@@ -54,18 +54,41 @@ void ClearLibavMessage() {
   t_warning.clear();
 }
 
-AVPixelFormat PackedFormat(ColorEncoding e) {
-  switch (e) {
-    case ColorEncoding::kBGR8:
-      return AV_PIX_FMT_BGR24;
-    case ColorEncoding::kRGB8:
-      return AV_PIX_FMT_RGB24;
-    case ColorEncoding::kRGBA8:
-      return AV_PIX_FMT_RGBA;
-    case ColorEncoding::kMono8:
-      return AV_PIX_FMT_GRAY8;
+bool PlanesOf(const AVFrame& f, YuvPlanes* out) {
+  using Layout = YuvPlanes::Layout;
+  YuvPlanes p;
+  switch (static_cast<AVPixelFormat>(f.format)) {
+    case AV_PIX_FMT_GRAY8:
+      p.layout = Layout::kGrey;
+      p.full_range = true;
+      break;
+    case AV_PIX_FMT_YUVJ420P:
+      p.full_range = true;
+      [[fallthrough]];
+    case AV_PIX_FMT_YUV420P:
+      p.layout = Layout::k420;
+      break;
+    case AV_PIX_FMT_YUVJ444P:
+      p.full_range = true;
+      [[fallthrough]];
+    case AV_PIX_FMT_YUV444P:
+      p.layout = Layout::k444;
+      break;
+    default:
+      return false;
   }
-  return AV_PIX_FMT_NONE;
+  // A picture tagged full range by its colour properties rather than a 'yuvj' format is too.
+  p.full_range |= f.color_range == AVCOL_RANGE_JPEG;
+  p.y = f.data[0];
+  p.y_stride = f.linesize[0];
+  if (p.layout != Layout::kGrey) {
+    p.u = f.data[1];
+    p.v = f.data[2];
+    p.u_stride = f.linesize[1];
+    p.v_stride = f.linesize[2];
+  }
+  *out = p;
+  return true;
 }
 
 std::string LibavError(int code) {

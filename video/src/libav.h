@@ -1,12 +1,14 @@
 // What encoder.cc, decoder.cc and codecs.cc share of FFmpeg: its error text, its log routed into
-// the error of the call that caused it instead of stderr, and our packed pixels' formats.
+// the error of the call that caused it instead of stderr, and a picture's planes.
 #pragma once
 
 #include <string>
 
 #include "cloudcast/core/image.h"
+#include "yuv.h"
 
 extern "C" {
+#include <libavutil/frame.h>
 #include <libavutil/pixfmt.h>
 }
 
@@ -23,7 +25,8 @@ std::string TakeLibavWarning();
 void ClearLibavMessage();
 // av_strerror's text for an AVERROR code.
 std::string LibavError(int code);
-// The libav pixel format of a packed image of ours (AV_PIX_FMT_NONE for none).
-AVPixelFormat PackedFormat(ColorEncoding e);
+// A picture's planes for YuvToPacked and PackedToYuv; false for a format other than 8-bit grey,
+// 4:2:0 or 4:4:4 (limited or full range).
+bool PlanesOf(const AVFrame& f, YuvPlanes* out);
 
 }  // namespace cloudcast::video::internal
