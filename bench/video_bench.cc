@@ -38,6 +38,12 @@
 #include "cloudcast/video/rvl.h"
 #include "line_plot.h"
 #include "stats.h"
+#include "yuv.h"  // video/src: the conversions measured against swscale
+
+extern "C" {
+#include <libavutil/pixfmt.h>
+#include <libswscale/swscale.h>
+}
 
 namespace cloudcast::bench {
 namespace {
@@ -549,6 +555,89 @@ std::vector<DepthRow> RunDepth(const std::string& dataset, const std::string& ki
   return rows;
 }
 
+struct ConversionRow {
+  std::string dataset, sampling, library;
+  double to_yuv_ms = 0, to_bgr_ms = 0, psnr = 0;
+};
+
+// The colour conversions around the codec (video/src/yuv.h) against swscale at the settings the
+// video layer used before (SWS_BILINEAR, BT.601 limited range): each image to 4:2:0 or 4:4:4 and
+// back to BGR, thread CPU ms per 640x480 image (median over rounds x images), and the round trip's
+// PSNR against the image (no codec in between).
+std::vector<ConversionRow> RunConversion(const Dataset& d, int rounds) {
+  using video::internal::YuvPlanes;
+  std::vector<ConversionRow> rows;
+  for (const bool four44 : {false, true}) {
+    const YuvPlanes::Layout layout = four44 ? YuvPlanes::Layout::k444 : YuvPlanes::Layout::k420;
+    const AVPixelFormat format = four44 ? AV_PIX_FMT_YUV444P : AV_PIX_FMT_YUV420P;
+    for (const bool ours : {false, true}) {
+      std::vector<double> to_yuv, to_bgr, psnr;
+      video::internal::PackedToYuv packed_to_yuv;
+      SwsContext* there = nullptr;
+      SwsContext* back = nullptr;
+      for (int r = 0; r < rounds; ++r) {
+        for (const OwnedColor& c : d.colour) {
+          const int w = static_cast<int>(c.width), h = static_cast<int>(c.height);
+          const int cw = four44 ? w : (w + 1) / 2, ch = four44 ? h : (h + 1) / 2;
+          std::vector<std::uint8_t> y(std::size_t(w) * h), u(std::size_t(cw) * ch),
+              v(std::size_t(cw) * ch), bgr(std::size_t(w) * h * 3);
+          YuvPlanes planes;
+          planes.layout = layout;
+          planes.y = y.data();
+          planes.u = u.data();
+          planes.v = v.data();
+          planes.y_stride = w;
+          planes.u_stride = planes.v_stride = cw;
+          std::uint8_t* yuv[3] = {y.data(), u.data(), v.data()};
+          const int yuv_strides[3] = {w, cw, cw};
+          const std::uint8_t* src[1] = {c.pixels.data()};
+          const int src_strides[1] = {w * 3};
+          std::uint8_t* dst[1] = {bgr.data()};
+          double t0 = ThreadCpuMs();
+          if (ours) {
+            Check(packed_to_yuv.Convert(c.pixels.data(), w * 3, ColorEncoding::kBGR8, w, h, planes),
+                  "to YUV");
+          } else {
+            there = sws_getCachedContext(there, w, h, AV_PIX_FMT_BGR24, w, h, format, SWS_BILINEAR,
+                                         nullptr, nullptr, nullptr);
+            sws_scale(there, src, src_strides, 0, h, yuv, yuv_strides);
+          }
+          to_yuv.push_back(ThreadCpuMs() - t0);
+          t0 = ThreadCpuMs();
+          if (ours) {
+            Check(
+                video::internal::YuvToPacked(planes, w, h, ColorEncoding::kBGR8, bgr.data(), w * 3),
+                "to BGR");
+          } else {
+            back = sws_getCachedContext(back, w, h, format, w, h, AV_PIX_FMT_BGR24, SWS_BILINEAR,
+                                        nullptr, nullptr, nullptr);
+            const std::uint8_t* in[3] = {y.data(), u.data(), v.data()};
+            sws_scale(back, in, yuv_strides, 0, h, dst, src_strides);
+          }
+          to_bgr.push_back(ThreadCpuMs() - t0);
+          if (r == 0) {
+            psnr.push_back(Psnr(AsMat(c.view()), cv::Mat(h, w, CV_8UC3, bgr.data())));
+          }
+        }
+      }
+      sws_freeContext(there);
+      sws_freeContext(back);
+      ConversionRow row;
+      row.dataset = d.name;
+      row.sampling = four44 ? "4:4:4" : "4:2:0";
+      row.library = ours ? (four44 ? "ours (swscale there, libyuv back)" : "ours (libyuv)")
+                         : "swscale (before)";
+      row.to_yuv_ms = Median(to_yuv);
+      row.to_bgr_ms = Median(to_bgr);
+      double sum = 0;
+      for (double p : psnr) sum += p;
+      row.psnr = sum / static_cast<double>(psnr.size());
+      rows.push_back(row);
+    }
+  }
+  return rows;
+}
+
 template <typename T>
 std::vector<T> ParseList(const std::string& s, const char* flag) {
   std::vector<T> out;
@@ -583,6 +672,7 @@ int Main(int argc, char** argv) {
               colour_bitrates = "3", jpeg_qualities = "50,70,80,90,95";
   int synthetic_frames = 30, tsukuba_frames = 0, fps = 30, keyint = 60, interleaved_refs = 2;
   bool no_sgbm = false, no_colour = false, no_stereo = false, no_depth = false;
+  bool no_conversion = false;
   std::string stereo_x264, colour_x264, capped, colour_capped;
   std::string colour_kinds = "420,444";
   bool lossless_every_preset = false;
@@ -648,7 +738,9 @@ int Main(int argc, char** argv) {
   app.add_flag("--no-stereo", no_stereo, "skip the stereo table");
   app.add_flag("--no-depth", no_depth,
                "skip the lossless depth/disparity table (zstd against RVL)");
-  app.add_option("--depth-rounds", depth_rounds, "timed rounds of the depth table")
+  app.add_flag("--no-conversion", no_conversion,
+               "skip the colour conversion table (RGB to YUV and back: ours against swscale)");
+  app.add_option("--depth-rounds", depth_rounds, "timed rounds of the depth and conversion tables")
       ->check(CLI::Range(1, 1000))
       ->capture_default_str();
   app.add_option("--codecs", codecs,
@@ -1018,6 +1110,31 @@ int Main(int argc, char** argv) {
                       {"decode_ms", r.decode_ms}});
     }
     out["depth"] = rows;
+  }
+
+  if (!no_conversion && !no_colour) {
+    std::vector<ConversionRow> conversion_rows;
+    for (const Dataset& d : sets) {
+      for (ConversionRow& r : RunConversion(d, depth_rounds)) conversion_rows.push_back(r);
+    }
+    std::printf(
+        "\ncolour conversion around the codec: BGR to YUV and back, no codec between (thread CPU "
+        "ms per image, median over %d rounds x images; PSNR of the round trip)\n",
+        depth_rounds);
+    std::printf("%-10s %-6s %-36s %10s %10s %8s\n", "data", "yuv", "conversion", "to YUV ms",
+                "to BGR ms", "PSNR");
+    nlohmann::json rows = nlohmann::json::array();
+    for (const ConversionRow& r : conversion_rows) {
+      std::printf("%-10s %-6s %-36s %10.3f %10.3f %8.2f\n", r.dataset.c_str(), r.sampling.c_str(),
+                  r.library.c_str(), r.to_yuv_ms, r.to_bgr_ms, r.psnr);
+      rows.push_back({{"dataset", r.dataset},
+                      {"sampling", r.sampling},
+                      {"conversion", r.library},
+                      {"to_yuv_ms", r.to_yuv_ms},
+                      {"to_bgr_ms", r.to_bgr_ms},
+                      {"psnr_db", r.psnr}});
+    }
+    out["conversion"] = rows;
   }
 
   if (!plots_dir.empty()) {

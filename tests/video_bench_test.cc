@@ -74,6 +74,13 @@ TEST_F(VideoBenchTest, CodesPairsInEveryLayoutAndWritesItsTablesAndCharts) {
     EXPECT_GT(row["ssim"].get<double>(), 0.5) << row.dump();
     EXPECT_LE(row["ssim"].get<double>(), 1.0) << row.dump();
   }
+  // The colour conversion table: swscale and ours, 4:2:0 and 4:4:4, each timed and round-tripped.
+  ASSERT_EQ(j["conversion"].size(), 4u) << j.dump(1);
+  for (const auto& row : j["conversion"]) {
+    EXPECT_GT(row["to_yuv_ms"].get<double>(), 0.0) << row.dump();
+    EXPECT_GT(row["to_bgr_ms"].get<double>(), 0.0) << row.dump();
+    EXPECT_GT(row["psnr_db"].get<double>(), 25.0) << row.dump();
+  }
   for (const char* png : {"video_stereo_synthetic.png", "video_colour_synthetic.png"}) {
     EXPECT_GT(std::filesystem::file_size(Path("plots") + "/" + png), 1000u) << png;
   }
