@@ -8,10 +8,15 @@
 
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <set>
+#include <string>
 #include <thread>
+#include <vector>
 
+#include "absl/strings/str_split.h"
 #include "cloudcast/load/null_server.h"
 #include "support/program_support.h"
 #include "support/server_fixture.h"
@@ -138,6 +143,58 @@ TEST_F(LoadCliTest, EveryInputKindIsAnsweredByARealServer) {
           << j["options"]["config"];
     }
   }
+}
+
+// --frame-log: a line per answered frame, each step of its way in order on the one clock client
+// and server share here (write, the server's receipt and send, receipt), its latency from the
+// intended time, and what the server made of it; a folder that does not exist is a usage error.
+TEST_F(LoadCliTest, FrameLogHasALinePerAnsweredFrameInTheOrderOfItsWay) {
+  const std::unique_ptr<server::Server> server = StartTestServer();
+  ASSERT_NE(server, nullptr);
+  const RunResult r =
+      Run({"--server", server->address(), "--synthetic", "320x240", "--synthetic-frames", "2",
+           "--streams", "2", "--fps", "30", "--frames", "12", "--lossless", "--json",
+           Path("r.json"), "--frame-log", Path("frames.csv"), "-q"});
+  ASSERT_EQ(r.code, 0) << r;
+  std::ifstream in(Path("frames.csv"));
+  std::string line;
+  ASSERT_TRUE(std::getline(in, line));
+  std::vector<std::string> header = absl::StrSplit(line, ',');
+  ASSERT_EQ(header.size(), 21u) << line;
+  EXPECT_EQ(header[0], "stream");
+  EXPECT_EQ(header[7], "latency_ms");
+  std::map<std::string, std::size_t> column;
+  for (std::size_t i = 0; i < header.size(); ++i) column[header[i]] = i;
+  int rows = 0;
+  std::set<std::pair<int, std::uint64_t>> frames;
+  while (std::getline(in, line)) {
+    ++rows;
+    const std::vector<std::string> f = absl::StrSplit(line, ',');
+    ASSERT_EQ(f.size(), header.size()) << line;
+    auto i64 = [&](const char* name) { return std::stoll(f[column.at(name)]); };
+    frames.insert({static_cast<int>(i64("stream")), static_cast<std::uint64_t>(i64("sequence"))});
+    EXPECT_LE(i64("intended_unix_ns") - 50'000'000, i64("written_unix_ns")) << line;
+    EXPECT_LE(i64("written_unix_ns"), i64("server_receive_unix_ns")) << line;
+    EXPECT_LE(i64("server_receive_unix_ns"), i64("server_send_unix_ns")) << line;
+    EXPECT_LE(i64("server_send_unix_ns"), i64("received_unix_ns")) << line;
+    EXPECT_NEAR(std::stod(f[column.at("latency_ms")]),
+                static_cast<double>(i64("received_unix_ns") - i64("intended_unix_ns")) / 1e6, 0.01)
+        << line;
+    EXPECT_GT(i64("image_bytes"), 0) << line;
+    EXPECT_GT(i64("reply_bytes"), 0) << line;
+    EXPECT_GT(i64("points"), 0) << line;
+    EXPECT_GT(i64("pipeline_us"), 0) << line;
+    EXPECT_FALSE(f[column.at("instance")].empty()) << line;
+  }
+  const json j = json::parse(ReadText(Path("r.json")));
+  EXPECT_EQ(rows, j["frames"]["answered"].get<int>());
+  EXPECT_EQ(rows, 12);
+  EXPECT_EQ(frames.size(), 12u);  // each frame once
+
+  const RunResult bad = Run({"--server", server->address(), "--synthetic", "64x48", "--frames", "1",
+                             "--frame-log", Path("no/such/folder/frames.csv")});
+  EXPECT_EQ(bad.code, 2) << bad;
+  EXPECT_NE(bad.err.find("--frame-log"), std::string::npos) << bad;
 }
 
 TEST_F(LoadCliTest, UnreachableServerExitsOneNamingIt) {

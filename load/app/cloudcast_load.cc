@@ -23,14 +23,15 @@
 
 #include "cloudcast/cli/checks.h"
 #include "cloudcast/cli/connection_flags.h"
+#include "cloudcast/cli/rate_flags.h"
 #include "cloudcast/cli/role_flags.h"
 #include "cloudcast/cli/stage_flags.h"
 #include "cloudcast/cli/stereo_flags.h"
-#include "cloudcast/cli/rate_flags.h"
 #include "cloudcast/cli/video_flags.h"
 #include "cloudcast/client/config.h"
 #include "cloudcast/core/limits.h"
 #include "cloudcast/load/fleet.h"
+#include "cloudcast/load/frame_log.h"
 #include "cloudcast/load/frame_store.h"
 #include "cloudcast/load/memory_watch.h"
 #include "cloudcast/load/probe.h"
@@ -107,7 +108,7 @@ struct Flags {
   double soak_warmup_s = load::SoakBounds{}.warmup_s;
   double soak_max_growth_mb = load::SoakBounds{}.max_growth_bytes / 1e6;
   // Output
-  std::string json, html;
+  std::string json, html, frame_log;
   double progress_s = 1;
   bool quiet = false;
 };
@@ -363,6 +364,13 @@ std::unique_ptr<cloudcast::cli::StageFlags> AddFlags(CLI::App& app, Flags& f) {
   app.add_option("--html", f.html, "Write the report as one self-contained HTML page")
       ->type_name("FILE")
       ->group(output);
+  app.add_option("--frame-log", f.frame_log,
+                 "Write a CSV line per answered frame: the load's write and receipt and the "
+                 "server's receipt and send (Unix ns), bytes each way, points, the server's "
+                 "stage times, the reply cap: which way a late frame waited "
+                 "(docs/load-testing.md)")
+      ->type_name("FILE")
+      ->group(output);
   app.add_option("--progress", f.progress_s, "Seconds between progress lines on stderr; 0 = none")
       ->check(NumberCheck("0 or 1", [](double v) { return v == 0 || v == 1; }))
       ->capture_default_str()
@@ -427,8 +435,9 @@ int main(int argc, char** argv) {
   if (f.duration_s == 0 && f.frames == 0) {
     return usage("--duration 0 needs --frames N: a run must be bounded");
   }
-  for (const auto& [flag, path] :
-       {std::pair<std::string, std::string>{"--json", f.json}, {"--html", f.html}}) {
+  for (const auto& [flag, path] : {std::pair<std::string, std::string>{"--json", f.json},
+                                   {"--html", f.html},
+                                   {"--frame-log", f.frame_log}}) {
     if (const std::string m = MissingFolder(flag, path); !m.empty()) return usage(m);
   }
   const bool ramp = f.schedule != "const";
@@ -607,6 +616,16 @@ int main(int argc, char** argv) {
     std::_Exit(130);
   }).detach();
 
+  std::unique_ptr<load::FrameLog> frame_log;
+  if (!f.frame_log.empty()) {
+    auto opened = load::FrameLog::Open(f.frame_log, "--frame-log");
+    if (!opened.ok()) {
+      std::cerr << "cloudcast-load: " << opened.status().message() << "\n";
+      return kExitUsage;
+    }
+    frame_log = *std::move(opened);
+    o.frame_log = frame_log.get();
+  }
   auto fleet = load::Fleet::Connect(o, &*store);
   if (!fleet.ok()) {
     std::cerr << "cloudcast-load: " << fleet.status().message() << "\n";
@@ -713,6 +732,12 @@ int main(int argc, char** argv) {
     out << load::Html(report);
     if (!out) {
       std::cerr << "cloudcast-load: cannot write --html " << f.html << "\n";
+      code = kExitFailure;
+    }
+  }
+  if (frame_log) {
+    if (absl::Status s = frame_log->Close(); !s.ok()) {
+      std::cerr << "cloudcast-load: " << s.message() << "\n";
       code = kExitFailure;
     }
   }

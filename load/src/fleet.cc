@@ -94,6 +94,10 @@ class Fleet::Driver : public client::StreamSink {
     std::optional<client::RateControlOptions> rate_control;
     double fps;  // the schedule's rate at its start (the rate controller's frame budget)
     const VideoSequence* video;  // the store's picture sequence; null: frames in any order
+    FrameLog* frame_log;         // null: none
+    std::int64_t Unix(std::int64_t steady_ns) const {
+      return t0_unix_ns + (steady_ns - t0_steady_ns);
+    }
   };
 
   Driver(int index, std::uint64_t frame_limit, const grpc::ByteBuffer* config)
@@ -254,6 +258,7 @@ class Fleet::Driver : public client::StreamSink {
         ++stats_.answered;
         ctx_->recorder->Answered(now - intended, now - actual, instance, bytes);
         ctx_->recorder->Downlink(reply.cloud().color_bits(), reply.cloud().has_over_cap());
+        if (ctx_->frame_log != nullptr) LogFrame(reply.cloud(), *frame, now, bytes, instance);
         if (rate_) {
           ctx_->recorder->RateSample(index_, *rate_, frame->frame.record.image_bytes);
         }
@@ -264,6 +269,33 @@ class Fleet::Driver : public client::StreamSink {
       }
     }
     if (ctx_->closed_loop) TopUp();
+  }
+
+  // Under mu_: the answered frame's line of --frame-log.
+  void LogFrame(const v1::CloudReply& cloud, const client::SettledFrame& frame,
+                std::int64_t received_ns, std::size_t reply_bytes, const std::string& instance) {
+    FrameLogRow row;
+    row.stream = index_;
+    row.sequence = frame.sequence;
+    row.intended_unix_ns = ctx_->Unix(frame.frame.record.intended_ns);
+    row.written_unix_ns = ctx_->Unix(Ns(frame.frame.written));
+    row.server_receive_unix_ns = cloud.receive_time_unix_ns();
+    row.server_send_unix_ns = cloud.send_time_unix_ns();
+    row.received_unix_ns = ctx_->Unix(received_ns);
+    row.image_bytes = frame.frame.record.image_bytes;
+    row.reply_bytes = reply_bytes;
+    row.points = cloud.point_count();
+    row.position_bits = cloud.position_bits();
+    row.over_cap = cloud.has_over_cap();
+    row.queue_us = cloud.times().queue_us();
+    row.decode_us = cloud.times().decode_us();
+    row.rectify_us = cloud.times().rectify_us();
+    row.match_us = cloud.times().match_us();
+    row.pipeline_us = cloud.times().pipeline_us();
+    row.encode_us = cloud.times().encode_us();
+    row.reply_cap_bytes = rate_ ? rate_->reply_cap_bytes : 0;
+    row.instance = instance;
+    ctx_->frame_log->Add(row);
   }
 
   void OnRate(const client::RateEstimate& estimate) override {
@@ -808,7 +840,8 @@ FleetResult Fleet::Run(const std::function<void(const SecondStats&)>& on_second)
       std::chrono::duration_cast<std::chrono::nanoseconds>(result.start.time_since_epoch()).count(),
       o.rate_control,
       o.closed_loop ? 30.0 : o.schedule.start,
-      store_->video() ? &*store_->video() : nullptr};
+      store_->video() ? &*store_->video() : nullptr,
+      o.frame_log};
   const double cpu_start = ProcessCpuSeconds();
   for (int s = 0; s < n; ++s) {
     drivers_[s]->Start(channels_[static_cast<std::size_t>(s) % channels_.size()].get(), &ctx);

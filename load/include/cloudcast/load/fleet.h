@@ -41,6 +41,7 @@
 #include "absl/status/statusor.h"
 #include "cloudcast/client/options.h"
 #include "cloudcast/client/security.h"
+#include "cloudcast/load/frame_log.h"
 #include "cloudcast/load/frame_store.h"
 #include "cloudcast/load/recorder.h"
 #include "cloudcast/load/schedule.h"
@@ -85,6 +86,8 @@ struct FleetOptions {
   std::optional<client::RateControlOptions> rate_control;
   // TLS and the bearer token of every channel (cloudcast/client/security.h); default plaintext.
   client::ChannelSecurity security;
+  // A line per answered frame (--frame-log); the caller's, open for the whole run. Null: none.
+  FrameLog* frame_log = nullptr;
 };
 
 // round_robin for a target that names several addresses ("ipv4:a:p,b:p", "ipv6:...") or asks
