@@ -1,23 +1,27 @@
 // cloudcast-load's parts: the histogram against exact percentiles, the schedule, the frame
 // store's wire bytes, and fleets against a real cloudcast server and the null server on
 // loopback. No assertion on a time value: orderings and counts only.
+#include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <algorithm>
+#include <filesystem>
+#include <fstream>
 #include <random>
+#include <string>
 #include <thread>
-
-#include <grpcpp/grpcpp.h>
 
 #include "cloudcast/core/draco_codec.h"
 #include "cloudcast/load/fleet.h"
-#include "cloudcast/proto/convert.h"
+#include "cloudcast/load/frame_log.h"
 #include "cloudcast/load/frame_store.h"
 #include "cloudcast/load/histogram.h"
 #include "cloudcast/load/memory_watch.h"
 #include "cloudcast/load/null_server.h"
 #include "cloudcast/load/report.h"
 #include "cloudcast/load/schedule.h"
+#include "cloudcast/proto/convert.h"
 #include "cloudcast/server/server.h"
 #include "cloudcast/v1/cloudcast.grpc.pb.h"
 #include "support/frame_store_requests.h"
@@ -125,6 +129,34 @@ FrameStore SmallStore(int frames = 3, std::uint32_t w = 64, std::uint32_t h = 48
   o.source.synthetic_height = h;
   o.synthetic_frames = frames;
   return FrameStore::Prepare(o).value();
+}
+
+// --frame-log's lines: the header's columns on every line, the latency from the intended time,
+// and a replica name with a comma or a quote quoted as CSV has it.
+TEST(FrameLogTest, LinesHaveTheHeadersColumnsAndQuoteAnAwkwardInstance) {
+  const std::string path = (std::filesystem::temp_directory_path() /
+                            ("frame_log_test_" + std::to_string(getpid()) + ".csv"))
+                               .string();
+  auto log = FrameLog::Open(path, "--frame-log");
+  ASSERT_TRUE(log.ok()) << log.status();
+  FrameLogRow row;
+  row.intended_unix_ns = 1'000'000'000;
+  row.received_unix_ns = 1'123'456'000;
+  row.instance = "replica-1";
+  (*log)->Add(row);
+  row.instance = "a,b\"c";
+  (*log)->Add(row);
+  ASSERT_TRUE((*log)->Close().ok());
+  std::ifstream in(path);
+  std::string header, plain, awkward;
+  ASSERT_TRUE(std::getline(in, header) && std::getline(in, plain) && std::getline(in, awkward));
+  const auto columns = [](const std::string& s) { return std::count(s.begin(), s.end(), ','); };
+  EXPECT_EQ(columns(plain), columns(header));
+  EXPECT_NE(plain.find(",123.456,"), std::string::npos) << plain;
+  EXPECT_EQ(plain.substr(plain.rfind(',') + 1), "replica-1");
+  EXPECT_EQ(awkward.substr(awkward.size() - 9), ",\"a,b\"\"c\"") << awkward;
+  std::filesystem::remove(path);
+  EXPECT_FALSE(FrameLog::Open("/no/such/folder/x.csv", "--frame-log").ok());
 }
 
 TEST(FrameStoreTest, RequestsParseAsStreamRequestsWithPatchedFields) {

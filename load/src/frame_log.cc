@@ -33,12 +33,13 @@ void FrameLog::Add(const FrameLogRow& r) {
                 static_cast<double>(r.received_unix_ns - r.intended_unix_ns) / 1e6);
   // An instance name is the server's --instance or its host name: no commas or quotes to escape
   // in practice, but a name with either is quoted as CSV has it.
-  std::string instance = r.instance;
-  if (instance.find_first_of(",\"\n") != std::string::npos) {
-    std::string quoted = "\"";
-    for (const char c : instance) quoted += c == '"' ? std::string("\"\"") : std::string(1, c);
-    instance = quoted + "\"";
+  std::string quoted;
+  if (r.instance.find_first_of(",\"\n") != std::string::npos) {
+    quoted = "\"";
+    for (const char c : r.instance) quoted += c == '"' ? std::string("\"\"") : std::string(1, c);
+    quoted += "\"";
   }
+  const std::string& instance = quoted.empty() ? r.instance : quoted;
   const std::string line = absl::StrCat(
       r.stream, ",", r.sequence, ",", r.intended_unix_ns, ",", r.written_unix_ns, ",",
       r.server_receive_unix_ns, ",", r.server_send_unix_ns, ",", r.received_unix_ns, ",", latency,
