@@ -118,14 +118,9 @@ Dataset Synthetic(int frames) {
     Pair p;
     p.left = Check(stereo::ToGrey(lc.view()), "grey");
     p.right = Check(stereo::ToGrey(rc.view()), "grey");
-    // The render's disparity is for a baseline of 1; the pair's is kSyntheticStereoBaseline.
-    p.truth = {std::vector<std::uint8_t>(left.width * left.height), left.width, left.height,
+    p.truth = {Check(SyntheticStereoTruth(left), "truth"), left.width, left.height,
                DisparityEncoding::kU8};
     const float* src = reinterpret_cast<const float*>(left.disparity.data());
-    for (std::size_t i = 0; i < p.truth.pixels.size(); ++i) {
-      const double v = src[i] * kSyntheticStereoBaseline;
-      p.truth.pixels[i] = std::isfinite(v) && v > 0.5 && v < 255 ? std::lround(v) : 0;
-    }
     // The frame's own disparity (baseline 1) in 1/16 px, as a matcher or a depth camera's
     // driver would send it: 0 where nothing is seen.
     OwnedDisparity u16{std::vector<std::uint8_t>(left.width * left.height * 2), left.width,

@@ -536,6 +536,22 @@ double SyntheticScene::DistanceToSurface(std::uint64_t frame, double x, double y
   return best;
 }
 
+absl::StatusOr<std::vector<std::uint8_t>> SyntheticStereoTruth(const SyntheticFrame& left) {
+  if (left.disparity_encoding != DisparityEncoding::kF32) {
+    return absl::InvalidArgumentError(
+        "left.disparity_encoding: the stereo truth is computed from exact (kF32) disparities");
+  }
+  std::vector<std::uint8_t> truth(std::size_t{left.width} * left.height);
+  const float* src = reinterpret_cast<const float*>(left.disparity.data());
+  for (std::size_t i = 0; i < truth.size(); ++i) {
+    // The render's disparity is for a baseline of 1; the pair's is kSyntheticStereoBaseline.
+    const double v = src[i] * kSyntheticStereoBaseline;
+    truth[i] =
+        std::isfinite(v) && v > 0.5 && v < 255 ? static_cast<std::uint8_t>(std::lround(v)) : 0;
+  }
+  return truth;
+}
+
 DisparityView SyntheticFrame::disparity_view() const {
   DisparityView view;
   view.data = disparity.data();

@@ -32,6 +32,14 @@ struct SyntheticOptions {
 // points to land on the scene.
 inline constexpr double kSyntheticStereoBaseline = 0.5;
 
+struct SyntheticFrame;
+
+// The truth of a synthetic stereo pair, as the stereo benchmarks and tests score it: for a left
+// image rendered with exact (kF32) disparities at eye_x 0 and its right image
+// kSyntheticStereoBaseline away, the left view's disparity in whole pixels (kU8 rows, tightly
+// packed; 0 where unknown or over 255). Errors: a frame not rendered kF32.
+absl::StatusOr<std::vector<std::uint8_t>> SyntheticStereoTruth(const SyntheticFrame& left);
+
 // One rendered frame. It owns its pixels; the views point into them.
 struct SyntheticFrame {
   // PCL-compatible preset with the focal scaled to the width (615 at 640 px): fx = fy =
