@@ -422,5 +422,39 @@ TEST(SyntheticTest, DistanceToSurfaceIsADistance) {
   }
 }
 
+// The stereo truth the benchmarks and tests score matchers against: the left view's disparity for
+// the pair's baseline (kSyntheticStereoBaseline, half the frame's 1), in whole pixels.
+TEST(SyntheticTest, StereoTruthIsTheLeftDisparityAtThePairsBaselineInWholePixels) {
+  SyntheticOptions o;
+  o.width = 160;
+  o.height = 120;
+  o.frame = 3;
+  auto left = SyntheticScene::Default().Render(o);
+  ASSERT_TRUE(left.ok()) << left.status();
+  auto truth = SyntheticStereoTruth(*left);
+  ASSERT_TRUE(truth.ok()) << truth.status();
+  ASSERT_EQ(truth->size(), std::size_t{160} * 120);
+  std::size_t known = 0;
+  for (std::size_t i = 0; i < truth->size(); ++i) {
+    float d;
+    std::memcpy(&d, &left->disparity[4 * i], 4);
+    const double want = d * kSyntheticStereoBaseline;
+    if (std::isfinite(want) && want > 0.5 && want < 255) {
+      EXPECT_EQ((*truth)[i], std::lround(want)) << i;
+      ++known;
+    } else {
+      EXPECT_EQ((*truth)[i], 0) << i;
+    }
+  }
+  EXPECT_GT(known, truth->size() / 2);  // the floor, boxes and spheres: most of the view
+
+  o.disparity_encoding = DisparityEncoding::kU16;
+  auto fixed = SyntheticScene::Default().Render(o);
+  ASSERT_TRUE(fixed.ok());
+  const auto refused = SyntheticStereoTruth(*fixed);
+  EXPECT_EQ(refused.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(refused.status().message().find("left.disparity_encoding"), std::string::npos);
+}
+
 }  // namespace
 }  // namespace cloudcast
