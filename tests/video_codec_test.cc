@@ -288,8 +288,8 @@ bool CodedWithCabac(const EncodedPicture& unit) {
 constexpr double kStereoBarBytesPerPair = 8e6 / 8 / 30;
 
 // docs/video.md's stereo settings (table 8d) code with CAVLC, which is what makes them decode in
-// half the time of the CABAC streams they replace (0.7 to 1.1 ms an image against 1.4 to 2.0 on
-// the same hosts: CABAC's arithmetic decoding is most of an H.264 decode at these rates). Through
+// half the time of the CABAC streams they replace (1.07 and 1.20 ms an image against 2.21 in the
+// same rounds: CABAC's arithmetic decoding is half of an H.264 decode at these rates). Through
 // the server's decoder they keep issue 27's stereo bar: <= 8 Mbit/s at 30 pairs a second with our
 // matcher's bad-2.0 within +1.0 point of the same matcher on the original pairs, against each data
 // set's own truth. x264 on one thread is deterministic, so these are the benchmark's rows.
