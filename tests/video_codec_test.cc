@@ -13,6 +13,7 @@
 
 #include "cloudcast/datasets/synthetic.h"
 #include "cloudcast/datasets/tsukuba.h"
+#include "cloudcast/io/image_io.h"
 #include "cloudcast/stereo/evaluation.h"
 #include "cloudcast/stereo/grey.h"
 #include "cloudcast/stereo/matcher.h"
@@ -224,29 +225,21 @@ TEST(VideoCodec, IntraColourSettingKeepsTheColourBarOnNewTsukuba) {
 // Stereo pairs (grey) with the left view's truth (kU8 rows, px, 0 = unknown).
 struct StereoPairs {
   std::vector<OwnedColor> left, right;
-  std::vector<std::vector<std::uint8_t>> truth;
+  std::vector<OwnedDisparity> truth;
 };
 
 // Our matcher's bad-2.0 (docs/stereo.md's defaults, against truth + `truth_offset` px) on the
 // decoded pairs, minus on the originals: issue 27's measure of what a coding costs stereo.
 double Bad2Change(const StereoPairs& original, const StereoPairs& decoded, int truth_offset) {
-  stereo::SetOpenCvThreads(1);
   auto matcher = stereo::MakeMatcher(StereoParams{});
   EXPECT_TRUE(matcher.ok()) << matcher.status();
   stereo::DisparityScore before, after;
-  const auto score = [&](const OwnedColor& l, const OwnedColor& r,
-                         const std::vector<std::uint8_t>& t, stereo::DisparityScore* into) {
+  const auto score = [&](const OwnedColor& l, const OwnedColor& r, const OwnedDisparity& truth,
+                         stereo::DisparityScore* into) {
     stereo::DisparityMap16 map;
     const absl::Status s = (*matcher)->Compute(l.view(), r.view(), &map);
     EXPECT_TRUE(s.ok()) << s;
-    DisparityView truth;
-    truth.data = t.data();
-    truth.size_bytes = t.size();
-    truth.width = l.width;
-    truth.height = l.height;
-    truth.stride_bytes = l.width;
-    truth.encoding = DisparityEncoding::kU8;
-    EXPECT_TRUE(into->Add(map, truth).ok());
+    EXPECT_TRUE(into->Add(map, truth.view()).ok());
   };
   for (std::size_t i = 0; i < original.left.size(); ++i) {
     score(original.left[i], original.right[i], original.truth[i], &before);
@@ -310,7 +303,7 @@ TEST(VideoCodec, CavlcStereoSettingKeepsTheStereoBarOnTheSyntheticScene) {
     ASSERT_TRUE(left.ok() && right.ok());
     auto truth = SyntheticStereoTruth(*left);
     ASSERT_TRUE(truth.ok()) << truth.status();
-    pairs.truth.push_back(*std::move(truth));
+    pairs.truth.push_back({*std::move(truth), left->width, left->height, DisparityEncoding::kU8});
     pairs.left.push_back(*stereo::ToGrey(left->colour_view()));
     pairs.right.push_back(*stereo::ToGrey(right->colour_view()));
   }
@@ -353,7 +346,7 @@ TEST(VideoCodec, CavlcStereoSettingKeepsTheStereoBarOnNewTsukuba) {
   for (const StereoFrame& f : *loaded) {
     pairs.left.push_back(*stereo::ToGrey(f.left.view()));
     pairs.right.push_back(*stereo::ToGrey(f.right.view()));
-    pairs.truth.push_back(f.truth.pixels);
+    pairs.truth.push_back(f.truth);
     interleaved.push_back(pairs.left.back());
     interleaved.push_back(pairs.right.back());
   }
