@@ -620,8 +620,9 @@ std::vector<ConversionRow> RunConversion(const Dataset& d, int rounds) {
       ConversionRow row;
       row.dataset = d.name;
       row.sampling = four44 ? "4:4:4" : "4:2:0";
-      row.library = ours ? (four44 ? "ours (swscale there, libyuv back)" : "ours (libyuv)")
-                         : "swscale (before)";
+      row.library =
+          ours ? (four44 ? "ours (libyuv split + ours there, libyuv back)" : "ours (libyuv)")
+               : "swscale (before)";
       row.to_yuv_ms = Median(to_yuv);
       row.to_bgr_ms = Median(to_bgr);
       double sum = 0;
