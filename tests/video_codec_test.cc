@@ -198,10 +198,10 @@ constexpr double kColourBarBytesPerFrame = 3e6 / 8 / 30;
 // docs/video.md's colour settings (table 8e) code with CAVLC, no deblocking, x264's PSNR tuning
 // (no psy, no adaptive quantization) and no weighted prediction (x264 then skips its half-size
 // copy of each picture): the server decodes them in two thirds of the time of table 8c's CABAC
-// settings (0.66 and 0.69 in the same rounds, 0.67 and 0.66 of the instructions) and they encode
-// in 0.67 and 0.78 of it. Through the server's decoder each keeps issue 27's colour bar: <= 3
-// Mbit/s at 30 fps (12,500 bytes a frame) at a mean PSNR >= 38 dB. x264 on one thread is
-// deterministic, so these are the benchmark's rows, not samples.
+// settings (synthetic 0.69, New Tsukuba 0.66 within rounds; 0.65 and 0.67 of the instructions)
+// and they encode in 0.78 and 0.67 of it (0.71 and 0.64). Through the server's decoder each keeps
+// issue 27's colour bar: <= 3 Mbit/s at 30 fps (12,500 bytes a frame) at a mean PSNR >= 38 dB. x264
+// on one thread is deterministic, so these are the benchmark's rows, not samples.
 //
 // The synthetic scene (a rendered camera: colour changes pixel to pixel, so 4:4:4), 30
 // consecutive 640x480 frames: veryfast crf 25, every partition, diamond motion search, one
