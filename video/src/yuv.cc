@@ -31,16 +31,18 @@ constexpr std::int32_t Fixed(double v) {
   return static_cast<std::int32_t>(v * (1 << kFractionBits) + (v < 0 ? -0.5 : 0.5));
 }
 constexpr double kKr = 0.299, kKg = 0.587, kKb = 0.114;
-constexpr double kLuma = 219.0 / 255.0, kChroma = 224.0 / 255.0;
-// Per output: the R, G and B coefficients, then the offset (with the rounding half).
-constexpr std::int32_t kY[4] = {Fixed(kLuma * kKr), Fixed(kLuma* kKg), Fixed(kLuma* kKb),
-                                (16 << kFractionBits) + (1 << (kFractionBits - 1))};
-constexpr std::int32_t kU[4] = {Fixed(-kChroma * kKr / 1.772), Fixed(-kChroma* kKg / 1.772),
-                                Fixed(kChroma * 0.5),
-                                (128 << kFractionBits) + (1 << (kFractionBits - 1))};
-constexpr std::int32_t kV[4] = {Fixed(kChroma * 0.5), Fixed(-kChroma* kKg / 1.402),
-                                Fixed(-kChroma* kKb / 1.402),
-                                (128 << kFractionBits) + (1 << (kFractionBits - 1))};
+constexpr std::int32_t Luma(double k) { return Fixed(k * 219.0 / 255.0); }
+constexpr std::int32_t Chroma(double k) { return Fixed(k * 224.0 / 255.0); }
+constexpr std::int32_t Offset(int level) {
+  return (level << kFractionBits) + (1 << (kFractionBits - 1));  // with the rounding half
+}
+constexpr double kCbScale = 2 * (1 - kKb), kCrScale = 2 * (1 - kKr);  // 1.772, 1.402
+// Per output: the R, G and B coefficients, then the offset.
+constexpr std::int32_t kY[4] = {Luma(kKr), Luma(kKg), Luma(kKb), Offset(16)};
+constexpr std::int32_t kU[4] = {Chroma(-kKr / kCbScale), Chroma(-kKg / kCbScale), Chroma(0.5),
+                                Offset(128)};
+constexpr std::int32_t kV[4] = {Chroma(0.5), Chroma(-kKg / kCrScale), Chroma(-kKb / kCrScale),
+                                Offset(128)};
 
 std::uint8_t Sample(const std::int32_t (&k)[4], std::int32_t r, std::int32_t g, std::int32_t b) {
   return static_cast<std::uint8_t>((k[0] * r + k[1] * g + k[2] * b + k[3]) >> kFractionBits);
