@@ -305,9 +305,10 @@ void ExactYuv(int r, int g, int b, double* yuv) {
 }
 
 // The encoders' 4:4:4 pictures are the exact colours rounded: a sample may be the neighbour only
-// where the exact value is within 1/50 of a level of the half between them (the coefficients'
-// rounding). Uniform noise (every colour), each packed order, Mono8 too (r = g = b, neutral
-// chroma), and widths that leave a tail after the 16-sample steps, with padded rows.
+// where the exact value is within 1/85 of a level of the half between them (the coefficients'
+// rounding), which uniform noise meets in about a quarter of a percent of its samples. Uniform
+// noise (every colour), each packed order, Mono8 too (r = g = b, neutral chroma), and widths that
+// leave a tail after the 16-sample steps, with padded rows.
 TEST(VideoYuv, FourFourFourPicturesAreTheExactColoursRounded) {
   PackedToYuv to_yuv;
   for (const int width : {kW, 37, 5}) {
@@ -333,9 +334,9 @@ TEST(VideoYuv, FourFourFourPicturesAreTheExactColoursRounded) {
         for (int col = 0; col < width; ++col) {
           const std::uint8_t* px = &image[static_cast<std::size_t>(row) * src_stride +
                                           static_cast<std::size_t>(col) * bpp];
-          int r = px[0], g = px[1], b = px[2];
+          int r = px[0], g = px[0], b = px[0];
+          if (from != ColorEncoding::kMono8) g = px[1], b = px[2];
           if (from == ColorEncoding::kBGR8) std::swap(r, b);
-          if (from == ColorEncoding::kMono8) r = g = b = px[0];
           double exact[3];
           ExactYuv(r, g, b, exact);
           const std::size_t at = static_cast<std::size_t>(row) * dst_stride + col;
@@ -343,7 +344,7 @@ TEST(VideoYuv, FourFourFourPicturesAreTheExactColoursRounded) {
           for (int k = 0; k < 3; ++k) {
             if (got[k] == std::lround(exact[k])) continue;
             ++off;
-            ASSERT_LE(std::abs(got[k] - exact[k]), 0.5 + 0.02)
+            ASSERT_LE(std::abs(got[k] - exact[k]), 0.5 + 1.0 / 85)
                 << "row " << row << ", column " << col << ", plane " << k << ": " << int{got[k]}
                 << " for " << exact[k];
           }
@@ -353,7 +354,7 @@ TEST(VideoYuv, FourFourFourPicturesAreTheExactColoursRounded) {
           }
         }
       }
-      EXPECT_LE(off, width * kRows * 3 / 100) << "samples off the exact colour rounded";
+      EXPECT_LE(off, width * kRows * 3 / 100 + 2) << "samples off the exact colour rounded";
     }
   }
 }

@@ -21,10 +21,11 @@ using Layout = YuvPlanes::Layout;
 // libyuv names packed formats by their order in a little-endian word: its RGB24 is our BGR8 (B,
 // G, R in memory), RAW our RGB8, ABGR our RGBA8, and ARGB is B, G, R, A in memory.
 
-// BT.601 limited range with 15-bit fractions: Y' = 16 + 219/255 (Kr R + Kg G + Kb B), Cb = 128 +
-// 224/255 (B - Y) / 1.772, Cr = 128 + 224/255 (R - Y) / 1.402. Rounding the coefficients moves a
-// sample by at most 255 * 3 / 2^16 of a level, so every sample is the exact colour rounded (or,
-// within 1/85 of a half level, its neighbour). The results stay in [16, 240]: no clamping. 15
+// BT.601 limited range with 15-bit fractions: with L = Kr R + Kg G + Kb B, Y' = 16 + 219/255 L,
+// Cb = 128 + 224/255 (B - L) / 1.772, Cr = 128 + 224/255 (R - L) / 1.402. Rounding the
+// coefficients moves a sample by at most 255 * 3 / 2^16 of a level (1/85), so every sample is the
+// exact colour rounded, or its neighbour where the exact value lies within 1/85 of a level of the
+// halfway point. The results stay in [16, 240]: no clamping. 15
 // bits keep each coefficient in an int16, for SSE2's multiply-add of pairs.
 constexpr int kFractionBits = 15;
 constexpr std::int32_t Fixed(double v) {
@@ -60,9 +61,10 @@ constexpr bool FitsPairs(const std::int32_t (&k)[4]) {
 }
 static_assert(FitsPairs(kY) && FitsPairs(kU) && FitsPairs(kV));
 
+// Four (low, high) int16 pairs, low first in memory.
 __m128i Pair(std::int32_t low, std::int32_t high) {
-  return _mm_set1_epi32(static_cast<int>((static_cast<std::uint32_t>(high) << 16) |
-                                         (static_cast<std::uint32_t>(low) & 0xffffu)));
+  const auto l = static_cast<std::int16_t>(low), h = static_cast<std::int16_t>(high);
+  return _mm_set_epi16(h, l, h, l, h, l, h, l);
 }
 
 struct Coefficients {
@@ -160,6 +162,8 @@ absl::Status PackedToYuv::Convert(const std::uint8_t* src, int src_stride, Color
         case ColorEncoding::kMono8:
           r = g = b = in;
           break;
+        default:
+          return absl::InvalidArgumentError("PackedToYuv: an unknown packed encoding");
       }
       PlanarRowTo444(r, g, b, d.y + static_cast<std::ptrdiff_t>(row) * d.y_stride,
                      d.u + static_cast<std::ptrdiff_t>(row) * d.u_stride,
