@@ -147,13 +147,10 @@ absl::Status PackedToYuv::Convert(const std::uint8_t* src, int src_stride, Color
       const std::uint8_t *r = first, *g = second, *b = third;
       switch (from) {
         case ColorEncoding::kBGR8:
-          libyuv::SplitRGBPlane(in, src_stride, first, width, second, width, third, width, width,
-                                1);
-          std::swap(r, b);
-          break;
         case ColorEncoding::kRGB8:
           libyuv::SplitRGBPlane(in, src_stride, first, width, second, width, third, width, width,
                                 1);
+          if (from == ColorEncoding::kBGR8) std::swap(r, b);
           break;
         case ColorEncoding::kRGBA8:  // libyuv's ARGB split reads B, G, R, A: ours is R, G, B, A
           libyuv::SplitARGBPlane(in, src_stride, third, width, second, width, first, width, nullptr,
